@@ -1,0 +1,40 @@
+"""aiortu: an asyncio Modbus RTU master/slave framework.
+
+See the README and ``docs/`` for the guides; the public names are re-exported here.
+"""
+
+from __future__ import annotations
+
+from aiortu.core.codes import ExceptionCode, FunctionCode
+from aiortu.core.timing import LineSettings
+from aiortu.errors import (
+    ConnectionLost,
+    CRCError,
+    ExceptionResponse,
+    FrameError,
+    InvalidRequest,
+    InvalidValue,
+    MalformedPDU,
+    ModbusError,
+    PortError,
+    ResponseTimeout,
+)
+
+__version__ = "0.1.0"
+
+__all__ = (
+    "CRCError",
+    "ConnectionLost",
+    "ExceptionCode",
+    "ExceptionResponse",
+    "FrameError",
+    "FunctionCode",
+    "InvalidRequest",
+    "InvalidValue",
+    "LineSettings",
+    "MalformedPDU",
+    "ModbusError",
+    "PortError",
+    "ResponseTimeout",
+    "__version__",
+)

@@ -1,0 +1,192 @@
+"""The definitions of aiortu's exceptions; see :mod:`aiortu.errors` for the tree.
+
+They live in the core because the sans-IO core raises them and imports nothing from the
+rest of the package. Users import them from :mod:`aiortu.errors` or :mod:`aiortu`.
+"""
+
+from __future__ import annotations
+
+import enum
+
+from aiortu.core.codes import ExceptionCode
+
+__all__ = (
+    "CRCError",
+    "ConnectionLost",
+    "ExceptionResponse",
+    "FrameError",
+    "InvalidValue",
+    "InvalidRequest",
+    "MalformedPDU",
+    "ModbusError",
+    "PortBusy",
+    "PortError",
+    "PortNotFound",
+    "PortPermissionDenied",
+    "ResponseTimeout",
+    "UnsupportedSettings",
+)
+
+
+class ModbusError(Exception):
+    """The base of every error aiortu raises on purpose."""
+
+
+def _describe_range(allowed: object) -> str:
+    if isinstance(allowed, range):
+        if allowed.step == 1:
+            return f"{allowed.start}..{allowed.stop - 1}"
+        return f"{allowed.start}..{allowed.stop - 1} in steps of {allowed.step}"
+    return str(allowed)
+
+
+class InvalidValue(ModbusError, ValueError):
+    """A field or a setting is outside its allowed range. Caused by the caller.
+
+    Raised while building a request, a response or line settings, before any byte exists.
+    :attr:`field` names the field, :attr:`value` is what was given and :attr:`allowed`
+    describes what the spec permits (a :class:`range` or a short text).
+    """
+
+    def __init__(self, field: str, value: object, allowed: object, detail: str = "") -> None:
+        self.field = field
+        self.value = value
+        self.allowed = allowed
+        message = f"{field} = {value!r} is outside the allowed range {_describe_range(allowed)}"
+        if detail:
+            message = f"{message}: {detail}"
+        super().__init__(message)
+
+
+class InvalidRequest(InvalidValue):
+    """A request the spec forbids, such as unit 0 for a read or a count of 0. Caused by the caller.
+
+    Raised before anything is sent, so the line is untouched.
+    """
+
+
+class ExceptionResponse(ModbusError):
+    """The device answered with a Modbus exception response. Caused by the peer.
+
+    The exchange itself worked: the device understood the frame and refused the
+    request. :attr:`code` is the exception code the device sent (an ``ExceptionCode``
+    when it is one the spec defines, else the raw ``int``), :attr:`function_code` is the
+    function code of the request, and :attr:`unit` the device's address when known.
+    """
+
+    def __init__(self, code: int, function_code: int | None = None, unit: int | None = None) -> None:
+        try:
+            self.code: int = ExceptionCode(code)
+        except ValueError:
+            self.code = code
+        self.function_code = function_code
+        self.unit = unit
+        name = self.code.name if isinstance(self.code, enum.Enum) else "UNKNOWN"
+        where = []
+        if unit is not None:
+            where.append(f"unit {unit}")
+        if function_code is not None:
+            where.append(f"function 0x{function_code:02X}")
+        suffix = f" from {', '.join(where)}" if where else ""
+        super().__init__(f"exception response {name} (0x{code:02X}){suffix}")
+
+
+class ResponseTimeout(ModbusError, TimeoutError):
+    """No valid reply arrived within the response timeout. Caused by the peer or the line.
+
+    The device may be off, at another address or baud rate, or the reply was too corrupted
+    to recognise. Also a :class:`TimeoutError`, so generic timeout handling catches it.
+    """
+
+
+class FrameError(ModbusError):
+    """Bytes arrived that do not make a valid frame. Caused by the peer or the line.
+
+    :attr:`reason` is a short machine-readable word (``"crc"``, ``"length"``,
+    ``"content"``, ...), and the message explains it.
+    """
+
+    reason = "frame"
+
+    def __init__(self, message: str, *, reason: str | None = None) -> None:
+        if reason is not None:
+            self.reason = reason
+        super().__init__(message)
+
+
+class CRCError(FrameError):
+    """The CRC of a frame does not match its content. Caused by the line.
+
+    Noise, a collision of two transmitters, or line settings (baud rate, parity) that
+    differ between the ends.
+    """
+
+    reason = "crc"
+
+    def __init__(self, received: int, computed: int) -> None:
+        self.received = received
+        self.computed = computed
+        super().__init__(f"CRC mismatch: frame carries 0x{received:04X}, content gives 0x{computed:04X}")
+
+
+class MalformedPDU(FrameError):
+    """A frame with a good CRC whose content breaks the spec. Caused by the peer.
+
+    :attr:`field`, :attr:`value` and :attr:`allowed` name what is wrong when it is one
+    field. :attr:`exception_code` is the Modbus exception a slave answers such a request
+    with (``ILLEGAL_DATA_VALUE`` unless the function itself is unknown).
+    """
+
+    reason = "content"
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        field: str | None = None,
+        value: object = None,
+        allowed: object = None,
+        exception_code: int = 0x03,
+    ) -> None:
+        self.field = field
+        self.value = value
+        self.allowed = allowed
+        self.exception_code = exception_code
+        if field is not None:
+            message = f"{message}: {field} = {value!r}, allowed {_describe_range(allowed)}"
+        super().__init__(message)
+
+
+class ConnectionLost(ModbusError):
+    """The byte stream under the line closed or failed. Caused by the line.
+
+    A USB adapter unplugged, a TCP connection to a serial device server dropped, or the
+    other end of a virtual line closed. Requests in flight fail with this error.
+    """
+
+
+class PortError(ModbusError):
+    """A port could not be opened as asked. Caused by the environment.
+
+    :attr:`port` names the device path or URL.
+    """
+
+    def __init__(self, port: str, message: str) -> None:
+        self.port = port
+        super().__init__(f"{port}: {message}")
+
+
+class PortNotFound(PortError):
+    """No such serial device, pty or host."""
+
+
+class PortBusy(PortError):
+    """Another program has the port open (aiortu opens serial ports exclusively)."""
+
+
+class PortPermissionDenied(PortError):
+    """The user may not open the port (on Linux, usually missing from the ``dialout`` group)."""
+
+
+class UnsupportedSettings(PortError):
+    """The port or the OS refuses the requested line settings (baud rate, parity, RS-485)."""

@@ -1,0 +1,346 @@
+"""Protocol data units: the base classes, the registry, and decoding by function code.
+
+A PDU is the function code and its data, without the unit address and the CRC of the RTU
+frame around it (see :mod:`aiortu.core.frame`). Every public function code has a request
+class and a response class in one of the ``pdu_*`` modules; each is an immutable
+dataclass that checks the spec's limits when it is built and encodes itself to bytes::
+
+    >>> ReadHoldingRegistersRequest(address=0x6B, count=3).encode().hex(" ")
+    '03 00 6b 00 03'
+
+Errors follow who caused them. Building an object with a field out of range raises
+:class:`~aiortu.errors.InvalidRequest` (requests) or :class:`~aiortu.errors.InvalidValue`
+(responses), naming the field, the value and the allowed range. Decoding bytes that break
+the spec raises :class:`~aiortu.errors.MalformedPDU` and nothing else: never an
+``IndexError`` or a ``struct.error`` from inside.
+
+An exception response is a value, :class:`ExceptionPDU`, that the caller can inspect; the
+master turns it into :class:`~aiortu.errors.ExceptionResponse` at its boundary. Function
+codes without a class (the user-defined ones, vendor extensions) travel as
+:class:`RawPDU`.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import ClassVar, Self, TypeVar
+
+from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode
+from aiortu.core.errors import InvalidRequest, InvalidValue, MalformedPDU
+
+__all__ = (
+    "ADDRESS_RANGE",
+    "BYTE_RANGE",
+    "MAX_PDU_LENGTH",
+    "REGISTER_RANGE",
+    "PDU",
+    "ExceptionPDU",
+    "RawPDU",
+    "Request",
+    "Response",
+    "decode_request",
+    "decode_response",
+    "known_function_codes",
+    "pack_bits",
+    "pack_registers",
+    "register",
+    "register_decoders",
+    "unpack_bits",
+    "unpack_registers",
+)
+
+MAX_PDU_LENGTH = 253
+"""The longest PDU: a 256-byte RTU frame less the address byte and the CRC."""
+
+ADDRESS_RANGE = range(0x10000)
+"""Protocol addresses of every table: 0..65535."""
+
+REGISTER_RANGE = range(0x10000)
+"""Values of a 16-bit register: 0..65535."""
+
+BYTE_RANGE = range(0x100)
+"""Values of one byte."""
+
+
+class PDU:
+    """Base of every request, response and exception PDU."""
+
+    __slots__ = ()
+
+    function_code: ClassVar[int]
+    """The function code this class encodes (for :class:`RawPDU`, an instance field)."""
+
+    _invalid: ClassVar[type[InvalidValue]] = InvalidValue
+
+    def encode(self) -> bytes:
+        """The PDU as bytes: the function code, then the data."""
+        raise NotImplementedError
+
+    @classmethod
+    def decode(cls, pdu: bytes) -> Self:
+        """Decode *pdu* (function code included) into this class.
+
+        Raises :class:`~aiortu.errors.MalformedPDU` when the bytes break the spec.
+        """
+        raise NotImplementedError
+
+    # Helpers shared by the subclasses. Building an object checks its fields with
+    # ``_check``; decoding wraps the build in ``_decoding`` so that a field out of
+    # range in received bytes becomes MalformedPDU, the peer's fault, not the caller's.
+
+    def _check(self, field: str, value: int, allowed: range) -> None:
+        if value not in allowed:
+            raise self._invalid(field, value, allowed)
+
+    def _check_values(self, field: str, values: tuple[int, ...], allowed: range) -> None:
+        if not values:
+            return
+        low = min(values)
+        high = max(values)
+        if low < allowed.start or high >= allowed.stop:
+            bad = low if low < allowed.start else high
+            raise self._invalid(f"{field}[{values.index(bad)}]", bad, allowed)
+
+    @classmethod
+    def _build(cls, factory: Callable[[], Self]) -> Self:
+        """Run *factory* (a constructor call on decoded fields), blaming the peer for errors."""
+        try:
+            return factory()
+        except InvalidValue as error:
+            raise MalformedPDU(
+                f"{cls.__name__}: field out of range",
+                field=error.field,
+                value=error.value,
+                allowed=error.allowed,
+            ) from None
+
+    @classmethod
+    def _expect_length(cls, pdu: bytes, length: int) -> None:
+        if len(pdu) != length:
+            raise MalformedPDU(
+                f"{cls.__name__}: PDU length", field="length", value=len(pdu), allowed=range(length, length + 1)
+            )
+
+    @classmethod
+    def _expect_min_length(cls, pdu: bytes, length: int) -> None:
+        if len(pdu) < length:
+            raise MalformedPDU(
+                f"{cls.__name__}: PDU too short",
+                field="length",
+                value=len(pdu),
+                allowed=range(length, MAX_PDU_LENGTH + 1),
+            )
+
+
+class Request(PDU):
+    """Base of the requests a master sends."""
+
+    __slots__ = ()
+
+    _invalid: ClassVar[type[InvalidValue]] = InvalidRequest
+
+    response_class: ClassVar[type[Response]]
+    """The class of the normal reply to this request."""
+
+    broadcastable: ClassVar[bool] = False
+    """Whether the spec lets this request go to unit 0 (only writes may)."""
+
+    def check_response(self, response: Response) -> None:
+        """Raise :class:`~aiortu.errors.MalformedPDU` if *response* cannot answer this request.
+
+        The base checks the class; subclasses check what the reply echoes or counts.
+        """
+        if type(response) is not self.response_class:
+            raise MalformedPDU(
+                f"{type(response).__name__} does not answer {type(self).__name__}",
+                exception_code=ExceptionCode.ILLEGAL_FUNCTION,
+            )
+
+
+class Response(PDU):
+    """Base of the normal (not exception) replies a slave sends."""
+
+    __slots__ = ()
+
+
+@dataclass(frozen=True, slots=True)
+class ExceptionPDU(PDU):
+    """An exception response: the request's function code with the top bit set, and a code.
+
+    ``function_code`` here is the request's function code (without the top bit);
+    ``exception_code`` is an :class:`~aiortu.core.codes.ExceptionCode` when the spec
+    defines it, else the raw number.
+    """
+
+    function_code: int  # type: ignore[misc]  # an instance field here, a ClassVar elsewhere
+    exception_code: int
+
+    def __post_init__(self) -> None:
+        self._check("function_code", self.function_code, range(1, EXCEPTION_BIT))
+        self._check("exception_code", self.exception_code, BYTE_RANGE)
+        try:
+            object.__setattr__(self, "exception_code", ExceptionCode(self.exception_code))
+        except ValueError:
+            pass
+
+    def encode(self) -> bytes:
+        return bytes((self.function_code | EXCEPTION_BIT, self.exception_code))
+
+    @classmethod
+    def decode(cls, pdu: bytes) -> Self:
+        cls._expect_length(pdu, 2)
+        if not pdu[0] & EXCEPTION_BIT:
+            raise MalformedPDU("not an exception response", field="function_code", value=pdu[0], allowed="0x81..0xFF")
+        return cls._build(lambda: cls(pdu[0] & 0x7F, pdu[1]))
+
+
+@dataclass(frozen=True, slots=True)
+class RawPDU(Request, Response):
+    """A PDU of a function code aiortu has no class for: user-defined and vendor codes.
+
+    ``data`` is everything after the function code. Used as a request and as a response.
+    """
+
+    function_code: int  # type: ignore[misc]
+    data: bytes = b""
+
+    def __post_init__(self) -> None:
+        self._check("function_code", self.function_code, range(1, EXCEPTION_BIT))
+        object.__setattr__(self, "data", bytes(self.data))
+        self._check("len(data)", len(self.data), range(MAX_PDU_LENGTH))
+
+    def encode(self) -> bytes:
+        return bytes((self.function_code,)) + self.data
+
+    @classmethod
+    def decode(cls, pdu: bytes) -> Self:
+        cls._expect_min_length(pdu, 1)
+        return cls._build(lambda: cls(pdu[0], bytes(pdu[1:])))
+
+    def check_response(self, response: Response) -> None:
+        if not isinstance(response, RawPDU) or response.function_code != self.function_code:
+            raise MalformedPDU("reply function code differs from the request's")
+
+
+RawPDU.response_class = RawPDU
+
+
+_RequestT = TypeVar("_RequestT", bound=type[Request])
+
+_REQUESTS: dict[int, type[Request]] = {}
+_RESPONSES: dict[int, type[Response]] = {}
+_SUB_DECODERS: dict[int, tuple[Callable[[bytes], Request], Callable[[bytes], Response]]] = {}
+
+
+def register(request_class: _RequestT) -> _RequestT:
+    """Class decorator: decode this function code with *request_class* and its ``response_class``."""
+    code = request_class.function_code
+    if code in _REQUESTS:
+        raise RuntimeError(f"function code 0x{code:02X} registered twice")
+    _REQUESTS[code] = request_class
+    _RESPONSES[code] = request_class.response_class
+    return request_class
+
+
+def register_decoders(
+    function_code: int,
+    decode_request: Callable[[bytes], Request],
+    decode_response: Callable[[bytes], Response],
+) -> None:
+    """Register decoders for a function code shared by several classes (2B carries MEI types)."""
+    _SUB_DECODERS[function_code] = (decode_request, decode_response)
+
+
+def _function_code(pdu: bytes) -> int:
+    if not pdu:
+        raise MalformedPDU("empty PDU", field="length", value=0, allowed=range(1, MAX_PDU_LENGTH + 1))
+    if len(pdu) > MAX_PDU_LENGTH:
+        raise MalformedPDU("PDU too long", field="length", value=len(pdu), allowed=range(1, MAX_PDU_LENGTH + 1))
+    return pdu[0]
+
+
+def decode_request(pdu: bytes) -> Request:
+    """Decode a request PDU into its class, or into :class:`RawPDU` for an unknown code.
+
+    Raises :class:`~aiortu.errors.MalformedPDU` for function code 0 or >= 0x80, and for a
+    known function code whose data breaks the spec (its ``exception_code`` says which
+    exception a slave should answer).
+    """
+    code = _function_code(pdu)
+    if code == 0 or code & EXCEPTION_BIT:
+        raise MalformedPDU(
+            "invalid request function code",
+            field="function_code",
+            value=code,
+            allowed=range(1, EXCEPTION_BIT),
+            exception_code=ExceptionCode.ILLEGAL_FUNCTION,
+        )
+    request_class = _REQUESTS.get(code)
+    if request_class is not None:
+        return request_class.decode(pdu)
+    sub = _SUB_DECODERS.get(code)
+    if sub is not None:
+        return sub[0](pdu)
+    return RawPDU.decode(pdu)
+
+
+def decode_response(pdu: bytes) -> Response | ExceptionPDU:
+    """Decode a reply PDU: an :class:`ExceptionPDU`, a known response, or :class:`RawPDU`."""
+    code = _function_code(pdu)
+    if code & EXCEPTION_BIT:
+        return ExceptionPDU.decode(pdu)
+    if code == 0:
+        raise MalformedPDU("invalid function code", field="function_code", value=0, allowed=range(1, EXCEPTION_BIT))
+    response_class = _RESPONSES.get(code)
+    if response_class is not None:
+        return response_class.decode(pdu)
+    sub = _SUB_DECODERS.get(code)
+    if sub is not None:
+        return sub[1](pdu)
+    return RawPDU.decode(pdu)
+
+
+def known_function_codes() -> frozenset[int]:
+    """The function codes that decode into a class of their own."""
+    return frozenset(_REQUESTS) | frozenset(_SUB_DECODERS)
+
+
+def pack_registers(values: Iterable[int]) -> bytes:
+    """Big-endian 16-bit words (the values must already be checked)."""
+    values = tuple(values)
+    return struct.pack(f">{len(values)}H", *values)
+
+
+def unpack_registers(data: bytes, offset: int, count: int) -> tuple[int, ...]:
+    """*count* big-endian 16-bit words from *data* at *offset* (the length must be checked)."""
+    return struct.unpack_from(f">{count}H", data, offset)
+
+
+def pack_bits(bits: Iterable[bool]) -> bytes:
+    """Bits packed LSB first, the last byte padded with zeros."""
+    out = bytearray()
+    byte = 0
+    position = 0
+    for bit in bits:
+        if bit:
+            byte |= 1 << position
+        position += 1
+        if position == 8:
+            out.append(byte)
+            byte = 0
+            position = 0
+    if position:
+        out.append(byte)
+    return bytes(out)
+
+
+def unpack_bits(data: bytes) -> tuple[bool, ...]:
+    """Every bit of *data*, LSB first: 8 bits per byte, padding included."""
+    return tuple(_BYTE_BITS[byte][index] for byte in data for index in range(8))
+
+
+_BYTE_BITS: tuple[tuple[bool, ...], ...] = tuple(
+    tuple(bool(byte >> index & 1) for index in range(8)) for byte in range(256)
+)

@@ -1,0 +1,65 @@
+"""The exceptions aiortu raises, and who causes each of them.
+
+Every error aiortu raises on purpose is a :class:`ModbusError`, so one ``except`` clause
+catches them all. Below it, the tree says who is at fault, which is what the caller
+needs to decide whether to fix their code, retry, or look at the wiring::
+
+    ModbusError                      anything aiortu raises on purpose
+    ├── InvalidValue                 (the caller) a field or setting outside its allowed range
+    │   └── InvalidRequest           (the caller) a request that must not be sent; nothing was sent
+    ├── ExceptionResponse            (the peer)   the device answered with a Modbus exception code
+    ├── ResponseTimeout              (the peer or the line) no valid reply in time; also a TimeoutError
+    ├── FrameError                   (the peer or the line) bytes that are not a valid frame
+    │   ├── CRCError                 (the line)   the CRC does not match: noise, a collision, wrong settings
+    │   └── MalformedPDU             (the peer)   the CRC is good but the content breaks the spec
+    ├── ConnectionLost               (the line)   the byte stream closed or failed under us
+    └── PortError                    (the environment) a port that cannot be opened as asked
+        ├── PortNotFound             no such device or host
+        ├── PortBusy                 another program holds the port
+        ├── PortPermissionDenied     the user may not open the port
+        └── UnsupportedSettings      the port or the OS refuses the line settings
+
+A Modbus exception response is not a transport failure: :class:`ExceptionResponse` carries
+the device's :attr:`~ExceptionResponse.code`, a value the caller can inspect and act on,
+while the other branches say the exchange itself failed.
+
+The classes are defined in :mod:`aiortu.core.errors`, because the sans-IO core raises
+them too and the core imports nothing from the rest of the package; this module is where
+users import them from.
+"""
+
+from __future__ import annotations
+
+from aiortu.core.errors import (
+    CRCError,
+    ConnectionLost,
+    ExceptionResponse,
+    FrameError,
+    InvalidValue,
+    InvalidRequest,
+    MalformedPDU,
+    ModbusError,
+    PortBusy,
+    PortError,
+    PortNotFound,
+    PortPermissionDenied,
+    ResponseTimeout,
+    UnsupportedSettings,
+)
+
+__all__ = (
+    "CRCError",
+    "ConnectionLost",
+    "ExceptionResponse",
+    "FrameError",
+    "InvalidValue",
+    "InvalidRequest",
+    "MalformedPDU",
+    "ModbusError",
+    "PortBusy",
+    "PortError",
+    "PortNotFound",
+    "PortPermissionDenied",
+    "ResponseTimeout",
+    "UnsupportedSettings",
+)
