@@ -1,0 +1,534 @@
+"""The RTU receiver: bytes and times in, frames out. A state machine written as a table.
+
+The machine follows the receiver of MODBUS-NOTES.md (after the serial line spec)::
+
+    INIT     wait for silence; bytes here are noise      -- silence -->  IDLE
+    IDLE     waiting for a frame                         -- a byte -->   START
+    START    the address byte arrived                    -- a byte -->   DATABUF
+    DATABUF  storing the frame                           -- silence, or the known length
+                                                            with a good CRC -->  RESPONSE
+    RESPONSE checking the frame; handing it on           -- checked -->  IDLE
+
+and :data:`TRANSITIONS` is that diagram as data: each (state, event) pair names the next
+state and the action. A pair missing from the table is a bug and raises
+:class:`ReceiverError`, never a silent no-op. The documentation draws its diagram from
+the same table.
+
+Two things go beyond the timer-driven spec, as DESIGN.md explains:
+
+* It is length-aware. Once the first bytes tell a frame's length (see
+  :mod:`aiortu.core.frame`) and the CRC checks at that length, the frame is complete at
+  once, without waiting for t3.5 of silence. Silence still ends frames whose length
+  cannot be predicted. Its role says which layouts to expect: a master expects replies;
+  a slave expects requests for its own units and either layout for other units, since on
+  a multi-drop bus it also hears other slaves' replies (a reply and a request with the
+  same function code have different lengths, and the CRC tells which one it is).
+* It resynchronises. A buffer that fails its CRC is searched for a frame that starts
+  later in it (garbage right before a good frame), and a frame whose CRC fails is never
+  accepted.
+
+Timing comes in as arguments: :meth:`Receiver.feed` takes a chunk and the time it
+arrived, :meth:`Receiver.expire` the current time, and :meth:`Receiver.next_deadline`
+tells the caller when to call :meth:`~Receiver.expire` next. Chunks are assumed to hold
+back-to-back characters that ended arriving at the given time, which is what a serial
+driver or a USB adapter hands over.
+
+The t1.5 rule comes in two modes. ``strict`` follows the spec: a gap of more than t1.5
+inside a frame discards it, and t3.5 of silence ends a frame. ``tolerant`` (the default)
+ignores gaps inside frames, because USB adapters and virtual lines deliver bytes in
+bursts, and ends a frame only after a longer silence (:data:`TOLERANT_FRAME_SILENCE`, or
+t3.5 when that is longer).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Final
+
+from aiortu.core.codes import BROADCAST_UNIT
+from aiortu.core.crc import crc16
+from aiortu.core.frame import (
+    CANNOT_KNOW,
+    MAX_FRAME_LENGTH,
+    MIN_FRAME_LENGTH,
+    NEED_MORE,
+    expected_request_length,
+    expected_response_length,
+)
+from aiortu.core.timing import LineSettings
+
+__all__ = (
+    "TOLERANT_FRAME_SILENCE",
+    "TRANSITIONS",
+    "DiscardReason",
+    "FrameDiscarded",
+    "FrameReceived",
+    "Receiver",
+    "ReceiverError",
+    "ReceiverEvent",
+    "ReceiverState",
+    "Role",
+    "TimingMode",
+)
+
+TOLERANT_FRAME_SILENCE: Final = 0.020
+"""Silence (seconds) that ends a frame in tolerant mode, unless t3.5 is longer.
+
+Long enough to ride over the latency timer of common USB adapters (often 16 ms), which
+may split one frame into two deliveries; frames of known length complete before it.
+"""
+
+
+class ReceiverState(enum.Enum):
+    """The states of the RTU receiver, named after the spec."""
+
+    INIT = "INIT"
+    IDLE = "IDLE"
+    START = "START"
+    DATABUF = "DATABUF"
+    RESPONSE = "RESPONSE"
+
+
+class ReceiverEvent(enum.Enum):
+    """What can happen to the receiver."""
+
+    CHARS = "chars"
+    """Characters arrived within the allowed gap of the previous ones."""
+    LATE_CHARS = "late chars"
+    """Characters arrived after a gap longer than t1.5 but shorter than the frame silence
+    (strict mode only)."""
+    SILENCE = "silence"
+    """The line has been silent long enough to end a frame (t3.5, or the tolerant bound)."""
+    COMPLETE = "complete"
+    """The frame reached its predicted length and its CRC checks."""
+    OVERFLOW = "overflow"
+    """The buffer outgrew the longest frame (256 bytes)."""
+    CHECKED = "checked"
+    """The closed frame has been checked and handed on."""
+
+
+class Role(enum.Enum):
+    """Which frames the receiver expects, for length prediction."""
+
+    MASTER = "master"
+    """Replies only."""
+    SLAVE = "slave"
+    """Requests to its own units and broadcasts; requests or replies of other units."""
+    MONITOR = "monitor"
+    """Requests or replies of any unit (a passive sniffer)."""
+
+
+class TimingMode(enum.StrEnum):
+    """How the receiver applies the t1.5 rule (see the module docstring)."""
+
+    STRICT = "strict"
+    TOLERANT = "tolerant"
+
+
+class DiscardReason(enum.StrEnum):
+    """Why bytes were not handed on as a frame."""
+
+    CRC = "crc"
+    """The bytes ended by silence do not make a frame whose CRC checks."""
+    GAP = "gap"
+    """A gap longer than t1.5 broke the frame (strict mode)."""
+    TOO_SHORT = "too short"
+    """Fewer than 4 bytes before silence."""
+    OVERFLOW = "overflow"
+    """More than 256 bytes without a frame boundary."""
+    NOISE = "noise"
+    """Bytes that arrived while the receiver waited for silence."""
+
+
+class ReceiverError(RuntimeError):
+    """An event arrived in a state whose table has no entry for it. Caused by a bug in aiortu."""
+
+
+@dataclass(frozen=True, slots=True)
+class FrameReceived:
+    """A frame whose CRC checks: its bytes (unit, PDU and CRC) and when it arrived.
+
+    ``start`` is when its first byte arrived and ``end`` when its last byte did, in the
+    clock of the times given to the receiver.
+    """
+
+    frame: bytes
+    start: float
+    end: float
+
+    @property
+    def unit(self) -> int:
+        """The unit address, the first byte."""
+        return self.frame[0]
+
+    @property
+    def pdu(self) -> bytes:
+        """The PDU: the frame without the address and the CRC."""
+        return self.frame[1:-2]
+
+
+@dataclass(frozen=True, slots=True)
+class FrameDiscarded:
+    """Bytes that did not make a frame, with the reason and when they arrived."""
+
+    data: bytes
+    reason: DiscardReason
+    start: float
+    end: float
+
+
+ReceiverOutput = FrameReceived | FrameDiscarded
+
+_S = ReceiverState
+_E = ReceiverEvent
+
+TRANSITIONS: Final[dict[tuple[ReceiverState, ReceiverEvent], tuple[ReceiverState, str]]] = {
+    # (state, event): (next state, action)
+    (_S.INIT, _E.CHARS): (_S.INIT, "gather_noise"),
+    (_S.INIT, _E.LATE_CHARS): (_S.INIT, "gather_noise"),
+    (_S.INIT, _E.SILENCE): (_S.IDLE, "salvage_noise"),
+    (_S.INIT, _E.OVERFLOW): (_S.INIT, "salvage_overflow"),
+    (_S.IDLE, _E.CHARS): (_S.START, "begin_frame"),
+    (_S.IDLE, _E.LATE_CHARS): (_S.START, "begin_frame"),
+    (_S.IDLE, _E.SILENCE): (_S.IDLE, "nothing"),
+    (_S.START, _E.CHARS): (_S.DATABUF, "store"),
+    (_S.START, _E.LATE_CHARS): (_S.INIT, "discard_gap"),
+    (_S.START, _E.SILENCE): (_S.IDLE, "discard_short"),
+    (_S.DATABUF, _E.CHARS): (_S.DATABUF, "store"),
+    (_S.DATABUF, _E.LATE_CHARS): (_S.INIT, "discard_gap"),
+    (_S.DATABUF, _E.SILENCE): (_S.RESPONSE, "check_closed_frame"),
+    (_S.DATABUF, _E.COMPLETE): (_S.RESPONSE, "deliver_complete_frame"),
+    (_S.DATABUF, _E.OVERFLOW): (_S.INIT, "salvage_overflow"),
+    (_S.RESPONSE, _E.CHECKED): (_S.IDLE, "nothing"),
+}
+"""The receiver's transitions: ``(state, event) -> (next state, action name)``."""
+
+
+class Receiver:
+    """The RTU receiver of one line (see the module docstring).
+
+    *settings* give the character time, t1.5 and t3.5. *role* chooses the layouts to
+    expect; *units* are a slave's own unit addresses (for :attr:`Role.SLAVE`). *timing*
+    is ``"tolerant"`` (default) or ``"strict"``. *frame_silence* overrides the silence
+    that ends a frame (default: t3.5 in strict mode, the longer of t3.5 and
+    :data:`TOLERANT_FRAME_SILENCE` in tolerant mode).
+
+    The receiver starts in INIT: the first frame is accepted only after a silence, as
+    the spec asks, unless *start_idle* is set (a line known to be quiet, such as a
+    freshly opened virtual line).
+    """
+
+    def __init__(
+        self,
+        settings: LineSettings | None = None,
+        *,
+        role: Role = Role.MASTER,
+        units: Iterable[int] = (),
+        timing: TimingMode | str = TimingMode.TOLERANT,
+        frame_silence: float | None = None,
+        start_idle: bool = False,
+    ) -> None:
+        self.settings = settings if settings is not None else LineSettings()
+        self.role = role
+        self.units = frozenset(units)
+        self.timing = TimingMode(timing)
+        self.char_time = self.settings.char_time
+        self.t1_5 = self.settings.t1_5
+        if frame_silence is None:
+            frame_silence = self.settings.t3_5
+            if self.timing is TimingMode.TOLERANT:
+                frame_silence = max(frame_silence, TOLERANT_FRAME_SILENCE)
+        if frame_silence < 0:
+            raise ValueError(f"frame_silence must be >= 0, not {frame_silence}")
+        self.frame_silence = frame_silence
+        self._strict = self.timing is TimingMode.STRICT
+        self.state = ReceiverState.IDLE if start_idle else ReceiverState.INIT
+        self._buffer = bytearray()
+        self._candidates: list[int] = []
+        self._predicted = False
+        self._first: float = 0.0
+        self._last: float | None = None
+        self._out: list[ReceiverOutput] = []
+        self._now = 0.0
+        self._first_arrival = 0.0
+        self._chunk_end = 0.0
+        self._chunk_length = 0
+        self._end_index = 0
+        self._actions: dict[tuple[ReceiverState, ReceiverEvent], tuple[ReceiverState, Callable[..., int]]] = {
+            key: (target, getattr(self, f"_{action}")) for key, (target, action) in TRANSITIONS.items()
+        }
+
+    # -- the driving interface -------------------------------------------------------
+
+    def feed(self, data: bytes, now: float) -> list[ReceiverOutput]:
+        """Take a chunk of bytes that finished arriving at *now*; return what it completed."""
+        out: list[ReceiverOutput] = []
+        self._out = out
+        count = len(data)
+        if not count:
+            return self._expire(now, out)
+        char_time = self.char_time
+        first_arrival = now - (count - 1) * char_time
+        last = self._last
+        if last is not None:
+            if first_arrival < last:
+                first_arrival = last
+            silence = first_arrival - char_time - last
+            if silence >= self.frame_silence:
+                self._fire(ReceiverEvent.SILENCE, b"", 0, last + self.frame_silence)
+        else:
+            silence = float("inf")
+        late = self._strict and silence > self.t1_5 and self.state in _MID_FRAME
+        event = ReceiverEvent.LATE_CHARS if late else ReceiverEvent.CHARS
+        self._first_arrival = first_arrival
+        self._chunk_end = now
+        self._chunk_length = count
+        position = 0
+        while position < count:
+            position = self._fire(event, data, position, now)
+            event = ReceiverEvent.CHARS
+        self._last = now
+        return out
+
+    def expire(self, now: float) -> list[ReceiverOutput]:
+        """Tell the receiver the time is *now*; return what the silence so far completed."""
+        out: list[ReceiverOutput] = []
+        self._out = out
+        return self._expire(now, out)
+
+    def next_deadline(self) -> float | None:
+        """When :meth:`expire` should next be called, or ``None`` if no timer runs."""
+        if self.state is ReceiverState.IDLE or self._last is None:
+            return None
+        return self._last + self.frame_silence
+
+    def reset(self) -> None:
+        """Forget any partial frame and wait for silence again (after reopening a port)."""
+        self._buffer.clear()
+        self._last = None
+        self.state = ReceiverState.INIT
+
+    # -- the machine -----------------------------------------------------------------
+
+    def _expire(self, now: float, out: list[ReceiverOutput]) -> list[ReceiverOutput]:
+        deadline = self.next_deadline()
+        if deadline is not None and now >= deadline:
+            self._fire(ReceiverEvent.SILENCE, b"", 0, deadline)
+        return out
+
+    def _fire(self, event: ReceiverEvent, data: bytes, position: int, now: float) -> int:
+        """Run one transition; return how far into *data* it consumed."""
+        entry = self._actions.get((self.state, event))
+        if entry is None:
+            raise ReceiverError(f"no transition for event {event.name} in state {self.state.name}")
+        target, action = entry
+        self._now = now
+        self.state = target
+        result: int = action(data, position)
+        return result
+
+    def _arrival(self, position: int) -> float:
+        """When the byte at *position* of the current chunk finished arriving."""
+        return max(self._first_arrival, self._chunk_end - (self._chunk_length - 1 - position) * self.char_time)
+
+    # -- actions: each takes the chunk and a position, returns the new position --------
+
+    def _nothing(self, data: bytes, position: int) -> int:
+        return position
+
+    def _gather_noise(self, data: bytes, position: int) -> int:
+        if not self._buffer:
+            self._first = self._arrival(position)
+        room = MAX_FRAME_LENGTH - len(self._buffer)
+        take = len(data) - position
+        if take > room:
+            self._buffer += data[position : position + room]
+            self._fire(ReceiverEvent.OVERFLOW, b"", 0, self._arrival(position + room - 1))
+            return position + room
+        self._buffer += data[position:]
+        return len(data)
+
+    def _salvage_noise(self, data: bytes, position: int) -> int:
+        self._salvage(DiscardReason.NOISE, keep_tail=False)
+        return position
+
+    def _salvage_overflow(self, data: bytes, position: int) -> int:
+        self._salvage(DiscardReason.OVERFLOW, keep_tail=True)
+        return position
+
+    def _begin_frame(self, data: bytes, position: int) -> int:
+        self._buffer.clear()
+        self._buffer.append(data[position])
+        self._first = self._arrival(position)
+        self._candidates = []
+        self._predicted = False
+        return position + 1
+
+    def _store(self, data: bytes, position: int) -> int:
+        buffer = self._buffer
+        end = len(data)
+        while position < end:
+            if not self._predicted:
+                buffer.append(data[position])
+                position += 1
+                self._predict()
+                if self._complete_at_candidate(position):
+                    return position
+                continue
+            if self._candidates:
+                target = self._candidates[0]
+                take = min(end - position, target - len(buffer))
+                buffer += data[position : position + take]
+                position += take
+                if self._complete_at_candidate(position):
+                    return position
+                continue
+            room = MAX_FRAME_LENGTH - len(buffer)
+            if end - position > room:
+                buffer += data[position : position + room]
+                position += room
+                self._fire(ReceiverEvent.OVERFLOW, b"", 0, self._arrival(position - 1))
+                return position
+            buffer += data[position:]
+            return end
+        return position
+
+    def _predict(self) -> None:
+        """Set the candidate lengths of the frame in the buffer, once its first bytes tell."""
+        buffer = self._buffer
+        role = self.role
+        if role is Role.MASTER:
+            guesses: tuple[int, ...] = (expected_response_length(buffer),)
+        elif role is Role.SLAVE and (buffer[0] in self.units or buffer[0] == BROADCAST_UNIT):
+            guesses = (expected_request_length(buffer),)
+        else:
+            guesses = (expected_request_length(buffer), expected_response_length(buffer))
+        if NEED_MORE in guesses:
+            return
+        self._predicted = True
+        have = len(buffer)
+        self._candidates = sorted({guess for guess in guesses if guess != CANNOT_KNOW and guess >= have})
+
+    def _complete_at_candidate(self, position: int) -> bool:
+        """Check the CRC when the buffer reaches a candidate length; fire COMPLETE if it holds.
+
+        *position* is how far into the current chunk the buffer reaches.
+        """
+        candidates = self._candidates
+        buffer = self._buffer
+        while candidates and len(buffer) >= candidates[0]:
+            length = candidates.pop(0)
+            if length == len(buffer) and length >= MIN_FRAME_LENGTH and crc16(buffer) == 0:
+                self._end_index = position - 1
+                self._fire(ReceiverEvent.COMPLETE, b"", 0, self._now)
+                return True
+        return False
+
+    def _deliver_complete_frame(self, data: bytes, position: int) -> int:
+        end = self._arrival(self._end_index)
+        self._out.append(FrameReceived(bytes(self._buffer), self._first, end))
+        self._buffer.clear()
+        self._fire(ReceiverEvent.CHECKED, b"", 0, self._now)
+        return position
+
+    def _check_closed_frame(self, data: bytes, position: int) -> int:
+        buffer = self._buffer
+        if len(buffer) >= MIN_FRAME_LENGTH and crc16(buffer) == 0:
+            self._out.append(FrameReceived(bytes(buffer), self._first, self._last_arrival()))
+            buffer.clear()
+        else:
+            self._salvage(DiscardReason.CRC if len(buffer) >= MIN_FRAME_LENGTH else DiscardReason.TOO_SHORT)
+        self._fire(ReceiverEvent.CHECKED, b"", 0, self._now)
+        return position
+
+    def _discard_gap(self, data: bytes, position: int) -> int:
+        self._discard(bytes(self._buffer), DiscardReason.GAP, self._last_arrival())
+        self._buffer.clear()
+        return position
+
+    def _discard_short(self, data: bytes, position: int) -> int:
+        self._discard(bytes(self._buffer), DiscardReason.TOO_SHORT, self._last_arrival())
+        self._buffer.clear()
+        return position
+
+    # -- helpers ---------------------------------------------------------------------
+
+    def _last_arrival(self) -> float:
+        return self._last if self._last is not None else self._now
+
+    def _discard(self, data: bytes, reason: DiscardReason, end: float) -> None:
+        if data:
+            self._out.append(FrameDiscarded(data, reason, self._first, end))
+
+    def _salvage(self, reason: DiscardReason, *, keep_tail: bool = False) -> None:
+        """Hand on every valid frame found inside the buffer; discard the rest with *reason*.
+
+        With *keep_tail* (overflow), bytes at the end that could still begin a frame stay
+        in the buffer; otherwise the buffer is emptied.
+        """
+        buffer = bytes(self._buffer)
+        end = self._last_arrival()
+        garbage_from = 0
+        offset = 0
+        length = len(buffer)
+        keep_from = length
+        while offset <= length - MIN_FRAME_LENGTH:
+            found = self._frame_at(buffer, offset)
+            if found > 0:
+                if offset > garbage_from:
+                    self._discard(buffer[garbage_from:offset], reason, self._estimate(offset - 1, end))
+                self._out.append(
+                    FrameReceived(
+                        buffer[offset : offset + found],
+                        self._estimate(offset, end),
+                        self._estimate(offset + found - 1, end),
+                    )
+                )
+                offset += found
+                garbage_from = offset
+                continue
+            if found == NEED_MORE and keep_tail and keep_from == length:
+                keep_from = offset
+            offset += 1
+        if keep_tail:
+            keep_from = max(keep_from, garbage_from, length - (MAX_FRAME_LENGTH - 1))
+            if keep_from > garbage_from:
+                self._discard(buffer[garbage_from:keep_from], reason, end)
+            del self._buffer[:keep_from]
+        else:
+            if length > garbage_from:
+                self._discard(buffer[garbage_from:], reason, end)
+            self._buffer.clear()
+
+    def _estimate(self, index: int, end: float) -> float:
+        """When byte *index* of the buffer arrived, assuming back-to-back characters."""
+        return min(end, self._first + index * self.char_time)
+
+    def _frame_at(self, buffer: bytes, offset: int) -> int:
+        """The length of a valid frame starting at *offset*, or NEED_MORE / CANNOT_KNOW."""
+        head = buffer[offset : offset + 12]
+        unit = head[0]
+        if unit > 247:
+            return CANNOT_KNOW
+        if self.role is Role.MASTER:
+            guesses: tuple[int, ...] = (expected_response_length(head),)
+        elif self.role is Role.SLAVE and (unit in self.units or unit == BROADCAST_UNIT):
+            guesses = (expected_request_length(head),)
+        else:
+            guesses = (expected_request_length(head), expected_response_length(head))
+        need_more = False
+        for guess in guesses:
+            if guess == NEED_MORE:
+                need_more = True
+            elif guess >= MIN_FRAME_LENGTH:
+                if offset + guess <= len(buffer):
+                    if crc16(buffer[offset : offset + guess]) == 0:
+                        return guess
+                else:
+                    need_more = True
+        return NEED_MORE if need_more else CANNOT_KNOW
+
+
+_MID_FRAME = frozenset((ReceiverState.START, ReceiverState.DATABUF))
