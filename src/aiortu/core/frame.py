@@ -149,7 +149,7 @@ _RESPONSE_LAYOUTS: dict[int, _Layout] = {
 }
 
 
-def _predict(frame: bytes, layouts: dict[int, _Layout], reply: bool) -> int:
+def _predict(frame: bytes | bytearray, layouts: dict[int, _Layout], reply: bool) -> int:
     have = len(frame)
     if have < 2:
         return NEED_MORE
@@ -176,7 +176,7 @@ def _predict(frame: bytes, layouts: dict[int, _Layout], reply: bool) -> int:
     return _predict_mei(frame, reply)
 
 
-def _predict_mei(frame: bytes, reply: bool) -> int:
+def _predict_mei(frame: bytes | bytearray, reply: bool) -> int:
     have = len(frame)
     if have < 3:
         return NEED_MORE
@@ -197,7 +197,7 @@ def _predict_mei(frame: bytes, reply: bool) -> int:
     return position + 2
 
 
-def expected_request_length(frame: bytes) -> int:
+def expected_request_length(frame: bytes | bytearray) -> int:
     """The total length of the request frame that starts with *frame*.
 
     Returns the length in bytes (unit and CRC included), :data:`NEED_MORE`, or
@@ -209,7 +209,7 @@ def expected_request_length(frame: bytes) -> int:
     return _predict(frame, _REQUEST_LAYOUTS, reply=False)
 
 
-def expected_response_length(frame: bytes) -> int:
+def expected_response_length(frame: bytes | bytearray) -> int:
     """The total length of the reply frame that starts with *frame*.
 
     Returns the length in bytes (unit and CRC included), :data:`NEED_MORE`, or

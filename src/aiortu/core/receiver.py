@@ -215,9 +215,10 @@ class Receiver:
     that ends a frame (default: t3.5 in strict mode, the longer of t3.5 and
     :data:`TOLERANT_FRAME_SILENCE` in tolerant mode).
 
-    The receiver starts in INIT: the first frame is accepted only after a silence, as
-    the spec asks, unless *start_idle* is set (a line known to be quiet, such as a
-    freshly opened virtual line).
+    *now* is the time the receiver starts listening. Given, it starts in INIT and the
+    silence timer runs from then, as the spec asks after power-up: a frame already under
+    way when the port opened is not mistaken for a whole one. Left out, the line is
+    taken to have been quiet and the receiver starts in IDLE.
     """
 
     def __init__(
@@ -228,7 +229,7 @@ class Receiver:
         units: Iterable[int] = (),
         timing: TimingMode | str = TimingMode.TOLERANT,
         frame_silence: float | None = None,
-        start_idle: bool = False,
+        now: float | None = None,
     ) -> None:
         self.settings = settings if settings is not None else LineSettings()
         self.role = role
@@ -244,12 +245,12 @@ class Receiver:
             raise ValueError(f"frame_silence must be >= 0, not {frame_silence}")
         self.frame_silence = frame_silence
         self._strict = self.timing is TimingMode.STRICT
-        self.state = ReceiverState.IDLE if start_idle else ReceiverState.INIT
+        self.state = ReceiverState.IDLE if now is None else ReceiverState.INIT
         self._buffer = bytearray()
         self._candidates: list[int] = []
         self._predicted = False
         self._first: float = 0.0
-        self._last: float | None = None
+        self._last: float | None = now
         self._out: list[ReceiverOutput] = []
         self._now = 0.0
         self._first_arrival = 0.0
@@ -304,10 +305,10 @@ class Receiver:
             return None
         return self._last + self.frame_silence
 
-    def reset(self) -> None:
-        """Forget any partial frame and wait for silence again (after reopening a port)."""
+    def reset(self, now: float) -> None:
+        """Forget any partial frame and wait for silence from *now* (after reopening a port)."""
         self._buffer.clear()
-        self._last = None
+        self._last = now
         self.state = ReceiverState.INIT
 
     # -- the machine -----------------------------------------------------------------

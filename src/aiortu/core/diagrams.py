@@ -1,0 +1,44 @@
+"""Draw a state machine's transition table as a Mermaid state diagram.
+
+The documentation's diagrams are generated from the same tables the machines run on
+(``python -m aiortu.core.diagrams``), and a test checks that the pages still match, so a
+diagram can never drift from the code.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping
+
+__all__ = ("state_diagram",)
+
+
+def state_diagram(
+    transitions: Mapping[tuple[enum.Enum, enum.Enum], tuple[enum.Enum, str]],
+    initial: enum.Enum,
+) -> str:
+    """A Mermaid ``stateDiagram-v2`` block with one arrow per (state, event) entry.
+
+    Arrows are labelled ``EVENT / action``; *initial* gets the start marker. Entries
+    that share their source, target and action are merged into one arrow whose label
+    lists the events.
+    """
+    merged: dict[tuple[str, str, str], list[str]] = {}
+    for (state, event), (target, action) in transitions.items():
+        merged.setdefault((state.name, target.name, action), []).append(event.name)
+    lines = ["```mermaid", "stateDiagram-v2", f"    [*] --> {initial.name}"]
+    for (source, target, action), events in merged.items():
+        lines.append(f"    {source} --> {target}: {' | '.join(events)} / {action}")
+    lines.append("```")
+    return "\n".join(lines) + "\n"
+
+
+def _main() -> None:
+    from aiortu.core.receiver import TRANSITIONS, ReceiverState
+
+    print("Receiver:")
+    print(state_diagram(TRANSITIONS, ReceiverState.INIT))
+
+
+if __name__ == "__main__":
+    _main()

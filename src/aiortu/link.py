@@ -1,0 +1,230 @@
+"""One serial line: a byte stream pumped through the receiver with a clock.
+
+A :class:`Link` owns a byte stream (a serial port, a TCP connection to a serial device
+server, a virtual line). A task reads it, timestamps every chunk with the link's clock,
+runs the sans-IO :class:`~aiortu.core.receiver.Receiver`, wakes it at its deadlines, and
+queues what it yields: frames, and the bytes it discarded with the reason.
+
+:meth:`Link.send` keeps the spec's silence: it first waits until the line has been quiet,
+in both directions, for ``frame_gap`` (t3.5 of the line settings by default; 0 is allowed
+for virtual lines and TCP, where there is no wire to keep quiet), then writes the frame
+and returns when, by the clock, its last byte will have left the wire. The master starts
+its response timeout from that time, not from when ``write()`` returned.
+
+The master and the slave are built on this; users rarely need it directly, except to
+watch a line (``role=Role.MONITOR``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Callable, Iterable
+from types import TracebackType
+from typing import Self
+
+import anyio
+import anyio.abc
+from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
+
+from aiortu.core.receiver import (
+    DiscardReason,
+    FrameDiscarded,
+    FrameReceived,
+    Receiver,
+    Role,
+    TimingMode,
+)
+from aiortu.core.timing import LineSettings
+from aiortu.errors import ConnectionLost
+
+__all__ = ("Link", "LinkEvent")
+
+LinkEvent = FrameReceived | FrameDiscarded
+"""What a link delivers: a frame whose CRC checks, or bytes discarded with a reason."""
+
+_STREAM_ERRORS = (
+    anyio.EndOfStream,
+    anyio.BrokenResourceError,
+    anyio.ClosedResourceError,
+    OSError,
+)
+
+
+class Link:
+    """One serial line (see the module docstring). Use it as an async context manager.
+
+    *settings* are the line settings (timing for the receiver and the frame gap).
+    *role*, *units*, *timing* and *frame_silence* configure the receiver.
+    *frame_gap* is the silence kept before each transmission: ``None`` for t3.5 of the
+    settings. *clock* returns seconds (default :func:`anyio.current_time`).
+    *queue_size* bounds the events waiting to be received; when it is full the oldest
+    event is dropped and counted, so a reader that falls behind never stalls the line.
+    """
+
+    def __init__(
+        self,
+        stream: anyio.abc.ByteStream,
+        settings: LineSettings | None = None,
+        *,
+        role: Role = Role.MASTER,
+        units: Iterable[int] = (),
+        timing: TimingMode | str = TimingMode.TOLERANT,
+        frame_silence: float | None = None,
+        frame_gap: float | None = None,
+        clock: Callable[[], float] = anyio.current_time,
+        queue_size: int = 64,
+    ) -> None:
+        self.stream = stream
+        self.settings = settings if settings is not None else LineSettings()
+        self.frame_gap = self.settings.t3_5 if frame_gap is None else frame_gap
+        if self.frame_gap < 0 or math.isnan(self.frame_gap):
+            raise ValueError(f"frame_gap must be >= 0 seconds, not {frame_gap}")
+        self.clock = clock
+        self.receiver = Receiver(self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence)
+        self._queue_size = queue_size
+        self._send_events: MemoryObjectSendStream[LinkEvent]
+        self._receive_events: MemoryObjectReceiveStream[LinkEvent]
+        self._send_events, self._receive_events = anyio.create_memory_object_stream[LinkEvent](queue_size)
+        self._task_group: anyio.abc.TaskGroup | None = None
+        self._send_lock = anyio.Lock()
+        self._last_received = -math.inf
+        self._transmit_end = -math.inf
+        self._error: BaseException | None = None
+        self._closed = anyio.Event()
+        self.frames_received = 0
+        self.frames_sent = 0
+        self.discarded: Counter[DiscardReason] = Counter()
+        self.events_dropped = 0
+
+    # -- lifetime --------------------------------------------------------------------
+
+    async def __aenter__(self) -> Self:
+        self.receiver.reset(self.clock())
+        self._task_group = anyio.create_task_group()
+        await self._task_group.__aenter__()
+        self._task_group.start_soon(self._pump, name="aiortu link reader")
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> bool | None:
+        await self.aclose()
+        assert self._task_group is not None
+        return await self._task_group.__aexit__(exc_type, exc, traceback)
+
+    async def aclose(self) -> None:
+        """Stop reading and close the stream."""
+        if self._task_group is not None:
+            self._task_group.cancel_scope.cancel()
+        self._send_events.close()
+        with anyio.CancelScope(shield=True):
+            await self.stream.aclose()
+
+    # -- receiving -------------------------------------------------------------------
+
+    @property
+    def last_activity(self) -> float:
+        """When the line was last busy: the later of the last byte received and our last byte sent."""
+        return max(self._last_received, self._transmit_end)
+
+    async def receive(self) -> LinkEvent:
+        """The next frame or discard, oldest first.
+
+        Raises :class:`~aiortu.errors.ConnectionLost` once the stream has failed or closed
+        and every queued event has been received.
+        """
+        try:
+            return await self._receive_events.receive()
+        except (anyio.EndOfStream, anyio.ClosedResourceError):
+            raise self._connection_lost() from self._error
+
+    def receive_nowait(self) -> LinkEvent | None:
+        """The next queued event, or ``None`` if there is none yet."""
+        try:
+            return self._receive_events.receive_nowait()
+        except anyio.WouldBlock:
+            return None
+        except (anyio.EndOfStream, anyio.ClosedResourceError):
+            raise self._connection_lost() from self._error
+
+    def _connection_lost(self) -> ConnectionLost:
+        if self._error is None:
+            return ConnectionLost("the link is closed")
+        return ConnectionLost(f"the line failed: {self._error!r}")
+
+    async def _pump(self) -> None:
+        receiver = self.receiver
+        clock = self.clock
+        stream = self.stream
+        try:
+            while True:
+                deadline = receiver.next_deadline()
+                if deadline is None:
+                    chunk = await stream.receive()
+                else:
+                    chunk = b""
+                    with anyio.move_on_after(max(0.0, deadline - clock())):
+                        chunk = await stream.receive()
+                now = clock()
+                if chunk:
+                    self._last_received = now
+                    self._deliver(receiver.feed(chunk, now))
+                else:
+                    self._deliver(receiver.expire(now))
+        except _STREAM_ERRORS as error:
+            self._error = error
+        finally:
+            self._send_events.close()
+            self._closed.set()
+
+    def _deliver(self, events: list[LinkEvent]) -> None:
+        for event in events:
+            if isinstance(event, FrameReceived):
+                self.frames_received += 1
+            else:
+                self.discarded[event.reason] += 1
+            try:
+                self._send_events.send_nowait(event)
+            except anyio.WouldBlock:
+                # Drop the oldest: the newest frame is the one a waiting master wants.
+                self._receive_events.receive_nowait()
+                self.events_dropped += 1
+                self._send_events.send_nowait(event)
+
+    # -- sending ---------------------------------------------------------------------
+
+    async def send(self, frame: bytes) -> float:
+        """Send *frame* after ``frame_gap`` of silence; return when it will have left the wire.
+
+        The returned time is in the link's clock: the moment the write began plus the
+        frame's wire time at the line's character rate. Raises
+        :class:`~aiortu.errors.ConnectionLost` if the stream fails.
+        """
+        async with self._send_lock:
+            await self.wait_for_silence(self.frame_gap)
+            if self._error is not None or self._closed.is_set():
+                raise self._connection_lost()
+            start = self.clock()
+            try:
+                await self.stream.send(frame)
+            except _STREAM_ERRORS as error:
+                self._error = error
+                raise self._connection_lost() from error
+            self.frames_sent += 1
+            # The OS may buffer the write, so it returns early; the wire is busy until
+            # the last character has gone, whichever is later.
+            end = max(start + self.settings.wire_time(len(frame)), self.clock())
+            self._transmit_end = end
+            return end
+
+    async def wait_for_silence(self, silence: float) -> None:
+        """Wait until neither side has used the line for *silence* seconds."""
+        while True:
+            remaining = self.last_activity + silence - self.clock()
+            if remaining <= 0:
+                return
+            await anyio.sleep(remaining)
