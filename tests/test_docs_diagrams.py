@@ -18,5 +18,7 @@ def test_the_receiver_diagram_matches_its_table() -> None:
 def test_the_diagram_has_one_arrow_per_merged_entry() -> None:
     drawn = state_diagram(TRANSITIONS, ReceiverState.INIT)
     arrows = [line for line in drawn.splitlines() if "-->" in line and "[*]" not in line]
-    sources = {(state.name, target.name, action) for (state, _), (target, action) in TRANSITIONS.items()}
+    sources = {
+        (state.name, target.name, action) for (state, _), (target, action) in TRANSITIONS.items()
+    }
     assert len(arrows) == len(sources)

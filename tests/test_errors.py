@@ -76,5 +76,12 @@ def test_port_errors_name_the_port() -> None:
 
 
 def test_the_package_reexports_the_errors_users_catch() -> None:
-    for name in ("ModbusError", "ExceptionResponse", "ResponseTimeout", "FrameError", "ConnectionLost", "InvalidRequest"):
+    for name in (
+        "ModbusError",
+        "ExceptionResponse",
+        "ResponseTimeout",
+        "FrameError",
+        "ConnectionLost",
+        "InvalidRequest",
+    ):
         assert getattr(aiortu, name) is getattr(errors, name)

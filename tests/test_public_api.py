@@ -31,7 +31,9 @@ def _defined_here(module: ModuleType) -> set[str]:
     for name, value in vars(module).items():
         if name.startswith("_"):
             continue
-        if (inspect.isclass(value) or inspect.isfunction(value)) and value.__module__ == module.__name__:
+        if (
+            inspect.isclass(value) or inspect.isfunction(value)
+        ) and value.__module__ == module.__name__:
             names.add(name)
     return names
 
@@ -50,4 +52,6 @@ def test_all_is_a_tuple_matching_the_exports(module_name: str) -> None:
     missing = [name for name in exported if not hasattr(module, name)]
     assert not missing, f"{module_name}.__all__ names what it does not define: {missing}"
     unlisted = _defined_here(module) - set(exported)
-    assert not unlisted, f"{module_name} defines public names missing from __all__: {sorted(unlisted)}"
+    assert not unlisted, (
+        f"{module_name} defines public names missing from __all__: {sorted(unlisted)}"
+    )

@@ -5,12 +5,12 @@ catches them all. Below it, the tree says who is at fault, which is what the cal
 needs to decide whether to fix their code, retry, or look at the wiring::
 
     ModbusError                      anything aiortu raises on purpose
-    ├── InvalidValue                 (the caller) a field or setting outside its allowed range
+    ├── InvalidValue                 (the caller) a field or setting out of its allowed range
     │   └── InvalidRequest           (the caller) a request that must not be sent; nothing was sent
     ├── ExceptionResponse            (the peer)   the device answered with a Modbus exception code
-    ├── ResponseTimeout              (the peer or the line) no valid reply in time; also a TimeoutError
-    ├── FrameError                   (the peer or the line) bytes that are not a valid frame
-    │   ├── CRCError                 (the line)   the CRC does not match: noise, a collision, wrong settings
+    ├── ResponseTimeout              (peer or line) no valid reply in time; a TimeoutError
+    ├── FrameError                   (peer or line) bytes that are not a valid frame
+    │   ├── CRCError                 (the line)   the CRC does not match: noise, wrong settings
     │   └── MalformedPDU             (the peer)   the CRC is good but the content breaks the spec
     ├── ConnectionLost               (the line)   the byte stream closed or failed under us
     └── PortError                    (the environment) a port that cannot be opened as asked
@@ -31,12 +31,12 @@ users import them from.
 from __future__ import annotations
 
 from aiortu.core.errors import (
-    CRCError,
     ConnectionLost,
+    CRCError,
     ExceptionResponse,
     FrameError,
-    InvalidValue,
     InvalidRequest,
+    InvalidValue,
     MalformedPDU,
     ModbusError,
     PortBusy,

@@ -81,11 +81,15 @@ class Link:
         if self.frame_gap < 0 or math.isnan(self.frame_gap):
             raise ValueError(f"frame_gap must be >= 0 seconds, not {frame_gap}")
         self.clock = clock
-        self.receiver = Receiver(self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence)
+        self.receiver = Receiver(
+            self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence
+        )
         self._queue_size = queue_size
         self._send_events: MemoryObjectSendStream[LinkEvent]
         self._receive_events: MemoryObjectReceiveStream[LinkEvent]
-        self._send_events, self._receive_events = anyio.create_memory_object_stream[LinkEvent](queue_size)
+        self._send_events, self._receive_events = anyio.create_memory_object_stream[LinkEvent](
+            queue_size
+        )
         self._task_group: anyio.abc.TaskGroup | None = None
         self._send_lock = anyio.Lock()
         self._last_received = -math.inf
@@ -128,7 +132,7 @@ class Link:
 
     @property
     def last_activity(self) -> float:
-        """When the line was last busy: the later of the last byte received and our last byte sent."""
+        """When the line was last busy: the later of the last byte received and the last sent."""
         return max(self._last_received, self._transmit_end)
 
     async def receive(self) -> LinkEvent:

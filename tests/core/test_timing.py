@@ -37,7 +37,11 @@ def test_character_time_t15_and_t35(baudrate: int, name: str) -> None:
 
 def test_exact_numbers_of_the_spec_default_and_9600() -> None:
     spec_default = LineSettings()
-    assert (spec_default.baudrate, spec_default.parity, spec_default.stopbits) == (19200, Parity.EVEN, 1)
+    assert (spec_default.baudrate, spec_default.parity, spec_default.stopbits) == (
+        19200,
+        Parity.EVEN,
+        1,
+    )
     assert spec_default.char_time == pytest.approx(572.916666e-6, rel=1e-6)
     assert spec_default.t3_5 == pytest.approx(2.005208333e-3, rel=1e-9)
     line = LineSettings(9600)
@@ -58,7 +62,9 @@ def test_wire_time_and_transaction_rate() -> None:
 
 
 @given(st.integers(1, 4_000_000), st.sampled_from("NEO"), st.sampled_from([1, 2]))
-def test_the_fixed_timers_apply_exactly_above_19200(baudrate: int, parity: str, stopbits: int) -> None:
+def test_the_fixed_timers_apply_exactly_above_19200(
+    baudrate: int, parity: str, stopbits: int
+) -> None:
     line = LineSettings(baudrate, parity=parity, stopbits=stopbits)
     if baudrate > 19200:
         assert (line.t1_5, line.t3_5) == (750e-6, 1750e-6)

@@ -9,13 +9,17 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Mapping
+from typing import TypeVar
 
 __all__ = ("state_diagram",)
 
+StateT = TypeVar("StateT", bound=enum.Enum)
+EventT = TypeVar("EventT", bound=enum.Enum)
+
 
 def state_diagram(
-    transitions: Mapping[tuple[enum.Enum, enum.Enum], tuple[enum.Enum, str]],
-    initial: enum.Enum,
+    transitions: Mapping[tuple[StateT, EventT], tuple[StateT, str]],
+    initial: StateT,
 ) -> str:
     """A Mermaid ``stateDiagram-v2`` block with one arrow per (state, event) entry.
 
@@ -24,11 +28,11 @@ def state_diagram(
     lists the events.
     """
     merged: dict[tuple[str, str, str], list[str]] = {}
-    for (state, event), (target, action) in transitions.items():
-        merged.setdefault((state.name, target.name, action), []).append(event.name)
+    for (source, event), (target, action) in transitions.items():
+        merged.setdefault((source.name, target.name, action), []).append(event.name)
     lines = ["```mermaid", "stateDiagram-v2", f"    [*] --> {initial.name}"]
-    for (source, target, action), events in merged.items():
-        lines.append(f"    {source} --> {target}: {' | '.join(events)} / {action}")
+    for (source_name, target_name, action), events in merged.items():
+        lines.append(f"    {source_name} --> {target_name}: {' | '.join(events)} / {action}")
     lines.append("```")
     return "\n".join(lines) + "\n"
 

@@ -74,7 +74,9 @@ class ExceptionResponse(ModbusError):
     function code of the request, and :attr:`unit` the device's address when known.
     """
 
-    def __init__(self, code: int, function_code: int | None = None, unit: int | None = None) -> None:
+    def __init__(
+        self, code: int, function_code: int | None = None, unit: int | None = None
+    ) -> None:
         try:
             self.code: int = ExceptionCode(code)
         except ValueError:
@@ -126,7 +128,9 @@ class CRCError(FrameError):
     def __init__(self, received: int, computed: int) -> None:
         self.received = received
         self.computed = computed
-        super().__init__(f"CRC mismatch: frame carries 0x{received:04X}, content gives 0x{computed:04X}")
+        super().__init__(
+            f"CRC mismatch: frame carries 0x{received:04X}, content gives 0x{computed:04X}"
+        )
 
 
 class MalformedPDU(FrameError):

@@ -1,4 +1,4 @@
-"""RTU frames: the unit address, the PDU and the CRC, and the length of a frame from its first bytes.
+"""RTU frames: unit address, PDU and CRC, and the length of a frame from its first bytes.
 
 An RTU frame (the spec's ADU) is ``unit + PDU + CRC``, 4 to 256 bytes, the CRC sent low
 byte first. :func:`encode_frame` and :func:`decode_frame` build and check whole frames.

@@ -22,6 +22,7 @@ codes without a class (the user-defined ones, vendor extensions) travel as
 
 from __future__ import annotations
 
+import contextlib
 import struct
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -105,7 +106,14 @@ class PDU:
 
     @classmethod
     def _build(cls, factory: Callable[[], Self]) -> Self:
-        """Run *factory* (a constructor call on decoded fields), blaming the peer for errors."""
+        """Run *factory* (a constructor call on decoded fields), blaming the peer for errors.
+
+        The MalformedPDU carries the exception a slave answers with: 02 when the field is
+        an address range (its name starts with a word ending in ``address``, such as
+        ``address + count`` or ``read_address + read_count``), else 03. Constructors check
+        quantities before address ranges, so a request wrong in both gets 03, as the spec
+        orders the checks.
+        """
         try:
             return factory()
         except InvalidValue as error:
@@ -114,13 +122,29 @@ class PDU:
                 field=error.field,
                 value=error.value,
                 allowed=error.allowed,
+                exception_code=_exception_code_for(error.field),
             ) from None
+
+    @classmethod
+    def _expect_function_code(cls, pdu: bytes) -> None:
+        # decode_request dispatches on the code, but a class's decode may be called directly.
+        if not pdu or pdu[0] != cls.function_code:
+            raise MalformedPDU(
+                f"{cls.__name__}: function code",
+                field="function_code",
+                value=pdu[0] if pdu else None,
+                allowed=range(cls.function_code, cls.function_code + 1),
+                exception_code=ExceptionCode.ILLEGAL_FUNCTION,
+            )
 
     @classmethod
     def _expect_length(cls, pdu: bytes, length: int) -> None:
         if len(pdu) != length:
             raise MalformedPDU(
-                f"{cls.__name__}: PDU length", field="length", value=len(pdu), allowed=range(length, length + 1)
+                f"{cls.__name__}: PDU length",
+                field="length",
+                value=len(pdu),
+                allowed=range(length, length + 1),
             )
 
     @classmethod
@@ -132,6 +156,12 @@ class PDU:
                 value=len(pdu),
                 allowed=range(length, MAX_PDU_LENGTH + 1),
             )
+
+
+def _exception_code_for(field: str) -> ExceptionCode:
+    if field.split(" ", 1)[0].endswith("address"):
+        return ExceptionCode.ILLEGAL_DATA_ADDRESS
+    return ExceptionCode.ILLEGAL_DATA_VALUE
 
 
 class Request(PDU):
@@ -158,6 +188,16 @@ class Request(PDU):
                 exception_code=ExceptionCode.ILLEGAL_FUNCTION,
             )
 
+    def _check_echo(self, field: str, received: int, sent: int) -> None:
+        """Raise MalformedPDU unless the reply's *field* repeats what the request sent."""
+        if received != sent:
+            raise MalformedPDU(
+                f"reply to {type(self).__name__} does not echo the request",
+                field=field,
+                value=received,
+                allowed=range(sent, sent + 1),
+            )
+
 
 class Response(PDU):
     """Base of the normal (not exception) replies a slave sends."""
@@ -180,10 +220,8 @@ class ExceptionPDU(PDU):
     def __post_init__(self) -> None:
         self._check("function_code", self.function_code, range(1, EXCEPTION_BIT))
         self._check("exception_code", self.exception_code, BYTE_RANGE)
-        try:
+        with contextlib.suppress(ValueError):
             object.__setattr__(self, "exception_code", ExceptionCode(self.exception_code))
-        except ValueError:
-            pass
 
     def encode(self) -> bytes:
         return bytes((self.function_code | EXCEPTION_BIT, self.exception_code))
@@ -192,7 +230,12 @@ class ExceptionPDU(PDU):
     def decode(cls, pdu: bytes) -> Self:
         cls._expect_length(pdu, 2)
         if not pdu[0] & EXCEPTION_BIT:
-            raise MalformedPDU("not an exception response", field="function_code", value=pdu[0], allowed="0x81..0xFF")
+            raise MalformedPDU(
+                "not an exception response",
+                field="function_code",
+                value=pdu[0],
+                allowed="0x81..0xFF",
+            )
         return cls._build(lambda: cls(pdu[0] & 0x7F, pdu[1]))
 
 
@@ -235,7 +278,7 @@ _SUB_DECODERS: dict[int, tuple[Callable[[bytes], Request], Callable[[bytes], Res
 
 
 def register(request_class: _RequestT) -> _RequestT:
-    """Class decorator: decode this function code with *request_class* and its ``response_class``."""
+    """Class decorator: decode this code with *request_class* and its ``response_class``."""
     code = request_class.function_code
     if code in _REQUESTS:
         raise RuntimeError(f"function code 0x{code:02X} registered twice")
@@ -255,9 +298,13 @@ def register_decoders(
 
 def _function_code(pdu: bytes) -> int:
     if not pdu:
-        raise MalformedPDU("empty PDU", field="length", value=0, allowed=range(1, MAX_PDU_LENGTH + 1))
+        raise MalformedPDU(
+            "empty PDU", field="length", value=0, allowed=range(1, MAX_PDU_LENGTH + 1)
+        )
     if len(pdu) > MAX_PDU_LENGTH:
-        raise MalformedPDU("PDU too long", field="length", value=len(pdu), allowed=range(1, MAX_PDU_LENGTH + 1))
+        raise MalformedPDU(
+            "PDU too long", field="length", value=len(pdu), allowed=range(1, MAX_PDU_LENGTH + 1)
+        )
     return pdu[0]
 
 
@@ -292,7 +339,9 @@ def decode_response(pdu: bytes) -> Response | ExceptionPDU:
     if code & EXCEPTION_BIT:
         return ExceptionPDU.decode(pdu)
     if code == 0:
-        raise MalformedPDU("invalid function code", field="function_code", value=0, allowed=range(1, EXCEPTION_BIT))
+        raise MalformedPDU(
+            "invalid function code", field="function_code", value=0, allowed=range(1, EXCEPTION_BIT)
+        )
     response_class = _RESPONSES.get(code)
     if response_class is not None:
         return response_class.decode(pdu)

@@ -11,30 +11,45 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar, Self
 
-from aiortu.core.codes import FunctionCode
+from aiortu.core.codes import ExceptionCode, FunctionCode
 from aiortu.core.errors import MalformedPDU
 from aiortu.core.pdu import (
     ADDRESS_RANGE,
     Request,
     Response,
     pack_bits,
+    pack_registers,
     register,
     unpack_bits,
+    unpack_registers,
 )
 
 __all__ = (
     "MAX_READ_BITS",
+    "MAX_WRITE_BITS",
     "ReadCoilsRequest",
     "ReadCoilsResponse",
     "ReadDiscreteInputsRequest",
     "ReadDiscreteInputsResponse",
+    "WriteMultipleCoilsRequest",
+    "WriteMultipleCoilsResponse",
+    "WriteSingleCoilRequest",
+    "WriteSingleCoilResponse",
 )
 
 MAX_READ_BITS = 2000
 """The most coils or discrete inputs one read may ask for (0x7D0)."""
 
+MAX_WRITE_BITS = 1968
+"""The most coils one write multiple coils (0F) may set (0x7B0)."""
+
 _READ_BITS_COUNT = range(1, MAX_READ_BITS + 1)
 _READ_BITS_BYTE_COUNT = range(1, (MAX_READ_BITS + 7) // 8 + 1)
+_WRITE_BITS_COUNT = range(1, MAX_WRITE_BITS + 1)
+_END_RANGE = range(ADDRESS_RANGE.stop + 1)
+
+_COIL_ON = 0xFF00
+_COIL_OFF = 0x0000
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,10 +69,13 @@ class ReadCoilsResponse(Response):
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
+        cls._expect_function_code(pdu)
         cls._expect_min_length(pdu, 3)
         byte_count = pdu[1]
         if byte_count not in _READ_BITS_BYTE_COUNT:
-            raise MalformedPDU(cls.__name__, field="byte_count", value=byte_count, allowed=_READ_BITS_BYTE_COUNT)
+            raise MalformedPDU(
+                cls.__name__, field="byte_count", value=byte_count, allowed=_READ_BITS_BYTE_COUNT
+            )
         cls._expect_length(pdu, 2 + byte_count)
         return cls._build(lambda: cls(unpack_bits(pdu[2:])))
 
@@ -77,22 +95,31 @@ class ReadCoilsRequest(Request):
         self._check("address + count", self.address + self.count, range(ADDRESS_RANGE.stop + 1))
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + self.address.to_bytes(2, "big") + self.count.to_bytes(2, "big")
+        return (
+            bytes((self.function_code,))
+            + self.address.to_bytes(2, "big")
+            + self.count.to_bytes(2, "big")
+        )
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
+        cls._expect_function_code(pdu)
         cls._expect_length(pdu, 5)
-        return cls._build(lambda: cls(int.from_bytes(pdu[1:3], "big"), int.from_bytes(pdu[3:5], "big")))
+        return cls._build(
+            lambda: cls(int.from_bytes(pdu[1:3], "big"), int.from_bytes(pdu[3:5], "big"))
+        )
 
     def check_response(self, response: Response) -> None:
         Request.check_response(self, response)
         assert isinstance(response, ReadCoilsResponse)
+        # Compare whole bytes: a decoded reply holds the padding, one built locally may not.
         expected = (self.count + 7) // 8
-        if len(response.values) != expected * 8:
+        received = (len(response.values) + 7) // 8
+        if received != expected:
             raise MalformedPDU(
                 "reply byte count does not match the count asked",
                 field="byte_count",
-                value=len(response.values) // 8,
+                value=received,
                 allowed=range(expected, expected + 1),
             )
 
@@ -116,5 +143,170 @@ class ReadDiscreteInputsRequest(ReadCoilsRequest):
     response_class: ClassVar[type[Response]] = ReadDiscreteInputsResponse
 
 
+def _coil_word(value: bool) -> int:
+    return _COIL_ON if value else _COIL_OFF
+
+
+def _decode_single_coil(cls: type[Request] | type[Response], pdu: bytes) -> tuple[int, bool]:
+    """The address and the value of a 05 request or reply; only 0xFF00 and 0x0000 are values."""
+    cls._expect_function_code(pdu)
+    cls._expect_length(pdu, 5)
+    address, word = unpack_registers(pdu, 1, 2)
+    if word not in (_COIL_ON, _COIL_OFF):
+        raise MalformedPDU(
+            f"{cls.__name__}: coil value",
+            field="value",
+            value=word,
+            allowed="0xFF00 (on) or 0x0000 (off)",
+            exception_code=ExceptionCode.ILLEGAL_DATA_VALUE,
+        )
+    return address, word == _COIL_ON
+
+
+@dataclass(frozen=True, slots=True)
+class WriteSingleCoilResponse(Response):
+    """Reply to write single coil: the request echoed, *address* and *value*.
+
+    On the wire the value is 0xFF00 (on) or 0x0000 (off); decoding rejects any other word.
+    """
+
+    function_code: ClassVar[int] = FunctionCode.WRITE_SINGLE_COIL
+    address: int
+    value: bool
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "value", bool(self.value))
+        self._check("address", self.address, ADDRESS_RANGE)
+
+    def encode(self) -> bytes:
+        return bytes((self.function_code,)) + pack_registers((self.address, _coil_word(self.value)))
+
+    @classmethod
+    def decode(cls, pdu: bytes) -> Self:
+        address, value = _decode_single_coil(cls, pdu)
+        return cls._build(lambda: cls(address, value))
+
+
+@dataclass(frozen=True, slots=True)
+class WriteSingleCoilRequest(Request):
+    """Set the coil at protocol address *address* (0..65535) on (``True``) or off.
+
+    *value* is a ``bool``; it travels as 0xFF00 or 0x0000, and a decoded request with any
+    other word raises MalformedPDU with exception code 03. May be broadcast.
+    """
+
+    function_code: ClassVar[int] = FunctionCode.WRITE_SINGLE_COIL
+    response_class: ClassVar[type[Response]] = WriteSingleCoilResponse
+    broadcastable: ClassVar[bool] = True
+    address: int
+    value: bool
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "value", bool(self.value))
+        self._check("address", self.address, ADDRESS_RANGE)
+
+    def encode(self) -> bytes:
+        return bytes((self.function_code,)) + pack_registers((self.address, _coil_word(self.value)))
+
+    @classmethod
+    def decode(cls, pdu: bytes) -> Self:
+        address, value = _decode_single_coil(cls, pdu)
+        return cls._build(lambda: cls(address, value))
+
+    def check_response(self, response: Response) -> None:
+        Request.check_response(self, response)
+        assert isinstance(response, WriteSingleCoilResponse)
+        self._check_echo("address", response.address, self.address)
+        self._check_echo("value", _coil_word(response.value), _coil_word(self.value))
+
+
+@dataclass(frozen=True, slots=True)
+class WriteMultipleCoilsResponse(Response):
+    """Reply to write multiple coils: the *address* and the *count* (1..1968) written."""
+
+    function_code: ClassVar[int] = FunctionCode.WRITE_MULTIPLE_COILS
+    address: int
+    count: int
+
+    def __post_init__(self) -> None:
+        self._check("address", self.address, ADDRESS_RANGE)
+        self._check("count", self.count, _WRITE_BITS_COUNT)
+        self._check("address + count", self.address + self.count, _END_RANGE)
+
+    def encode(self) -> bytes:
+        return bytes((self.function_code,)) + pack_registers((self.address, self.count))
+
+    @classmethod
+    def decode(cls, pdu: bytes) -> Self:
+        cls._expect_function_code(pdu)
+        cls._expect_length(pdu, 5)
+        return cls._build(lambda: cls(*unpack_registers(pdu, 1, 2)))
+
+
+@dataclass(frozen=True, slots=True)
+class WriteMultipleCoilsRequest(Request):
+    """Set 1..1968 consecutive coils from protocol address *address* to *values*.
+
+    The count is ``len(values)``, and ``address + count`` may not pass 65536. On the wire the
+    bits are packed LSB first; a decoded request keeps exactly the count sent and ignores the
+    padding bits of the last byte. May be broadcast.
+    """
+
+    function_code: ClassVar[int] = FunctionCode.WRITE_MULTIPLE_COILS
+    response_class: ClassVar[type[Response]] = WriteMultipleCoilsResponse
+    broadcastable: ClassVar[bool] = True
+    address: int
+    values: tuple[bool, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "values", tuple(bool(value) for value in self.values))
+        self._check("address", self.address, ADDRESS_RANGE)
+        self._check("len(values)", len(self.values), _WRITE_BITS_COUNT)
+        self._check("address + len(values)", self.address + len(self.values), _END_RANGE)
+
+    @property
+    def count(self) -> int:
+        """The number of coils written."""
+        return len(self.values)
+
+    def encode(self) -> bytes:
+        packed = pack_bits(self.values)
+        return (
+            bytes((self.function_code,))
+            + pack_registers((self.address, len(self.values)))
+            + bytes((len(packed),))
+            + packed
+        )
+
+    @classmethod
+    def decode(cls, pdu: bytes) -> Self:
+        cls._expect_function_code(pdu)
+        cls._expect_min_length(pdu, 7)
+        address, count = unpack_registers(pdu, 1, 2)
+        # The count is checked here rather than by the constructor because it decides how
+        # many bits to unpack; an out-of-range count is exception 03 either way.
+        if count not in _WRITE_BITS_COUNT:
+            raise MalformedPDU(cls.__name__, field="count", value=count, allowed=_WRITE_BITS_COUNT)
+        byte_count = pdu[5]
+        expected = (count + 7) // 8
+        if byte_count != expected:
+            raise MalformedPDU(
+                f"{cls.__name__}: byte count does not match the count",
+                field="byte_count",
+                value=byte_count,
+                allowed=range(expected, expected + 1),
+            )
+        cls._expect_length(pdu, 6 + byte_count)
+        return cls._build(lambda: cls(address, unpack_bits(pdu[6:])[:count]))
+
+    def check_response(self, response: Response) -> None:
+        Request.check_response(self, response)
+        assert isinstance(response, WriteMultipleCoilsResponse)
+        self._check_echo("address", response.address, self.address)
+        self._check_echo("count", response.count, len(self.values))
+
+
 register(ReadCoilsRequest)
 register(ReadDiscreteInputsRequest)
+register(WriteSingleCoilRequest)
+register(WriteMultipleCoilsRequest)

@@ -257,8 +257,11 @@ class Receiver:
         self._chunk_end = 0.0
         self._chunk_length = 0
         self._end_index = 0
-        self._actions: dict[tuple[ReceiverState, ReceiverEvent], tuple[ReceiverState, Callable[..., int]]] = {
-            key: (target, getattr(self, f"_{action}")) for key, (target, action) in TRANSITIONS.items()
+        self._actions: dict[
+            tuple[ReceiverState, ReceiverEvent], tuple[ReceiverState, Callable[..., int]]
+        ] = {
+            key: (target, getattr(self, f"_{action}"))
+            for key, (target, action) in TRANSITIONS.items()
         }
 
     # -- the driving interface -------------------------------------------------------
@@ -274,8 +277,7 @@ class Receiver:
         first_arrival = now - (count - 1) * char_time
         last = self._last
         if last is not None:
-            if first_arrival < last:
-                first_arrival = last
+            first_arrival = max(first_arrival, last)
             silence = first_arrival - char_time - last
             if silence >= self.frame_silence:
                 self._fire(ReceiverEvent.SILENCE, b"", 0, last + self.frame_silence)
@@ -332,7 +334,10 @@ class Receiver:
 
     def _arrival(self, position: int) -> float:
         """When the byte at *position* of the current chunk finished arriving."""
-        return max(self._first_arrival, self._chunk_end - (self._chunk_length - 1 - position) * self.char_time)
+        return max(
+            self._first_arrival,
+            self._chunk_end - (self._chunk_length - 1 - position) * self.char_time,
+        )
 
     # -- actions: each takes the chunk and a position, returns the new position --------
 
@@ -410,7 +415,9 @@ class Receiver:
             return
         self._predicted = True
         have = len(buffer)
-        self._candidates = sorted({guess for guess in guesses if guess != CANNOT_KNOW and guess >= have})
+        self._candidates = sorted(
+            {guess for guess in guesses if guess != CANNOT_KNOW and guess >= have}
+        )
 
     def _complete_at_candidate(self, position: int) -> bool:
         """Check the CRC when the buffer reaches a candidate length; fire COMPLETE if it holds.
@@ -440,7 +447,9 @@ class Receiver:
             self._out.append(FrameReceived(bytes(buffer), self._first, self._last_arrival()))
             buffer.clear()
         else:
-            self._salvage(DiscardReason.CRC if len(buffer) >= MIN_FRAME_LENGTH else DiscardReason.TOO_SHORT)
+            self._salvage(
+                DiscardReason.CRC if len(buffer) >= MIN_FRAME_LENGTH else DiscardReason.TOO_SHORT
+            )
         self._fire(ReceiverEvent.CHECKED, b"", 0, self._now)
         return position
 
@@ -479,7 +488,9 @@ class Receiver:
             found = self._frame_at(buffer, offset)
             if found > 0:
                 if offset > garbage_from:
-                    self._discard(buffer[garbage_from:offset], reason, self._estimate(offset - 1, end))
+                    self._discard(
+                        buffer[garbage_from:offset], reason, self._estimate(offset - 1, end)
+                    )
                 self._out.append(
                     FrameReceived(
                         buffer[offset : offset + found],

@@ -114,7 +114,7 @@ class LineSettings:
         return self.wire_time(request_length + reply_length) + 2 * self.t3_5
 
     def transaction_rate(self, request_length: int, reply_length: int) -> float:
-        """The wire-limited number of request/reply pairs per second (see :meth:`transaction_time`)."""
+        """The wire-limited request/reply pairs per second (see :meth:`transaction_time`)."""
         return 1.0 / self.transaction_time(request_length, reply_length)
 
     def __str__(self) -> str:
