@@ -1,0 +1,75 @@
+"""Byte streams that carry RTU frames: serial ports, RTU over TCP, pty file descriptors.
+
+Every transport is an :class:`anyio.abc.ByteStream`, so the link, the master and the
+slave take any of them. :func:`open_stream` opens one from a port name as users write it:
+a serial device path, or ``rtu+tcp://host:port`` (see :mod:`aiortu.transport.url`).
+Opening errors are :class:`~aiortu.errors.PortError` subclasses naming the port; see
+``docs/transports.md`` for what each means and what to do about it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from anyio.abc import ByteStream
+
+from aiortu.core.timing import LineSettings
+from aiortu.transport.echo import LocalEchoFilter
+from aiortu.transport.fd import FileDescriptorStream
+from aiortu.transport.serial import RS485Options, SerialAttribute, SerialStream, open_serial
+from aiortu.transport.tcp import open_rtu_over_tcp
+from aiortu.transport.url import (
+    PortAddress,
+    SerialAddress,
+    TcpAddress,
+    parse_port_url,
+)
+
+__all__ = (
+    "FileDescriptorStream",
+    "LocalEchoFilter",
+    "PortAddress",
+    "RS485Options",
+    "SerialAddress",
+    "SerialAttribute",
+    "SerialStream",
+    "TcpAddress",
+    "open_rtu_over_tcp",
+    "open_serial",
+    "open_stream",
+    "parse_port_url",
+)
+
+_SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo"})
+_TCP_OPTIONS = frozenset({"connect_timeout"})
+
+
+async def open_stream(
+    port_or_url: str,
+    settings: LineSettings = LineSettings(),  # noqa: B008 - frozen, safe to share
+    **options: Any,
+) -> ByteStream:
+    """Open the transport a port name designates and return it as a byte stream.
+
+    ``rtu+tcp://host:port`` connects to a serial device server
+    (:func:`open_rtu_over_tcp`; option ``connect_timeout``; *settings* are not sent
+    anywhere, as the server's serial side is configured on the server). Anything else is
+    a serial device path (:func:`open_serial`; options ``exclusive``, ``rs485`` and
+    ``local_echo``).
+
+    Raises :class:`~aiortu.errors.InvalidValue` for a malformed URL,
+    :class:`TypeError` for an option the transport does not take, and the transport's
+    :class:`~aiortu.errors.PortError` subclasses when it cannot be opened.
+    """
+    address = parse_port_url(port_or_url)
+    allowed = _TCP_OPTIONS if isinstance(address, TcpAddress) else _SERIAL_OPTIONS
+    unknown = sorted(set(options) - allowed)
+    if unknown:
+        kind = "RTU over TCP" if isinstance(address, TcpAddress) else "a serial port"
+        raise TypeError(
+            f"{port_or_url}: {kind} takes no option {', '.join(unknown)} "
+            f"(it takes {', '.join(sorted(allowed))})"
+        )
+    if isinstance(address, TcpAddress):
+        return await open_rtu_over_tcp(address.host, address.port, **options)
+    return await open_serial(address.path, settings, **options)

@@ -1,0 +1,472 @@
+"""A serial port as an anyio byte stream, over pyserial-asyncio-fast.
+
+:func:`open_serial` opens a device path (``/dev/ttyUSB0``, ``/dev/serial/by-id/...``, a
+pty) with the given :class:`~aiortu.core.timing.LineSettings` and returns a
+:class:`SerialStream`, an :class:`anyio.abc.ByteStream` that the link, the master and the
+slave can use like any other stream.
+
+**asyncio only.** pyserial-asyncio-fast drives the port through the asyncio event loop, so
+this transport runs on anyio's asyncio backend and nowhere else; under trio, use RTU over
+TCP or a pty :class:`~aiortu.transport.fd.FileDescriptorStream` instead.
+
+Errors while opening are :class:`~aiortu.errors.PortError` subclasses that name the port
+and the cause: :class:`~aiortu.errors.PortNotFound` (no such device, or not a serial
+device), :class:`~aiortu.errors.PortBusy` (another program holds the port),
+:class:`~aiortu.errors.PortPermissionDenied` (EACCES/EPERM: on Linux, join the ``dialout``
+group) and :class:`~aiortu.errors.UnsupportedSettings` (the settings, or RS-485 mode,
+refused by the driver).
+
+Errors while running follow anyio's conventions: when the port fails under us (a USB
+adapter unplugged, the other end of a pty closed), bytes already received are still
+delivered, then :meth:`SerialStream.receive` and :meth:`SerialStream.send` raise
+:class:`anyio.BrokenResourceError`, chained to pyserial's error. A serial port has no
+orderly end, so :class:`anyio.EndOfStream` is never raised. After :meth:`SerialStream.aclose`
+both raise :class:`anyio.ClosedResourceError`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any
+
+import anyio
+import anyio.lowlevel
+import serial
+import serial.rs485
+from anyio.abc import ByteStream
+from serial_asyncio_fast import connection_for_serial
+
+from aiortu.core.timing import LineSettings, Parity
+from aiortu.errors import (
+    InvalidValue,
+    PortBusy,
+    PortError,
+    PortNotFound,
+    PortPermissionDenied,
+    UnsupportedSettings,
+)
+from aiortu.transport.echo import LocalEchoFilter
+
+__all__ = ("RS485Options", "SerialAttribute", "SerialStream", "open_serial")
+
+_READ_BUFFER_LIMIT = 64 * 1024
+"""Received bytes held for a slow reader before the port stops being read."""
+
+_CLOSE_TIMEOUT = 2.0
+"""Seconds aclose() waits for pending output to drain and the port to close."""
+
+_termios: ModuleType | None
+try:
+    import termios
+
+    _termios = termios
+    _TERMIOS_ERROR: type[Exception] = termios.error
+except ImportError:  # pragma: no cover - no termios off POSIX, where pyserial raises OSError
+    _termios = None
+    _TERMIOS_ERROR = OSError
+
+_CMSPAR = getattr(_termios, "CMSPAR", 0o10000000000)
+"""Mark/space parity; Linux has it, and Python's termios does not always name it."""
+
+
+_NOT_FOUND = frozenset({errno.ENOENT, errno.ENODEV, errno.ENXIO, errno.ENOTDIR, errno.EIO})
+_BUSY = frozenset({errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK})
+_DENIED = frozenset({errno.EACCES, errno.EPERM})
+
+
+@dataclass(frozen=True, slots=True)
+class RS485Options:
+    """Kernel RS-485 mode: the driver switches the transceiver with RTS around each write.
+
+    Passed to pyserial as :class:`serial.rs485.RS485Settings` and applied with the
+    ``TIOCSRS485`` ioctl, so it needs a UART driver with RS-485 support; a pty or a plain
+    RS-232 port refuses it and :func:`open_serial` raises
+    :class:`~aiortu.errors.UnsupportedSettings`. Delays are in seconds (the kernel keeps
+    milliseconds).
+    """
+
+    rts_level_for_tx: bool = True
+    """RTS level while transmitting."""
+    rts_level_for_rx: bool = False
+    """RTS level while receiving."""
+    delay_before_tx: float | None = None
+    """Seconds between raising RTS and the first bit; None keeps the driver's value."""
+    delay_before_rx: float | None = None
+    """Seconds between the last bit and releasing RTS; None keeps the driver's value."""
+    receive_during_tx: bool = False
+    """Keep the receiver on while transmitting: the port then echoes what we send
+    (combine with ``local_echo=True``)."""
+
+    def __post_init__(self) -> None:
+        for name in ("delay_before_tx", "delay_before_rx"):
+            value = getattr(self, name)
+            if value is not None and not 0 <= value <= 65.535:
+                raise InvalidValue(name, value, "0..65.535 seconds, or None")
+
+    def to_pyserial(self) -> Any:
+        """The equivalent :class:`serial.rs485.RS485Settings`."""
+        return serial.rs485.RS485Settings(
+            rts_level_for_tx=self.rts_level_for_tx,
+            rts_level_for_rx=self.rts_level_for_rx,
+            loopback=self.receive_during_tx,
+            delay_before_tx=self.delay_before_tx,
+            delay_before_rx=self.delay_before_rx,
+        )
+
+
+class SerialAttribute(anyio.TypedAttributeSet):
+    """Typed attributes a :class:`SerialStream` offers through ``stream.extra(...)``."""
+
+    port: str = anyio.typed_attribute()
+    """The device path the stream was opened with."""
+    settings: LineSettings = anyio.typed_attribute()
+    """The line settings in force."""
+    serial: Any = anyio.typed_attribute()
+    """The underlying :class:`serial.Serial`, for modem lines; never read or write it."""
+
+
+class _PortProtocol(asyncio.Protocol):
+    """Collects what the transport reports; the stream waits on its events."""
+
+    def __init__(self, echo: LocalEchoFilter | None) -> None:
+        self.echo = echo
+        self.transport: asyncio.Transport | None = None
+        self.buffer = bytearray()
+        self.data_ready = asyncio.Event()
+        self.writable = asyncio.Event()
+        self.writable.set()
+        self.done = asyncio.Event()
+        self.lost = False
+        self.error: BaseException | None = None
+        self._reading_paused = False
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        if self.echo is not None:
+            data = self.echo.feed(data)
+        if not data:
+            return
+        self.buffer += data
+        self.data_ready.set()
+        if len(self.buffer) > _READ_BUFFER_LIMIT and not self._reading_paused:
+            assert self.transport is not None
+            self._reading_paused = True
+            self.transport.pause_reading()
+
+    def take(self, max_bytes: int) -> bytes:
+        chunk = bytes(self.buffer[:max_bytes])
+        del self.buffer[:max_bytes]
+        if self._reading_paused and len(self.buffer) <= _READ_BUFFER_LIMIT // 2 and not self.lost:
+            assert self.transport is not None
+            self._reading_paused = False
+            self.transport.resume_reading()
+        return chunk
+
+    def pause_writing(self) -> None:
+        self.writable.clear()
+
+    def resume_writing(self) -> None:
+        self.writable.set()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.lost = True
+        self.error = exc
+        # Wake every waiter so that it sees the loss.
+        self.data_ready.set()
+        self.writable.set()
+        self.done.set()
+
+
+class SerialStream(ByteStream):
+    """An open serial port as a byte stream. Made by :func:`open_serial`.
+
+    :meth:`receive` returns the bytes as the port delivers them (with the local echo
+    removed when asked); :meth:`send` returns once the transport has handed every byte to
+    the OS driver, which then clocks them out at the baud rate. One task may receive while
+    another sends; two concurrent receivers (or senders) raise
+    :class:`anyio.BusyResourceError`.
+    """
+
+    def __init__(
+        self,
+        port: str,
+        settings: LineSettings,
+        transport: asyncio.Transport,
+        protocol: _PortProtocol,
+        serial_instance: Any,
+    ) -> None:
+        self._port = port
+        self._settings = settings
+        self._transport = transport
+        self._protocol = protocol
+        self._serial = serial_instance
+        self._closed = False
+        self._eof_sent = False
+        self._receive_guard = anyio.ResourceGuard("reading from")
+        self._send_guard = anyio.ResourceGuard("writing to")
+
+    @property
+    def port(self) -> str:
+        """The device path this stream was opened with."""
+        return self._port
+
+    @property
+    def settings(self) -> LineSettings:
+        """The line settings in force."""
+        return self._settings
+
+    @property
+    def echo(self) -> LocalEchoFilter | None:
+        """The local echo filter with its counters, or None when ``local_echo`` is off."""
+        return self._protocol.echo
+
+    @property
+    def extra_attributes(self) -> Mapping[Any, Callable[[], Any]]:
+        """The :class:`SerialAttribute` values, for ``stream.extra(...)``."""
+        return {
+            SerialAttribute.port: lambda: self._port,
+            SerialAttribute.settings: lambda: self._settings,
+            SerialAttribute.serial: lambda: self._serial,
+        }
+
+    def _broken(self) -> anyio.BrokenResourceError:
+        error = anyio.BrokenResourceError(f"{self._port}: the serial port failed or disappeared")
+        error.__cause__ = self._protocol.error
+        return error
+
+    async def receive(self, max_bytes: int = 65536) -> bytes:
+        """Return the next chunk of received bytes, at most *max_bytes*, waiting for one.
+
+        Raises :class:`anyio.BrokenResourceError` once the port has failed and every byte
+        received before the failure was returned, and :class:`anyio.ClosedResourceError`
+        after :meth:`aclose`.
+        """
+        if max_bytes < 1:
+            raise ValueError("max_bytes must be at least 1")
+        with self._receive_guard:
+            await anyio.lowlevel.checkpoint()
+            protocol = self._protocol
+            while True:
+                if self._closed:
+                    raise anyio.ClosedResourceError
+                if protocol.buffer:
+                    return protocol.take(max_bytes)
+                if protocol.lost:
+                    raise self._broken()
+                protocol.data_ready.clear()
+                await protocol.data_ready.wait()
+
+    async def send(self, item: bytes) -> None:
+        """Write all of *item* and wait until the transport has handed it to the driver.
+
+        If the caller is cancelled while waiting, the bytes still go out: they are already
+        queued. Raises :class:`anyio.BrokenResourceError` if the port has failed and
+        :class:`anyio.ClosedResourceError` after :meth:`aclose` or :meth:`send_eof`.
+        """
+        with self._send_guard:
+            await anyio.lowlevel.checkpoint()
+            if self._closed or self._eof_sent:
+                raise anyio.ClosedResourceError
+            if self._protocol.lost or self._transport.is_closing():
+                raise self._broken()
+            if not item:
+                return
+            if self._protocol.echo is not None:
+                # Before the write: the echo may be read in the same loop iteration.
+                self._protocol.echo.expect(item)
+            self._transport.write(item)
+            await self._protocol.writable.wait()
+            if self._closed:
+                raise anyio.ClosedResourceError
+            # The transport reports a failed write by closing itself, not by raising.
+            if self._protocol.lost or self._transport.is_closing():
+                raise self._broken()
+
+    async def send_eof(self) -> None:
+        """Refuse further sends; the line itself has no end-of-file to transmit."""
+        await anyio.lowlevel.checkpoint()
+        self._eof_sent = True
+
+    async def aclose(self) -> None:
+        """Close the port, letting pending output drain first (for at most 2 s).
+
+        Idempotent; waits until the port is really released, so that it can be reopened
+        at once.
+        """
+        if not self._closed:
+            self._closed = True
+            self._protocol.data_ready.set()
+            self._protocol.writable.set()
+            if not self._transport.is_closing():
+                self._transport.close()
+            with anyio.move_on_after(_CLOSE_TIMEOUT, shield=True):
+                await self._protocol.done.wait()
+            # Output stuck behind flow control: drop it. While output is still buffered the
+            # transport has not started closing the port, so aborting cannot close it twice.
+            if not self._protocol.done.is_set() and self._transport.get_write_buffer_size():
+                self._transport.abort()
+                with anyio.move_on_after(_CLOSE_TIMEOUT, shield=True):
+                    await self._protocol.done.wait()
+        await anyio.lowlevel.checkpoint()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "lost" if self._protocol.lost else "open"
+        return f"<SerialStream {self._port} {self._settings} {state}>"
+
+
+def _errno_of(exc: BaseException) -> int | None:
+    """The OS error number behind a pyserial or termios error, if one is known."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        number = getattr(seen, "errno", None)
+        if isinstance(number, int):
+            return number
+        if isinstance(seen, _TERMIOS_ERROR) and seen.args and isinstance(seen.args[0], int):
+            return int(seen.args[0])
+        seen = seen.__cause__ or seen.__context__
+    return None
+
+
+def _open_error(port: str, exc: BaseException, what: str) -> PortError:
+    """Translate an error raised while opening *port* into aiortu's error for it."""
+    number = _errno_of(exc)
+    if isinstance(exc, ValueError):
+        return UnsupportedSettings(port, f"the port refuses {what}: {exc}")
+    cause = os.strerror(number) if number is not None else str(exc)
+    if number == errno.ENOTTY:
+        return PortNotFound(port, f"not a serial device ({cause})")
+    if number in _NOT_FOUND:
+        return PortNotFound(port, f"no such serial device ({cause})")
+    if number in _BUSY:
+        return PortBusy(port, f"another program has the port open ({cause})")
+    if number in _DENIED:
+        return PortPermissionDenied(
+            port,
+            "permission denied: give the user access to the device "
+            f"(on Linux, add it to the 'dialout' group) ({cause})",
+        )
+    if number == errno.EINVAL:
+        return UnsupportedSettings(port, f"the port refuses {what} ({cause})")
+    return PortError(port, f"cannot open the port: {exc}")
+
+
+def _new_serial(
+    port: str, settings: LineSettings, exclusive: bool, rs485: RS485Options | None
+) -> Any:
+    """A configured but unopened :class:`serial.Serial`."""
+    if os.name == "posix" and settings.stopbits == 1.5 and settings.bytesize != 5:
+        # termios has no 1.5 stop bits: pyserial would quietly use 2.
+        raise UnsupportedSettings(port, "1.5 stop bits exist only with 5 data bits on POSIX")
+    try:
+        instance = serial.Serial()
+        instance.baudrate = settings.baudrate
+        instance.bytesize = settings.bytesize
+        instance.parity = Parity(settings.parity).value
+        instance.stopbits = settings.stopbits
+        instance.exclusive = exclusive
+        if rs485 is not None:
+            instance.rs485_mode = rs485.to_pyserial()
+        instance.port = port
+    except ValueError as exc:
+        raise UnsupportedSettings(port, f"the settings {settings} are refused: {exc}") from exc
+    return instance
+
+
+def _applied_format(fd: int) -> str | None:
+    """The character format the tty really has, as ``8E1``; None where termios is missing."""
+    if _termios is None:
+        return None
+    cflag = _termios.tcgetattr(fd)[2]
+    bytesize = {_termios.CS5: 5, _termios.CS6: 6, _termios.CS7: 7, _termios.CS8: 8}.get(
+        cflag & _termios.CSIZE, 0
+    )
+    if not cflag & _termios.PARENB:
+        parity = Parity.NONE
+    elif cflag & _CMSPAR:
+        parity = Parity.MARK if cflag & _termios.PARODD else Parity.SPACE
+    else:
+        parity = Parity.ODD if cflag & _termios.PARODD else Parity.EVEN
+    stopbits = 2 if cflag & _termios.CSTOPB else 1
+    return f"{bytesize}{parity.value}{stopbits}"
+
+
+def _expected_format(settings: LineSettings) -> str:
+    stopbits = 1 if settings.stopbits == 1 else 2  # termios spells 1.5 as 2 (CSTOPB)
+    return f"{settings.bytesize}{Parity(settings.parity).value}{stopbits}"
+
+
+def _open(port: str, instance: Any, settings: LineSettings, what: str) -> None:
+    """Open and check the port; runs in a worker thread, as opening may block."""
+    try:
+        instance.open()
+    except (serial.SerialException, OSError, ValueError, _TERMIOS_ERROR) as exc:
+        raise _open_error(port, exc, what) from exc
+    try:
+        # Some drivers accept tcsetattr() and quietly keep other settings.
+        applied = _applied_format(instance.fileno())
+    except (OSError, _TERMIOS_ERROR) as exc:
+        instance.close()
+        raise _open_error(port, exc, what) from exc
+    if applied is not None and applied != _expected_format(settings):
+        instance.close()
+        raise UnsupportedSettings(
+            port, f"the driver kept {applied} instead of {_expected_format(settings)}"
+        )
+
+
+def _running_loop() -> asyncio.AbstractEventLoop:
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        raise RuntimeError(
+            "open_serial() runs on asyncio only (pyserial-asyncio-fast); under trio, use "
+            "RTU over TCP or a pty FileDescriptorStream"
+        ) from None
+
+
+async def open_serial(
+    port: str,
+    settings: LineSettings = LineSettings(),  # noqa: B008 - frozen, safe to share
+    *,
+    exclusive: bool = True,
+    rs485: RS485Options | None = None,
+    local_echo: bool = False,
+) -> SerialStream:
+    """Open the serial device *port* with *settings* and return it as a byte stream.
+
+    *exclusive* locks the port (``flock``) so that a second program using the same
+    convention gets :class:`~aiortu.errors.PortBusy` instead of stealing bytes. *rs485*
+    turns on the driver's RS-485 mode. *local_echo* strips the echo of our own
+    transmissions that some RS-485 adapters return (see :mod:`aiortu.transport.echo` for
+    what happens when the echo does not match).
+
+    Raises :class:`~aiortu.errors.PortNotFound`, :class:`~aiortu.errors.PortBusy`,
+    :class:`~aiortu.errors.PortPermissionDenied` or
+    :class:`~aiortu.errors.UnsupportedSettings`, each naming the port and the cause, and
+    :class:`RuntimeError` when not running on asyncio.
+    """
+    loop = _running_loop()
+    instance = _new_serial(port, settings, exclusive, rs485)
+    what = f"the settings {settings}" + (" with RS-485 mode" if rs485 is not None else "")
+    # Shielded: a cancellation arriving while the worker thread opens the port would
+    # otherwise leave the port open with nobody to close it.
+    with anyio.CancelScope(shield=True):
+        await anyio.to_thread.run_sync(_open, port, instance, settings, what)
+    protocol = _PortProtocol(LocalEchoFilter() if local_echo else None)
+    try:
+        # The transport sets non-blocking timeouts, which reconfigures the open port.
+        transport, _ = await connection_for_serial(loop, lambda: protocol, instance)
+    except (serial.SerialException, OSError, ValueError, _TERMIOS_ERROR) as exc:
+        instance.close()
+        raise _open_error(port, exc, what) from exc
+    # Nothing buffered in user space: send() returns once its bytes are with the driver.
+    transport.set_write_buffer_limits(high=0, low=0)
+    return SerialStream(port, settings, transport, protocol, instance)

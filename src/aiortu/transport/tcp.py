@@ -1,0 +1,85 @@
+"""RTU over TCP: the raw RTU frames over a TCP connection, for serial device servers.
+
+A serial device server (a "serial-to-Ethernet" box in transparent mode) relays the bytes
+of a TCP connection to its serial port and back. The frames travel exactly as on the wire,
+unit address and CRC included, with no MBAP header: this is not Modbus TCP.
+
+:func:`open_rtu_over_tcp` returns anyio's TCP stream, with Nagle's algorithm off because
+RTU frames are small and every millisecond of delay adds to each transaction. It runs on
+any anyio backend.
+
+Errors while connecting are :class:`~aiortu.errors.PortNotFound`, whatever the cause
+(unknown host, connection refused, unreachable network, or no answer within
+*connect_timeout*), with a message that says which host and port and why: for the caller
+they all mean the same thing, that there is no device server at that address now, and
+that trying again later may work. While running, anyio's stream raises
+:class:`anyio.EndOfStream` from ``receive()`` when the server closes the connection and
+:class:`anyio.BrokenResourceError` when it is reset; the link turns both into
+:class:`~aiortu.errors.ConnectionLost`.
+"""
+
+from __future__ import annotations
+
+import socket
+
+import anyio
+from anyio.abc import SocketAttribute, SocketStream
+
+from aiortu.errors import InvalidValue, PortNotFound
+
+__all__ = ("open_rtu_over_tcp", "format_tcp_url")
+
+
+def format_tcp_url(host: str, port: int) -> str:
+    """The ``rtu+tcp://host:port`` URL of a device server, with IPv6 hosts in brackets."""
+    if ":" in host:
+        return f"rtu+tcp://[{host}]:{port}"
+    return f"rtu+tcp://{host}:{port}"
+
+
+def _leaf_errors(exc: BaseException) -> list[BaseException]:
+    if isinstance(exc, BaseExceptionGroup):
+        return [leaf for inner in exc.exceptions for leaf in _leaf_errors(inner)]
+    return [exc]
+
+
+def _describe_failure(exc: OSError) -> str:
+    """Why a connection failed, from the errors of every address that was tried."""
+    # anyio wraps the errors of all the addresses it tried in one OSError.
+    causes = _leaf_errors(exc.__cause__) if exc.__cause__ is not None else [exc]
+    if all(isinstance(cause, ConnectionRefusedError) for cause in causes):
+        return "connection refused: nothing listens on that port"
+    return "cannot connect: " + "; ".join(str(cause) for cause in causes)
+
+
+async def open_rtu_over_tcp(host: str, port: int, *, connect_timeout: float = 5.0) -> SocketStream:
+    """Connect to the serial device server at *host*:*port* and return the connection.
+
+    Raises :class:`~aiortu.errors.PortNotFound` when the host is unknown, the connection
+    is refused or fails, or nothing answers within *connect_timeout* seconds, and
+    :class:`~aiortu.errors.InvalidValue` for a port outside 1..65535 or a timeout that
+    is not positive.
+    """
+    if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
+        raise InvalidValue("port", port, range(1, 65536))
+    if not connect_timeout > 0:
+        raise InvalidValue("connect_timeout", connect_timeout, "a positive number of seconds")
+    where = format_tcp_url(host, port)
+    try:
+        with anyio.fail_after(connect_timeout):
+            stream = await anyio.connect_tcp(host, port)
+    except TimeoutError:
+        raise PortNotFound(
+            where, f"no answer within {connect_timeout:g} s (host down or filtered?)"
+        ) from None
+    except socket.gaierror as exc:
+        raise PortNotFound(where, f"unknown host {host!r} ({exc.strerror})") from exc
+    except OSError as exc:
+        raise PortNotFound(where, _describe_failure(exc)) from exc
+    try:
+        sock = stream.extra(SocketAttribute.raw_socket)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    except BaseException:
+        await stream.aclose()
+        raise
+    return stream
