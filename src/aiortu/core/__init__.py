@@ -6,7 +6,14 @@ rule of the spec can be tested with exact numbers.
 
 from __future__ import annotations
 
-from aiortu.core import pdu_bits, pdu_registers  # noqa: F401  (register the PDU classes)
+# Importing the PDU modules registers their classes for decode_request/decode_response.
+from aiortu.core import (  # noqa: F401
+    pdu_bits,
+    pdu_device_id,
+    pdu_files,
+    pdu_registers,
+    pdu_serial_line,
+)
 from aiortu.core.codes import (
     DeviceIdObject,
     DeviceIdReadCode,
