@@ -1,1 +1,29 @@
-"""placeholder"""
+"""Test benches for Modbus RTU: virtual serial lines, in memory and over pseudo-terminals.
+
+- :class:`VirtualBus` / :func:`virtual_pair`: in-memory RS-485 buses of
+  :class:`anyio.abc.ByteStream` endpoints, with baud-rate pacing, adapter chunking,
+  collisions and a trace of the wire.
+- :class:`PtyBus`: the same over pseudo-terminals, so that any program can open a port.
+- :class:`FaultPlan` / :class:`FaultInjector`: reproducible noise on a line.
+- The pytest fixtures in :mod:`aiortu.testing.pytest_plugin` (loaded automatically).
+
+See ``docs/testing.md``.
+"""
+
+from __future__ import annotations
+
+from aiortu.testing.faults import FaultedChunk, FaultInjector, FaultPlan, FaultStats
+from aiortu.testing.pty_bus import PtyBus
+from aiortu.testing.virtual_bus import TraceEntry, VirtualBus, VirtualEndpoint, virtual_pair
+
+__all__ = (
+    "FaultInjector",
+    "FaultPlan",
+    "FaultStats",
+    "FaultedChunk",
+    "PtyBus",
+    "TraceEntry",
+    "VirtualBus",
+    "VirtualEndpoint",
+    "virtual_pair",
+)

@@ -1,0 +1,148 @@
+"""``aiortu virtual-bus``: a virtual RS-485 bus of pseudo-terminals for other programs.
+
+Prints one device path per port on stdout, one a line, as soon as the bus is up; then
+relays until SIGINT or SIGTERM and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+import anyio
+
+from aiortu.cli import CommandFailed, Subparsers
+from aiortu.core.timing import LineSettings
+from aiortu.testing.faults import FaultPlan
+from aiortu.testing.pty_bus import PtyBus
+
+__all__ = ("register", "run")
+
+_EXAMPLES = """\
+examples:
+  aiortu virtual-bus --ports 2
+      two ports at 19200 8E1; prints e.g. /dev/pts/5 and /dev/pts/6
+  aiortu virtual-bus --ports 3 --baudrate 9600 --parity N --stopbits 2 --link-dir /tmp/rtu
+      a three-drop bus at 9600 8N2 with stable names /tmp/rtu/port0 .. port2
+  aiortu virtual-bus --no-pacing --chunk-size 62 --latency 0.016
+      no baud-rate pacing, delivery in chunks as through a USB adapter
+  aiortu virtual-bus --bit-error-rate 1e-4 --gap-rate 0.001 --gap 0.01 --seed 7
+      a noisy line, the same noise on every run with the same seed
+
+then, in another shell, for example:
+  mbpoll -m rtu -a 1 -b 19200 -P even -t 4 -r 1 -c 3 -1 /dev/pts/5
+"""
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
+    return value
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a number of seconds >= 0: {text!r}")
+    return value
+
+
+def _probability(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a probability: {text!r}") from None
+    if not 0 <= value <= 1:
+        raise argparse.ArgumentTypeError(f"must be a probability from 0 to 1: {text!r}")
+    return value
+
+
+def register(subparsers: Subparsers) -> None:
+    """Add the ``virtual-bus`` subcommand to *subparsers*."""
+    parser = subparsers.add_parser(
+        "virtual-bus",
+        help="a virtual RS-485 bus of pseudo-terminals that any program can open",
+        description=(
+            "Create a virtual multi-drop serial bus of pseudo-terminals. What a program "
+            "writes to one port reaches the programs on all the other ports, at the "
+            "character rate of the line settings. Prints one device path per line, then "
+            "relays until interrupted (SIGINT or SIGTERM)."
+        ),
+        epilog=_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--ports", type=_positive_int, default=2, help="number of ports (2)")
+    line = parser.add_argument_group("line settings (for pacing)")
+    line.add_argument("--baudrate", type=_positive_int, default=19200, help="baud rate (19200)")
+    line.add_argument("--parity", choices=("N", "E", "O"), default="E", help="parity (E)")
+    line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
+    line.add_argument(
+        "--no-pacing", action="store_true", help="deliver at once, not at the character rate"
+    )
+    adapter = parser.add_argument_group("adapter model")
+    adapter.add_argument(
+        "--chunk-size", type=_positive_int, default=None, help="at most this many bytes per read"
+    )
+    adapter.add_argument(
+        "--latency", type=_seconds, default=0.0, help="hold received bytes this long (seconds)"
+    )
+    faults = parser.add_argument_group("faults")
+    faults.add_argument("--bit-error-rate", type=_probability, default=0.0, metavar="R")
+    faults.add_argument("--drop-rate", type=_probability, default=0.0, metavar="R")
+    faults.add_argument("--garbage-rate", type=_probability, default=0.0, metavar="R")
+    faults.add_argument("--gap-rate", type=_probability, default=0.0, metavar="R")
+    faults.add_argument("--gap", type=_seconds, default=0.0, metavar="S", help="gap length")
+    faults.add_argument("--seed", type=int, default=0, help="seed of the fault generator (0)")
+    parser.add_argument(
+        "--link-dir", default=None, metavar="DIR", help="make links DIR/port0, DIR/port1, ..."
+    )
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the bus described by *args* until SIGINT or SIGTERM; return the exit code."""
+    settings = (
+        None
+        if args.no_pacing
+        else LineSettings(args.baudrate, parity=args.parity, stopbits=args.stopbits)
+    )
+    plan = FaultPlan(
+        bit_error_rate=args.bit_error_rate,
+        drop_rate=args.drop_rate,
+        garbage_rate=args.garbage_rate,
+        gap_rate=args.gap_rate,
+        gap=args.gap,
+        seed=args.seed,
+    )
+    bus = PtyBus(
+        args.ports,
+        settings=settings,
+        chunk_size=args.chunk_size,
+        latency=args.latency,
+        faults=None if plan.is_clean else plan,
+        link_dir=args.link_dir,
+    )
+    try:
+        return anyio.run(_relay, bus)
+    except OSError as exc:
+        raise CommandFailed(f"cannot create the bus: {exc}") from exc
+
+
+async def _relay(bus: PtyBus) -> int:
+    # The handlers go in before the paths are printed: whoever reads the paths may signal
+    # at once.
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async with bus:
+            sys.stdout.write("".join(f"{device}\n" for device in bus.devices))
+            sys.stdout.flush()
+            async for _ in signals:
+                break
+    return 0
