@@ -176,6 +176,11 @@ class Link:
                 now = clock()
                 if chunk:
                     self._last_received = now
+                    if self._transmit_end > now:
+                        # The line is half duplex: a byte received proves our own frame
+                        # has left it, even where the wire time estimate says otherwise
+                        # (virtual lines deliver faster than the baud rate).
+                        self._transmit_end = now
                     self._deliver(receiver.feed(chunk, now))
                 else:
                     self._deliver(receiver.expire(now))

@@ -1,0 +1,522 @@
+"""The master's state machine, written as a table: one transaction at a time, sans-IO.
+
+The machine follows the master diagram of the serial line spec::
+
+    IDLE                nothing in flight          -- a unicast sent -->      WAITING_REPLY
+                                                   -- a broadcast sent -->    WAITING_TURNAROUND
+    WAITING_TURNAROUND  slaves execute a broadcast -- the delay is over -->   IDLE
+    WAITING_REPLY       the response timeout runs  -- a frame -->             PROCESSING_REPLY
+                                                   -- bad bytes, timeout -->  PROCESSING_ERROR
+    PROCESSING_REPLY    does the frame answer us?  -- yes -->                 IDLE
+                                                   -- stale, other unit -->   WAITING_REPLY
+                                                   -- an exception reply -->  PROCESSING_ERROR
+    PROCESSING_ERROR    retry, give up, or go on   -- retry, give up -->      IDLE
+                        waiting                    -- a frame error noted --> WAITING_REPLY
+
+:data:`TRANSITIONS` is that diagram as data: ``(state, event) -> (next state, action)``.
+A pair missing from it is a bug and raises :class:`MasterMachineError`, never a silent
+no-op. The documentation draws its diagram from the same table.
+
+The machine owns the decisions of a transaction; the async master only moves bytes and
+sleeps until :attr:`MasterMachine.deadline`:
+
+* The response timeout runs from the end of transmission (the time the caller passes to
+  :meth:`MasterMachine.sent`), per attempt.
+* A frame answers the request only when it ended after the request began to go out (older
+  frames are stale), comes from the unit asked, carries the request's function code or its
+  exception form, decodes, and passes ``request.check_response``. Anything else is skipped
+  and the wait goes on: on a multi-drop line other units talk too.
+* Bytes that fail the CRC or the framing are noted; the wait goes on for a short grace
+  (a good frame may follow in the same burst), and if nothing answers, the attempt fails
+  with that frame error rather than a plain timeout.
+* Retries follow a :class:`RetryPolicy`: by default on timeouts and frame errors only,
+  never on exception responses (a device that refused will refuse again).
+
+Time comes in as arguments; the machine never reads a clock.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable, Collection
+from dataclasses import dataclass, field
+from typing import Final
+
+from aiortu.core.codes import BROADCAST_UNIT, EXCEPTION_BIT
+from aiortu.core.crc import crc16
+from aiortu.core.errors import CRCError, FrameError, MalformedPDU, ResponseTimeout
+from aiortu.core.frame import encode_frame
+from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_response
+
+__all__ = (
+    "DEFAULT_FRAME_ERROR_GRACE",
+    "DEFAULT_RETRY_ON",
+    "TRANSITIONS",
+    "Failure",
+    "MasterEvent",
+    "MasterMachine",
+    "MasterMachineError",
+    "MasterState",
+    "Outcome",
+    "OutcomeKind",
+    "RetryPolicy",
+    "SkipReason",
+    "Transaction",
+    "TransitionObserver",
+    "frame_error_from_discard",
+    "next_state",
+)
+
+DEFAULT_FRAME_ERROR_GRACE: Final = 0.05
+"""Seconds the wait goes on after bad bytes, in case a good frame follows them."""
+
+
+class MasterState(enum.Enum):
+    """The states of the master, named after the spec."""
+
+    IDLE = "IDLE"
+    WAITING_REPLY = "WAITING_REPLY"
+    WAITING_TURNAROUND = "WAITING_TURNAROUND"
+    PROCESSING_REPLY = "PROCESSING_REPLY"
+    PROCESSING_ERROR = "PROCESSING_ERROR"
+
+
+class MasterEvent(enum.Enum):
+    """What can happen to the master."""
+
+    SEND_UNICAST = "send unicast"
+    """A request that expects a reply has left the wire."""
+    SEND_BROADCAST = "send broadcast"
+    """A request that expects no reply (a broadcast, or diagnostics 04) has left the wire."""
+    TURNAROUND_EXPIRED = "turnaround expired"
+    """The turnaround delay after a request without reply is over."""
+    REPLY_RECEIVED = "reply received"
+    """A frame with a good CRC arrived while waiting."""
+    REPLY_OK = "reply ok"
+    """The frame answers the request."""
+    REPLY_UNEXPECTED = "reply unexpected"
+    """The frame is stale, from another unit, or does not answer the request."""
+    REPLY_EXCEPTION = "reply exception"
+    """The unit answered with an exception response."""
+    FRAME_ERROR = "frame error"
+    """Bytes arrived that do not make a valid frame."""
+    TIMEOUT = "timeout"
+    """The response timeout (or the grace after a frame error) ran out."""
+    CONNECTION_LOST = "connection lost"
+    """The line under the master failed."""
+    ERROR_NOTED = "error noted"
+    """A frame error is remembered and the wait goes on."""
+    RETRY = "retry"
+    """The request is sent again."""
+    GIVE_UP = "give up"
+    """The transaction ends with its error (or its exception response)."""
+
+
+class MasterMachineError(RuntimeError):
+    """An event arrived in a state whose table has no entry for it. Caused by a bug in aiortu."""
+
+
+class Failure(enum.Enum):
+    """The kinds of failed attempt a :class:`RetryPolicy` can retry."""
+
+    TIMEOUT = "timeout"
+    """No reply within the response timeout."""
+    FRAME_ERROR = "frame error"
+    """Bad bytes (CRC, framing) or a reply that did not decode, and no good reply."""
+
+
+DEFAULT_RETRY_ON: Final[frozenset[Failure | int]] = frozenset(
+    (Failure.TIMEOUT, Failure.FRAME_ERROR)
+)
+"""Retry on timeouts and frame errors, never on exception responses."""
+
+
+@dataclass(frozen=True, slots=True)
+class RetryPolicy:
+    """How often a failed attempt is repeated, and after which failures.
+
+    *retries* is the number of extra attempts (0 sends once). *retry_on* holds
+    :class:`Failure` members and, to retry exception responses too, exception codes
+    (``ExceptionCode.SERVER_DEVICE_BUSY``, for instance).
+    """
+
+    retries: int = 2
+    retry_on: frozenset[Failure | int] = DEFAULT_RETRY_ON
+
+    def __post_init__(self) -> None:
+        if isinstance(self.retries, bool) or not isinstance(self.retries, int) or self.retries < 0:
+            raise ValueError(f"retries must be an int >= 0, not {self.retries!r}")
+        object.__setattr__(self, "retry_on", frozenset(self.retry_on))
+
+    @classmethod
+    def of(cls, retries: int, retry_on: Collection[Failure | int] | None = None) -> RetryPolicy:
+        """A policy from the usual arguments; *retry_on* ``None`` means the default."""
+        return cls(retries, DEFAULT_RETRY_ON if retry_on is None else frozenset(retry_on))
+
+
+class SkipReason(enum.StrEnum):
+    """Why a frame was not taken as the reply."""
+
+    STALE = "stale"
+    """It ended before the request began to go out."""
+    OTHER_UNIT = "other unit"
+    """It comes from another unit."""
+    OTHER_FUNCTION = "other function"
+    """Its function code is neither the request's nor its exception form."""
+    MALFORMED = "malformed"
+    """It does not decode, or does not answer the request (count, echo)."""
+
+
+class OutcomeKind(enum.Enum):
+    """What the caller of the machine does next."""
+
+    WAIT = "wait"
+    """Keep waiting until :attr:`MasterMachine.deadline`."""
+    DONE = "done"
+    """The transaction is over: :attr:`Outcome.response` (or ``None`` without reply)."""
+    RETRY = "retry"
+    """Send :attr:`MasterMachine.frame` again, then call :meth:`MasterMachine.sent`."""
+    FAILED = "failed"
+    """The transaction is over: raise :attr:`Outcome.error`."""
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    """The machine's answer to an event; see :class:`OutcomeKind`."""
+
+    kind: OutcomeKind
+    response: Response | ExceptionPDU | None = None
+    error: Exception | None = None
+    skipped: SkipReason | None = None
+
+
+_WAIT = Outcome(OutcomeKind.WAIT)
+
+
+@dataclass(slots=True)
+class Transaction:
+    """One request to one unit, and what happened to it so far.
+
+    *expects_reply* is false for broadcasts and for requests a device never answers
+    (diagnostics 04, force listen-only mode); those wait *turnaround* seconds instead.
+    Set :attr:`abandoned` when the caller is gone: the attempt in flight finishes (so
+    that its reply cannot reach a later request) but is not retried.
+    """
+
+    unit: int
+    request: Request
+    timeout: float
+    policy: RetryPolicy = field(default_factory=RetryPolicy)
+    expects_reply: bool = True
+    turnaround: float = 0.0
+    abandoned: bool = False
+    attempts: int = 0
+    """Attempts sent so far."""
+    attempt_start: float = 0.0
+    """When the current attempt began to go out."""
+    attempt_end: float = 0.0
+    """When the current attempt had left the wire."""
+    frame_error: FrameError | None = None
+    """The last frame error of the current attempt, if any."""
+    failures: list[Failure] = field(default_factory=list)
+    """The failure of every failed attempt, in order."""
+
+    @property
+    def frame(self) -> bytes:
+        """The RTU frame of the request."""
+        return encode_frame(self.unit, self.request.encode())
+
+
+def frame_error_from_discard(data: bytes, reason: str) -> FrameError:
+    """The error that discarded bytes stand for: :class:`CRCError` when a CRC is there to
+    compare, else :class:`FrameError` with *reason*."""
+    if reason == "crc" and len(data) >= 4:
+        return CRCError(data[-2] | data[-1] << 8, crc16(data[:-2]))
+    return FrameError(
+        f"{len(data)} bytes discarded ({reason}): {data[:16].hex(' ')}", reason=reason
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class _ArrivedFrame:
+    unit: int
+    pdu: bytes
+    end: float
+
+
+@dataclass(frozen=True, slots=True)
+class _BadBytes:
+    error: FrameError
+    end: float
+
+
+_S = MasterState
+_E = MasterEvent
+
+TRANSITIONS: Final[dict[tuple[MasterState, MasterEvent], tuple[MasterState, str]]] = {
+    # (state, event): (next state, action)
+    (_S.IDLE, _E.SEND_UNICAST): (_S.WAITING_REPLY, "start_response_timeout"),
+    (_S.IDLE, _E.SEND_BROADCAST): (_S.WAITING_TURNAROUND, "start_turnaround"),
+    (_S.IDLE, _E.CONNECTION_LOST): (_S.PROCESSING_ERROR, "note_connection_lost"),
+    (_S.WAITING_TURNAROUND, _E.TURNAROUND_EXPIRED): (_S.IDLE, "finish_without_reply"),
+    (_S.WAITING_TURNAROUND, _E.CONNECTION_LOST): (_S.PROCESSING_ERROR, "note_connection_lost"),
+    (_S.WAITING_REPLY, _E.REPLY_RECEIVED): (_S.PROCESSING_REPLY, "examine_frame"),
+    (_S.WAITING_REPLY, _E.FRAME_ERROR): (_S.PROCESSING_ERROR, "note_frame_error"),
+    (_S.WAITING_REPLY, _E.TIMEOUT): (_S.PROCESSING_ERROR, "note_attempt_failed"),
+    (_S.WAITING_REPLY, _E.CONNECTION_LOST): (_S.PROCESSING_ERROR, "note_connection_lost"),
+    (_S.PROCESSING_REPLY, _E.REPLY_OK): (_S.IDLE, "finish_with_reply"),
+    (_S.PROCESSING_REPLY, _E.REPLY_UNEXPECTED): (_S.WAITING_REPLY, "skip_frame"),
+    (_S.PROCESSING_REPLY, _E.REPLY_EXCEPTION): (_S.PROCESSING_ERROR, "note_exception"),
+    (_S.PROCESSING_ERROR, _E.ERROR_NOTED): (_S.WAITING_REPLY, "shorten_wait"),
+    (_S.PROCESSING_ERROR, _E.RETRY): (_S.IDLE, "prepare_retry"),
+    (_S.PROCESSING_ERROR, _E.GIVE_UP): (_S.IDLE, "finish_with_failure"),
+}
+"""The master's transitions: ``(state, event) -> (next state, action name)``."""
+
+
+def next_state(state: MasterState, event: MasterEvent) -> MasterState:
+    """The state *event* leads to from *state*; raises :class:`MasterMachineError` if none."""
+    entry = TRANSITIONS.get((state, event))
+    if entry is None:
+        raise MasterMachineError(f"no transition for event {event.name} in state {state.name}")
+    return entry[0]
+
+
+TransitionObserver = Callable[[MasterState, MasterEvent, MasterState], None]
+"""Called with ``(state, event, next state)`` for every transition."""
+
+
+class MasterMachine:
+    """The state machine of a master on one line (see the module docstring).
+
+    Drive it like this for each transaction:
+
+    1. :meth:`begin` with a :class:`Transaction` (state IDLE).
+    2. Send :attr:`frame`, then :meth:`sent` with when it began to go out and when it had
+       left the wire.
+    3. Until the outcome is DONE or FAILED: feed :meth:`frame_received`,
+       :meth:`frame_error` and, once the clock passes :attr:`deadline`, :meth:`expired`.
+       On RETRY, send :attr:`frame` again and call :meth:`sent`.
+
+    :meth:`connection_lost` ends the transaction in any state but PROCESSING_*.
+    *on_transition*, if given, is called with ``(state, event, next state)`` for every
+    transition (for tracing and for the tests).
+    """
+
+    __slots__ = (
+        "_actions",
+        "_on_transition",
+        "_outcome",
+        "deadline",
+        "frame_error_grace",
+        "state",
+        "transaction",
+    )
+
+    def __init__(
+        self,
+        *,
+        frame_error_grace: float = DEFAULT_FRAME_ERROR_GRACE,
+        on_transition: TransitionObserver | None = None,
+    ) -> None:
+        self.state = MasterState.IDLE
+        """The current state."""
+        self.transaction: Transaction | None = None
+        """The transaction in progress (kept after it ends, until the next :meth:`begin`)."""
+        self.deadline: float | None = None
+        """When to call :meth:`expired`: the end of the response timeout or turnaround."""
+        self.frame_error_grace = frame_error_grace
+        """Seconds the wait goes on after a frame error (never past the response timeout)."""
+        self._on_transition = on_transition
+        self._outcome = _WAIT
+        self._actions: dict[
+            tuple[MasterState, MasterEvent], tuple[MasterState, Callable[[object], None]]
+        ] = {
+            key: (target, getattr(self, f"_{action}"))
+            for key, (target, action) in TRANSITIONS.items()
+        }
+
+    # -- driving ---------------------------------------------------------------------
+
+    def begin(self, transaction: Transaction) -> None:
+        """Take *transaction* as the one in progress; the machine must be IDLE."""
+        if self.state is not MasterState.IDLE:
+            raise MasterMachineError(f"a transaction begins in state IDLE, not {self.state.name}")
+        self.transaction = transaction
+        self.deadline = None
+
+    @property
+    def frame(self) -> bytes:
+        """The frame to send for the transaction in progress."""
+        return self._current.frame
+
+    def sent(self, start: float, end: float) -> float:
+        """The request began to go out at *start* and left the wire at *end*.
+
+        Returns the deadline: *end* plus the response timeout, or plus the turnaround.
+        """
+        transaction = self._current
+        transaction.attempts += 1
+        transaction.attempt_start = start
+        transaction.attempt_end = end
+        transaction.frame_error = None
+        event = _E.SEND_UNICAST if transaction.expects_reply else _E.SEND_BROADCAST
+        self._fire(event, None)
+        assert self.deadline is not None
+        return self.deadline
+
+    def frame_received(self, unit: int, pdu: bytes, start: float, end: float) -> Outcome:
+        """A frame with a good CRC arrived (``start``/``end``: its first and last byte)."""
+        if self.state is MasterState.WAITING_TURNAROUND:
+            # Nobody answers a broadcast; whatever arrives is another conversation.
+            return Outcome(OutcomeKind.WAIT, skipped=SkipReason.OTHER_UNIT)
+        return self._fire(_E.REPLY_RECEIVED, _ArrivedFrame(unit, pdu, end))
+
+    def frame_error(self, error: FrameError, end: float) -> Outcome:
+        """Bytes that ended at *end* made no valid frame; *error* says why."""
+        if self.state is MasterState.WAITING_TURNAROUND or end < self._current.attempt_start:
+            return _WAIT
+        return self._fire(_E.FRAME_ERROR, _BadBytes(error, end))
+
+    def expired(self, now: float) -> Outcome:
+        """The clock reached *now*; past :attr:`deadline` this ends the wait."""
+        if self.deadline is None or now < self.deadline:
+            return _WAIT
+        if self.state is MasterState.WAITING_TURNAROUND:
+            return self._fire(_E.TURNAROUND_EXPIRED, None)
+        return self._fire(_E.TIMEOUT, None)
+
+    def connection_lost(self, error: Exception) -> Outcome:
+        """The line failed with *error*; the transaction fails with it."""
+        return self._fire(_E.CONNECTION_LOST, error)
+
+    # -- the machine -----------------------------------------------------------------
+
+    @property
+    def _current(self) -> Transaction:
+        if self.transaction is None:
+            raise MasterMachineError("no transaction in progress")
+        return self.transaction
+
+    def _fire(self, event: MasterEvent, argument: object) -> Outcome:
+        entry = self._actions.get((self.state, event))
+        if entry is None:
+            next_state(self.state, event)  # raises, with the message
+        assert entry is not None
+        target, action = entry
+        if self._on_transition is not None:
+            self._on_transition(self.state, event, target)
+        self.state = target
+        self._outcome = _WAIT
+        action(argument)
+        return self._outcome
+
+    # -- actions ---------------------------------------------------------------------
+
+    def _start_response_timeout(self, _: object) -> None:
+        transaction = self._current
+        self.deadline = transaction.attempt_end + transaction.timeout
+
+    def _start_turnaround(self, _: object) -> None:
+        transaction = self._current
+        self.deadline = transaction.attempt_end + transaction.turnaround
+
+    def _finish_without_reply(self, _: object) -> None:
+        self.deadline = None
+        self._outcome = Outcome(OutcomeKind.DONE)
+
+    def _examine_frame(self, argument: object) -> None:
+        assert isinstance(argument, _ArrivedFrame)
+        unit, pdu, end = argument.unit, argument.pdu, argument.end
+        transaction = self._current
+        request = transaction.request
+        reason: SkipReason | None = None
+        response: Response | ExceptionPDU | None = None
+        if end < transaction.attempt_start:
+            reason = SkipReason.STALE
+        elif unit != transaction.unit or unit == BROADCAST_UNIT:
+            reason = SkipReason.OTHER_UNIT
+        elif not pdu or pdu[0] & ~EXCEPTION_BIT != request.function_code:
+            reason = SkipReason.OTHER_FUNCTION
+        else:
+            try:
+                response = decode_response(pdu)
+                if not isinstance(response, ExceptionPDU):
+                    request.check_response(response)
+            except MalformedPDU as error:
+                # From our unit with our function code, yet wrong: remember it, so that
+                # if nothing better comes the caller hears why rather than "timeout".
+                transaction.frame_error = error
+                reason = SkipReason.MALFORMED
+        if reason is not None:
+            self._fire(_E.REPLY_UNEXPECTED, reason)
+        elif isinstance(response, ExceptionPDU):
+            self._fire(_E.REPLY_EXCEPTION, response)
+        else:
+            self._fire(_E.REPLY_OK, response)
+
+    def _skip_frame(self, reason: object) -> None:
+        assert isinstance(reason, SkipReason)
+        self._outcome = Outcome(OutcomeKind.WAIT, skipped=reason)
+
+    def _finish_with_reply(self, response: object) -> None:
+        assert isinstance(response, Response)
+        self.deadline = None
+        self._outcome = Outcome(OutcomeKind.DONE, response=response)
+
+    def _note_exception(self, response: object) -> None:
+        assert isinstance(response, ExceptionPDU)
+        if self._may_retry(response.exception_code):
+            self._fire(_E.RETRY, None)
+        else:
+            self._fire(_E.GIVE_UP, Outcome(OutcomeKind.DONE, response=response))
+
+    def _note_frame_error(self, argument: object) -> None:
+        assert isinstance(argument, _BadBytes)
+        self._current.frame_error = argument.error
+        self._fire(_E.ERROR_NOTED, argument.end)
+
+    def _shorten_wait(self, end: object) -> None:
+        assert isinstance(end, float | int)
+        assert self.deadline is not None
+        self.deadline = min(self.deadline, end + self.frame_error_grace)
+
+    def _note_attempt_failed(self, _: object) -> None:
+        transaction = self._current
+        failure = Failure.TIMEOUT if transaction.frame_error is None else Failure.FRAME_ERROR
+        transaction.failures.append(failure)
+        if self._may_retry(failure):
+            self._fire(_E.RETRY, None)
+            return
+        error: Exception
+        if transaction.frame_error is not None:
+            error = transaction.frame_error
+        else:
+            tries = f" in {transaction.attempts} attempts" if transaction.attempts > 1 else ""
+            error = ResponseTimeout(
+                f"no reply from unit {transaction.unit} to function "
+                f"0x{transaction.request.function_code:02X} within {transaction.timeout:g} s{tries}"
+            )
+        self._fire(_E.GIVE_UP, Outcome(OutcomeKind.FAILED, error=error))
+
+    def _note_connection_lost(self, error: object) -> None:
+        assert isinstance(error, Exception)
+        self._fire(_E.GIVE_UP, Outcome(OutcomeKind.FAILED, error=error))
+
+    def _prepare_retry(self, _: object) -> None:
+        self.deadline = None
+        self._outcome = Outcome(OutcomeKind.RETRY)
+
+    def _finish_with_failure(self, outcome: object) -> None:
+        assert isinstance(outcome, Outcome)
+        self.deadline = None
+        self._outcome = outcome
+
+    def _may_retry(self, failure: Failure | int) -> bool:
+        transaction = self._current
+        policy = transaction.policy
+        return (
+            not transaction.abandoned
+            and failure in policy.retry_on
+            and transaction.attempts <= policy.retries
+        )

@@ -1,0 +1,642 @@
+# ruff: noqa: ASYNC109
+# ``timeout=`` here is the Modbus response timeout, counted from the end of transmission
+# by the line task; a cancel scope around the call cannot express that.
+"""The async Modbus RTU master: one line, one transaction at a time, shared by any number
+of coroutines.
+
+::
+
+    async with aiortu.open_master("/dev/ttyUSB0", baudrate=19200, parity="E") as master:
+        regs = await master.read_holding_registers(17, 0x6B, 3)
+        await master.write_registers(17, 0x10, [1, 2, 3])
+        bits = await master.slave(17).read_coils(0x13, 20)
+        await master.broadcast.write_register(0x10, 7)
+
+:class:`Master` takes any :class:`anyio.abc.ByteStream`; :func:`open_master` opens one
+from a port name or URL first. The line task lives in :mod:`aiortu.master_engine`, the
+state machine in :mod:`aiortu.core.master_machine`, the per-unit and broadcast handles in
+:mod:`aiortu.master_handles`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import AsyncIterator, Callable, Collection, Iterable, Mapping, Sequence
+from types import TracebackType
+from typing import Any, Self, TypeVar
+
+import anyio
+import anyio.abc
+
+from aiortu.core import pdu_device_id, pdu_files, pdu_serial_line
+from aiortu.core.codes import BROADCAST_UNIT, DeviceIdReadCode, DiagnosticSubFunction
+from aiortu.core.master_machine import Failure, RetryPolicy, Transaction
+from aiortu.core.pdu import ExceptionPDU, Request, Response
+from aiortu.core.pdu_bits import (
+    ReadCoilsRequest,
+    ReadCoilsResponse,
+    ReadDiscreteInputsRequest,
+    WriteMultipleCoilsRequest,
+    WriteSingleCoilRequest,
+)
+from aiortu.core.pdu_registers import (
+    MaskWriteRegisterRequest,
+    ReadFifoQueueRequest,
+    ReadFifoQueueResponse,
+    ReadHoldingRegistersRequest,
+    ReadHoldingRegistersResponse,
+    ReadInputRegistersRequest,
+    ReadWriteMultipleRegistersRequest,
+    WriteMultipleRegistersRequest,
+    WriteSingleRegisterRequest,
+)
+from aiortu.core.receiver import Role, TimingMode
+from aiortu.core.timing import LineSettings
+from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
+from aiortu.link import Link
+from aiortu.master_engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
+from aiortu.master_handles import (
+    BroadcastHandle,
+    FileRecordLike,
+    RecordRequestLike,
+    UnitHandle,
+    as_file_record,
+    as_record_request,
+)
+
+__all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
+
+UNIT_RANGE = range(1, 248)
+"""The unit addresses a unicast request may go to."""
+
+_ResponseT = TypeVar("_ResponseT", bound=Response)
+
+_MAX_DEVICE_ID_READS = 256
+"""A device cannot stream more objects than there are ids; stop a looping one there."""
+
+
+def check_unit(unit: object) -> int:
+    """Return *unit* if a unicast may go to it, else raise InvalidRequest."""
+    if isinstance(unit, bool) or not isinstance(unit, int) or unit not in UNIT_RANGE:
+        raise InvalidRequest("unit", unit, UNIT_RANGE, "use master.broadcast for unit 0")
+    return unit
+
+
+class Master:
+    """A Modbus RTU master on *stream*; an async context manager.
+
+    *settings* give the line timing. *timeout* is the response timeout of each attempt,
+    counted from when the request has left the wire; *retries* extra attempts follow a
+    failure listed in *retry_on* (default: timeouts and frame errors, never exception
+    responses; add exception codes to retry those). *frame_gap* is the silence kept
+    before each request (``None``: t3.5; 0 for virtual lines and TCP gateways).
+    *turnaround_delay* is the wait after a broadcast. Health: *offline_after*
+    consecutive failures mark a unit offline; with *fail_fast_offline* calls to it raise
+    :class:`~aiortu.master_engine.UnitOffline` except one probe every *probe_interval*
+    seconds. *timing* is the receiver's t1.5 mode.
+
+    Every method takes the unit first, and ``timeout=`` (this call's response timeout)
+    and ``priority=`` (lower goes first; equal priorities keep their order). Requests
+    outside the spec raise :class:`~aiortu.errors.InvalidRequest` before anything is
+    sent. An exception reply raises :class:`~aiortu.errors.ExceptionResponse`; no reply
+    raises :class:`~aiortu.errors.ResponseTimeout`; bad bytes after the retries raise
+    :class:`~aiortu.errors.FrameError` (:class:`~aiortu.errors.CRCError` for a CRC);
+    a dead line raises :class:`~aiortu.errors.ConnectionLost`.
+
+    How a late reply is kept from a later request. RTU frames carry no transaction id,
+    so a reply is matched by what it is and when it came:
+
+    1. Before each request goes out, whatever the line delivered is dropped, and a frame
+       that ended before the request began to go out is dropped as stale.
+    2. A frame must come from the unit asked, with the request's function code (or its
+       exception form), and pass the request's checks of the reply (byte count, echoed
+       address, count and values); anything else is skipped while the wait goes on.
+    3. After a transaction in which an attempt failed, the line is kept quiet for
+       *late_reply_guard* seconds (0.1 by default) before the next request, on top of
+       the *frame_gap* silence: a reply that straggles in meanwhile is stale by rule 1.
+
+    The limit: a reply later than that guard, from the same unit, that also passes the
+    next request's checks (a read of the same count, say), cannot be told from the real
+    reply. Raise *late_reply_guard* on lines with slow devices, or use per-call timeouts
+    longer than the slowest device's reply time.
+
+    Cancelling a caller never desynchronises the line: one task owns all I/O; a
+    cancelled request still queued is dropped, and one in flight finishes its attempt
+    (its reply is consumed there) without retries.
+    """
+
+    def __init__(
+        self,
+        stream: anyio.abc.ByteStream,
+        settings: LineSettings | None = None,
+        *,
+        timeout: float = 1.0,
+        retries: int = 2,
+        retry_on: Collection[Failure | int] | None = None,
+        frame_gap: float | None = None,
+        turnaround_delay: float = 0.1,
+        late_reply_guard: float = 0.1,
+        offline_after: int = 3,
+        fail_fast_offline: bool = False,
+        probe_interval: float = 5.0,
+        timing: TimingMode | str = TimingMode.TOLERANT,
+        clock: Callable[[], float] = anyio.current_time,
+    ) -> None:
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 seconds, not {timeout!r}")
+        if not turnaround_delay >= 0:
+            raise ValueError(f"turnaround_delay must be >= 0 seconds, not {turnaround_delay!r}")
+        self.settings = settings if settings is not None else LineSettings()
+        self.timeout = timeout
+        self.turnaround_delay = turnaround_delay
+        self.policy = RetryPolicy.of(retries, retry_on)
+        self.link = Link(
+            stream, self.settings, role=Role.MASTER, timing=timing, frame_gap=frame_gap, clock=clock
+        )
+        self.engine = LineEngine(
+            self.link,
+            health=HealthPolicy(offline_after, fail_fast_offline, probe_interval),
+            late_reply_guard=late_reply_guard,
+        )
+        self.broadcast = BroadcastHandle(self)
+        """The writes that may go to every unit at once (unit 0); no reply is awaited."""
+        self._exit_stack: contextlib.AsyncExitStack | None = None
+
+    # -- lifetime --------------------------------------------------------------------
+
+    async def __aenter__(self) -> Self:
+        async with contextlib.AsyncExitStack() as stack:
+            await stack.enter_async_context(self.link)
+            task_group = await stack.enter_async_context(anyio.create_task_group())
+            stack.callback(task_group.cancel_scope.cancel)
+            task_group.start_soon(self.engine.run, name="aiortu master line task")
+            self._exit_stack = stack.pop_all()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> bool | None:
+        stack, self._exit_stack = self._exit_stack, None
+        if stack is None:
+            return None
+        return await stack.__aexit__(exc_type, exc, traceback)
+
+    # -- statistics ------------------------------------------------------------------
+
+    @property
+    def statistics(self) -> Mapping[int, UnitStats]:
+        """:class:`~aiortu.master_engine.UnitStats` by unit address, for units used so far."""
+        return self.engine.stats
+
+    def unit_stats(self, unit: int) -> UnitStats:
+        """The statistics and health of *unit*."""
+        return self.engine.unit_stats(unit)
+
+    def is_online(self, unit: int) -> bool:
+        """False once *unit* failed ``offline_after`` times in a row, until a success."""
+        return self.engine.unit_stats(unit).online
+
+    def slave(self, unit: int) -> UnitHandle:
+        """A handle on one unit: the same methods without the unit, plus typed values."""
+        return UnitHandle(self, check_unit(unit))
+
+    # -- the core of every call ------------------------------------------------------
+
+    async def execute(
+        self, unit: int, pdu: Request, *, timeout: float | None = None, priority: int = 0
+    ) -> Response | ExceptionPDU:
+        """Send any request PDU (a :class:`~aiortu.core.pdu.RawPDU` for custom codes) and
+        return the reply as it came, an exception reply included (not raised)."""
+        check_unit(unit)
+        if not isinstance(pdu, Request):
+            raise InvalidRequest("pdu", pdu, "a Request PDU")
+        transaction = Transaction(unit, pdu, self._timeout(timeout), self.policy)
+        response = await self.engine.submit(transaction, priority)
+        assert response is not None
+        return response
+
+    async def send_without_reply(self, unit: int, pdu: Request, *, priority: int = 0) -> None:
+        """Send *pdu* to *unit* (0 broadcasts it), then wait the turnaround delay.
+
+        No reply is awaited. Unit 0 takes only requests the spec lets be broadcast.
+        """
+        if unit == BROADCAST_UNIT:
+            if not pdu.broadcastable:
+                raise InvalidRequest(
+                    "unit", unit, UNIT_RANGE, f"{type(pdu).__name__} may not be broadcast"
+                )
+        else:
+            check_unit(unit)
+        transaction = Transaction(
+            unit,
+            pdu,
+            self.timeout,
+            RetryPolicy(0),
+            expects_reply=False,
+            turnaround=self.turnaround_delay,
+        )
+        await self.engine.submit(transaction, priority)
+
+    async def request(
+        self,
+        unit: int,
+        pdu: Request,
+        expected: type[_ResponseT],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> _ResponseT:
+        """Send *pdu*, raise ExceptionResponse for an exception reply, return the reply."""
+        response = await self.execute(unit, pdu, timeout=timeout, priority=priority)
+        if isinstance(response, ExceptionPDU):
+            raise ExceptionResponse(response.exception_code, pdu.function_code, unit)
+        if not isinstance(response, expected):
+            raise MalformedPDU(f"{type(response).__name__} does not answer {type(pdu).__name__}")
+        return response
+
+    def _timeout(self, timeout: float | None) -> float:
+        if timeout is None:
+            return self.timeout
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 seconds, not {timeout!r}")
+        return timeout
+
+    # -- bits ------------------------------------------------------------------------
+
+    async def read_coils(
+        self,
+        unit: int,
+        address: int,
+        count: int,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> list[bool]:
+        """Read *count* (1..2000) coils from *address* (01)."""
+        request = ReadCoilsRequest(address, count)
+        reply = await self.request(
+            unit, request, ReadCoilsResponse, timeout=timeout, priority=priority
+        )
+        return request.bits_of(reply)
+
+    async def read_discrete_inputs(
+        self,
+        unit: int,
+        address: int,
+        count: int,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> list[bool]:
+        """Read *count* (1..2000) discrete inputs from *address* (02)."""
+        request = ReadDiscreteInputsRequest(address, count)
+        reply = await self.request(
+            unit, request, ReadCoilsResponse, timeout=timeout, priority=priority
+        )
+        return request.bits_of(reply)
+
+    async def write_coil(
+        self,
+        unit: int,
+        address: int,
+        value: bool,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """Set the coil at *address* on or off (05); the echo is verified."""
+        request = WriteSingleCoilRequest(address, value)
+        await self.request(unit, request, Response, timeout=timeout, priority=priority)
+
+    async def write_coils(
+        self,
+        unit: int,
+        address: int,
+        values: Sequence[bool],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """Set 1..1968 coils from *address* (0F); the reply's address and count are verified."""
+        request = WriteMultipleCoilsRequest(address, tuple(values))
+        await self.request(unit, request, Response, timeout=timeout, priority=priority)
+
+    # -- registers -------------------------------------------------------------------
+
+    async def read_holding_registers(
+        self,
+        unit: int,
+        address: int,
+        count: int,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> list[int]:
+        """Read *count* (1..125) holding registers from *address* (03)."""
+        request = ReadHoldingRegistersRequest(address, count)
+        reply = await self.request(
+            unit, request, ReadHoldingRegistersResponse, timeout=timeout, priority=priority
+        )
+        return list(reply.values)
+
+    async def read_input_registers(
+        self,
+        unit: int,
+        address: int,
+        count: int,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> list[int]:
+        """Read *count* (1..125) input registers from *address* (04)."""
+        request = ReadInputRegistersRequest(address, count)
+        reply = await self.request(
+            unit, request, ReadHoldingRegistersResponse, timeout=timeout, priority=priority
+        )
+        return list(reply.values)
+
+    async def write_register(
+        self,
+        unit: int,
+        address: int,
+        value: int,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """Write *value* (0..65535) to the holding register at *address* (06); echo verified."""
+        request = WriteSingleRegisterRequest(address, value)
+        await self.request(unit, request, Response, timeout=timeout, priority=priority)
+
+    async def write_registers(
+        self,
+        unit: int,
+        address: int,
+        values: Sequence[int],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """Write 1..123 registers from *address* (10); the echoed address and count are checked."""
+        request = WriteMultipleRegistersRequest(address, tuple(values))
+        await self.request(unit, request, Response, timeout=timeout, priority=priority)
+
+    async def mask_write_register(
+        self,
+        unit: int,
+        address: int,
+        and_mask: int,
+        or_mask: int,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """Mask write the register at *address* (16): it becomes
+        ``(current & and_mask) | (or_mask & ~and_mask)``; the echo is verified."""
+        request = MaskWriteRegisterRequest(address, and_mask, or_mask)
+        await self.request(unit, request, Response, timeout=timeout, priority=priority)
+
+    async def read_write_registers(
+        self,
+        unit: int,
+        read_address: int,
+        read_count: int,
+        write_address: int,
+        values: Sequence[int],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> list[int]:
+        """Write *values* from *write_address*, then read *read_count* registers (17)."""
+        request = ReadWriteMultipleRegistersRequest(
+            read_address, read_count, write_address, tuple(values)
+        )
+        reply = await self.request(
+            unit, request, ReadHoldingRegistersResponse, timeout=timeout, priority=priority
+        )
+        return list(reply.values)
+
+    async def read_fifo_queue(
+        self, unit: int, address: int, *, timeout: float | None = None, priority: int = 0
+    ) -> list[int]:
+        """Read the 0..31 values queued in the FIFO whose pointer is at *address* (18)."""
+        request = ReadFifoQueueRequest(address)
+        reply = await self.request(
+            unit, request, ReadFifoQueueResponse, timeout=timeout, priority=priority
+        )
+        return list(reply.values)
+
+    # -- file records ----------------------------------------------------------------
+
+    async def read_file_record(
+        self,
+        unit: int,
+        sub_requests: Iterable[RecordRequestLike],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> list[list[int]]:
+        """Read file records (14): one list of values per sub-request, in order.
+
+        Each sub-request is a :class:`~aiortu.core.pdu_files.FileRecordRequest` or a
+        ``(file_number, record_number, record_length)`` tuple.
+        """
+        request = pdu_files.ReadFileRecordRequest(
+            tuple(as_record_request(sub) for sub in sub_requests)
+        )
+        reply = await self.request(
+            unit,
+            request,
+            pdu_files.ReadFileRecordResponse,
+            timeout=timeout,
+            priority=priority,
+        )
+        return [list(values) for values in reply.records]
+
+    async def write_file_record(
+        self,
+        unit: int,
+        records: Iterable[FileRecordLike],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """Write file records (15); the echo is verified.
+
+        Each record is a :class:`~aiortu.core.pdu_files.FileRecord` or a
+        ``(file_number, record_number, values)`` tuple.
+        """
+        request = pdu_files.WriteFileRecordRequest(tuple(as_file_record(r) for r in records))
+        await self.request(unit, request, Response, timeout=timeout, priority=priority)
+
+    # -- serial line functions -------------------------------------------------------
+
+    async def read_exception_status(
+        self, unit: int, *, timeout: float | None = None, priority: int = 0
+    ) -> int:
+        """Read the eight exception status bits of the device as one byte (07)."""
+        reply = await self.request(
+            unit,
+            pdu_serial_line.ReadExceptionStatusRequest(),
+            pdu_serial_line.ReadExceptionStatusResponse,
+            timeout=timeout,
+            priority=priority,
+        )
+        return reply.status
+
+    async def diagnostics(
+        self,
+        unit: int,
+        sub_function: int,
+        data: bytes = b"\x00\x00",
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> pdu_serial_line.DiagnosticsResponse | None:
+        """Run diagnostics *sub_function* with *data* (08); return the reply.
+
+        Force listen-only mode (04) gets no reply: it is sent, followed by the turnaround
+        delay, and ``None`` is returned.
+        """
+        request = pdu_serial_line.DiagnosticsRequest(sub_function, data)
+        if request.sub_function == DiagnosticSubFunction.FORCE_LISTEN_ONLY_MODE:
+            await self.send_without_reply(unit, request, priority=priority)
+            return None
+        return await self.request(
+            unit,
+            request,
+            pdu_serial_line.DiagnosticsResponse,
+            timeout=timeout,
+            priority=priority,
+        )
+
+    async def get_comm_event_counter(
+        self, unit: int, *, timeout: float | None = None, priority: int = 0
+    ) -> pdu_serial_line.GetCommEventCounterResponse:
+        """Read the status word and the event counter of the device (0B)."""
+        return await self.request(
+            unit,
+            pdu_serial_line.GetCommEventCounterRequest(),
+            pdu_serial_line.GetCommEventCounterResponse,
+            timeout=timeout,
+            priority=priority,
+        )
+
+    async def get_comm_event_log(
+        self, unit: int, *, timeout: float | None = None, priority: int = 0
+    ) -> pdu_serial_line.GetCommEventLogResponse:
+        """Read the status, the counters and the event log of the device (0C)."""
+        return await self.request(
+            unit,
+            pdu_serial_line.GetCommEventLogRequest(),
+            pdu_serial_line.GetCommEventLogResponse,
+            timeout=timeout,
+            priority=priority,
+        )
+
+    async def report_server_id(
+        self, unit: int, *, timeout: float | None = None, priority: int = 0
+    ) -> pdu_serial_line.ReportServerIdResponse:
+        """Read the device's server id, run indicator and additional data (11)."""
+        return await self.request(
+            unit,
+            pdu_serial_line.ReportServerIdRequest(),
+            pdu_serial_line.ReportServerIdResponse,
+            timeout=timeout,
+            priority=priority,
+        )
+
+    async def read_device_identification(
+        self,
+        unit: int,
+        read_code: int = DeviceIdReadCode.BASIC,
+        object_id: int = 0,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> dict[int, bytes]:
+        """Read the device identification objects (2B/0E) as ``{object id: value}``.
+
+        Stream reads (basic, regular, extended) follow "more follows" until the device
+        has sent everything; an individual read (4) returns the one object.
+        """
+        objects: dict[int, bytes] = {}
+        next_id = object_id
+        for _ in range(_MAX_DEVICE_ID_READS):
+            request = pdu_device_id.ReadDeviceIdentificationRequest(read_code, next_id)
+            reply = await self.request(
+                unit,
+                request,
+                pdu_device_id.ReadDeviceIdentificationResponse,
+                timeout=timeout,
+                priority=priority,
+            )
+            objects.update(reply.objects)
+            if not reply.more_follows or request.read_code == DeviceIdReadCode.INDIVIDUAL:
+                return objects
+            if reply.next_object_id in objects or not reply.objects:
+                raise MalformedPDU(
+                    "device identification does not advance",
+                    field="next_object_id",
+                    value=reply.next_object_id,
+                    allowed="an object id not read yet",
+                )
+            next_id = reply.next_object_id
+        raise MalformedPDU("device identification never ends")
+
+
+@contextlib.asynccontextmanager
+async def open_master(
+    port_or_url: str,
+    *,
+    baudrate: int = 19200,
+    parity: str = "E",
+    stopbits: float = 1,
+    bytesize: int = 8,
+    timeout: float = 1.0,
+    retries: int = 2,
+    retry_on: Collection[Failure | int] | None = None,
+    frame_gap: float | None = None,
+    turnaround_delay: float = 0.1,
+    late_reply_guard: float = 0.1,
+    offline_after: int = 3,
+    fail_fast_offline: bool = False,
+    probe_interval: float = 5.0,
+    timing: TimingMode | str = TimingMode.TOLERANT,
+    **transport_options: Any,
+) -> AsyncIterator[Master]:
+    """Open *port_or_url* (a serial device path or ``rtu+tcp://host:port``) and yield a
+    :class:`Master` on it; the port is closed on exit.
+
+    The line settings come from *baudrate*, *parity*, *stopbits* and *bytesize*; the
+    other arguments are :class:`Master`'s, and *transport_options* go to
+    :func:`aiortu.transport.open_stream` (``exclusive``, ``rs485``, ``local_echo``,
+    ``connect_timeout``). Opening errors are :class:`~aiortu.errors.PortError`\\ s.
+    """
+    from aiortu.transport import open_stream
+
+    settings = LineSettings(baudrate, bytesize, parity, stopbits)
+    stream = await open_stream(port_or_url, settings, **transport_options)
+    master = Master(
+        stream,
+        settings,
+        timeout=timeout,
+        retries=retries,
+        retry_on=retry_on,
+        frame_gap=frame_gap,
+        turnaround_delay=turnaround_delay,
+        late_reply_guard=late_reply_guard,
+        offline_after=offline_after,
+        fail_fast_offline=fail_fast_offline,
+        probe_interval=probe_interval,
+        timing=timing,
+    )
+    try:
+        async with master:
+            yield master
+    finally:
+        with anyio.CancelScope(shield=True):
+            await stream.aclose()

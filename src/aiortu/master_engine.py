@@ -1,0 +1,352 @@
+"""The master's line task: one transaction at a time on one line, for any number of callers.
+
+:class:`LineEngine` owns a :class:`~aiortu.link.Link` and runs the sans-IO
+:class:`~aiortu.core.master_machine.MasterMachine` on it. Callers hand it
+:class:`~aiortu.core.master_machine.Transaction` objects through :meth:`LineEngine.submit`,
+which queues them (FIFO, lower *priority* first) and waits on a per-request event; the
+line task alone reads and writes the line. So a caller that is cancelled never leaves the
+line half way through an exchange: a request still queued is dropped, and a request in
+flight finishes its current attempt (its reply must not reach a later request) and is not
+retried.
+
+It also keeps :class:`UnitStats` per unit and their health: a unit is offline after
+*offline_after* consecutive failed transactions, and online again after a success. With
+*fail_fast_offline*, a request to an offline unit raises :class:`UnitOffline` at once,
+except for one probe every *probe_interval* seconds.
+
+:class:`~aiortu.master.Master` is the API built on this; see its docstring for the guard
+against late replies.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+from dataclasses import dataclass
+
+import anyio
+
+from aiortu.core.codes import BROADCAST_UNIT
+from aiortu.core.errors import CRCError, FrameError
+from aiortu.core.master_machine import (
+    Failure,
+    MasterMachine,
+    Outcome,
+    OutcomeKind,
+    Transaction,
+    frame_error_from_discard,
+)
+from aiortu.core.pdu import ExceptionPDU, Response
+from aiortu.core.receiver import FrameReceived
+from aiortu.errors import ConnectionLost, ResponseTimeout
+from aiortu.link import Link, LinkEvent
+
+__all__ = ("HealthPolicy", "LineEngine", "UnitOffline", "UnitStats")
+
+
+class UnitOffline(ResponseTimeout):
+    """The unit is marked offline and the master fails fast: nothing was sent.
+
+    Raised only with ``fail_fast_offline=True``, between probes. Also a
+    :class:`~aiortu.errors.ResponseTimeout`, since the unit has not been answering.
+    """
+
+    def __init__(self, unit: int, failures: int) -> None:
+        self.unit = unit
+        super().__init__(
+            f"unit {unit} is offline after {failures} consecutive failures; "
+            "not sent (fail_fast_offline)"
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class HealthPolicy:
+    """When a unit counts as offline, and what calls to it do then.
+
+    *offline_after* consecutive failed transactions (timeouts, frame errors) mark a unit
+    offline; a success marks it online. With *fail_fast_offline*, calls to an offline
+    unit raise :class:`UnitOffline` without sending, except one probe every
+    *probe_interval* seconds.
+    """
+
+    offline_after: int = 3
+    fail_fast_offline: bool = False
+    probe_interval: float = 5.0
+
+
+@dataclass(slots=True)
+class UnitStats:
+    """What happened between the master and one unit.
+
+    Counters count transactions, except ``timeouts``, ``crc_errors`` and ``frame_errors``,
+    which count failed attempts (a retried transaction may add several).
+    """
+
+    requests: int = 0
+    """Transactions sent to the unit (a broadcast counts for unit 0)."""
+    successes: int = 0
+    """Transactions that got their reply (an exception response counts: the unit answered)."""
+    failures: int = 0
+    """Transactions that ended without a usable reply (timeouts, frame errors)."""
+    timeouts: int = 0
+    """Attempts that got no reply in time."""
+    crc_errors: int = 0
+    """Attempts that ended with a CRC error."""
+    frame_errors: int = 0
+    """Attempts that ended with any other frame error (framing, malformed reply)."""
+    exceptions: int = 0
+    """Exception responses received."""
+    retries: int = 0
+    """Attempts repeated."""
+    skipped_frames: int = 0
+    """Frames skipped while waiting for this unit (stale, other units, not matching)."""
+    last_latency: float | None = None
+    """Seconds from the start of the request to the end of the reply, last success."""
+    mean_latency: float | None = None
+    """The mean of that latency over every success."""
+    consecutive_failures: int = 0
+    """Failed transactions since the last success."""
+    online: bool = True
+    """False after ``offline_after`` consecutive failures, until a success."""
+    last_probe: float = -math.inf
+    """When a request was last let through to the unit while offline (fail fast)."""
+
+    def _record_latency(self, latency: float) -> None:
+        self.last_latency = latency
+        previous = self.mean_latency if self.mean_latency is not None else 0.0
+        self.mean_latency = previous + (latency - previous) / self.successes
+
+
+class _Job:
+    """A queued transaction and the caller's side of it: an event and the result."""
+
+    __slots__ = ("done", "error", "priority", "response", "sequence", "transaction")
+
+    def __init__(self, transaction: Transaction, priority: int, sequence: int) -> None:
+        self.transaction = transaction
+        self.priority = priority
+        self.sequence = sequence
+        self.done = anyio.Event()
+        self.response: Response | ExceptionPDU | None = None
+        self.error: Exception | None = None
+
+    def __lt__(self, other: _Job) -> bool:
+        return (self.priority, self.sequence) < (other.priority, other.sequence)
+
+    def finish(self, response: Response | ExceptionPDU | None, error: Exception | None) -> None:
+        self.response = response
+        self.error = error
+        self.done.set()
+
+
+class LineEngine:
+    """The line task of a master (see the module docstring).
+
+    *late_reply_guard* is the silence, in seconds, kept after a transaction in which an
+    attempt failed, before the next request goes out: a reply that turns up that late is
+    dropped as stale. *frame_error_grace* is how long a wait goes on after bad bytes.
+    """
+
+    def __init__(
+        self,
+        link: Link,
+        *,
+        health: HealthPolicy | None = None,
+        late_reply_guard: float = 0.1,
+        frame_error_grace: float = 0.05,
+    ) -> None:
+        self.link = link
+        self.health = health if health is not None else HealthPolicy()
+        self.late_reply_guard = late_reply_guard
+        self.machine = MasterMachine(frame_error_grace=frame_error_grace)
+        self.stats: dict[int, UnitStats] = {}
+        """Statistics by unit address."""
+        self._queue: list[_Job] = []
+        self._sequence = itertools.count()
+        self._wake = anyio.Event()
+        self._quiet_until = -math.inf
+        self._failed: ConnectionLost | None = None
+        self.transactions = 0
+        """Transactions the line task has run (attempts of abandoned ones included)."""
+
+    # -- the callers' side -----------------------------------------------------------
+
+    def unit_stats(self, unit: int) -> UnitStats:
+        """The statistics of *unit* (created empty on first use)."""
+        stats = self.stats.get(unit)
+        if stats is None:
+            stats = self.stats[unit] = UnitStats()
+        return stats
+
+    async def submit(
+        self, transaction: Transaction, priority: int = 0
+    ) -> Response | ExceptionPDU | None:
+        """Queue *transaction*, wait for it, and return the reply (``None`` without one).
+
+        Raises the transaction's error (ResponseTimeout, FrameError, ConnectionLost) and
+        :class:`UnitOffline` when failing fast. If the caller is cancelled, the request
+        is dropped from the queue or, when in flight, finished without retries.
+        """
+        if self._failed is not None:
+            raise ConnectionLost(str(self._failed))
+        self._check_offline(transaction.unit)
+        job = _Job(transaction, priority, next(self._sequence))
+        heapq.heappush(self._queue, job)
+        self._wake.set()
+        try:
+            await job.done.wait()
+        finally:
+            if not job.done.is_set():
+                transaction.abandoned = True
+        if job.error is not None:
+            raise job.error
+        return job.response
+
+    def _check_offline(self, unit: int) -> None:
+        if not self.health.fail_fast_offline or unit == BROADCAST_UNIT:
+            return
+        stats = self.stats.get(unit)
+        if stats is None or stats.online:
+            return
+        now = self.link.clock()
+        if now - stats.last_probe < self.health.probe_interval:
+            raise UnitOffline(unit, stats.consecutive_failures)
+        stats.last_probe = now
+
+    # -- the line task ---------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Run transactions until cancelled or the line fails."""
+        try:
+            while True:
+                job = await self._next_job()
+                if job.transaction.abandoned:
+                    continue
+                await self._run_job(job)
+        except ConnectionLost as error:
+            self._fail_everything(error)
+        finally:
+            self._fail_everything(ConnectionLost("the master is closed"))
+
+    async def _next_job(self) -> _Job:
+        while not self._queue:
+            await self._wake.wait()
+            self._wake = anyio.Event()
+        return heapq.heappop(self._queue)
+
+    def _fail_everything(self, error: ConnectionLost) -> None:
+        if self._failed is None:
+            self._failed = error
+        while self._queue:
+            job = heapq.heappop(self._queue)
+            job.finish(None, ConnectionLost(str(error)))
+
+    async def _run_job(self, job: _Job) -> None:
+        transaction = job.transaction
+        machine = self.machine
+        stats = self.unit_stats(transaction.unit)
+        stats.requests += 1
+        self.transactions += 1
+        machine.begin(transaction)
+        try:
+            while True:
+                await self._keep_guard()
+                frame = machine.frame
+                self._drain()
+                try:
+                    end = await self.link.send(frame)
+                except ConnectionLost as error:
+                    machine.connection_lost(error)
+                    raise
+                machine.sent(end - self.link.settings.wire_time(len(frame)), end)
+                outcome = await self._wait_for_outcome(stats)
+                if outcome.kind is not OutcomeKind.RETRY:
+                    break
+                self._count_failed_attempt(stats, transaction)
+                stats.retries += 1
+        except ConnectionLost as error:
+            job.finish(None, error)
+            raise
+        except BaseException:
+            # Cancelled with the master: the caller hears the line is gone.
+            job.finish(None, ConnectionLost("the master is closed"))
+            raise
+        self._settle(job, outcome, stats)
+
+    async def _keep_guard(self) -> None:
+        delay = self._quiet_until - self.link.clock()
+        if delay > 0:
+            await anyio.sleep(delay)
+
+    def _drain(self) -> None:
+        """Drop what arrived before the request goes out: none of it can answer it."""
+        while self.link.receive_nowait() is not None:
+            pass
+
+    async def _wait_for_outcome(self, stats: UnitStats) -> Outcome:
+        machine = self.machine
+        clock = self.link.clock
+        while True:
+            deadline = machine.deadline
+            assert deadline is not None
+            event: LinkEvent | None = None
+            with anyio.move_on_after(deadline - clock()):
+                event = await self.link.receive()
+            if event is None:
+                # A reply queued right at the deadline still counts: look before giving up.
+                event = self.link.receive_nowait()
+                if event is None:
+                    outcome = machine.expired(clock())
+                    if outcome.kind is not OutcomeKind.WAIT:
+                        return outcome
+                    continue
+            outcome = self._feed(event)
+            if outcome.skipped is not None:
+                stats.skipped_frames += 1
+            if outcome.kind is not OutcomeKind.WAIT:
+                return outcome
+
+    def _feed(self, event: LinkEvent) -> Outcome:
+        if isinstance(event, FrameReceived):
+            return self.machine.frame_received(event.unit, event.pdu, event.start, event.end)
+        error = frame_error_from_discard(event.data, str(event.reason))
+        return self.machine.frame_error(error, event.end)
+
+    def _count_failed_attempt(self, stats: UnitStats, transaction: Transaction) -> None:
+        error = transaction.frame_error
+        if isinstance(error, CRCError):
+            stats.crc_errors += 1
+        elif error is not None:
+            stats.frame_errors += 1
+        elif transaction.failures and transaction.failures[-1] is Failure.TIMEOUT:
+            stats.timeouts += 1
+
+    def _settle(self, job: _Job, outcome: Outcome, stats: UnitStats) -> None:
+        transaction = job.transaction
+        if transaction.failures or outcome.kind is OutcomeKind.FAILED:
+            # An earlier attempt may still be answered late; keep the line quiet a while
+            # so that such a reply arrives before the next request and is dropped.
+            self._quiet_until = self.link.clock() + self.late_reply_guard
+        if outcome.kind is OutcomeKind.FAILED:
+            self._count_failed_attempt(stats, transaction)
+            error = outcome.error
+            assert error is not None
+            if isinstance(error, ResponseTimeout | FrameError):
+                stats.failures += 1
+                stats.consecutive_failures += 1
+                if stats.online and stats.consecutive_failures >= self.health.offline_after:
+                    stats.online = False
+                    # The first probe comes a whole interval after the unit went offline.
+                    stats.last_probe = self.link.clock()
+            job.finish(None, error)
+            return
+        response = outcome.response
+        if response is not None:
+            stats.successes += 1
+            stats.consecutive_failures = 0
+            stats.online = True
+            if isinstance(response, ExceptionPDU):
+                stats.exceptions += 1
+            stats._record_latency(self.link.clock() - transaction.attempt_start)
+        job.finish(response, None)

@@ -1,0 +1,161 @@
+"""The master's state machine: the table, the deadlines, matching and the retry policy."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from aiortu.core.errors import CRCError, FrameError, ResponseTimeout
+from aiortu.core.master_machine import (
+    TRANSITIONS,
+    Failure,
+    MasterEvent,
+    MasterMachine,
+    MasterMachineError,
+    MasterState,
+    OutcomeKind,
+    RetryPolicy,
+    SkipReason,
+    Transaction,
+    next_state,
+)
+from aiortu.core.pdu_registers import (
+    ReadHoldingRegistersRequest,
+    ReadHoldingRegistersResponse,
+    WriteSingleRegisterRequest,
+)
+
+REPLY = ReadHoldingRegistersResponse((1, 2)).encode()
+
+
+@given(st.sampled_from(MasterState), st.sampled_from(MasterEvent))
+def test_every_pair_goes_where_the_table_says_or_raises(
+    state: MasterState, event: MasterEvent
+) -> None:
+    if (state, event) in TRANSITIONS:
+        assert next_state(state, event) is TRANSITIONS[state, event][0]
+    else:
+        with pytest.raises(MasterMachineError):
+            next_state(state, event)
+
+
+operations = st.lists(
+    st.sampled_from(["begin", "sent", "reply", "other", "bad", "expire", "lost"]), max_size=30
+)
+
+
+@given(operations, st.integers(0, 2))
+def test_the_machine_only_takes_transitions_from_the_table(ops: list[str], retries: int) -> None:
+    seen: list[tuple[MasterState, MasterEvent, MasterState]] = []
+    machine = MasterMachine(on_transition=lambda *step: seen.append(step))
+    now = 0.0
+    for op in ops:
+        now += 0.3
+        try:
+            if op == "begin":
+                request = ReadHoldingRegistersRequest(0, 2)
+                machine.begin(Transaction(1, request, 0.5, RetryPolicy(retries)))
+            elif op == "sent":
+                machine.sent(now - 0.001, now)
+            elif op == "reply":
+                machine.frame_received(1, REPLY, now, now)
+            elif op == "other":
+                machine.frame_received(2, REPLY, now, now)
+            elif op == "bad":
+                machine.frame_error(FrameError("noise"), now)
+            elif op == "expire":
+                machine.expired(now)
+            else:
+                machine.connection_lost(ConnectionError("gone"))
+        except MasterMachineError:
+            pass
+    for state, event, target in seen:
+        assert TRANSITIONS[state, event][0] is target
+    # Transient states never outlive a call.
+    assert machine.state not in (MasterState.PROCESSING_REPLY, MasterState.PROCESSING_ERROR)
+
+
+def started(timeout: float = 1.0, retries: int = 0, **options: object) -> MasterMachine:
+    machine = MasterMachine()
+    request = ReadHoldingRegistersRequest(0, 2)
+    machine.begin(Transaction(1, request, timeout, RetryPolicy(retries), **options))  # type: ignore[arg-type]
+    return machine
+
+
+def test_the_deadline_counts_from_the_end_of_transmission() -> None:
+    machine = started(timeout=0.5)
+    assert machine.sent(10.0, 10.004) == pytest.approx(10.504)
+    assert machine.state is MasterState.WAITING_REPLY
+    assert machine.expired(10.5).kind is OutcomeKind.WAIT
+    outcome = machine.expired(10.504)
+    assert outcome.kind is OutcomeKind.FAILED
+    assert isinstance(outcome.error, ResponseTimeout)
+    assert machine.state is MasterState.IDLE
+
+
+def test_stale_other_unit_and_mismatching_frames_are_skipped() -> None:
+    machine = started()
+    machine.sent(10.0, 10.004)
+    assert machine.frame_received(1, REPLY, 9.0, 9.9).skipped is SkipReason.STALE
+    assert machine.frame_received(2, REPLY, 10.0, 10.01).skipped is SkipReason.OTHER_UNIT
+    other = WriteSingleRegisterRequest(0, 1).encode()
+    assert machine.frame_received(1, other, 10.0, 10.01).skipped is SkipReason.OTHER_FUNCTION
+    three = ReadHoldingRegistersResponse((1, 2, 3)).encode()
+    assert machine.frame_received(1, three, 10.0, 10.01).skipped is SkipReason.MALFORMED
+    outcome = machine.frame_received(1, REPLY, 10.0, 10.02)
+    assert outcome.kind is OutcomeKind.DONE
+    assert outcome.response == ReadHoldingRegistersResponse((1, 2))
+
+
+def test_retries_follow_the_policy() -> None:
+    machine = started(retries=1)
+    machine.sent(0.0, 0.001)
+    assert machine.expired(2.0).kind is OutcomeKind.RETRY
+    machine.sent(2.0, 2.001)
+    assert machine.expired(4.0).kind is OutcomeKind.FAILED
+    assert machine.transaction is not None
+    assert machine.transaction.failures == [Failure.TIMEOUT, Failure.TIMEOUT]
+
+
+def test_exception_replies_are_not_retried_by_default() -> None:
+    machine = started(retries=3)
+    machine.sent(0.0, 0.001)
+    outcome = machine.frame_received(1, bytes((0x83, 0x02)), 0.01, 0.02)
+    assert outcome.kind is OutcomeKind.DONE
+    assert outcome.response is not None
+
+
+def test_a_frame_error_shortens_the_wait_and_is_the_failure() -> None:
+    machine = started(timeout=1.0)
+    machine.sent(0.0, 0.001)
+    error = CRCError(1, 2)
+    assert machine.frame_error(error, 0.1).kind is OutcomeKind.WAIT
+    assert machine.deadline == pytest.approx(0.1 + machine.frame_error_grace)
+    outcome = machine.expired(0.2)
+    assert outcome.error is error
+
+
+def test_abandoned_transactions_are_not_retried() -> None:
+    machine = started(retries=3)
+    machine.sent(0.0, 0.001)
+    assert machine.transaction is not None
+    machine.transaction.abandoned = True
+    assert machine.expired(2.0).kind is OutcomeKind.FAILED
+
+
+def test_a_broadcast_waits_the_turnaround() -> None:
+    machine = started(expects_reply=False, turnaround=0.1)
+    assert machine.sent(0.0, 0.004) == pytest.approx(0.104)
+    assert machine.state is MasterState.WAITING_TURNAROUND
+    assert machine.frame_received(1, REPLY, 0.05, 0.05).kind is OutcomeKind.WAIT
+    assert machine.expired(0.1).kind is OutcomeKind.WAIT
+    assert machine.expired(0.105).kind is OutcomeKind.DONE
+    assert machine.state is MasterState.IDLE
+
+
+def test_a_second_transaction_cannot_begin_mid_way() -> None:
+    machine = started()
+    machine.sent(0.0, 0.001)
+    with pytest.raises(MasterMachineError):
+        machine.begin(Transaction(1, ReadHoldingRegistersRequest(0, 1), 1.0))
