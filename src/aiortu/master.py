@@ -21,15 +21,14 @@ state machine in :mod:`aiortu.core.master_machine`, the per-unit and broadcast h
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Callable, Collection, Iterable, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Collection, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Self, TypeVar
 
 import anyio
 import anyio.abc
 
-from aiortu.core import pdu_device_id, pdu_files, pdu_serial_line
-from aiortu.core.codes import BROADCAST_UNIT, DeviceIdReadCode, DiagnosticSubFunction
+from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.master_machine import Failure, RetryPolicy, Transaction
 from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.core.pdu_bits import (
@@ -54,15 +53,10 @@ from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
 from aiortu.link import Link
+from aiortu.master_connection import LineConnection, ReconnectPolicy, StreamOpener
 from aiortu.master_engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
-from aiortu.master_handles import (
-    BroadcastHandle,
-    FileRecordLike,
-    RecordRequestLike,
-    UnitHandle,
-    as_file_record,
-    as_record_request,
-)
+from aiortu.master_handles import BroadcastHandle, UnitHandle
+from aiortu.master_serial import SerialLineFunctions
 
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
 
@@ -71,18 +65,15 @@ UNIT_RANGE = range(1, 248)
 
 _ResponseT = TypeVar("_ResponseT", bound=Response)
 
-_MAX_DEVICE_ID_READS = 256
-"""A device cannot stream more objects than there are ids; stop a looping one there."""
 
-
-def check_unit(unit: object) -> int:
+def _check_unit(unit: object) -> int:
     """Return *unit* if a unicast may go to it, else raise InvalidRequest."""
     if isinstance(unit, bool) or not isinstance(unit, int) or unit not in UNIT_RANGE:
         raise InvalidRequest("unit", unit, UNIT_RANGE, "use master.broadcast for unit 0")
     return unit
 
 
-class Master:
+class Master(SerialLineFunctions):
     """A Modbus RTU master on *stream*; an async context manager.
 
     *settings* give the line timing. *timeout* is the response timeout of each attempt,
@@ -94,6 +85,15 @@ class Master:
     consecutive failures mark a unit offline; with *fail_fast_offline* calls to it raise
     :class:`~aiortu.master_engine.UnitOffline` except one probe every *probe_interval*
     seconds. *timing* is the receiver's t1.5 mode.
+
+    Reconnecting (see :mod:`aiortu.master_connection`): when the stream fails, the
+    request in flight and the queued ones raise :class:`~aiortu.errors.ConnectionLost`.
+    A master given only a stream cannot reopen it and stays failed. Given an *opener*
+    (an async function returning a new stream for the same port; :func:`open_master`
+    passes one) and *reconnect* true, it reopens the port, waiting *reconnect_delay*
+    ``(first, longest)`` seconds between attempts, doubling; requests made meanwhile
+    wait up to their timeout for the port and then raise ConnectionLost, or raise it at
+    once with *reconnect_fail_fast*.
 
     Every method takes the unit first, and ``timeout=`` (this call's response timeout)
     and ``priority=`` (lower goes first; equal priorities keep their order). Requests
@@ -141,6 +141,10 @@ class Master:
         probe_interval: float = 5.0,
         timing: TimingMode | str = TimingMode.TOLERANT,
         clock: Callable[[], float] = anyio.current_time,
+        opener: StreamOpener | None = None,
+        reconnect: bool = True,
+        reconnect_delay: tuple[float, float] = (0.1, 5.0),
+        reconnect_fail_fast: bool = False,
     ) -> None:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 seconds, not {timeout!r}")
@@ -150,14 +154,27 @@ class Master:
         self.timeout = timeout
         self.turnaround_delay = turnaround_delay
         self.policy = RetryPolicy.of(retries, retry_on)
-        self.link = Link(
-            stream, self.settings, role=Role.MASTER, timing=timing, frame_gap=frame_gap, clock=clock
-        )
+
+        def make_link(stream: anyio.abc.ByteStream) -> Link:
+            return Link(
+                stream, self.settings, role=Role.MASTER, timing=timing, frame_gap=frame_gap,
+                clock=clock,
+            )  # fmt: skip
+
+        link = make_link(stream)
         self.engine = LineEngine(
-            self.link,
+            link,
             health=HealthPolicy(offline_after, fail_fast_offline, probe_interval),
             late_reply_guard=late_reply_guard,
         )
+        self.connection = LineConnection(
+            self.engine,
+            link,
+            make_link,
+            opener,
+            ReconnectPolicy(reconnect, reconnect_delay, reconnect_fail_fast),
+        )
+        """Keeps the line up: reconnect counters, the current link."""
         self.broadcast = BroadcastHandle(self)
         """The writes that may go to every unit at once (unit 0); no reply is awaited."""
         self._exit_stack: contextlib.AsyncExitStack | None = None
@@ -166,10 +183,9 @@ class Master:
 
     async def __aenter__(self) -> Self:
         async with contextlib.AsyncExitStack() as stack:
-            await stack.enter_async_context(self.link)
             task_group = await stack.enter_async_context(anyio.create_task_group())
             stack.callback(task_group.cancel_scope.cancel)
-            task_group.start_soon(self.engine.run, name="aiortu master line task")
+            task_group.start_soon(self.connection.run, name="aiortu master line task")
             self._exit_stack = stack.pop_all()
         return self
 
@@ -183,6 +199,16 @@ class Master:
         if stack is None:
             return None
         return await stack.__aexit__(exc_type, exc, traceback)
+
+    @property
+    def link(self) -> Link:
+        """The line the master talks on now (a new one after each reconnect)."""
+        return self.connection.link
+
+    @property
+    def connected(self) -> bool:
+        """Whether the line is up: False while reconnecting and once failed or closed."""
+        return self.connection.connected
 
     # -- statistics ------------------------------------------------------------------
 
@@ -201,7 +227,7 @@ class Master:
 
     def slave(self, unit: int) -> UnitHandle:
         """A handle on one unit: the same methods without the unit, plus typed values."""
-        return UnitHandle(self, check_unit(unit))
+        return UnitHandle(self, _check_unit(unit))
 
     # -- the core of every call ------------------------------------------------------
 
@@ -210,7 +236,7 @@ class Master:
     ) -> Response | ExceptionPDU:
         """Send any request PDU (a :class:`~aiortu.core.pdu.RawPDU` for custom codes) and
         return the reply as it came, an exception reply included (not raised)."""
-        check_unit(unit)
+        _check_unit(unit)
         if not isinstance(pdu, Request):
             raise InvalidRequest("pdu", pdu, "a Request PDU")
         transaction = Transaction(unit, pdu, self._timeout(timeout), self.policy)
@@ -229,7 +255,7 @@ class Master:
                     "unit", unit, UNIT_RANGE, f"{type(pdu).__name__} may not be broadcast"
                 )
         else:
-            check_unit(unit)
+            _check_unit(unit)
         transaction = Transaction(
             unit,
             pdu,
@@ -429,164 +455,6 @@ class Master:
         )
         return list(reply.values)
 
-    # -- file records ----------------------------------------------------------------
-
-    async def read_file_record(
-        self,
-        unit: int,
-        sub_requests: Iterable[RecordRequestLike],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> list[list[int]]:
-        """Read file records (14): one list of values per sub-request, in order.
-
-        Each sub-request is a :class:`~aiortu.core.pdu_files.FileRecordRequest` or a
-        ``(file_number, record_number, record_length)`` tuple.
-        """
-        request = pdu_files.ReadFileRecordRequest(
-            tuple(as_record_request(sub) for sub in sub_requests)
-        )
-        reply = await self.request(
-            unit,
-            request,
-            pdu_files.ReadFileRecordResponse,
-            timeout=timeout,
-            priority=priority,
-        )
-        return [list(values) for values in reply.records]
-
-    async def write_file_record(
-        self,
-        unit: int,
-        records: Iterable[FileRecordLike],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """Write file records (15); the echo is verified.
-
-        Each record is a :class:`~aiortu.core.pdu_files.FileRecord` or a
-        ``(file_number, record_number, values)`` tuple.
-        """
-        request = pdu_files.WriteFileRecordRequest(tuple(as_file_record(r) for r in records))
-        await self.request(unit, request, Response, timeout=timeout, priority=priority)
-
-    # -- serial line functions -------------------------------------------------------
-
-    async def read_exception_status(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
-    ) -> int:
-        """Read the eight exception status bits of the device as one byte (07)."""
-        reply = await self.request(
-            unit,
-            pdu_serial_line.ReadExceptionStatusRequest(),
-            pdu_serial_line.ReadExceptionStatusResponse,
-            timeout=timeout,
-            priority=priority,
-        )
-        return reply.status
-
-    async def diagnostics(
-        self,
-        unit: int,
-        sub_function: int,
-        data: bytes = b"\x00\x00",
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> pdu_serial_line.DiagnosticsResponse | None:
-        """Run diagnostics *sub_function* with *data* (08); return the reply.
-
-        Force listen-only mode (04) gets no reply: it is sent, followed by the turnaround
-        delay, and ``None`` is returned.
-        """
-        request = pdu_serial_line.DiagnosticsRequest(sub_function, data)
-        if request.sub_function == DiagnosticSubFunction.FORCE_LISTEN_ONLY_MODE:
-            await self.send_without_reply(unit, request, priority=priority)
-            return None
-        return await self.request(
-            unit,
-            request,
-            pdu_serial_line.DiagnosticsResponse,
-            timeout=timeout,
-            priority=priority,
-        )
-
-    async def get_comm_event_counter(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
-    ) -> pdu_serial_line.GetCommEventCounterResponse:
-        """Read the status word and the event counter of the device (0B)."""
-        return await self.request(
-            unit,
-            pdu_serial_line.GetCommEventCounterRequest(),
-            pdu_serial_line.GetCommEventCounterResponse,
-            timeout=timeout,
-            priority=priority,
-        )
-
-    async def get_comm_event_log(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
-    ) -> pdu_serial_line.GetCommEventLogResponse:
-        """Read the status, the counters and the event log of the device (0C)."""
-        return await self.request(
-            unit,
-            pdu_serial_line.GetCommEventLogRequest(),
-            pdu_serial_line.GetCommEventLogResponse,
-            timeout=timeout,
-            priority=priority,
-        )
-
-    async def report_server_id(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
-    ) -> pdu_serial_line.ReportServerIdResponse:
-        """Read the device's server id, run indicator and additional data (11)."""
-        return await self.request(
-            unit,
-            pdu_serial_line.ReportServerIdRequest(),
-            pdu_serial_line.ReportServerIdResponse,
-            timeout=timeout,
-            priority=priority,
-        )
-
-    async def read_device_identification(
-        self,
-        unit: int,
-        read_code: int = DeviceIdReadCode.BASIC,
-        object_id: int = 0,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> dict[int, bytes]:
-        """Read the device identification objects (2B/0E) as ``{object id: value}``.
-
-        Stream reads (basic, regular, extended) follow "more follows" until the device
-        has sent everything; an individual read (4) returns the one object.
-        """
-        objects: dict[int, bytes] = {}
-        next_id = object_id
-        for _ in range(_MAX_DEVICE_ID_READS):
-            request = pdu_device_id.ReadDeviceIdentificationRequest(read_code, next_id)
-            reply = await self.request(
-                unit,
-                request,
-                pdu_device_id.ReadDeviceIdentificationResponse,
-                timeout=timeout,
-                priority=priority,
-            )
-            objects.update(reply.objects)
-            if not reply.more_follows or request.read_code == DeviceIdReadCode.INDIVIDUAL:
-                return objects
-            if reply.next_object_id in objects or not reply.objects:
-                raise MalformedPDU(
-                    "device identification does not advance",
-                    field="next_object_id",
-                    value=reply.next_object_id,
-                    allowed="an object id not read yet",
-                )
-            next_id = reply.next_object_id
-        raise MalformedPDU("device identification never ends")
-
 
 @contextlib.asynccontextmanager
 async def open_master(
@@ -606,6 +474,9 @@ async def open_master(
     fail_fast_offline: bool = False,
     probe_interval: float = 5.0,
     timing: TimingMode | str = TimingMode.TOLERANT,
+    reconnect: bool = True,
+    reconnect_delay: tuple[float, float] = (0.1, 5.0),
+    reconnect_fail_fast: bool = False,
     **transport_options: Any,
 ) -> AsyncIterator[Master]:
     """Open *port_or_url* (a serial device path or ``rtu+tcp://host:port``) and yield a
@@ -615,6 +486,10 @@ async def open_master(
     other arguments are :class:`Master`'s, and *transport_options* go to
     :func:`aiortu.transport.open_stream` (``exclusive``, ``rs485``, ``local_echo``,
     ``connect_timeout``). Opening errors are :class:`~aiortu.errors.PortError`\\ s.
+
+    With *reconnect* (the default) the master reopens the same port with the same
+    settings after it disappears (a USB adapter unplugged); see :class:`Master` for
+    *reconnect_delay* and *reconnect_fail_fast*.
     """
     from aiortu.transport import open_stream
 
@@ -633,6 +508,10 @@ async def open_master(
         fail_fast_offline=fail_fast_offline,
         probe_interval=probe_interval,
         timing=timing,
+        opener=lambda: open_stream(port_or_url, settings, **transport_options),
+        reconnect=reconnect,
+        reconnect_delay=reconnect_delay,
+        reconnect_fail_fast=reconnect_fail_fast,
     )
     try:
         async with master:
