@@ -361,7 +361,9 @@ class Receiver:
         return position
 
     def _salvage_overflow(self, data: bytes, position: int) -> int:
-        self._salvage(DiscardReason.OVERFLOW, keep_tail=True)
+        # Overflow strikes in the middle of a chunk, before the chunk's time is recorded:
+        # the last byte held arrived at the time the event was fired with.
+        self._salvage(DiscardReason.OVERFLOW, keep_tail=True, end=self._now)
         return position
 
     def _begin_frame(self, data: bytes, position: int) -> int:
@@ -411,13 +413,16 @@ class Receiver:
             guesses = (expected_request_length(buffer),)
         else:
             guesses = (expected_request_length(buffer), expected_response_length(buffer))
+        # NEED_MORE (0) and CANNOT_KNOW (-1) are never >= the bytes held: the filters drop them.
+        have = len(buffer)
         if NEED_MORE in guesses:
+            # A length one layout already gives is checked even while the other layout
+            # still needs bytes: a 7-byte 2B/0E request completes at 7 instead of waiting
+            # for the reply layout's object count at byte 8. At most one guess is left.
+            self._candidates = [guess for guess in guesses if guess >= have]
             return
         self._predicted = True
-        have = len(buffer)
-        self._candidates = sorted(
-            {guess for guess in guesses if guess != CANNOT_KNOW and guess >= have}
-        )
+        self._candidates = sorted({guess for guess in guesses if guess >= have})
 
     def _complete_at_candidate(self, position: int) -> bool:
         """Check the CRC when the buffer reaches a candidate length; fire COMPLETE if it holds.
@@ -468,18 +473,24 @@ class Receiver:
     def _last_arrival(self) -> float:
         return self._last if self._last is not None else self._now
 
-    def _discard(self, data: bytes, reason: DiscardReason, end: float) -> None:
+    def _discard(
+        self, data: bytes, reason: DiscardReason, end: float, start: float | None = None
+    ) -> None:
         if data:
-            self._out.append(FrameDiscarded(data, reason, self._first, end))
+            start = self._first if start is None else start
+            self._out.append(FrameDiscarded(data, reason, start, end))
 
-    def _salvage(self, reason: DiscardReason, *, keep_tail: bool = False) -> None:
+    def _salvage(
+        self, reason: DiscardReason, *, keep_tail: bool = False, end: float | None = None
+    ) -> None:
         """Hand on every valid frame found inside the buffer; discard the rest with *reason*.
 
         With *keep_tail* (overflow), bytes at the end that could still begin a frame stay
         in the buffer; otherwise the buffer is emptied.
         """
         buffer = bytes(self._buffer)
-        end = self._last_arrival()
+        if end is None:
+            end = self._last_arrival()
         garbage_from = 0
         offset = 0
         length = len(buffer)
@@ -489,7 +500,10 @@ class Receiver:
             if found > 0:
                 if offset > garbage_from:
                     self._discard(
-                        buffer[garbage_from:offset], reason, self._estimate(offset - 1, end)
+                        buffer[garbage_from:offset],
+                        reason,
+                        self._estimate(offset - 1, end),
+                        self._estimate(garbage_from, end),
                     )
                 self._out.append(
                     FrameReceived(
@@ -505,13 +519,22 @@ class Receiver:
                 keep_from = offset
             offset += 1
         if keep_tail:
+            # The last bytes are too few to judge and may begin a frame: keep them too.
+            keep_from = min(keep_from, length - (MIN_FRAME_LENGTH - 1))
             keep_from = max(keep_from, garbage_from, length - (MAX_FRAME_LENGTH - 1))
             if keep_from > garbage_from:
-                self._discard(buffer[garbage_from:keep_from], reason, end)
+                self._discard(
+                    buffer[garbage_from:keep_from],
+                    reason,
+                    self._estimate(keep_from - 1, end),
+                    self._estimate(garbage_from, end),
+                )
             del self._buffer[:keep_from]
+            # Later salvages time the kept bytes from the first of them.
+            self._first = self._estimate(keep_from, end)
         else:
             if length > garbage_from:
-                self._discard(buffer[garbage_from:], reason, end)
+                self._discard(buffer[garbage_from:], reason, end, self._estimate(garbage_from, end))
             self._buffer.clear()
 
     def _estimate(self, index: int, end: float) -> float:
@@ -520,7 +543,9 @@ class Receiver:
 
     def _frame_at(self, buffer: bytes, offset: int) -> int:
         """The length of a valid frame starting at *offset*, or NEED_MORE / CANNOT_KNOW."""
-        head = buffer[offset : offset + 12]
+        # The whole rest, not a fixed head: a 2B/0E reply's length needs every object's
+        # length byte, however far into the frame.
+        head = buffer[offset : offset + MAX_FRAME_LENGTH]
         unit = head[0]
         if unit > 247:
             return CANNOT_KNOW
