@@ -118,7 +118,12 @@ class Link:
     ) -> bool | None:
         await self.aclose()
         assert self._task_group is not None
-        return await self._task_group.__aexit__(exc_type, exc, traceback)
+        # The body's own exception propagates as it is; the reader task has been
+        # cancelled and only needs collecting, so it must not wrap that exception. No
+        # shield around it: a task group's scope must be exited as the host's innermost
+        # scope, and its own cancellation already keeps the collection short.
+        await self._task_group.__aexit__(None, None, None)
+        return None
 
     async def aclose(self) -> None:
         """Stop reading and close the stream."""
@@ -134,6 +139,15 @@ class Link:
     def last_activity(self) -> float:
         """When the line was last busy: the later of the last byte received and the last sent."""
         return max(self._last_received, self._transmit_end)
+
+    @property
+    def closed(self) -> bool:
+        """True once the reader has stopped: the stream failed or the link was closed."""
+        return self._closed.is_set()
+
+    async def wait_closed(self) -> None:
+        """Return once the reader has stopped (see :attr:`closed`)."""
+        await self._closed.wait()
 
     async def receive(self) -> LinkEvent:
         """The next frame or discard, oldest first.
@@ -176,11 +190,10 @@ class Link:
                 now = clock()
                 if chunk:
                     self._last_received = now
-                    if self._transmit_end > now:
-                        # The line is half duplex: a byte received proves our own frame
-                        # has left it, even where the wire time estimate says otherwise
-                        # (virtual lines deliver faster than the baud rate).
-                        self._transmit_end = now
+                    # The line is half duplex: a byte received proves our own frame has
+                    # left it, even where the wire time estimate says otherwise (virtual
+                    # lines deliver faster than the baud rate).
+                    self._transmit_end = min(self._transmit_end, now)
                     self._deliver(receiver.feed(chunk, now))
                 else:
                     self._deliver(receiver.expire(now))
