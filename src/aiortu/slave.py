@@ -21,13 +21,19 @@ including for the user-defined codes 65-72 and 100-110, which arrive as
 :class:`~aiortu.errors.ExceptionResponse` answers with its code; any other error answers
 04, is logged, and the slave goes on serving. The reply goes out after ``frame_gap`` of
 silence on the line (t3.5 by default; the link keeps it).
+
+Beyond function codes: :meth:`Slave.route` serves an address range of one table with a
+function (see :mod:`aiortu.slave_routes`); :meth:`Slave.before_request` and
+:meth:`Slave.after_request` add hooks around every request; a handler or hook that
+returns a :class:`~aiortu.slave_handlers.Reply` answers late, as another unit, or not at
+all, to test masters. *trace* sees every frame received and sent.
 """
 
 from __future__ import annotations
 
 import inspect
 import logging
-from collections.abc import AsyncIterator, Callable, Mapping
+from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from contextlib import asynccontextmanager
 from types import TracebackType
 from typing import Any, Self
@@ -36,7 +42,7 @@ import anyio
 import anyio.abc
 
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode
-from aiortu.core.data_model import DataStore
+from aiortu.core.data_model import AsyncDataStore, DataStore, Table
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
 from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
@@ -44,12 +50,33 @@ from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue, MalformedPDU
 from aiortu.link import Link
-from aiortu.slave_handlers import BUILTIN_HANDLERS, Handler, HandlerResult, RequestContext
+from aiortu.slave_handlers import (
+    BUILTIN_HANDLERS,
+    Answer,
+    Handler,
+    HandlerResult,
+    Reply,
+    RequestContext,
+)
+from aiortu.slave_routes import RangeHandler, RoutedStore
 from aiortu.transport import open_stream
 
-__all__ = ("Slave", "serve")
+__all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback", "serve")
 
 _log = logging.getLogger(__name__)
+
+BeforeHook = Callable[[Any, RequestContext], Answer]
+"""Called before the handler with (request, context): ``None`` goes on to the handler, a
+response or :class:`~aiortu.slave_handlers.Reply` answers instead of it, and raising
+:class:`~aiortu.errors.ExceptionResponse` refuses the request. May be async."""
+
+AfterHook = Callable[[Any, RequestContext, HandlerResult], Answer]
+"""Called after the handler with (request, context, its answer): ``None`` keeps the
+answer, anything else replaces it. May be async. Not called when the handler raised."""
+
+TraceCallback = Callable[[str, bytes], object]
+"""Sees the line: ``("received", frame)`` for every frame whose CRC checks (for any
+unit), ``("sent", frame)`` for every reply, ``("discarded", data)`` for bytes dropped."""
 
 _UNIT_RANGE = range(1, 248)
 _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
@@ -63,6 +90,7 @@ class Slave:
     settings, 0 for lines without a wire such as TCP). *timing* and *frame_silence*
     configure the receiver (see :mod:`aiortu.core.receiver`). *handlers* adds or replaces
     handlers by function code, as :meth:`set_handler` does. *clock* is the link's clock.
+    *trace* sees every frame (see :data:`TraceCallback`).
 
     Raises :class:`~aiortu.errors.InvalidValue` for a unit address outside 1..247 or a
     function code outside 1..127.
@@ -71,7 +99,7 @@ class Slave:
     def __init__(
         self,
         stream: anyio.abc.ByteStream,
-        units: Mapping[int, DataStore],
+        units: Mapping[int, DataStore | AsyncDataStore],
         settings: LineSettings | None = None,
         *,
         frame_gap: float | None = None,
@@ -79,11 +107,12 @@ class Slave:
         frame_silence: float | None = None,
         handlers: Mapping[int, Handler] | None = None,
         clock: Callable[[], float] = anyio.current_time,
+        trace: TraceCallback | None = None,
     ) -> None:
         for unit in units:
             if unit not in _UNIT_RANGE:
                 raise InvalidValue("unit", unit, _UNIT_RANGE)
-        self.units: dict[int, DataStore] = dict(units)
+        self.units: dict[int, DataStore | AsyncDataStore] = dict(units)
         """The data store of each unit served."""
         self.link = Link(
             stream,
@@ -105,7 +134,14 @@ class Slave:
         self._handlers: dict[int, Handler] = dict(BUILTIN_HANDLERS)
         for function_code, handler in (handlers or {}).items():
             self.set_handler(function_code, handler)
-        self._contexts = {unit: RequestContext(unit, store) for unit, store in self.units.items()}
+        self.trace = trace
+        """The trace callback, or ``None``."""
+        self._routed: dict[int, RoutedStore] = {}
+        self._before: list[BeforeHook] = []
+        self._after: list[AfterHook] = []
+        self._contexts: dict[int, RequestContext] = {}
+        self._broadcast_contexts: list[RequestContext] = []
+        self._build_contexts()
         self._task_group: anyio.abc.TaskGroup | None = None
         self._stopped = anyio.Event()
 
@@ -135,6 +171,62 @@ class Slave:
 
         return register
 
+    def route(
+        self,
+        table: Table | str,
+        addresses: range,
+        handler: RangeHandler,
+        *,
+        units: Iterable[int] | None = None,
+    ) -> None:
+        """Serve *addresses* of *table* with *handler* on *units* (default: every unit).
+
+        See :mod:`aiortu.slave_routes`. A later route wins where routes overlap.
+        """
+        table = Table(table)
+        for unit in self.units if units is None else units:
+            if unit not in self.units:
+                raise InvalidValue("unit", unit, sorted(self.units))
+            routed = self._routed.get(unit)
+            if routed is None:
+                routed = self._routed[unit] = RoutedStore(self.units[unit], unit)
+            routed.add(table, addresses, handler)
+        self._build_contexts()
+
+    def before_request(self, hook: BeforeHook) -> Callable[[], None]:
+        """Call *hook* before each request's handler (see :data:`BeforeHook`).
+
+        Returns a function that removes the hook.
+        """
+        self._before.append(hook)
+        return lambda: self._before.remove(hook) if hook in self._before else None
+
+    def after_request(self, hook: AfterHook) -> Callable[[], None]:
+        """Call *hook* after each request's handler (see :data:`AfterHook`).
+
+        Returns a function that removes the hook.
+        """
+        self._after.append(hook)
+        return lambda: self._after.remove(hook) if hook in self._after else None
+
+    def _build_contexts(self) -> None:
+        machine = self.machine
+        stores: dict[int, DataStore | AsyncDataStore] = {
+            unit: self._routed.get(unit, store) for unit, store in self.units.items()
+        }
+        self._contexts = {
+            unit: RequestContext(unit, store, machine=machine) for unit, store in stores.items()
+        }
+        # A broadcast runs once per store: units that share one store run it once.
+        seen: set[int] = set()
+        self._broadcast_contexts = []
+        for unit, store in stores.items():
+            if id(self.units[unit]) not in seen:
+                seen.add(id(self.units[unit]))
+                self._broadcast_contexts.append(
+                    RequestContext(unit, store, broadcast=True, machine=machine)
+                )
+
     @property
     def function_codes(self) -> frozenset[int]:
         """The function codes this slave serves."""
@@ -144,7 +236,7 @@ class Slave:
 
     @property
     def listen_only(self) -> bool:
-        """In listen-only mode requests are executed and never answered."""
+        """In listen-only mode requests are monitored only: not executed, not answered."""
         return self.machine.listen_only
 
     @listen_only.setter
@@ -204,24 +296,44 @@ class Slave:
         machine = self.machine
         while True:
             event = await link.receive()
+            trace = self.trace
             if not isinstance(event, FrameReceived):
+                if trace is not None:
+                    trace("discarded", event.data)
                 if event.reason is DiscardReason.CRC:
                     machine.frame_corrupt()
                 elif event.reason is DiscardReason.OVERFLOW:
                     machine.character_overrun()
                 continue
-            unit = event.frame[0]
-            if not machine.frame_received(unit):
+            frame = event.frame
+            if trace is not None:
+                trace("received", frame)
+            unit = frame[0]
+            if not machine.frame_received(unit, frame[1]):
                 continue
-            reply = await self._answer(unit, event.frame[1:-2])
+            if machine.listen_only and frame[1:4] != _RESTART_COMMUNICATIONS:
+                machine.ignore()
+                continue
+            reply = await self._answer(unit, frame[1:-2])
             if reply is not None and machine.should_reply:
-                await link.send(encode_frame(unit, reply))
+                if type(reply) is bytes:
+                    out = encode_frame(unit, reply)
+                else:
+                    assert isinstance(reply, Reply)
+                    assert reply.response is not None
+                    if reply.delay > 0:
+                        await anyio.sleep(reply.delay)
+                    answer_unit = unit if reply.unit is None else reply.unit
+                    out = encode_frame(answer_unit, reply.response.encode())
+                await link.send(out)
+                if trace is not None:
+                    trace("sent", out)
                 machine.reply_sent()
             else:
                 machine.no_reply()
 
-    async def _answer(self, unit: int, pdu: bytes) -> bytes | None:
-        """Check and execute one request; return the reply PDU, or None to send nothing."""
+    async def _answer(self, unit: int, pdu: bytes) -> bytes | Reply | None:
+        """Check and execute one request; return the reply PDU (or a Reply), or None."""
         machine = self.machine
         function_code = pdu[0]
         handler = self._handlers.get(function_code)
@@ -237,11 +349,11 @@ class Slave:
         assert handler is not None
         try:
             if machine.broadcast:
-                await self._execute_broadcast(handler, request)
-                reply = None
+                for context in self._broadcast_contexts:
+                    await self._run(handler, request, context)
+                result: HandlerResult = None
             else:
-                result = await _call(handler, request, self._contexts[unit])
-                reply = None if result is None else result.encode()
+                result = await self._run(handler, request, self._contexts[unit])
         except ExceptionResponse as error:
             machine.processing_failed(error.code)
             return _exception_pdu(function_code, error.code)
@@ -250,17 +362,32 @@ class Slave:
             machine.processing_failed(ExceptionCode.SERVER_DEVICE_FAILURE)
             return _exception_pdu(function_code, ExceptionCode.SERVER_DEVICE_FAILURE)
         machine.processed()
-        return reply
+        if result is None:
+            return None
+        if isinstance(result, Reply):
+            return None if result.response is None else result
+        return result.encode()
 
-    async def _execute_broadcast(self, handler: Handler, request: Request | None) -> None:
-        """Run a broadcast on every unit; units that share a store run it once."""
-        done: set[int] = set()
-        for unit, store in self.units.items():
-            if id(store) in done:
-                continue
-            done.add(id(store))
-            context = RequestContext(unit, store, broadcast=True)
-            await _call(handler, request, context)
+    async def _run(
+        self, handler: Handler, request: Request | None, context: RequestContext
+    ) -> HandlerResult:
+        """The handler's answer, with the hooks around it."""
+        if not (self._before or self._after):
+            return await _call(handler, request, context)
+        for before in tuple(self._before):
+            early = before(request, context)
+            if inspect.isawaitable(early):
+                early = await early
+            if early is not None:
+                return early
+        result = await _call(handler, request, context)
+        for after in tuple(self._after):
+            replaced = after(request, context, result)
+            if inspect.isawaitable(replaced):
+                replaced = await replaced
+            if replaced is not None:
+                result = replaced
+        return result
 
 
 async def _call(
@@ -273,6 +400,10 @@ async def _call(
     return result
 
 
+_RESTART_COMMUNICATIONS = bytes((0x08, 0x00, 0x01))
+"""Diagnostics, restart communications: the one request served in listen-only mode."""
+
+
 def _exception_pdu(function_code: int, exception_code: int | None) -> bytes:
     # Raw bytes, not ExceptionPDU: a request with code 0 must still get its 01 answer.
     code = ExceptionCode.SERVER_DEVICE_FAILURE if exception_code is None else exception_code
@@ -282,7 +413,7 @@ def _exception_pdu(function_code: int, exception_code: int | None) -> bytes:
 @asynccontextmanager
 async def serve(
     port_or_url: str,
-    units: Mapping[int, DataStore],
+    units: Mapping[int, DataStore | AsyncDataStore],
     *,
     baudrate: int = 19200,
     parity: str = "E",
@@ -291,6 +422,7 @@ async def serve(
     frame_gap: float | None = None,
     timing: TimingMode | str = TimingMode.TOLERANT,
     handlers: Mapping[int, Handler] | None = None,
+    trace: TraceCallback | None = None,
     **options: Any,
 ) -> AsyncIterator[Slave]:
     """Open *port_or_url* and serve *units* on it for the duration of the ``async with``.
@@ -305,7 +437,13 @@ async def serve(
     stream = await open_stream(port_or_url, settings, **options)
     try:
         slave = Slave(
-            stream, units, settings, frame_gap=frame_gap, timing=timing, handlers=handlers
+            stream,
+            units,
+            settings,
+            frame_gap=frame_gap,
+            timing=timing,
+            handlers=handlers,
+            trace=trace,
         )
     except BaseException:
         await stream.aclose()

@@ -4,11 +4,13 @@ A slave unit serves the four tables of the Modbus data model (coils, discrete in
 input registers, holding registers) from a :class:`DataStore`: a small synchronous
 protocol, :meth:`~DataStore.read` and :meth:`~DataStore.write` on a :class:`Table`,
 raising :class:`~aiortu.errors.ExceptionResponse` with the code the master should get
-(02 for an address outside the map), plus the optional :class:`SupportsFifoQueues` and
-:class:`SupportsExceptionStatus`. They are defined in :mod:`aiortu.core.data_model` and
-re-exported here. An async variant of the protocol (a store that proxies another device)
-is allowed by the design and may come later; a sync store then keeps costing nothing
-extra.
+(02 for an address outside the map), plus the optional capabilities
+(:class:`SupportsFifoQueues`, :class:`SupportsExceptionStatus`,
+:class:`SupportsFileRecords`, :class:`SupportsDeviceIdentification`,
+:class:`SupportsServerId`). They are defined in :mod:`aiortu.core.data_model` and
+re-exported here. Any store method may be a coroutine (:class:`AsyncDataStore`, e.g. a
+store that proxies another device, see ``examples/proxy_store.py``); a sync store keeps
+costing nothing extra.
 
 :class:`MemoryStore` is the default store::
 
@@ -18,6 +20,9 @@ extra.
         input_registers=Table.HOLDING_REGISTERS,             # alias another table
         read_only={Table.HOLDING_REGISTERS: [range(0x160, 0x162)]},
         fifo_queues={0x04DE: [440, 25]},
+        files={1: 100, 2: [1, 2, 3]},                        # file: record count or values
+        device_identification={0: "aiortu", 1: "SIM-1", 2: "1.0"},
+        server_id=ServerId(b"\x11", True, b"sim"),
     )
 
 Each table is a set of :class:`Block` s with explicit extents; a read or write whose range
@@ -44,21 +49,31 @@ import anyio
 
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.data_model import (
+    AsyncDataStore,
     DataStore,
+    ServerId,
+    SupportsDeviceIdentification,
     SupportsExceptionStatus,
     SupportsFifoQueues,
+    SupportsFileRecords,
+    SupportsServerId,
     Table,
 )
 from aiortu.errors import ExceptionResponse, InvalidValue
 
 __all__ = (
+    "AsyncDataStore",
     "Block",
     "Change",
     "ChangeFeed",
     "DataStore",
     "MemoryStore",
+    "ServerId",
+    "SupportsDeviceIdentification",
     "SupportsExceptionStatus",
     "SupportsFifoQueues",
+    "SupportsFileRecords",
+    "SupportsServerId",
     "Table",
 )
 
@@ -67,6 +82,10 @@ _log = logging.getLogger(__name__)
 _ADDRESS_SPACE: Final = 0x10000
 _REGISTER_VALUES = range(0x10000)
 _BIT_VALUES = range(2)
+_FILE_NUMBERS = range(1, 0x10000)
+_FILE_LENGTHS = range(1, 10001)
+_OBJECT_IDS = range(0x100)
+_MAX_OBJECT_LENGTH = 244
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,6 +174,9 @@ class MemoryStore:
         read_only_exception: ExceptionCode = ExceptionCode.ILLEGAL_DATA_ADDRESS,
         fifo_queues: Mapping[int, Iterable[int]] | None = None,
         exception_status: int = 0,
+        files: Mapping[int, int | Sequence[int]] | None = None,
+        device_identification: Mapping[int, str | bytes] | None = None,
+        server_id: ServerId | bytes | None = None,
     ) -> None:
         given = {
             Table.COILS: coils,
@@ -183,6 +205,18 @@ class MemoryStore:
             raise InvalidValue("exception_status", exception_status, range(0x100))
         self.exception_status = exception_status
         """The byte Read Exception Status (07) answers."""
+        self.files: dict[int, list[int]] = {
+            number: _file_of(number, spec) for number, spec in (files or {}).items()
+        }
+        """File records by file number: each file a list of records (registers)."""
+        self.device_objects: dict[int, bytes] | None = (
+            None if device_identification is None else _device_objects(device_identification)
+        )
+        """Device identification objects by id; ``None`` answers 2B/0E with 01."""
+        self.server_id: ServerId | None = (
+            ServerId(server_id) if isinstance(server_id, bytes) else server_id
+        )
+        """What Report Server ID (11) answers; ``None`` answers with the unit address."""
         self._observers: list[Callable[[Change], object]] = []
 
     # -- the DataStore protocol -----------------------------------------------------
@@ -222,6 +256,28 @@ class MemoryStore:
         """The byte Read Exception Status (07) answers."""
         return self.exception_status
 
+    def read_file_record(self, file_number: int, record_number: int, count: int) -> list[int]:
+        """*count* records of file *file_number* from *record_number*; 02 if not there."""
+        records = self._file(file_number, record_number, count)
+        return records[record_number : record_number + count]
+
+    def write_file_record(
+        self, file_number: int, record_number: int, values: Sequence[int]
+    ) -> None:
+        """Store *values* into file *file_number* from *record_number*; 02 if not there."""
+        records = self._file(file_number, record_number, len(values))
+        records[record_number : record_number + len(values)] = values
+
+    def device_identification(self) -> Mapping[int, bytes]:
+        """The device identification objects; exception 01 when the store has none."""
+        if self.device_objects is None:
+            raise ExceptionResponse(ExceptionCode.ILLEGAL_FUNCTION)
+        return self.device_objects
+
+    def report_server_id(self) -> ServerId | None:
+        """What Report Server ID (11) answers; ``None`` for the default (the unit, running)."""
+        return self.server_id
+
     # -- the application's side --------------------------------------------------------
 
     def get(self, table: Table | str, address: int, count: int = 1) -> list[int]:
@@ -236,11 +292,11 @@ class MemoryStore:
         """
         table = Table(table)
         items = [values] if isinstance(values, int) else list(values)
-        allowed = _BIT_VALUES if table.holds_bits else _REGISTER_VALUES
+        allowed = _BIT_VALUES if table.is_bit else _REGISTER_VALUES
         for index, value in enumerate(items):
             if value not in allowed:
                 raise InvalidValue(f"values[{index}]", value, allowed)
-        if table.holds_bits:
+        if table.is_bit:
             items = [bool(value) for value in items]
         block, offset = self._locate(table, address, len(items))
         block.values[offset : offset + len(items)] = items
@@ -280,6 +336,12 @@ class MemoryStore:
             if count > 0 and offset + count <= block.count:
                 return block, offset
         raise ExceptionResponse(ExceptionCode.ILLEGAL_DATA_ADDRESS)
+
+    def _file(self, file_number: int, record_number: int, count: int) -> list[int]:
+        records = self.files.get(file_number)
+        if records is None or count < 1 or record_number + count > len(records):
+            raise ExceptionResponse(ExceptionCode.ILLEGAL_DATA_ADDRESS)
+        return records
 
     def _notify(self, change: Change) -> None:
         for callback in tuple(self._observers):
@@ -374,12 +436,12 @@ def _blocks_of(table: Table, spec: BlockSpec | None) -> list[Block]:
 
 def _prepare(table: Table, block: Block) -> None:
     """Check (and for bits normalise) a block's values for *table*."""
-    allowed = _BIT_VALUES if table.holds_bits else _REGISTER_VALUES
+    allowed = _BIT_VALUES if table.is_bit else _REGISTER_VALUES
     values = block.values
     if values and (min(values) < allowed.start or max(values) >= allowed.stop):
         bad = next(value for value in values if value not in allowed)
         raise InvalidValue(f"{table.value} values", bad, allowed)
-    if table.holds_bits:
+    if table.is_bit:
         values[:] = [bool(value) for value in values]
 
 
@@ -392,6 +454,38 @@ def _alias(
     """The blocks of *target*, shared by *table*."""
     if isinstance(given[target], Table):
         raise InvalidValue(table.value, target.value, "a table that is not itself an alias")
-    if target.holds_bits != table.holds_bits:
+    if target.is_bit != table.is_bit:
         raise InvalidValue(table.value, target.value, "a table of the same kind, bits or registers")
     return blocks[target]
+
+
+def _file_of(number: int, spec: int | Sequence[int]) -> list[int]:
+    """The records of file *number*: *spec* records of 0, or the values given."""
+    if number not in _FILE_NUMBERS:
+        raise InvalidValue("files key", number, _FILE_NUMBERS)
+    records = [0] * spec if isinstance(spec, int) else list(spec)
+    if len(records) not in _FILE_LENGTHS:
+        raise InvalidValue(f"files[{number}] length", len(records), _FILE_LENGTHS)
+    for index, value in enumerate(records):
+        if value not in _REGISTER_VALUES:
+            raise InvalidValue(f"files[{number}][{index}]", value, _REGISTER_VALUES)
+    return records
+
+
+def _device_objects(objects: Mapping[int, str | bytes]) -> dict[int, bytes]:
+    """The objects as bytes by id, checked; sorted by id, as streams send them."""
+    found: dict[int, bytes] = {}
+    for object_id in sorted(objects):
+        if object_id not in _OBJECT_IDS:
+            raise InvalidValue("device_identification key", object_id, _OBJECT_IDS)
+        value = objects[object_id]
+        data = value.encode() if isinstance(value, str) else bytes(value)
+        if len(data) > _MAX_OBJECT_LENGTH:
+            raise InvalidValue(
+                f"device_identification[{object_id}] length",
+                len(data),
+                range(_MAX_OBJECT_LENGTH + 1),
+                "an object must fit one reply",
+            )
+        found[object_id] = data
+    return found

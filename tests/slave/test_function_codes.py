@@ -81,8 +81,8 @@ async def test_07_without_an_exception_status_answers_zero() -> None:
 
 EXCEPTIONS = [
     # Unsupported function codes, whatever their data: 01.
-    pytest.param("14 FF", "94 01", id="14-unsupported"),
-    pytest.param("08 00 00 12 34", "88 01", id="08-not-yet-served"),
+    pytest.param("0D", "8D 01", id="0D-unsupported"),
+    pytest.param("08 00 21 00 00", "88 01", id="08-unknown-sub-function"),
     pytest.param("41 01 02", "C1 01", id="user-code-without-handler"),
     pytest.param("00", "80 01", id="code-0"),
     # Quantity 0 and max + 1: 03.

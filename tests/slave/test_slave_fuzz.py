@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import anyio
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -44,7 +46,8 @@ def _answerable(frame: bytes) -> bool:
     return len(frame) >= 4 and crc16(frame) == 0 and frame[0] == UNIT
 
 
-@settings(max_examples=40)
+# HYPOTHESIS_PROFILE=long (tests/conftest.py) makes this the long soak.
+@settings(max_examples=5_000 if os.environ.get("HYPOTHESIS_PROFILE") == "long" else 40)
 @given(_FRAMES)
 def test_fuzzed_frames_never_crash_and_bad_crc_gets_no_reply(frames: list[bytes]) -> None:
     async def scenario() -> None:

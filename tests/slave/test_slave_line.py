@@ -74,7 +74,9 @@ async def test_invalid_broadcast_gets_no_exception(pdu: str) -> None:
     assert slave.counters.server_no_response_count == 1
 
 
-async def test_listen_only_executes_and_does_not_answer() -> None:
+async def test_listen_only_monitors_and_neither_executes_nor_answers() -> None:
+    # The spec: in listen-only mode messages are monitored, no action is taken and no
+    # response sent.
     store = example_store()
     async with slave_line({UNIT: store}) as (master, slave):
         slave.listen_only = True
@@ -82,7 +84,8 @@ async def test_listen_only_executes_and_does_not_answer() -> None:
         assert await master.receive_frame(0.05) is None
         slave.listen_only = False
         await master.assert_silent_then_alive()
-    assert store.get(Table.HOLDING_REGISTERS, 1) == [7]
+    assert store.get(Table.HOLDING_REGISTERS, 1) == [0]
+    assert slave.counters.server_no_response_count == 1
 
 
 async def test_reply_waits_for_frame_gap_of_silence() -> None:

@@ -4,6 +4,7 @@ The machine follows the slave diagram of the serial line spec::
 
     IDLE              waiting                 -- a frame with a good CRC -->  CHECKING
     CHECKING          for us, and valid?      -- another unit's frame -->     IDLE
+                                              -- ignored (listen-only) -->    IDLE
                                               -- valid (or broadcast) -->     PROCESSING
                                               -- invalid -->                  FORMATTING_ERROR
     PROCESSING        running the request     -- done -->                     FORMATTING_REPLY
@@ -16,8 +17,10 @@ bug and raises :class:`SlaveMachineError`, never a silent no-op.
 
 The machine is sans-IO: the slave tells it what happened and it says what to do. It owns
 the spec's decisions: frames for units it does not serve are dropped and counted;
-broadcasts (unit 0) are executed and never answered, not even with an exception; nothing
-is answered in listen-only mode; and exceptions come in the spec's order. That order
+broadcasts (unit 0) are executed and never answered, not even with an exception; in
+listen-only mode requests are only monitored (counted and logged), never executed nor
+answered, except restart communications (08/01), which leaves the mode; and exceptions
+come in the spec's order. That order
 falls out of the phases: :meth:`SlaveMachine.check_request` answers 01 for an unsupported
 function before any 03 or 02 the decoder found in the request itself (the decoder checks
 quantities before address ranges), and only a request that passed those checks reaches
@@ -25,7 +28,8 @@ PROCESSING, where the data store answers 02 for unmapped addresses and a failing
 04.
 
 :class:`SerialLineCounters` are the counters the spec's Diagnostics function (08)
-reports; the machine updates them as frames go by.
+reports; the machine updates them as frames go by, along with the comm event log and
+counter (:class:`~aiortu.core.comm_events.CommEventLog`) that 0B and 0C report.
 """
 
 from __future__ import annotations
@@ -35,9 +39,17 @@ from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from typing import Final
 
-from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
+from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
+from aiortu.core.comm_events import (
+    EVENT_ENTERED_LISTEN_ONLY,
+    EVENT_RESTART,
+    CommEventLog,
+    receive_event,
+    send_event,
+)
 
 __all__ = (
+    "DEFAULT_ASCII_DELIMITER",
     "NEGATIVE_ACKNOWLEDGE",
     "TRANSITIONS",
     "SerialLineCounters",
@@ -49,6 +61,14 @@ __all__ = (
 
 NEGATIVE_ACKNOWLEDGE: Final = 0x07
 """The exception code the spec's "server NAK count" counts (a legacy programming NAK)."""
+
+DEFAULT_ASCII_DELIMITER: Final = 0x0A
+"""The end-of-message character of the ASCII mode until 08/03 changes it (LF)."""
+
+# The requests that fetch the event counter or log do not count as completions.
+_NOT_COUNTED_AS_EVENTS = frozenset(
+    {FunctionCode.GET_COMM_EVENT_COUNTER, FunctionCode.GET_COMM_EVENT_LOG}
+)
 
 
 class SlaveState(enum.Enum):
@@ -76,6 +96,8 @@ class SlaveEvent(enum.Enum):
     """A unicast request passed the checks."""
     BROADCAST = "broadcast"
     """A broadcast request passed the checks."""
+    IGNORED = "ignored"
+    """Listen-only mode: the request is monitored, not executed nor answered."""
     REQUEST_INVALID = "request invalid"
     """The request is unsupported or breaks the spec: it gets an exception."""
     PROCESSED = "processed"
@@ -101,6 +123,7 @@ TRANSITIONS: Final[dict[tuple[SlaveState, SlaveEvent], SlaveState]] = {
     (_S.IDLE, _E.FRAME_CORRUPT): _S.IDLE,
     (_S.IDLE, _E.CHARACTER_OVERRUN): _S.IDLE,
     (_S.CHECKING, _E.NOT_FOR_US): _S.IDLE,
+    (_S.CHECKING, _E.IGNORED): _S.IDLE,
     (_S.CHECKING, _E.REQUEST_OK): _S.PROCESSING,
     (_S.CHECKING, _E.BROADCAST): _S.PROCESSING,
     (_S.CHECKING, _E.REQUEST_INVALID): _S.FORMATTING_ERROR,
@@ -158,21 +181,32 @@ class SlaveMachine:
     Drive it in this order for each frame:
 
     1. :meth:`frame_received`; if it returns ``False`` the frame is not for us: stop.
-    2. :meth:`check_request`; if it returns ``False`` the request gets an exception.
-    3. Otherwise execute the request, then :meth:`processed` or :meth:`processing_failed`.
-    4. If :attr:`should_reply`, send the reply (an exception with :attr:`exception_code`
+    2. In listen-only mode, unless the request is restart communications (08/01), call
+       :meth:`ignore` and stop.
+    3. :meth:`check_request`; if it returns ``False`` the request gets an exception.
+    4. Otherwise execute the request, then :meth:`processed` or :meth:`processing_failed`.
+    5. If :attr:`should_reply`, send the reply (an exception with :attr:`exception_code`
        when the state is FORMATTING_ERROR) and call :meth:`reply_sent`; otherwise call
        :meth:`no_reply`.
 
     Corrupt frames and overruns are reported with :meth:`frame_corrupt` and
-    :meth:`character_overrun`, between frames.
+    :meth:`character_overrun`, between frames. The diagnostics handlers change the
+    machine through :meth:`clear_counters`, :meth:`enter_listen_only` and
+    :meth:`restart_communications`.
     """
 
     __slots__ = (
+        "_entered_listen_only",
+        "_reply_allowed",
+        "_restart",
         "_units",
+        "ascii_delimiter",
         "broadcast",
         "counters",
+        "diagnostic_register",
+        "event_log",
         "exception_code",
+        "function_code",
         "listen_only",
         "state",
         "unit",
@@ -182,16 +216,27 @@ class SlaveMachine:
         self._units = frozenset(units)
         self.counters = counters if counters is not None else SerialLineCounters()
         """The diagnostic counters this machine updates."""
+        self.event_log = CommEventLog()
+        """The comm event log and event counter (0C, 0B)."""
         self.state = SlaveState.IDLE
         """The current state."""
         self.listen_only = False
-        """In listen-only mode (08 sub-function 04) requests are processed, never answered."""
+        """In listen-only mode (08/04) requests are monitored, never executed nor answered."""
+        self.diagnostic_register = 0
+        """The 16-bit diagnostic register (08/02); the application sets its bits."""
+        self.ascii_delimiter = DEFAULT_ASCII_DELIMITER
+        """The ASCII end-of-message character set by 08/03 (kept, unused in RTU)."""
         self.unit = BROADCAST_UNIT
         """The unit address of the frame being handled."""
+        self.function_code = 0
+        """The function code of the frame being handled."""
         self.broadcast = False
         """Whether the frame being handled is a broadcast."""
         self.exception_code: int | None = None
         """The exception the current request gets, once the state is FORMATTING_ERROR."""
+        self._reply_allowed = False
+        self._entered_listen_only = False
+        self._restart: bool | None = None
 
     @property
     def units(self) -> frozenset[int]:
@@ -200,8 +245,12 @@ class SlaveMachine:
 
     @property
     def should_reply(self) -> bool:
-        """Whether a reply goes on the line: not for a broadcast, nor in listen-only mode."""
-        return not (self.broadcast or self.listen_only)
+        """Whether a reply goes on the line: not for a broadcast, nor in listen-only mode.
+
+        A request that arrived in listen-only mode is never answered, even when it
+        leaves the mode (restart communications).
+        """
+        return self._reply_allowed and not self.listen_only
 
     def fire(self, event: SlaveEvent) -> SlaveState:
         """Run one transition and return the new state; raise for a pair not in the table."""
@@ -216,34 +265,45 @@ class SlaveMachine:
     # -- between frames ------------------------------------------------------------
 
     def frame_corrupt(self) -> None:
-        """Bytes failed the CRC check: count them; nothing is ever answered."""
+        """Bytes failed the CRC check: count and log them; nothing is ever answered."""
         self.fire(SlaveEvent.FRAME_CORRUPT)
         self.counters.bus_communication_error_count += 1
+        self.event_log.add(receive_event(communication_error=True, listen_only=self.listen_only))
 
     def character_overrun(self) -> None:
-        """A frame was lost to an overrun: count it."""
+        """A frame was lost to an overrun: count and log it."""
         self.fire(SlaveEvent.CHARACTER_OVERRUN)
         self.counters.bus_character_overrun_count += 1
+        self.event_log.add(receive_event(overrun=True, listen_only=self.listen_only))
 
     # -- one frame -------------------------------------------------------------------
 
-    def frame_received(self, unit: int) -> bool:
+    def frame_received(self, unit: int, function_code: int = 0) -> bool:
         """A frame with a good CRC for *unit* arrived; tell whether this slave handles it.
 
-        A frame for another unit is counted and dropped (the machine is IDLE again).
+        A frame for another unit is counted and dropped (the machine is IDLE again). A
+        frame for us is counted and logged as a receive event.
         """
         self.fire(SlaveEvent.FRAME_RECEIVED)
         counters = self.counters
         counters.bus_message_count += 1
         self.exception_code = None
         self.unit = unit
+        self.function_code = function_code
         self.broadcast = unit == BROADCAST_UNIT
         if not self.broadcast and unit not in self._units:
             counters.other_unit_count += 1
             self.fire(SlaveEvent.NOT_FOR_US)
             return False
         counters.server_message_count += 1
+        self._reply_allowed = not (self.broadcast or self.listen_only)
+        self.event_log.add(receive_event(broadcast=self.broadcast, listen_only=self.listen_only))
         return True
+
+    def ignore(self) -> None:
+        """Listen-only mode: the request is not executed nor answered; count it."""
+        self.fire(SlaveEvent.IGNORED)
+        self.counters.server_no_response_count += 1
 
     def check_request(self, *, supported: bool, violation: int | None = None) -> bool:
         """Check the request; tell whether to execute it.
@@ -271,7 +331,7 @@ class SlaveMachine:
         self.exception_code = exception_code
 
     def reply_sent(self) -> None:
-        """The reply went to the line; count it and return to IDLE."""
+        """The reply went to the line; count and log it and return to IDLE."""
         if not self.should_reply:
             raise SlaveMachineError("a reply was sent where none is allowed")
         code = self.exception_code if self.state is SlaveState.FORMATTING_ERROR else None
@@ -283,11 +343,52 @@ class SlaveMachine:
                 counters.server_busy_count += 1
             elif code == NEGATIVE_ACKNOWLEDGE:
                 counters.server_nak_count += 1
+        self._finish(code)
 
     def no_reply(self) -> None:
-        """Nothing was sent for this request; count it and return to IDLE."""
+        """Nothing was sent for this request; count and log it and return to IDLE."""
+        code = self.exception_code if self.state is SlaveState.FORMATTING_ERROR else None
         self.fire(SlaveEvent.NO_REPLY)
         self.counters.server_no_response_count += 1
+        self._finish(code)
+
+    # -- what diagnostics change -----------------------------------------------------
+
+    def clear_counters(self) -> None:
+        """08/0A: clear the counters, the event counter and the diagnostic register."""
+        self.counters.clear()
+        self.event_log.event_count = 0
+        self.diagnostic_register = 0
+
+    def enter_listen_only(self) -> None:
+        """08/04: from now on monitor requests only; logged as event 0x04."""
+        self.listen_only = True
+        self._entered_listen_only = True
+
+    def restart_communications(self, *, clear_log: bool) -> None:
+        """08/01: once the current request is finished (its reply sent, unless the slave
+        was in listen-only mode), clear the counters, the event log too if *clear_log*,
+        leave listen-only mode and log the restart (event 0x00)."""
+        self._restart = clear_log
+
+    def _finish(self, exception_code: int | None) -> None:
+        log = self.event_log
+        if self._entered_listen_only:
+            self._entered_listen_only = False
+            log.add(EVENT_ENTERED_LISTEN_ONLY)
+        else:
+            log.add(send_event(exception_code, listen_only=self.listen_only))
+        if exception_code is None and self.function_code not in _NOT_COUNTED_AS_EVENTS:
+            log.completed()
+        if self._restart is not None:
+            clear_log = self._restart
+            self._restart = None
+            self.counters.clear()
+            log.event_count = 0
+            if clear_log:
+                log.clear_events()
+            self.listen_only = False
+            log.add(EVENT_RESTART)
 
     def _invalid(self, exception_code: int) -> bool:
         self.fire(SlaveEvent.REQUEST_INVALID)
