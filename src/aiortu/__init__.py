@@ -19,12 +19,17 @@ from aiortu.errors import (
     PortError,
     ResponseTimeout,
 )
+from aiortu.master import Master, open_master
+from aiortu.poller import Point, Poller
+from aiortu.slave import Slave, serve
+from aiortu.store import DataStore, MemoryStore
 
 __version__ = "0.1.0"
 
 __all__ = (
     "CRCError",
     "ConnectionLost",
+    "DataStore",
     "ExceptionCode",
     "ExceptionResponse",
     "FrameError",
@@ -33,8 +38,15 @@ __all__ = (
     "InvalidValue",
     "LineSettings",
     "MalformedPDU",
+    "Master",
+    "MemoryStore",
     "ModbusError",
+    "Point",
+    "Poller",
     "PortError",
     "ResponseTimeout",
+    "Slave",
     "__version__",
+    "open_master",
+    "serve",
 )

@@ -14,6 +14,12 @@ It also keeps :class:`UnitStats` per unit and their health: a unit is offline af
 *fail_fast_offline*, a request to an offline unit raises :class:`UnitOffline` at once,
 except for one probe every *probe_interval* seconds.
 
+When the link fails, :meth:`LineEngine.serve` fails the request in flight and the queued
+ones with ConnectionLost and returns; :class:`~aiortu.master_connection.LineConnection`
+then closes the engine for good (:meth:`LineEngine.close`) or serves it again on a
+reopened link. Meanwhile :meth:`LineEngine.submit` waits for the line within the
+request's timeout, or fails at once (see :attr:`LineEngine.wait_for_reconnect`).
+
 :class:`~aiortu.master.Master` is the API built on this; see its docstring for the guard
 against late replies.
 """
@@ -167,6 +173,14 @@ class LineEngine:
         self._wake = anyio.Event()
         self._quiet_until = -math.inf
         self._failed: ConnectionLost | None = None
+        self._connected = anyio.Event()
+        self._connected.set()
+        self._link_down = False
+        self.wait_for_reconnect = False
+        """Whether requests made while the line is down wait for it to come back (set by
+        :class:`~aiortu.master_connection.LineConnection` when it can reopen the port)."""
+        self.fail_fast_reconnect = False
+        """With :attr:`wait_for_reconnect`: raise at once instead of waiting."""
         self.transactions = 0
         """Transactions the line task has run (attempts of abandoned ones included)."""
 
@@ -190,6 +204,8 @@ class LineEngine:
         """
         if self._failed is not None:
             raise ConnectionLost(str(self._failed))
+        if not self._connected.is_set():
+            await self._wait_connected(transaction.timeout)
         self._check_offline(transaction.unit)
         job = _Job(transaction, priority, next(self._sequence))
         heapq.heappush(self._queue, job)
@@ -202,6 +218,30 @@ class LineEngine:
         if job.error is not None:
             raise job.error
         return job.response
+
+    @property
+    def connected(self) -> bool:
+        """Whether the line is up: False while a reconnect is under way and once closed."""
+        return self._connected.is_set() and self._failed is None
+
+    async def wait_connected(self) -> None:
+        """Wait until the line is up (at once if it is), or the engine is closed."""
+        # The event is replaced at each disconnect: wait on the current one.
+        while not self._connected.is_set():
+            await self._connected.wait()
+
+    async def _wait_connected(self, seconds: float) -> None:
+        """Wait up to *seconds* for the line to come back, else raise ConnectionLost."""
+        if not self.wait_for_reconnect:
+            raise ConnectionLost("the line is down")
+        if self.fail_fast_reconnect:
+            raise ConnectionLost("the line is down and reconnecting; not sent (fail fast)")
+        with anyio.move_on_after(seconds):
+            await self.wait_connected()
+        if self._failed is not None:
+            raise ConnectionLost(str(self._failed))
+        if not self._connected.is_set():
+            raise ConnectionLost(f"the line is down and did not come back within {seconds} s")
 
     def _check_offline(self, unit: int) -> None:
         if not self.health.fail_fast_offline or unit == BROADCAST_UNIT:
@@ -217,27 +257,61 @@ class LineEngine:
     # -- the line task ---------------------------------------------------------------
 
     async def run(self) -> None:
-        """Run transactions until cancelled or the line fails."""
+        """Run transactions on :attr:`link` until cancelled or the line fails, then fail
+        every request, then and later, with ConnectionLost."""
         try:
-            while True:
-                job = await self._next_job()
-                if job.transaction.abandoned:
-                    continue
-                await self._run_job(job)
-        except ConnectionLost as error:
-            self._fail_everything(error)
+            self.close(await self.serve(self.link))
         finally:
-            self._fail_everything(ConnectionLost("the master is closed"))
+            self.close(ConnectionLost("the master is closed"))
+
+    async def serve(self, link: Link) -> ConnectionLost:
+        """Run transactions on *link* (entered by the caller) until it fails; return why.
+
+        The request in flight and the queued ones fail with that ConnectionLost; requests
+        made afterwards wait for the next :meth:`serve` or fail (see :meth:`submit`).
+        """
+        self.link = link
+        self._link_down = False
+        self._connected.set()
+        lost: ConnectionLost
+        async with anyio.create_task_group() as tasks:
+            tasks.start_soon(self._watch_link, link, name="aiortu master link watch")
+            try:
+                while True:
+                    job = await self._next_job()
+                    if job.transaction.abandoned:
+                        continue
+                    await self._run_job(job)
+            except ConnectionLost as error:
+                lost = error
+            tasks.cancel_scope.cancel()
+        self._connected = anyio.Event()
+        self._fail_queued(lost)
+        return lost
+
+    def close(self, error: ConnectionLost) -> None:
+        """Fail every queued request, and every later one, with *error* (first error wins)."""
+        if self._failed is None:
+            self._failed = error
+        self._fail_queued(self._failed)
+        self._connected.set()
+
+    async def _watch_link(self, link: Link) -> None:
+        # An idle line task must notice a dead port too, so that a reconnect starts at once.
+        await link.wait_closed()
+        self._link_down = True
+        self._wake.set()
 
     async def _next_job(self) -> _Job:
         while not self._queue:
+            if self._link_down:
+                self._drain()  # raises the link's ConnectionLost once it is empty
+                raise ConnectionLost("the line failed")
             await self._wake.wait()
             self._wake = anyio.Event()
         return heapq.heappop(self._queue)
 
-    def _fail_everything(self, error: ConnectionLost) -> None:
-        if self._failed is None:
-            self._failed = error
+    def _fail_queued(self, error: ConnectionLost) -> None:
         while self._queue:
             job = heapq.heappop(self._queue)
             job.finish(None, ConnectionLost(str(error)))
@@ -254,11 +328,7 @@ class LineEngine:
                 await self._keep_guard()
                 frame = machine.frame
                 self._drain()
-                try:
-                    end = await self.link.send(frame)
-                except ConnectionLost as error:
-                    machine.connection_lost(error)
-                    raise
+                end = await self.link.send(frame)
                 machine.sent(end - self.link.settings.wire_time(len(frame)), end)
                 outcome = await self._wait_for_outcome(stats)
                 if outcome.kind is not OutcomeKind.RETRY:
@@ -266,6 +336,8 @@ class LineEngine:
                 self._count_failed_attempt(stats, transaction)
                 stats.retries += 1
         except ConnectionLost as error:
+            # Back to IDLE, wherever the line failed: the next line may serve again.
+            machine.connection_lost(error)
             job.finish(None, error)
             raise
         except BaseException:

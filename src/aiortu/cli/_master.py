@@ -1,0 +1,180 @@
+"""What the master's commands (``read``, ``write``, ``poll``) share: line options, number
+parsing, opening the master, and turning failures into one line and an exit code.
+
+Exit codes of those commands:
+
+====  =========================================================================
+0     success
+1     the port could not be opened or failed (the line is gone)
+2     bad arguments (including values out of the spec's range)
+3     no reply in time (after the retries)
+4     the device answered with a Modbus exception
+5     a reply came but was not valid (CRC or framing error, malformed content)
+====  =========================================================================
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+
+import anyio
+
+from aiortu.core.addressing import Table
+from aiortu.errors import (
+    ConnectionLost,
+    ExceptionResponse,
+    FrameError,
+    InvalidValue,
+    PortError,
+    ResponseTimeout,
+)
+from aiortu.master import Master, open_master
+
+__all__ = (
+    "EXIT_CODES_HELP",
+    "UsageError",
+    "LINE_FLAGS_HELP",
+    "TABLES",
+    "add_line_options",
+    "address",
+    "open_from_args",
+    "positive_int",
+    "run_master",
+    "seconds",
+)
+
+EXIT_CODES_HELP = """\
+exit codes:
+  0  success
+  1  the port could not be opened, or failed
+  2  bad arguments (one line on stderr)
+  3  no reply in time
+  4  the device answered with a Modbus exception
+  5  an invalid reply (CRC or framing error, malformed content)
+"""
+
+LINE_FLAGS_HELP = """\
+aiortu and mbpoll side by side (mbpoll -m rtu ...):
+  --unit 17                mbpoll -a 17
+  --baudrate 9600          mbpoll -b 9600
+  --parity E|O|N           mbpoll -P even|odd|none
+  --stopbits 2             mbpoll -s 2
+  --timeout 0.5            mbpoll -o 0.5
+"""
+
+
+class UsageError(Exception):
+    """Arguments that do not go together; shown as ``error: ...`` with exit code 2."""
+
+
+TABLES: dict[str, Table] = {
+    "coils": Table.COILS,
+    "discrete": Table.DISCRETE_INPUTS,
+    "input": Table.INPUT_REGISTERS,
+    "holding": Table.HOLDING_REGISTERS,
+}
+"""The ``--table`` names and the tables they mean."""
+
+TABLE_NAMES: dict[Table, str] = {table: name for name, table in TABLES.items()}
+
+
+def address(text: str) -> int:
+    """An address or a count: decimal or ``0x`` hex."""
+    try:
+        value = int(text, 16) if text.lower().startswith("0x") else int(text, 10)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a decimal or 0x hex number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0: {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1, decimal or ``0x`` hex."""
+    value = address(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
+    return value
+
+
+def seconds(text: str) -> float:
+    """A number of seconds > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0: {text!r}")
+    return value
+
+
+def add_line_options(parser: argparse.ArgumentParser) -> None:
+    """Add the port argument and ``--baudrate --parity --stopbits --timeout --retries``."""
+    parser.add_argument("port", metavar="PORT", help="a serial device path or rtu+tcp://host:port")
+    line = parser.add_argument_group("line settings")
+    line.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
+    line.add_argument("--parity", choices=("N", "E", "O"), default="E", help="parity (E)")
+    line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
+    line.add_argument(
+        "--timeout", type=seconds, default=1.0, help="response timeout in seconds (1.0)"
+    )
+    line.add_argument(
+        "--retries", type=address, default=0, help="extra attempts after a timeout (0)"
+    )
+
+
+@asynccontextmanager
+async def open_from_args(args: argparse.Namespace, **options: object) -> AsyncIterator[Master]:
+    """Open a master on ``args.port`` with the line options of *args*; no reconnecting."""
+    async with open_master(
+        args.port,
+        baudrate=args.baudrate,
+        parity=args.parity,
+        stopbits=args.stopbits,
+        timeout=args.timeout,
+        retries=args.retries,
+        reconnect=False,
+        **options,  # type: ignore[arg-type]
+    ) as master:
+        yield master
+
+
+def _describe(error: BaseException) -> tuple[int, str]:
+    if isinstance(error, InvalidValue | UsageError):
+        return 2, f"error: {error}"
+    if isinstance(error, PortError):
+        return 1, str(error)
+    if isinstance(error, ConnectionLost):
+        return 1, f"the line failed: {error}"
+    if isinstance(error, ResponseTimeout):
+        return 3, f"no reply: {error}"
+    if isinstance(error, ExceptionResponse):
+        return 4, str(error)
+    if isinstance(error, FrameError):
+        return 5, f"invalid reply: {error}"
+    raise error
+
+
+def run_master(args: argparse.Namespace, body: Callable[[], Awaitable[int]]) -> int:
+    """Run *body* in an event loop; print a failure as one line on stderr, return the code."""
+    prog = f"aiortu {args.command}"
+    try:
+        return anyio.run(body)
+    except* (UsageError, InvalidValue, PortError, ConnectionLost, ResponseTimeout) as group:
+        code, message = _describe(_first(group))
+    except* FrameError as group:
+        code, message = _describe(_first(group))
+    except* ExceptionResponse as group:
+        code, message = _describe(_first(group))
+    print(f"{prog}: {message}", file=sys.stderr)
+    return code
+
+
+def _first(group: BaseExceptionGroup[BaseException]) -> BaseException:
+    error: BaseException = group
+    while isinstance(error, BaseExceptionGroup):
+        error = error.exceptions[0]
+    return error

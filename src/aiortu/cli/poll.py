@@ -1,0 +1,269 @@
+"""``aiortu poll``: poll points on one or more units and show them as a table.
+
+The points come from ``--ref`` with ``--count`` (COUNT values of one type from that
+reference, on every ``--unit``) or from repeated ``--point NAME=UNIT:REF[:TYPE[:LAYOUT]]``.
+On a terminal the table is redrawn in place after each cycle (ANSI cursor movement);
+when stdout is not a terminal each cycle is printed as plain lines followed by a blank
+line, and with ``--json`` each sample is one JSON object per line. Each unit's health
+(online or offline, failures in a row, latency) is shown under the points. Runs until
+``--cycles`` or ``--duration`` is reached, or SIGINT/SIGTERM (exit 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from typing import TextIO
+
+import anyio
+
+from aiortu.cli import Subparsers
+from aiortu.cli._master import (
+    EXIT_CODES_HELP,
+    LINE_FLAGS_HELP,
+    UsageError,
+    add_line_options,
+    open_from_args,
+    positive_int,
+    run_master,
+    seconds,
+)
+from aiortu.core.addressing import Reference, format_reference
+from aiortu.core.poll_plan import Point
+from aiortu.core.values import Layout, ValueType
+from aiortu.errors import InvalidValue
+from aiortu.poller import CycleReport, Poller, Sample, UnitHealth
+
+__all__ = ("TablePrinter", "parse_point", "points_from_args", "register", "run")
+
+_EXAMPLES = f"""\
+examples:
+  aiortu poll /dev/ttyUSB0 --unit 1 --ref 40001 --count 4
+      four holding registers of unit 1, once a second
+  aiortu poll /dev/ttyUSB0 --unit 1,2,3 --ref 30001 --count 2 --type float32 --layout CDAB
+      two word-swapped floats from the input registers of units 1, 2 and 3
+  aiortu poll /dev/ttyUSB0 --point temp=1:30001:int16 --point flow=2:40108:float32:CDAB \\
+        --interval 0.5 --cycles 10
+      named points on two units, ten cycles, twice a second
+  aiortu poll /dev/ttyUSB0 --unit 1 --ref 00001 --count 8 --json | jq .value
+      eight coils, one JSON object per sample
+
+the same with mbpoll (which polls one unit and one range):
+  aiortu poll ... --unit 1 --ref 40001 --count 4     mbpoll -a 1 -t 4 -r 1 -c 4
+  aiortu poll ... --type float32 --layout CDAB       mbpoll -t 4:float
+  aiortu poll ... --type float32 --layout ABCD       mbpoll -t 4:float -B
+  aiortu poll ... --type int32 --layout CDAB         mbpoll -t 4:int
+  aiortu poll ... --interval 0.5                     mbpoll -l 500
+  aiortu poll ... --cycles 1                         mbpoll -1
+
+{LINE_FLAGS_HELP}
+{EXIT_CODES_HELP}"""
+
+
+def register(subparsers: Subparsers) -> None:
+    """Add the ``poll`` subcommand to *subparsers*."""
+    parser = subparsers.add_parser(
+        "poll",
+        help="poll points on one or more units and show them as a live table",
+        description=(
+            "Poll points at an interval and show their values with each unit's health. "
+            "Neighbouring points of a unit are read together. The table refreshes in place "
+            "on a terminal; piped, each cycle is printed as plain lines."
+        ),
+        epilog=_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_line_options(parser)
+    what = parser.add_argument_group("what to poll")
+    what.add_argument(
+        "--unit", help="unit address(es) for --ref: 1..247, comma-separated for several"
+    )
+    what.add_argument("--ref", help="the first reference, e.g. 40001 (with --unit)")
+    what.add_argument("--count", type=positive_int, default=1, help="values from --ref (1)")
+    what.add_argument(
+        "--type",
+        choices=[kind.value for kind in ValueType],
+        default=ValueType.UINT16.value,
+        help="register value type (uint16)",
+    )
+    what.add_argument(
+        "--layout",
+        choices=[layout.value for layout in Layout],
+        default=Layout.ABCD.value,
+        help="word and byte order of wider values (ABCD: big-endian)",
+    )
+    what.add_argument("--scale", type=float, default=None, help="multiply values by this")
+    what.add_argument(
+        "--point",
+        action="append",
+        default=[],
+        metavar="NAME=UNIT:REF[:TYPE[:LAYOUT]]",
+        help="a named point; repeat for several",
+    )
+    timing = parser.add_argument_group("when")
+    timing.add_argument("--interval", type=seconds, default=1.0, help="seconds per cycle (1.0)")
+    timing.add_argument("--cycles", type=positive_int, default=None, help="stop after N cycles")
+    timing.add_argument("--duration", type=seconds, default=None, help="stop after S seconds")
+    timing.add_argument(
+        "--probe-interval",
+        type=seconds,
+        default=5.0,
+        help="seconds between probes of an offline unit (5.0)",
+    )
+    parser.add_argument("--json", action="store_true", help="one JSON object per sample")
+    parser.set_defaults(run=run)
+
+
+def parse_point(text: str) -> Point:
+    """A point from ``NAME=UNIT:REF[:TYPE[:LAYOUT]]``; InvalidValue if malformed."""
+    name, equals, spec = text.partition("=")
+    fields = spec.split(":")
+    if not equals or not name or not 2 <= len(fields) <= 4:
+        raise InvalidValue("--point", text, "NAME=UNIT:REF[:TYPE[:LAYOUT]]")
+    unit = _unit(fields[0])
+    kind = fields[2] if len(fields) > 2 else ValueType.UINT16.value
+    layout = fields[3] if len(fields) > 3 else Layout.ABCD.value
+    return Point.of(name, unit, fields[1], kind, layout=layout)
+
+
+def _unit(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise InvalidValue("unit", text, "1..247") from None
+
+
+def points_from_args(args: argparse.Namespace) -> list[Point]:
+    """The points *args* describe (``--ref`` on each ``--unit``, then each ``--point``)."""
+    found = [parse_point(text) for text in args.point]
+    if args.ref is not None:
+        if args.unit is None:
+            raise UsageError("--ref needs --unit")
+        units = [_unit(item) for item in args.unit.split(",")]
+        first = Point.of("first", units[0], args.ref, args.type, layout=args.layout)
+        for unit in units:
+            for index in range(args.count):
+                start = first.address + index * first.width
+                name = _reference_name(Reference(first.table, start))
+                found.append(
+                    Point(
+                        name if len(units) == 1 else f"{unit}/{name}",
+                        unit,
+                        first.table,
+                        start,
+                        first.type,
+                        first.layout,
+                        args.scale,
+                    )
+                )
+    if not found:
+        raise UsageError("give --ref (with --unit) or at least one --point")
+    return found
+
+
+def _reference_name(reference: Reference) -> str:
+    return format_reference(reference, 5 if reference.number <= 9999 else 6)
+
+
+def _format_value(sample: Sample) -> str:
+    if sample.error is not None:
+        return f"-- {type(sample.error).__name__}"
+    value = sample.value
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+class TablePrinter:
+    """Prints cycles to *out*: redrawn in place with *ansi*, else as plain blocks."""
+
+    def __init__(self, out: TextIO, poller: Poller, *, ansi: bool) -> None:
+        self.out = out
+        self.poller = poller
+        self.ansi = ansi
+        self._latest: dict[str, Sample] = {}
+        self._shown = 0
+
+    def lines(self, report: CycleReport) -> list[str]:
+        """The table after *report*: a header, the points, each unit's health."""
+        for sample in report.samples:
+            self._latest[sample.name] = sample
+        stats = self.poller.cycle_time
+        mean = (stats.mean or 0.0) * 1000
+        lines = [
+            f"cycle {report.index + 1}  time {report.duration * 1000:.1f} ms  mean {mean:.1f} ms",
+            f"{'POINT':<16}{'UNIT':>5}  VALUE",
+        ]
+        for point in self.poller.points:
+            latest = self._latest.get(point.name)
+            shown = _format_value(latest) if latest is not None else "--"
+            lines.append(f"{point.name:<16}{point.unit:>5}  {shown}")
+        lines.extend(_health_line(health) for health in self.poller.health().values())
+        return lines
+
+    def show(self, report: CycleReport) -> None:
+        """Print the table after *report*."""
+        lines = self.lines(report)
+        if self.ansi:
+            # Back to the first line of the previous table, and clear it all.
+            prefix = f"\x1b[{self._shown}F\x1b[J" if self._shown else ""
+            self.out.write(prefix + "\n".join(lines) + "\n")
+            self._shown = len(lines)
+        else:
+            self.out.write("\n".join(lines) + "\n\n")
+        self.out.flush()
+
+
+def _health_line(health: UnitHealth) -> str:
+    state = "online" if health.online else "OFFLINE"
+    latency = (
+        f", latency {health.last_latency * 1000:.1f} ms" if health.last_latency is not None else ""
+    )
+    return f"unit {health.unit}: {state}, {health.consecutive_failures} failures in a row{latency}"
+
+
+def _json_sample(sample: Sample) -> str:
+    document = {
+        "cycle": sample.cycle,
+        "name": sample.name,
+        "unit": sample.unit,
+        "value": sample.value,
+        "error": None if sample.error is None else str(sample.error),
+    }
+    return json.dumps(document)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Poll what *args* ask for until told to stop; return the exit code."""
+
+    async def body() -> int:
+        points = points_from_args(args)
+        async with open_from_args(args) as master:
+            poller = Poller(
+                master,
+                points,
+                interval=args.interval,
+                offline_probe_interval=args.probe_interval,
+            )
+            if args.json:
+                poller.on_sample(lambda s: print(_json_sample(s), flush=True))
+            else:
+                printer = TablePrinter(sys.stdout, poller, ansi=sys.stdout.isatty())
+                poller.on_cycle(printer.show)
+            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+                async with anyio.create_task_group() as tasks:
+
+                    async def stop_on_signal() -> None:
+                        async for _ in signals:
+                            tasks.cancel_scope.cancel()
+
+                    tasks.start_soon(stop_on_signal)
+                    await poller.run(cycles=args.cycles, duration=args.duration)
+                    tasks.cancel_scope.cancel()
+        return 0
+
+    return run_master(args, body)

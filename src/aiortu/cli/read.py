@@ -1,0 +1,122 @@
+"""``aiortu read``: read coils, discrete inputs, input or holding registers once, and print them.
+
+One line per element (``ADDRESS VALUE``), or with ``--json`` exactly one JSON object,
+``{"unit": U, "table": "...", "address": A, "values": [...]}`` (bits as ``true`` and
+``false``). Failures give one line on stderr and the exit codes of
+:mod:`aiortu.cli._master`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from aiortu.cli import Subparsers
+from aiortu.cli._master import (
+    EXIT_CODES_HELP,
+    LINE_FLAGS_HELP,
+    TABLE_NAMES,
+    TABLES,
+    UsageError,
+    add_line_options,
+    address,
+    open_from_args,
+    positive_int,
+    run_master,
+)
+from aiortu.core.addressing import Table, parse_reference
+
+__all__ = ("print_values", "register", "run", "target")
+
+_EXAMPLES = f"""\
+examples:
+  aiortu read /dev/ttyUSB0 --unit 17 --table holding --address 0x6B --count 3
+      holding registers 107..109 of unit 17 at 19200 8E1
+  aiortu read /dev/ttyUSB0 --unit 17 --ref 40108 --count 3
+      the same, by reference (40108 = holding register 107)
+  aiortu read /dev/ttyUSB0 --unit 1 --table coils --address 0 --count 16 --json
+      16 coils as one JSON object
+  aiortu read rtu+tcp://10.0.0.5:4001 --unit 2 --table input --address 0 --count 4
+      through a serial device server
+
+the same reads with mbpoll:
+  aiortu read ... --table coils      mbpoll -t 0
+  aiortu read ... --table discrete   mbpoll -t 1
+  aiortu read ... --table input      mbpoll -t 3
+  aiortu read ... --table holding    mbpoll -t 4
+  aiortu read ... --address 107      mbpoll -r 108 (mbpoll counts from 1)
+  aiortu read ... --count 3          mbpoll -c 3
+
+{LINE_FLAGS_HELP}
+{EXIT_CODES_HELP}"""
+
+
+def register(subparsers: Subparsers) -> None:
+    """Add the ``read`` subcommand to *subparsers*."""
+    parser = subparsers.add_parser(
+        "read",
+        help="read coils, discrete inputs or registers from a device once",
+        description=(
+            "Read COUNT elements of one table of one unit, from a protocol address "
+            "(--table and --address, decimal or 0x hex) or a reference such as 40108 "
+            "(--ref), and print them: one 'ADDRESS VALUE' line per element, or one JSON "
+            "object with --json."
+        ),
+        epilog=_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_line_options(parser)
+    what = parser.add_argument_group("what to read")
+    what.add_argument("--unit", type=positive_int, required=True, help="unit address 1..247")
+    what.add_argument("--table", choices=tuple(TABLES), help="the table (with --address)")
+    what.add_argument("--address", type=address, help="the first protocol address (0-based)")
+    what.add_argument("--ref", help="a 5- or 6-digit reference instead, e.g. 40108 or 100001")
+    what.add_argument("--count", type=positive_int, default=1, help="how many elements (1)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.set_defaults(run=run)
+
+
+def target(args: argparse.Namespace, parser_name: str) -> tuple[Table, int]:
+    """The table and address from ``--ref`` or ``--table`` and ``--address``."""
+    if args.ref is not None:
+        if args.table is not None or args.address is not None:
+            raise UsageError("give either --ref, or --table and --address, not both")
+        reference = parse_reference(args.ref)
+        return reference.table, reference.address
+    if args.table is None or args.address is None:
+        raise UsageError(f"{parser_name} needs --table and --address, or --ref")
+    return TABLES[args.table], args.address
+
+
+def run(args: argparse.Namespace) -> int:
+    """Read what *args* ask for and print it; return the exit code."""
+
+    async def body() -> int:
+        table, start = target(args, "read")
+        async with open_from_args(args) as master:
+            unit, count = args.unit, args.count
+            values: list[bool] | list[int]
+            if table is Table.COILS:
+                values = await master.read_coils(unit, start, count)
+            elif table is Table.DISCRETE_INPUTS:
+                values = await master.read_discrete_inputs(unit, start, count)
+            elif table is Table.INPUT_REGISTERS:
+                values = await master.read_input_registers(unit, start, count)
+            else:
+                values = await master.read_holding_registers(unit, start, count)
+        print_values(args.json, unit, table, start, values)
+        return 0
+
+    return run_master(args, body)
+
+
+def print_values(
+    as_json: bool, unit: int, table: Table, start: int, values: list[bool] | list[int]
+) -> None:
+    """Print *values* read or written at *start*: one JSON object, or a line each."""
+    if as_json:
+        document = {"unit": unit, "table": TABLE_NAMES[table], "address": start}
+        print(json.dumps({**document, "values": values}), flush=True)
+        return
+    shown = [int(v) if isinstance(v, bool) else v for v in values]
+    print("\n".join(f"{start + i} {value}" for i, value in enumerate(shown)), flush=True)

@@ -1,0 +1,56 @@
+"""A pymodbus RTU server with all four tables, for the master's interop tests.
+
+``python pymodbus_tables_server.py PORT`` serves unit 1 at 19200 8N2 (ptys keep no
+parity; see aiortu.testing.pty_bus) and prints ``ready`` once the port is open. Runs
+until killed. The initial values are :data:`COILS`, :data:`DISCRETE_INPUTS`,
+:data:`INPUT_REGISTERS` and :data:`HOLDING_REGISTERS` from protocol address 0.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+
+from pymodbus import FramerType
+from pymodbus.datastore import (
+    ModbusDeviceContext,
+    ModbusSequentialDataBlock,
+    ModbusServerContext,
+)
+from pymodbus.server import ModbusSerialServer
+
+COILS = [bool(i % 3 == 0) for i in range(40)]
+DISCRETE_INPUTS = [bool(i % 4 == 1) for i in range(40)]
+INPUT_REGISTERS = [0x100 + i for i in range(40)]
+HOLDING_REGISTERS = [0x1234, 0xABCD, 7] + [1000 + i for i in range(3, 40)]
+
+
+def _connected(up: bool) -> None:
+    if up:
+        print("ready", flush=True)
+
+
+async def serve(port: str) -> None:
+    # pymodbus's device context shifts addresses by one: a block starting at 1 serves
+    # protocol address 0.
+    device = ModbusDeviceContext(
+        co=ModbusSequentialDataBlock(1, COILS),
+        di=ModbusSequentialDataBlock(1, DISCRETE_INPUTS),
+        ir=ModbusSequentialDataBlock(1, INPUT_REGISTERS),
+        hr=ModbusSequentialDataBlock(1, HOLDING_REGISTERS),
+    )
+    server = ModbusSerialServer(
+        ModbusServerContext(devices={1: device}, single=False),
+        framer=FramerType.RTU,
+        port=port,
+        baudrate=19200,
+        parity="N",
+        stopbits=2,
+        bytesize=8,
+        trace_connect=_connected,
+    )
+    await server.serve_forever()
+
+
+if __name__ == "__main__":
+    asyncio.run(serve(sys.argv[1]))

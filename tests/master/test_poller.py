@@ -1,0 +1,197 @@
+"""The poller against a fake slave: merged reads on the wire, typed values, samples
+through callbacks and the async iterator, and dead units that do not stall the cycle."""
+
+from __future__ import annotations
+
+import io
+import itertools
+
+import anyio
+import pytest
+
+import aiortu
+from aiortu import Point, Poller
+from aiortu.cli.poll import TablePrinter
+from aiortu.core.addressing import Table
+from aiortu.core.pdu_bits import ReadCoilsRequest, ReadDiscreteInputsRequest
+from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
+from aiortu.core.values import ValueType, decode_value
+from aiortu.poller import CycleReport, Sample, UnitSkipped
+
+from .fakes import coil_value, line, register_value
+
+POINTS = [
+    Point.of("a", 1, "40001"),
+    Point.of("b", 1, "40003", "float32", layout="CDAB"),  # gap 1: merged with a
+    Point.of("c", 1, "40010", "int32"),  # gap 5: merged with max_gap=5
+    Point.of("d", 1, "40100"),  # far: its own read
+    Point.of("e", 1, "30005", "int16", scale=0.5),
+    Point.of("f", 2, "40001"),
+    Point.of("g", 2, "00010"),
+    Point.of("h", 2, "00030"),  # 19 bits after g: merged (bit gap 80)
+    Point.of("i", 2, "10002"),
+]
+
+
+def wire(request: object) -> tuple[int, int, int]:
+    match request:
+        case (
+            ReadHoldingRegistersRequest(address=a, count=n)
+            | ReadInputRegistersRequest(address=a, count=n)
+            | ReadCoilsRequest(address=a, count=n)
+            | ReadDiscreteInputsRequest(address=a, count=n)
+        ):
+            return request.function_code, a, n  # type: ignore[attr-defined]
+    raise AssertionError(request)
+
+
+async def test_the_requests_on_the_wire_are_the_merged_ranges_and_values_decode() -> None:
+    async with line() as (master, slave, _):
+        poller = Poller(master, POINTS, max_gap=5, max_bit_gap=80)
+        samples = {s.name: s for s in await poller.poll_once()}
+        requests = [(seen.unit, *wire(seen.request)) for seen in slave.seen]
+        assert requests == [
+            (1, 0x03, 0, 11),  # a, b, c: addresses 0..10
+            (1, 0x03, 99, 1),  # d
+            (1, 0x04, 4, 1),  # e
+            (2, 0x01, 9, 21),  # g, h: coils 9..29
+            (2, 0x02, 1, 1),  # i
+            (2, 0x03, 0, 1),  # f
+        ]
+        assert next((r.unit, r.table, r.address, r.count) for r in poller.reads) == (
+            1,
+            Table.HOLDING_REGISTERS,
+            0,
+            11,
+        )
+    assert all(s.ok for s in samples.values())
+    assert samples["a"].value == register_value(1, 0)
+    assert samples["b"].value == decode_value(
+        [register_value(1, 2), register_value(1, 3)], ValueType.FLOAT32, "CDAB"
+    )
+    assert samples["c"].value == decode_value(
+        [register_value(1, 9), register_value(1, 10)], ValueType.INT32
+    )
+    assert samples["d"].value == register_value(1, 99)
+    raw_e = decode_value([register_value(1, 4) ^ 0xFFFF], ValueType.INT16)
+    assert samples["e"].value == pytest.approx(raw_e * 0.5)
+    assert samples["f"].value == register_value(2, 0)
+    assert samples["g"].value is coil_value(2, 9)
+    assert samples["h"].value is coil_value(2, 29)
+    assert samples["i"].value is coil_value(2, 1)
+
+
+async def test_samples_reach_callbacks_and_the_async_iterator() -> None:
+    seen: list[Sample] = []
+    cycles: list[CycleReport] = []
+
+    async def on_cycle(report: CycleReport) -> None:
+        cycles.append(report)
+
+    async with line() as (master, _, _):
+        poller = Poller(master, POINTS[:3], interval=0.02, on_sample=seen.append, on_cycle=on_cycle)
+        got: list[Sample] = []
+        with anyio.fail_after(5):
+            async with poller:
+                async for sample in poller:
+                    got.append(sample)
+                    if len(got) == 9:
+                        break
+    assert [s.name for s in got] == ["a", "b", "c"] * 3
+    assert [s.cycle for s in got] == [0, 0, 0, 1, 1, 1, 2, 2, 2]
+    assert seen[:9] == got
+    assert cycles[0].samples == tuple(got[:3])
+    stats = poller.cycle_time
+    assert stats.cycles >= 3
+    assert stats.last is not None
+    assert stats.mean is not None
+    assert poller.health()[1].online
+
+
+async def test_run_stops_after_the_cycles_and_ends_the_iteration() -> None:
+    async with line() as (master, _, _):
+        poller = Poller(master, POINTS[:2], interval=0.01)
+        with anyio.fail_after(5):
+            await poller.run(cycles=4)
+        assert poller.cycle_time.cycles == 4
+        assert len([s async for s in poller]) == 8
+
+
+async def test_points_with_their_own_interval_poll_on_their_own_schedule() -> None:
+    async with line() as (master, _, _):
+        fast = Point.of("fast", 1, "40001", interval=0.02)
+        slow = Point.of("slow", 1, "40002", interval=0.2)
+        poller = Poller(master, [fast, slow])
+        await poller.run(duration=0.5)
+        stats = poller.cycle_stats
+        assert stats[0.02].cycles > 3 * stats[0.2].cycles
+
+
+async def _cycle_times(points: list[Point], cycles: int, probe: float) -> list[float]:
+    durations: list[float] = []
+    units = frozenset({1, 2, 3})  # unit 4 is dead
+    options = {"timeout": 0.1, "retries": 0, "offline_after": 1}
+    async with line(units=units, **options) as (master, _, _):
+        poller = Poller(
+            master,
+            points,
+            interval=0.001,
+            offline_probe_interval=probe,
+            on_cycle=lambda r: durations.append(r.duration),
+        )
+        await poller.run(cycles=cycles)
+    return durations
+
+
+async def test_a_dead_unit_does_not_stall_the_cycle() -> None:
+    alive = [Point.of(f"u{u}r{r}", u, f"4{r * 20 + 1:04d}") for u in (1, 2, 3) for r in range(3)]
+    dead = [Point.of(f"u4r{r}", 4, f"4{r * 20 + 1:04d}") for r in range(3)]
+    all_alive = await _cycle_times(alive, 8, probe=60)
+    with_dead = await _cycle_times(alive + dead, 8, probe=60)
+    # The first cycle pays one timeout for the dead unit (its other reads are skipped).
+    assert 0.1 <= with_dead[0] < 0.1 + 3 * max(all_alive)
+    typical = sorted(all_alive)[len(all_alive) // 2]
+    # The next request after a failed one waits the master's late-reply guard (0.1 s),
+    # which falls in the second cycle; from then on the dead unit costs nothing.
+    assert with_dead[1] < 0.1 + 2 * typical + 0.01, (all_alive, with_dead)
+    assert max(with_dead[2:]) < 2 * typical + 0.01, (all_alive, with_dead)
+
+
+async def test_an_offline_unit_is_probed_every_offline_probe_interval() -> None:
+    options = {"timeout": 0.05, "retries": 0, "offline_after": 1}
+    async with line(units=frozenset({1}), **options) as (master, slave, _):
+        points = [Point.of("alive", 1, "40001"), Point.of("dead", 2, "40001")]
+        samples: list[Sample] = []
+        poller = Poller(
+            master, points, interval=0.01, offline_probe_interval=0.3, on_sample=samples.append
+        )
+        await poller.run(duration=1.0)
+        probes = [seen.time for seen in slave.seen if seen.unit == 2]
+        alive = [seen for seen in slave.seen if seen.unit == 1]
+    # Sent at about 0, 0.3, 0.6 and 0.9 s: the first read, then one probe per interval.
+    assert len(probes) in (3, 4, 5), probes
+    gaps = [b - a for a, b in itertools.pairwise(probes)]
+    assert all(gap >= 0.3 for gap in gaps), gaps
+    assert len(alive) > 30
+    dead = [s for s in samples if s.name == "dead"]
+    assert sum(isinstance(s.error, UnitSkipped) for s in dead) > 20
+    assert all(isinstance(s.error, aiortu.ResponseTimeout) for s in dead)
+    health = poller.health()
+    assert not health[2].online
+    assert health[2].skipped > 20
+    assert health[2].next_probe is not None
+
+
+async def test_the_poll_command_redraws_its_table_in_place_on_a_terminal() -> None:
+    async with line() as (master, _, _):
+        out = io.StringIO()
+        poller = Poller(master, POINTS[:2])
+        printer = TablePrinter(out, poller, ansi=True)
+        poller.on_cycle(printer.show)
+        await poller.run(cycles=2)
+    first, second = out.getvalue().split("\x1b[", 1)
+    lines = first.splitlines()
+    assert len(lines) == 5  # header, column titles, two points, one unit
+    assert lines[2] == f"a                   1  {register_value(1, 0)}"
+    # The second table moves back up over the first and clears it.
+    assert second.startswith("5F\x1b[J")

@@ -1,0 +1,191 @@
+"""``aiortu read``, ``write`` and ``poll`` as subprocesses against pymodbus's RTU server
+on a pty bus (8N2): exact output, text and JSON; failures exit non-zero with one line."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from aiortu.core.timing import LineSettings
+from aiortu.testing import PtyBus
+
+from .master.pymodbus_tables_server import COILS, HOLDING_REGISTERS, INPUT_REGISTERS
+
+pytestmark = [pytest.mark.interop, pytest.mark.timeout(90)]
+
+SERVER = Path(__file__).parent / "master" / "pymodbus_tables_server.py"
+LINE = ["--parity", "N", "--stopbits", "2"]
+
+
+@pytest.fixture(scope="module")
+def port() -> Iterator[str]:
+    """A pty bus port whose other port pymodbus's server (unit 1) serves."""
+    settings = LineSettings(19200, parity="N", stopbits=2)
+    with PtyBus(2, settings=settings).running_in_thread() as bus:
+        server = subprocess.Popen(
+            [sys.executable, "-W", "ignore", str(SERVER), bus.paths[1]],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+        )
+        try:
+            assert server.stdout is not None
+            assert server.stdout.readline().strip() == "ready"
+            yield bus.paths[0]
+        finally:
+            server.terminate()
+            server.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def silent_port() -> Iterator[str]:
+    """A pty bus port with nobody else on the bus."""
+    with PtyBus(2, settings=LineSettings(19200, parity="N", stopbits=2)).running_in_thread() as bus:
+        yield bus.paths[0]
+
+
+def aiortu(*args: str) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+    return subprocess.run(
+        [sys.executable, "-m", "aiortu", *args],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+        env=env,
+    )
+
+
+def test_read_holding_registers_as_text_and_json(port: str) -> None:
+    text = aiortu("read", port, "--unit", "1", "--table", "holding", "--address", "0",
+                  "--count", "3", *LINE)  # fmt: skip
+    assert (text.returncode, text.stdout, text.stderr) == (0, "0 4660\n1 43981\n2 7\n", "")
+    as_json = aiortu("read", port, "--unit", "1", "--ref", "40001", "--count", "3", "--json",
+                     *LINE)  # fmt: skip
+    assert as_json.returncode == 0, as_json.stderr
+    assert (
+        as_json.stdout
+        == '{"unit": 1, "table": "holding", "address": 0, "values": [4660, 43981, 7]}\n'
+    )
+
+
+def test_read_the_other_tables(port: str) -> None:
+    coils = aiortu("read", port, "--unit", "1", "--table", "coils", "--address", "0x3",
+                   "--count", "5", "--json", *LINE)  # fmt: skip
+    assert json.loads(coils.stdout) == {
+        "unit": 1, "table": "coils", "address": 3, "values": COILS[3:8],
+    }  # fmt: skip
+    inputs = aiortu("read", port, "--unit", "1", "--ref", "30003", "--count", "2", *LINE)
+    assert inputs.stdout == f"2 {INPUT_REGISTERS[2]}\n3 {INPUT_REGISTERS[3]}\n"
+    discrete = aiortu("read", port, "--unit", "1", "--table", "discrete", "--address", "0",
+                      "--count", "3", *LINE)  # fmt: skip
+    assert discrete.stdout == "0 0\n1 1\n2 0\n"
+
+
+def test_write_then_read_back(port: str) -> None:
+    written = aiortu("write", port, "--unit", "1", "--table", "holding", "--address", "35",
+                     "--values", "1,0x10,65535", "--json", *LINE)  # fmt: skip
+    assert (written.returncode, written.stderr) == (0, "")
+    assert (
+        written.stdout
+        == '{"unit": 1, "table": "holding", "address": 35, "values": [1, 16, 65535]}\n'
+    )
+    back = aiortu("read", port, "--unit", "1", "--ref", "40036", "--count", "3", *LINE)
+    assert back.stdout == "35 1\n36 16\n37 65535\n"
+    coils = aiortu("write", port, "--unit", "1", "--table", "coils", "--address", "30",
+                   "--values", "on,off,true,0", *LINE)  # fmt: skip
+    assert (coils.returncode, coils.stdout) == (0, "30 1\n31 0\n32 1\n33 0\n")
+    single = aiortu("write", port, "--unit", "1", "--ref", "00040", "--values", "1", *LINE)
+    assert (single.returncode, single.stdout) == (0, "39 1\n")
+    bits = aiortu("read", port, "--unit", "1", "--table", "coils", "--address", "30",
+                  "--count", "4", "--json", *LINE)  # fmt: skip
+    assert json.loads(bits.stdout)["values"] == [True, False, True, False]
+
+
+def test_poll_prints_plain_cycles_when_piped(port: str) -> None:
+    result = aiortu("poll", port, "--unit", "1", "--ref", "40001", "--count", "3",
+                    "--cycles", "2", "--interval", "0.1", *LINE)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "\x1b[" not in result.stdout
+    blocks = result.stdout.strip("\n").split("\n\n")
+    assert len(blocks) == 2
+    for index, block in enumerate(blocks):
+        lines = block.splitlines()
+        assert lines[0].startswith(f"cycle {index + 1}  time ")
+        assert lines[1:5] == [
+            "POINT            UNIT  VALUE",
+            "40001               1  4660",
+            "40002               1  43981",
+            "40003               1  7",
+        ]
+        assert lines[5].startswith("unit 1: online, 0 failures in a row, latency ")
+
+
+def test_poll_json_with_named_typed_points(port: str) -> None:
+    result = aiortu("poll", port, "--point", "a=1:40001", "--point", "b=1:40002:int16",
+                    "--point", "w=1:40001:uint32:CDAB", "--cycles", "1", "--json",
+                    *LINE)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    samples = [json.loads(line) for line in result.stdout.splitlines()]
+    assert samples == [
+        {"cycle": 0, "name": "a", "unit": 1, "value": 0x1234, "error": None},
+        {"cycle": 0, "name": "w", "unit": 1, "value": 0xABCD1234, "error": None},
+        {"cycle": 0, "name": "b", "unit": 1, "value": 0xABCD - 0x10000, "error": None},
+    ]
+    assert HOLDING_REGISTERS[:2] == [0x1234, 0xABCD]
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "message"),
+    [
+        (["read", "--unit", "1", "--table", "holding", "--address", "1000"], 4,
+         "aiortu read: exception response ILLEGAL_DATA_ADDRESS (0x02) from unit 1, function 0x03"),
+        (["read", "--unit", "1", "--table", "holding"], 2,
+         "aiortu read: error: read needs --table and --address, or --ref"),
+        (["read", "--unit", "1", "--table", "holding", "--address", "0", "--count", "126"], 2,
+         "aiortu read: error: count = 126 is outside the allowed range 1..125"),
+        (["write", "--unit", "1", "--table", "coils", "--address", "0", "--values", "maybe"], 2,
+         "aiortu write: error: --values = 'maybe' is outside the allowed range "
+         "1, 0, true, false, on or off"),
+        (["write", "--unit", "1", "--ref", "30001", "--values", "1"], 2,
+         "aiortu write: error: cannot write input_registers: only coils and holding registers"),
+    ],
+)  # fmt: skip
+def test_failures_exit_non_zero_with_one_line(
+    port: str, args: list[str], code: int, message: str
+) -> None:
+    command, *rest = args
+    result = aiortu(command, port, *rest, *LINE)
+    assert (result.returncode, result.stdout, result.stderr) == (code, "", message + "\n")
+
+
+def test_no_reply_and_no_port(silent_port: str, tmp_path: Path) -> None:
+    timeout = aiortu("read", silent_port, "--unit", "1", "--ref", "40001", "--timeout", "0.2",
+                     *LINE)  # fmt: skip
+    assert timeout.returncode == 3
+    assert timeout.stdout == ""
+    assert timeout.stderr.startswith("aiortu read: no reply: ")
+    assert timeout.stderr.count("\n") == 1
+    missing = aiortu("write", str(tmp_path / "ttyNONE"), "--unit", "1", "--ref", "40001",
+                     "--values", "1", *LINE)  # fmt: skip
+    assert missing.returncode == 1
+    assert missing.stderr.startswith(f"aiortu write: {tmp_path / 'ttyNONE'}: ")
+    assert missing.stderr.count("\n") == 1
+
+
+def test_poll_shows_an_offline_unit(silent_port: str) -> None:
+    result = aiortu("poll", silent_port, "--unit", "5", "--ref", "40001", "--cycles", "4",
+                    "--interval", "0.05", "--timeout", "0.1", *LINE)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    blocks = [block.splitlines() for block in result.stdout.strip("\n").split("\n\n")]
+    assert blocks[1][2] == "40001               5  -- ResponseTimeout"
+    assert blocks[1][3] == "unit 5: online, 2 failures in a row"
+    # Offline after three failures (the master's offline_after): then skipped until a probe.
+    assert blocks[3][2] == "40001               5  -- UnitSkipped"
+    assert blocks[3][3] == "unit 5: OFFLINE, 3 failures in a row"
