@@ -1,4 +1,4 @@
-"""The example scripts run on their own and print what they promise."""
+"""The examples run on their own and print what they promise; the example suite passes."""
 
 from __future__ import annotations
 
@@ -10,28 +10,48 @@ import pytest
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 
-
-@pytest.mark.parametrize(
-    ("script", "expected"),
-    [
-        ("poll_several_devices.py", "cycle 2 unit 3 voltage3   231.250"),
-        ("poll_several_devices.py", "unit 4: offline"),
-        ("typed_values.py", "float32 CDAB at 2: 0000 41AC -> 21.5"),
-        ("typed_values.py", "40108 = holding register 107 = 0x022B"),
-        ("slave_with_handler.py", "temperatures: [21.5, 21.6, 21.7, 21.8]"),
-        ("slave_with_handler.py", "observer: holding_registers 2: [0, 0] -> [7, 8]"),
-        ("proxy_store.py", "the far device now holds: [100, 200, 300, 401]"),
+# Each script, and lines (or line beginnings) its output must contain.
+EXPECTED = {
+    "poll_several_devices.py": ["cycle 2 unit 3 voltage3   231.250", "unit 4: offline"],
+    "typed_values.py": [
+        "float32 CDAB at 2: 0000 41AC -> 21.5",
+        "40108 = holding register 107 = 0x022B",
     ],
-)
-def test_an_example_runs_and_prints(script: str, expected: str) -> None:
-    result = subprocess.run(
-        [sys.executable, str(EXAMPLES / script)],
+    "slave_with_handler.py": [
+        "temperatures: [21.5, 21.6, 21.7, 21.8]",
+        "observer: holding_registers 2: [0, 0] -> [7, 8]",
+    ],
+    "proxy_store.py": ["the far device now holds: [100, 200, 300, 401]"],
+    "broadcast.py": ["unit 1: setpoint 215, registers 0..2 = [1, 2, 3]", "unit 3: setpoint 215"],
+    "rtu_over_tcp.py": ["after the write: [1234]"],
+}
+
+
+def _run(*arguments: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, *arguments],
         capture_output=True,
         text=True,
-        timeout=30,
+        timeout=60,
         check=False,
+        cwd=EXAMPLES.parent,
     )
+
+
+def test_every_example_script_is_checked() -> None:
+    assert {path.name for path in EXAMPLES.glob("*.py")} == set(EXPECTED)
+
+
+@pytest.mark.parametrize("script", sorted(EXPECTED))
+def test_an_example_runs_and_prints(script: str) -> None:
+    result = _run(str(EXAMPLES / script))
     assert result.returncode == 0, result.stderr
-    assert expected in result.stdout.splitlines() or any(
-        line.startswith(expected) for line in result.stdout.splitlines()
-    ), result.stdout
+    lines = result.stdout.splitlines()
+    for expected in EXPECTED[script]:
+        assert any(line.startswith(expected) for line in lines), (expected, result.stdout)
+
+
+def test_the_example_test_suite_passes() -> None:
+    result = _run("-m", "pytest", "-q", "-p", "no:cacheprovider", "examples/tests")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "3 passed" in result.stdout
