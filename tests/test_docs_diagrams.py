@@ -2,23 +2,36 @@
 
 from __future__ import annotations
 
+import enum
+from collections.abc import Mapping
 from pathlib import Path
 
+import pytest
+
+from aiortu.core import master_machine, receiver, slave_machine
 from aiortu.core.diagrams import state_diagram
-from aiortu.core.receiver import TRANSITIONS, ReceiverState
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 
+MACHINES: dict[str, tuple[Mapping[tuple[enum.Enum, enum.Enum], object], enum.Enum]] = {
+    "receiver": (receiver.TRANSITIONS, receiver.ReceiverState.INIT),
+    "master": (master_machine.TRANSITIONS, master_machine.MasterState.IDLE),
+    "slave": (slave_machine.TRANSITIONS, slave_machine.SlaveState.IDLE),
+}
 
-def test_the_receiver_diagram_matches_its_table() -> None:
+
+@pytest.mark.parametrize("machine", sorted(MACHINES))
+def test_the_protocol_page_draws_each_machine_from_its_table(machine: str) -> None:
+    table, initial = MACHINES[machine]
     page = (DOCS / "protocol.md").read_text(encoding="utf-8")
-    assert state_diagram(TRANSITIONS, ReceiverState.INIT) in page
+    assert state_diagram(table, initial) in page  # type: ignore[arg-type]
 
 
-def test_the_diagram_has_one_arrow_per_merged_entry() -> None:
-    drawn = state_diagram(TRANSITIONS, ReceiverState.INIT)
-    arrows = [line for line in drawn.splitlines() if "-->" in line and "[*]" not in line]
-    sources = {
-        (state.name, target.name, action) for (state, _), (target, action) in TRANSITIONS.items()
-    }
-    assert len(arrows) == len(sources)
+@pytest.mark.parametrize("machine", sorted(MACHINES))
+def test_every_entry_of_a_table_is_drawn(machine: str) -> None:
+    table, initial = MACHINES[machine]
+    drawn = state_diagram(table, initial)  # type: ignore[arg-type]
+    for (state, event), entry in table.items():
+        target = entry[0] if isinstance(entry, tuple) else entry
+        arrows = [line for line in drawn.splitlines() if f"{state.name} --> {target.name}:" in line]
+        assert any(event.name in arrow for arrow in arrows), (state, event)

@@ -18,30 +18,37 @@ EventT = TypeVar("EventT", bound=enum.Enum)
 
 
 def state_diagram(
-    transitions: Mapping[tuple[StateT, EventT], tuple[StateT, str]],
+    transitions: Mapping[tuple[StateT, EventT], tuple[StateT, str] | StateT],
     initial: StateT,
 ) -> str:
     """A Mermaid ``stateDiagram-v2`` block with one arrow per (state, event) entry.
 
-    Arrows are labelled ``EVENT / action``; *initial* gets the start marker. Entries
-    that share their source, target and action are merged into one arrow whose label
-    lists the events.
+    A table maps ``(state, event)`` to ``(next state, action)`` or to the next state
+    alone. Arrows are labelled ``EVENT / action`` (or ``EVENT``); *initial* gets the start
+    marker. Entries that share their source, target and action are merged into one arrow
+    whose label lists the events.
     """
     merged: dict[tuple[str, str, str], list[str]] = {}
-    for (source, event), (target, action) in transitions.items():
+    for (source, event), entry in transitions.items():
+        target, action = entry if isinstance(entry, tuple) else (entry, "")
         merged.setdefault((source.name, target.name, action), []).append(event.name)
     lines = ["```mermaid", "stateDiagram-v2", f"    [*] --> {initial.name}"]
     for (source_name, target_name, action), events in merged.items():
-        lines.append(f"    {source_name} --> {target_name}: {' | '.join(events)} / {action}")
+        label = " | ".join(events) + (f" / {action}" if action else "")
+        lines.append(f"    {source_name} --> {target_name}: {label}")
     lines.append("```")
     return "\n".join(lines) + "\n"
 
 
 def _main() -> None:
-    from aiortu.core.receiver import TRANSITIONS, ReceiverState
+    from aiortu.core import master_machine, receiver, slave_machine
 
     print("Receiver:")
-    print(state_diagram(TRANSITIONS, ReceiverState.INIT))
+    print(state_diagram(receiver.TRANSITIONS, receiver.ReceiverState.INIT))
+    print("Master:")
+    print(state_diagram(master_machine.TRANSITIONS, master_machine.MasterState.IDLE))
+    print("Slave:")
+    print(state_diagram(slave_machine.TRANSITIONS, slave_machine.SlaveState.IDLE))
 
 
 if __name__ == "__main__":
