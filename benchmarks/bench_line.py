@@ -2,7 +2,8 @@
 
 Run from the repository root with aiortu installed::
 
-    python benchmarks/bench_line.py [--rounds 15] [--frames 2000]
+    python benchmarks/bench_line.py [--rounds 15] [--frames 2000] [--rtts 1000] [--quick]
+        [--section receiver|relay]
 
 Sections (each a function ``section_*`` returning the lines it prints; add a section by
 writing one more and listing it in ``SECTIONS``):
@@ -14,11 +15,19 @@ writing one more and listing it in ``SECTIONS``):
     the worst case of a driver that wakes per character). Frames are spaced by t3.5 at
     19200 baud, so every frame starts from IDLE; each frame is checked to come out.
     Contenders are timed interleaved round by round; the table gives the median.
+(b) relay: the round trip of an 8-byte request and a 25-byte reply through the aiortu pty
+    relay (:class:`aiortu.testing.PtyBus`, unpaced, 2 ports, run in a process of its own)
+    against a socat pty pair (``socat pty,raw,echo=0 pty,raw,echo=0``). This process
+    writes the request to one end and reads the reply from it; a responder process
+    (this script with ``--respond PATH``) reads the 8 bytes at the other end and writes
+    the 25 back. The two lines take turns round by round; the table gives the median
+    round trip of each round's *rtts* round trips, then the median over the rounds.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import os
 import platform
@@ -144,8 +153,121 @@ def section_receiver(args: argparse.Namespace) -> list[str]:
     ]
 
 
+# -- (b) the pty relay against socat ----------------------------------------------------------
+
+TARGET_RELAY_RATIO = 1.5
+"""The issue's target: the relay's round trip at most this many times socat's."""
+
+
+def respond(path: str) -> None:
+    """Answer every 8 bytes read on *path* with 25 bytes, until the line goes away."""
+    import benchlib
+
+    fd = benchlib.open_raw(path)
+    reply = bytes(range(25))
+    print("ready", flush=True)
+    with contextlib.suppress(OSError, EOFError):
+        while True:
+            benchlib.read_exactly(fd, 8)
+            os.write(fd, reply)
+
+
+def serve_relay() -> None:
+    """Run an unpaced two-port PtyBus, print its paths, and run until killed."""
+    import anyio
+
+    from aiortu.testing import PtyBus
+
+    async def main() -> None:
+        async with PtyBus(2) as bus:
+            print(" ".join(bus.paths), flush=True)
+            await anyio.sleep_forever()
+
+    anyio.run(main)
+
+
+def round_trips(fd: int, count: int) -> list[float]:
+    import benchlib
+
+    request = bytes(range(8))
+    times = []
+    for _ in range(count):
+        start = time.perf_counter()
+        os.write(fd, request)
+        benchlib.read_exactly(fd, 25)
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def section_relay(args: argparse.Namespace) -> list[str]:
+    import subprocess
+
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import benchlib
+
+    rounds = 3 if args.quick else args.rounds
+    count = 200 if args.quick else args.rtts
+    medians: dict[str, list[float]] = {"socat pty pair": [], "aiortu PtyBus relay": []}
+    means: dict[str, list[float]] = {name: [] for name in medians}
+    with benchlib.Children() as children:
+        socat_a, socat_b = children.socat_pair()
+        relay = children.start(
+            [sys.executable, os.path.abspath(__file__), "--serve-relay"],
+            stdout=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+        )
+        assert relay.stdout is not None
+        relay_a, relay_b = relay.stdout.readline().decode().split()
+        ends = {}
+        for name, (near, far) in zip(
+            medians, ((socat_a, socat_b), (relay_a, relay_b)), strict=True
+        ):
+            responder = children.start(
+                [sys.executable, os.path.abspath(__file__), "--respond", far],
+                stdout=subprocess.PIPE,
+                stdin=subprocess.DEVNULL,
+            )
+            assert responder.stdout is not None
+            if responder.stdout.readline().decode().strip() != "ready":
+                raise RuntimeError("the responder did not start")
+            ends[name] = benchlib.open_raw(near)
+            round_trips(ends[name], 50)  # warm up
+        try:
+            for _ in range(rounds):
+                for name, fd in ends.items():
+                    times = round_trips(fd, count)
+                    medians[name].append(statistics.median(times))
+                    means[name].append(statistics.fmean(times))
+        finally:
+            for fd in ends.values():
+                os.close(fd)
+    socat = statistics.median(medians["socat pty pair"])
+    rows = []
+    for name, values in medians.items():
+        rtt = statistics.median(values)
+        spread = f"{min(values) * 1e6:.0f}..{max(values) * 1e6:.0f}"
+        rows.append(
+            f"| {name:<19} | {rtt * 1e6:>15.0f} | {spread:<12}"
+            f" | {statistics.median(means[name]) * 1e6:>11.0f} | {rtt / socat:>7.2f}x |"
+        )
+    ratio = statistics.median(medians["aiortu PtyBus relay"]) / socat
+    verdict = "met" if ratio <= TARGET_RELAY_RATIO else "MISSED"
+    return [
+        f"(b) relay: 8-byte request, 25-byte reply round trips; {rounds} interleaved rounds of "
+        f"{count} round trips per line",
+        "",
+        "| Line                | RTT us (median) | min..max us  | mean RTT us | vs socat |",
+        "|---------------------|-----------------|--------------|-------------|----------|",
+        *rows,
+        "",
+        f"Target: the relay's round trip <= {TARGET_RELAY_RATIO}x socat's: {verdict} "
+        f"({ratio:.2f}x).",
+    ]
+
+
 SECTIONS: dict[str, Callable[[argparse.Namespace], list[str]]] = {
     "receiver": section_receiver,
+    "relay": section_relay,
 }
 
 
@@ -153,10 +275,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--frames", type=int, default=2000)
+    parser.add_argument("--rtts", type=int, default=1000, help="round trips per relay round")
+    parser.add_argument("--quick", action="store_true", help="a short smoke run (relay)")
+    parser.add_argument("--respond", metavar="PATH", help=argparse.SUPPRESS)
+    parser.add_argument("--serve-relay", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument(
         "--section", action="append", choices=sorted(SECTIONS), help="run only these sections"
     )
     args = parser.parse_args()
+    if args.respond:
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        respond(args.respond)
+        return
+    if args.serve_relay:
+        serve_relay()
+        return
     print("\n".join(header()))
     for name in args.section or list(SECTIONS):
         print()
