@@ -13,18 +13,27 @@ its response timeout from that time, not from when ``write()`` returned.
 
 The master and the slave are built on this; users rarely need it directly, except to
 watch a line (``role=Role.MONITOR``).
+
+Events go to a queue that :meth:`Link.receive` reads, or, while a listener is set
+(:meth:`Link.listen`), straight to that listener from the reader task: the master's
+line engine listens, so that a reply reaches the waiting transaction with no task hop in
+between. The hot path avoids work that does nothing: the default clock is bound to the
+running event loop's clock when the link opens, and :meth:`Link.send` yields to the loop
+only when it has to wait (for the silence, for another sender, or for the stream).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections import Counter
 from collections.abc import Callable, Iterable
 from types import TracebackType
-from typing import Self
+from typing import Self, cast
 
 import anyio
 import anyio.abc
+import anyio.lowlevel
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
 from aiortu.core.receiver import (
@@ -38,10 +47,13 @@ from aiortu.core.receiver import (
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost
 
-__all__ = ("Link", "LinkEvent")
+__all__ = ("Link", "LinkEvent", "LinkListener")
 
 LinkEvent = FrameReceived | FrameDiscarded
 """What a link delivers: a frame whose CRC checks, or bytes discarded with a reason."""
+
+LinkListener = Callable[[LinkEvent | None], None]
+"""Called by the reader task with each event, and with ``None`` once the reader stops."""
 
 _STREAM_ERRORS = (
     anyio.EndOfStream,
@@ -51,13 +63,28 @@ _STREAM_ERRORS = (
 )
 
 
+def _loop_clock(token: anyio.lowlevel.EventLoopToken) -> Callable[[], float]:
+    """The running backend's clock, as cheap to read as it gets: the event loop's own
+    ``time`` method where the loop has one that tells the backend's time (asyncio),
+    else the backend's ``current_time``."""
+    backend_time = token.backend_class.current_time
+    loop_time = getattr(token.native_token, "time", None)
+    if callable(loop_time):
+        with contextlib.suppress(Exception):
+            if abs(float(loop_time()) - backend_time()) < 0.1:
+                return cast(Callable[[], float], loop_time)
+    return backend_time
+
+
 class Link:
     """One serial line (see the module docstring). Use it as an async context manager.
 
     *settings* are the line settings (timing for the receiver and the frame gap).
     *role*, *units*, *timing* and *frame_silence* configure the receiver.
     *frame_gap* is the silence kept before each transmission: ``None`` for t3.5 of the
-    settings. *clock* returns seconds (default :func:`anyio.current_time`).
+    settings. *clock* returns seconds (default :func:`anyio.current_time`, which the link
+    replaces, when it opens, with the running backend's own clock: the same time, read
+    without looking the backend up on every call).
     *queue_size* bounds the events waiting to be received; when it is full the oldest
     event is dropped and counted, so a reader that falls behind never stalls the line.
     """
@@ -84,14 +111,28 @@ class Link:
         self.receiver = Receiver(
             self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence
         )
-        self._queue_size = queue_size
+        self.queue_size = queue_size
+        """The most events kept waiting to be received (by a listener too)."""
         self._send_events: MemoryObjectSendStream[LinkEvent]
         self._receive_events: MemoryObjectReceiveStream[LinkEvent]
         self._send_events, self._receive_events = anyio.create_memory_object_stream[LinkEvent](
             queue_size
         )
         self._task_group: anyio.abc.TaskGroup | None = None
-        self._send_lock = anyio.Lock()
+        self._listener: LinkListener | None = None
+        self._sending = False
+        self._send_waiters: list[anyio.Event] = []
+        self.backend: type[anyio.abc.AsyncBackend] | None = None
+        """The async backend the link runs on (set when it opens): its events, cancel
+        scopes and clock cost no backend lookup."""
+        self.backend_clock = False
+        """Whether :attr:`clock` is the backend's own clock, so that its times can be
+        used as cancel scope deadlines as they are."""
+        self.writes_begun = 0
+        """Writes :meth:`send` has begun: a caller cancelled inside :meth:`send` can tell
+        whether its frame may have gone out."""
+        self.last_write_start = -math.inf
+        """When the last write began, in the link's clock."""
         self._last_received = -math.inf
         self._transmit_end = -math.inf
         self._error: BaseException | None = None
@@ -104,6 +145,13 @@ class Link:
     # -- lifetime --------------------------------------------------------------------
 
     async def __aenter__(self) -> Self:
+        token = anyio.lowlevel.current_token()
+        backend = self.backend = token.backend_class
+        if self.clock is anyio.current_time:
+            self.clock = _loop_clock(token)
+            self.backend_clock = True
+        else:
+            self.backend_clock = self.clock == backend.current_time
         self.receiver.reset(self.clock())
         self._task_group = anyio.create_task_group()
         await self._task_group.__aenter__()
@@ -149,6 +197,14 @@ class Link:
         """Return once the reader has stopped (see :attr:`closed`)."""
         await self._closed.wait()
 
+    def listen(self, listener: LinkListener | None) -> None:
+        """Hand every event to *listener* from now on, instead of queueing it (``None``
+        queues again). The listener runs in the reader task and must not block; it is
+        called with ``None`` once the reader has stopped (at once if it already has)."""
+        self._listener = listener
+        if listener is not None and self._closed.is_set():
+            listener(None)
+
     async def receive(self) -> LinkEvent:
         """The next frame or discard, oldest first.
 
@@ -169,6 +225,10 @@ class Link:
         except (anyio.EndOfStream, anyio.ClosedResourceError):
             raise self._connection_lost() from self._error
 
+    def connection_lost_error(self) -> ConnectionLost:
+        """The :class:`~aiortu.errors.ConnectionLost` that stands for the link's end."""
+        return self._connection_lost()
+
     def _connection_lost(self) -> ConnectionLost:
         if self._error is None:
             return ConnectionLost("the link is closed")
@@ -178,6 +238,11 @@ class Link:
         receiver = self.receiver
         clock = self.clock
         stream = self.stream
+        backend = self.backend
+        assert backend is not None
+        cancel_scope = backend.create_cancel_scope
+        backend_time = backend.current_time
+        native = self.backend_clock
         try:
             while True:
                 deadline = receiver.next_deadline()
@@ -185,7 +250,9 @@ class Link:
                     chunk = await stream.receive()
                 else:
                     chunk = b""
-                    with anyio.move_on_after(max(0.0, deadline - clock())):
+                    if not native:
+                        deadline = backend_time() + max(0.0, deadline - clock())
+                    with cancel_scope(deadline=deadline):
                         chunk = await stream.receive()
                 now = clock()
                 if chunk:
@@ -202,6 +269,8 @@ class Link:
         finally:
             self._send_events.close()
             self._closed.set()
+            if self._listener is not None:
+                self._listener(None)
 
     def _deliver(self, events: list[LinkEvent]) -> None:
         for event in events:
@@ -209,6 +278,10 @@ class Link:
                 self.frames_received += 1
             else:
                 self.discarded[event.reason] += 1
+            listener = self._listener
+            if listener is not None:
+                listener(event)
+                continue
             try:
                 self._send_events.send_nowait(event)
             except anyio.WouldBlock:
@@ -226,11 +299,19 @@ class Link:
         frame's wire time at the line's character rate. Raises
         :class:`~aiortu.errors.ConnectionLost` if the stream fails.
         """
-        async with self._send_lock:
+        # One sender at a time, in order; no yield when nobody else is sending (a
+        # master's line has a single sender).
+        if self._sending:
+            await self._wait_turn_to_send()
+        else:
+            self._sending = True
+        try:
             await self.wait_for_silence(self.frame_gap)
             if self._error is not None or self._closed.is_set():
                 raise self._connection_lost()
-            start = self.clock()
+            clock = self.clock
+            start = self.last_write_start = clock()
+            self.writes_begun += 1
             try:
                 await self.stream.send(frame)
             except _STREAM_ERRORS as error:
@@ -239,14 +320,35 @@ class Link:
             self.frames_sent += 1
             # The OS may buffer the write, so it returns early; the wire is busy until
             # the last character has gone, whichever is later.
-            end = max(start + self.settings.wire_time(len(frame)), self.clock())
+            end = max(start + self.settings.wire_time(len(frame)), clock())
             self._transmit_end = end
             return end
+        finally:
+            self._pass_turn_to_send()
+
+    async def _wait_turn_to_send(self) -> None:
+        turn = anyio.Event() if self.backend is None else self.backend.create_event()
+        self._send_waiters.append(turn)
+        try:
+            await turn.wait()
+        except BaseException:
+            if turn.is_set():
+                self._pass_turn_to_send()  # handed the turn, yet gone: pass it on
+            else:
+                self._send_waiters.remove(turn)
+            raise
+
+    def _pass_turn_to_send(self) -> None:
+        if self._send_waiters:
+            self._send_waiters.pop(0).set()  # the turn passes; _sending stays true
+        else:
+            self._sending = False
 
     async def wait_for_silence(self, silence: float) -> None:
-        """Wait until neither side has used the line for *silence* seconds."""
+        """Wait until neither side has used the line for *silence* seconds (no yield when
+        it already has)."""
         while True:
-            remaining = self.last_activity + silence - self.clock()
+            remaining = max(self._last_received, self._transmit_end) + silence - self.clock()
             if remaining <= 0:
                 return
             await anyio.sleep(remaining)

@@ -1,6 +1,6 @@
 # ruff: noqa: ASYNC109
 # ``timeout=`` here is the Modbus response timeout, counted from the end of transmission
-# by the line task; a cancel scope around the call cannot express that.
+# by the master; a cancel scope around the call cannot express that.
 """The async Modbus RTU master: one line, one transaction at a time, shared by any number
 of coroutines.
 
@@ -13,9 +13,20 @@ of coroutines.
         await master.broadcast.write_register(0x10, 7)
 
 :class:`Master` takes any :class:`anyio.abc.ByteStream`; :func:`open_master` opens one
-from a port name or URL first. The line task lives in :mod:`aiortu.master_engine`, the
+from a port name or URL first. The line engine lives in :mod:`aiortu.master_engine`, the
 state machine in :mod:`aiortu.core.master_machine`, the per-unit and broadcast handles in
 :mod:`aiortu.master_handles`.
+
+Who runs a transaction. The line is owned by one transaction at a time, and that
+transaction runs in its caller's task: on an idle line a call sends its request and
+waits for the reply itself, and a busy line hands itself to the next queued call (FIFO,
+lower priority first) when the transaction in progress ends. An earlier design had one
+task run every transaction, which cost two task hand-overs per call (to the line task
+and back) and about a third of the master's CPU per read; the rules that design gave
+are kept: exchanges never overlap, the queue order is the same, and a caller cancelled
+after its request began to go out leaves the attempt to the master's line task, which
+waits for its reply (so that it never reaches a later request) and only then hands the
+line on. The line task also notices a dead link and fails the queue.
 """
 
 from __future__ import annotations
@@ -120,9 +131,10 @@ class Master(SerialLineFunctions):
     reply. Raise *late_reply_guard* on lines with slow devices, or use per-call timeouts
     longer than the slowest device's reply time.
 
-    Cancelling a caller never desynchronises the line: one task owns all I/O; a
-    cancelled request still queued is dropped, and one in flight finishes its attempt
-    (its reply is consumed there) without retries.
+    Cancelling a caller never desynchronises the line: one transaction owns the line at
+    a time; a cancelled request still queued (or not yet sent) is dropped, and one in
+    flight has its attempt finished by the master's line task (its reply is consumed
+    there) without retries, before the next request goes out.
     """
 
     def __init__(

@@ -1,4 +1,4 @@
-"""Keeping a master's line up: run the line task on a link, reopen the port when it dies.
+"""Keeping a master's line up: serve the line on a link, reopen the port when it dies.
 
 A USB serial adapter can vanish under a running program. :class:`LineConnection` runs the
 master's :class:`~aiortu.master_engine.LineEngine` on a :class:`~aiortu.link.Link`; when

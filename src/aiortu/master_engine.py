@@ -1,24 +1,36 @@
-"""The master's line task: one transaction at a time on one line, for any number of callers.
+"""The master's line: one transaction at a time on one line, for any number of callers.
 
 :class:`LineEngine` owns a :class:`~aiortu.link.Link` and runs the sans-IO
 :class:`~aiortu.core.master_machine.MasterMachine` on it. Callers hand it
-:class:`~aiortu.core.master_machine.Transaction` objects through :meth:`LineEngine.submit`,
-which queues them (FIFO, lower *priority* first) and waits on a per-request event; the
-line task alone reads and writes the line. So a caller that is cancelled never leaves the
-line half way through an exchange: a request still queued is dropped, and a request in
-flight finishes its current attempt (its reply must not reach a later request) and is not
-retried.
+:class:`~aiortu.core.master_machine.Transaction` objects through :meth:`LineEngine.submit`.
+
+The line belongs to one transaction at a time, and the transaction runs in the task of
+the caller that submitted it: the caller sends the request and waits for the reply
+itself, so a read on an idle line costs no hand-over between tasks. When the line is
+busy, the caller queues (FIFO, lower *priority* first) and waits for its turn; the
+transaction that ends hands the line straight to the next one in the queue. The link
+hands every frame to the engine (:meth:`~aiortu.link.Link.listen`), which wakes the
+waiting transaction directly.
+
+Cancellation never leaves the line half way through an exchange. A caller cancelled
+while queued is dropped; one cancelled before its request began to go out gives the line
+up at once; one cancelled after that leaves its transaction to the engine's line task
+(:meth:`LineEngine.serve`), which finishes the attempt in flight (its reply must not
+reach a later request) without retries and then hands the line on. So the exchanges on
+the line stay strictly one after the other, exactly as if one task ran them all: the
+line task runs only what a cancelled caller left behind, and notices a dead link.
 
 It also keeps :class:`UnitStats` per unit and their health: a unit is offline after
 *offline_after* consecutive failed transactions, and online again after a success. With
 *fail_fast_offline*, a request to an offline unit raises :class:`UnitOffline` at once,
 except for one probe every *probe_interval* seconds.
 
-When the link fails, :meth:`LineEngine.serve` fails the request in flight and the queued
-ones with ConnectionLost and returns; :class:`~aiortu.master_connection.LineConnection`
-then closes the engine for good (:meth:`LineEngine.close`) or serves it again on a
-reopened link. Meanwhile :meth:`LineEngine.submit` waits for the line within the
-request's timeout, or fails at once (see :attr:`LineEngine.wait_for_reconnect`).
+When the link fails, the request in flight and the queued ones fail with
+ConnectionLost and :meth:`LineEngine.serve` returns;
+:class:`~aiortu.master_connection.LineConnection` then closes the engine for good
+(:meth:`LineEngine.close`) or serves it again on a reopened link. Meanwhile
+:meth:`LineEngine.submit` waits for the line within the request's timeout, or fails at
+once (see :attr:`LineEngine.wait_for_reconnect`).
 
 :class:`~aiortu.master.Master` is the API built on this; see its docstring for the guard
 against late replies.
@@ -29,6 +41,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import anyio
@@ -125,15 +138,27 @@ class UnitStats:
 
 
 class _Job:
-    """A queued transaction and the caller's side of it: an event and the result."""
+    """A transaction, its place in the queue, and its result."""
 
-    __slots__ = ("done", "error", "priority", "response", "sequence", "transaction")
+    __slots__ = (
+        "done",
+        "error",
+        "granted",
+        "priority",
+        "response",
+        "sequence",
+        "transaction",
+        "turn",
+    )
 
     def __init__(self, transaction: Transaction, priority: int, sequence: int) -> None:
         self.transaction = transaction
         self.priority = priority
         self.sequence = sequence
-        self.done = anyio.Event()
+        self.turn: anyio.Event | None = None
+        """Set when a queued job is handed the line, or failed while queued."""
+        self.granted = False
+        self.done = False
         self.response: Response | ExceptionPDU | None = None
         self.error: Exception | None = None
 
@@ -143,11 +168,13 @@ class _Job:
     def finish(self, response: Response | ExceptionPDU | None, error: Exception | None) -> None:
         self.response = response
         self.error = error
-        self.done.set()
+        self.done = True
+        if self.turn is not None:
+            self.turn.set()
 
 
 class LineEngine:
-    """The line task of a master (see the module docstring).
+    """The master's side of one line (see the module docstring).
 
     *late_reply_guard* is the silence, in seconds, kept after a transaction in which an
     attempt failed, before the next request goes out: a reply that turns up that late is
@@ -170,19 +197,25 @@ class LineEngine:
         """Statistics by unit address."""
         self._queue: list[_Job] = []
         self._sequence = itertools.count()
+        self._busy = False
+        """The line belongs to a transaction (running, handed over, or left to the line task)."""
+        self._serving = False
+        self._link_closed = False
+        self._events: deque[LinkEvent] = deque()
+        self._arrival: anyio.Event | None = None
+        self._adopted: _Job | None = None
         self._wake = anyio.Event()
         self._quiet_until = -math.inf
         self._failed: ConnectionLost | None = None
         self._connected = anyio.Event()
         self._connected.set()
-        self._link_down = False
         self.wait_for_reconnect = False
         """Whether requests made while the line is down wait for it to come back (set by
         :class:`~aiortu.master_connection.LineConnection` when it can reopen the port)."""
         self.fail_fast_reconnect = False
         """With :attr:`wait_for_reconnect`: raise at once instead of waiting."""
         self.transactions = 0
-        """Transactions the line task has run (attempts of abandoned ones included)."""
+        """Transactions run on the line (abandoned ones included)."""
 
     # -- the callers' side -----------------------------------------------------------
 
@@ -196,7 +229,8 @@ class LineEngine:
     async def submit(
         self, transaction: Transaction, priority: int = 0
     ) -> Response | ExceptionPDU | None:
-        """Queue *transaction*, wait for it, and return the reply (``None`` without one).
+        """Run *transaction* when the line is free, and return the reply (``None``
+        without one).
 
         Raises the transaction's error (ResponseTimeout, FrameError, ConnectionLost) and
         :class:`UnitOffline` when failing fast. If the caller is cancelled, the request
@@ -208,16 +242,58 @@ class LineEngine:
             await self._wait_connected(transaction.timeout)
         self._check_offline(transaction.unit)
         job = _Job(transaction, priority, next(self._sequence))
-        heapq.heappush(self._queue, job)
-        self._wake.set()
-        try:
-            await job.done.wait()
-        finally:
-            if not job.done.is_set():
-                transaction.abandoned = True
+        if self._busy or not self._serving or self._link_closed:
+            await self._wait_turn(job)
+        else:
+            self._busy = True  # an idle line: the transaction runs at once, here
+        if not job.done:
+            try:
+                await self._exchange(job)
+            finally:
+                if self._adopted is not job:
+                    self._release()
         if job.error is not None:
             raise job.error
         return job.response
+
+    async def _wait_turn(self, job: _Job) -> None:
+        """Queue *job* and wait until it is handed the line (or failed)."""
+        backend = self.link.backend
+        turn = job.turn = anyio.Event() if backend is None else backend.create_event()
+        heapq.heappush(self._queue, job)
+        if not self._busy and self._serving and not self._link_closed:
+            self._grant_next()
+        try:
+            await turn.wait()
+        except BaseException:
+            if job.granted and not job.done:
+                self._release()  # handed the line, yet gone: hand it on
+            else:
+                job.transaction.abandoned = True
+            raise
+
+    def _grant_next(self) -> None:
+        """Hand the line to the first job in the queue, or mark it free."""
+        queue = self._queue
+        while queue:
+            job = heapq.heappop(queue)
+            if job.transaction.abandoned:
+                continue
+            self._busy = True
+            job.granted = True
+            assert job.turn is not None
+            job.turn.set()
+            return
+        self._busy = False
+
+    def _release(self) -> None:
+        """The transaction that had the line is over: hand the line on."""
+        if self._link_closed or not self._serving:
+            # The queue waits for the line task: it fails it (dead link) or serves it.
+            self._busy = False
+            self._wake.set()
+            return
+        self._grant_next()
 
     @property
     def connected(self) -> bool:
@@ -257,34 +333,45 @@ class LineEngine:
     # -- the line task ---------------------------------------------------------------
 
     async def run(self) -> None:
-        """Run transactions on :attr:`link` until cancelled or the line fails, then fail
-        every request, then and later, with ConnectionLost."""
+        """Serve :attr:`link` until cancelled or the line fails, then fail every request,
+        then and later, with ConnectionLost."""
         try:
             self.close(await self.serve(self.link))
         finally:
             self.close(ConnectionLost("the master is closed"))
 
     async def serve(self, link: Link) -> ConnectionLost:
-        """Run transactions on *link* (entered by the caller) until it fails; return why.
+        """Serve the line on *link* (entered by the caller) until it fails; return why.
 
-        The request in flight and the queued ones fail with that ConnectionLost; requests
-        made afterwards wait for the next :meth:`serve` or fail (see :meth:`submit`).
+        This is the line task: it takes the link's events, finishes the transactions
+        that cancelled callers leave behind, and notices a dead link. The request in
+        flight and the queued ones fail with the link's ConnectionLost; requests made
+        afterwards wait for the next :meth:`serve` or fail (see :meth:`submit`).
         """
         self.link = link
-        self._link_down = False
+        self._link_closed = False
+        self._events.clear()
+        link.listen(self._on_link_event)
+        try:
+            while link.receive_nowait() is not None:  # queued before we listened
+                pass
+        except ConnectionLost:
+            pass
+        self._serving = True
         self._connected.set()
-        lost: ConnectionLost
-        async with anyio.create_task_group() as tasks:
-            tasks.start_soon(self._watch_link, link, name="aiortu master link watch")
-            try:
-                while True:
-                    job = await self._next_job()
-                    if job.transaction.abandoned:
-                        continue
-                    await self._run_job(job)
-            except ConnectionLost as error:
-                lost = error
-            tasks.cancel_scope.cancel()
+        try:
+            if not self._busy:
+                self._grant_next()
+            while not (self._link_closed and not self._busy):
+                await self._wake.wait()
+                self._wake = anyio.Event()
+                job = self._adopted
+                if job is not None:
+                    await self._finish_adopted(job)
+        finally:
+            self._serving = False
+            link.listen(None)
+        lost = link.connection_lost_error()
         self._connected = anyio.Event()
         self._fail_queued(lost)
         return lost
@@ -296,29 +383,32 @@ class LineEngine:
         self._fail_queued(self._failed)
         self._connected.set()
 
-    async def _watch_link(self, link: Link) -> None:
-        # An idle line task must notice a dead port too, so that a reconnect starts at once.
-        await link.wait_closed()
-        self._link_down = True
-        self._wake.set()
-
-    async def _next_job(self) -> _Job:
-        while not self._queue:
-            if self._link_down:
-                self._drain()  # raises the link's ConnectionLost once it is empty
-                raise ConnectionLost("the line failed")
-            await self._wake.wait()
-            self._wake = anyio.Event()
-        return heapq.heappop(self._queue)
+    def _on_link_event(self, event: LinkEvent | None) -> None:
+        """The link's listener: keep the event and wake the waiting transaction."""
+        if event is None:
+            self._link_closed = True
+            self._wake.set()
+        else:
+            events = self._events
+            if len(events) >= self.link.queue_size:
+                events.popleft()  # the newest frame is the one a waiting master wants
+                self.link.events_dropped += 1
+            events.append(event)
+        arrival = self._arrival
+        if arrival is not None:
+            arrival.set()
 
     def _fail_queued(self, error: ConnectionLost) -> None:
         while self._queue:
             job = heapq.heappop(self._queue)
-            job.finish(None, ConnectionLost(str(error)))
+            if not job.done:
+                job.finish(None, ConnectionLost(str(error)))
 
-    async def _run_job(self, job: _Job) -> None:
+    async def _exchange(self, job: _Job) -> None:
+        """Run *job*'s transaction on the line; the line is the caller's meanwhile."""
         transaction = job.transaction
         machine = self.machine
+        link = self.link
         stats = self.unit_stats(transaction.unit)
         stats.requests += 1
         self.transactions += 1
@@ -327,10 +417,28 @@ class LineEngine:
             while True:
                 await self._keep_guard()
                 frame = machine.frame
-                self._drain()
-                end = await self.link.send(frame)
-                machine.sent(end - self.link.settings.wire_time(len(frame)), end)
-                outcome = await self._wait_for_outcome(stats)
+                self._events.clear()  # nothing that came before can answer the request
+                wire_time = link.settings.wire_time(len(frame))
+                writes = link.writes_begun
+                try:
+                    end = await link.send(frame)
+                except ConnectionLost:
+                    raise
+                except BaseException:
+                    if link.writes_begun != writes:
+                        # The frame may be on its way: its reply must be waited for.
+                        start = link.last_write_start
+                        machine.sent(start, start + wire_time)
+                        self._adopt(job)
+                    raise
+                machine.sent(end - wire_time, end)
+                try:
+                    outcome = await self._wait_for_outcome(stats)
+                except ConnectionLost:
+                    raise
+                except BaseException:
+                    self._adopt(job)
+                    raise
                 if outcome.kind is not OutcomeKind.RETRY:
                     break
                 self._count_failed_attempt(stats, transaction)
@@ -339,45 +447,76 @@ class LineEngine:
             # Back to IDLE, wherever the line failed: the next line may serve again.
             machine.connection_lost(error)
             job.finish(None, error)
-            raise
+            return
         except BaseException:
-            # Cancelled with the master: the caller hears the line is gone.
-            job.finish(None, ConnectionLost("the master is closed"))
+            if self._adopted is not job:
+                # Gone before the request went out: nothing is on the wire. An earlier
+                # attempt may still be answered late: keep the guard.
+                transaction.abandoned = True
+                if transaction.failures:
+                    self._quiet_until = link.clock() + self.late_reply_guard
             raise
         self._settle(job, outcome, stats)
+
+    def _adopt(self, job: _Job) -> None:
+        """The caller is gone mid-attempt: the line task finishes the attempt."""
+        job.transaction.abandoned = True
+        self._adopted = job
+        self._wake.set()
+
+    async def _finish_adopted(self, job: _Job) -> None:
+        stats = self.unit_stats(job.transaction.unit)
+        try:
+            outcome = await self._wait_for_outcome(stats)
+            # Abandoned: the machine retries nothing, so this is the end.
+            if outcome.kind is OutcomeKind.RETRY:  # pragma: no cover - defensive
+                self._count_failed_attempt(stats, job.transaction)
+            else:
+                self._settle(job, outcome, stats)
+        except ConnectionLost as error:
+            self.machine.connection_lost(error)
+            job.finish(None, error)
+        finally:
+            self._adopted = None
+            self._release()
 
     async def _keep_guard(self) -> None:
         delay = self._quiet_until - self.link.clock()
         if delay > 0:
             await anyio.sleep(delay)
 
-    def _drain(self) -> None:
-        """Drop what arrived before the request goes out: none of it can answer it."""
-        while self.link.receive_nowait() is not None:
-            pass
-
     async def _wait_for_outcome(self, stats: UnitStats) -> Outcome:
         machine = self.machine
-        clock = self.link.clock
+        link = self.link
+        clock = link.clock
+        backend = link.backend
+        assert backend is not None
+        events = self._events
         while True:
+            while events:
+                outcome = self._feed(events.popleft())
+                if outcome.skipped is not None:
+                    stats.skipped_frames += 1
+                if outcome.kind is not OutcomeKind.WAIT:
+                    return outcome
+            if self._link_closed:
+                raise link.connection_lost_error()
             deadline = machine.deadline
             assert deadline is not None
-            event: LinkEvent | None = None
-            with anyio.move_on_after(deadline - clock()):
-                event = await self.link.receive()
-            if event is None:
-                # A reply queued right at the deadline still counts: look before giving up.
-                event = self.link.receive_nowait()
-                if event is None:
-                    outcome = machine.expired(clock())
-                    if outcome.kind is not OutcomeKind.WAIT:
-                        return outcome
-                    continue
-            outcome = self._feed(event)
-            if outcome.skipped is not None:
-                stats.skipped_frames += 1
-            if outcome.kind is not OutcomeKind.WAIT:
-                return outcome
+            now = clock()
+            if now >= deadline:
+                outcome = machine.expired(now)
+                if outcome.kind is not OutcomeKind.WAIT:
+                    return outcome
+                continue
+            if not link.backend_clock:
+                deadline = backend.current_time() + (deadline - now)
+            arrival = self._arrival = backend.create_event()
+            try:
+                with backend.create_cancel_scope(deadline=deadline):
+                    await arrival.wait()
+            finally:
+                self._arrival = None
 
     def _feed(self, event: LinkEvent) -> Outcome:
         if isinstance(event, FrameReceived):

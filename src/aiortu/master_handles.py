@@ -1,6 +1,6 @@
 # ruff: noqa: ASYNC109
 # ``timeout=`` here is the Modbus response timeout, counted from the end of transmission
-# by the line task; a cancel scope around the call cannot express that.
+# by the master; a cancel scope around the call cannot express that.
 """Handles on a :class:`~aiortu.master.Master`: one unit, or every unit at once (broadcast).
 
 :class:`UnitHandle` (``master.slave(17)``) has the master's methods without the unit, and

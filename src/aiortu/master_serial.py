@@ -1,6 +1,6 @@
 # ruff: noqa: ASYNC109
 # ``timeout=`` here is the Modbus response timeout, counted from the end of transmission
-# by the line task; a cancel scope around the call cannot express that.
+# by the master; a cancel scope around the call cannot express that.
 """The master's file record, serial-line and device identification functions.
 
 :class:`SerialLineFunctions` is a base class of :class:`~aiortu.master.Master`; it holds

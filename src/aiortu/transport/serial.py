@@ -252,8 +252,11 @@ class SerialStream(ByteStream):
         if max_bytes < 1:
             raise ValueError("max_bytes must be at least 1")
         with self._receive_guard:
-            await anyio.lowlevel.checkpoint()
             protocol = self._protocol
+            if protocol.buffer or protocol.lost or self._closed:
+                # Nothing to wait for: still a checkpoint, so that a reader of a flood
+                # lets other tasks run. When it waits, the wait is the checkpoint.
+                await anyio.lowlevel.checkpoint()
             while True:
                 if self._closed:
                     raise anyio.ClosedResourceError
@@ -267,12 +270,18 @@ class SerialStream(ByteStream):
     async def send(self, item: bytes) -> None:
         """Write all of *item* and wait until the transport has handed it to the driver.
 
+        Yields to the event loop only while the driver's buffer is full (the bytes are
+        then waiting in the transport); a write the driver takes at once returns without
+        a yield.
+
         If the caller is cancelled while waiting, the bytes still go out: they are already
         queued. Raises :class:`anyio.BrokenResourceError` if the port has failed and
         :class:`anyio.ClosedResourceError` after :meth:`aclose` or :meth:`send_eof`.
         """
         with self._send_guard:
-            await anyio.lowlevel.checkpoint()
+            # A cancellation point, but no yield unless the driver's buffer is full: a
+            # request goes out in the same loop iteration that sends it.
+            await anyio.lowlevel.checkpoint_if_cancelled()
             if self._closed or self._eof_sent:
                 raise anyio.ClosedResourceError
             if self._protocol.lost or self._transport.is_closing():
