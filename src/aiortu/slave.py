@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import inspect
 import logging
+from collections import deque
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from contextlib import asynccontextmanager
 from types import TracebackType
@@ -41,24 +42,27 @@ from typing import Any, Self
 import anyio
 import anyio.abc
 
-from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode
+from aiortu.core.codes import BROADCAST_UNIT, EXCEPTION_BIT, ExceptionCode
 from aiortu.core.data_model import AsyncDataStore, DataStore, Table
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
 from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
-from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine
+from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine, SlaveState
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue, MalformedPDU
-from aiortu.link import Link
+from aiortu.link import Link, LinkEvent
 from aiortu.slave_handlers import (
     BUILTIN_HANDLERS,
+    FAST_PATHS,
     Answer,
+    FastPath,
     Handler,
     HandlerResult,
     Reply,
     RequestContext,
 )
 from aiortu.slave_routes import RangeHandler, RoutedStore
+from aiortu.store import MemoryStore
 from aiortu.transport import open_stream
 
 __all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback", "serve")
@@ -141,9 +145,16 @@ class Slave:
         self._after: list[AfterHook] = []
         self._contexts: dict[int, RequestContext] = {}
         self._broadcast_contexts: list[RequestContext] = []
+        self._fast_stores: dict[int, MemoryStore] = {}
+        self._fast_paths: dict[int, FastPath] = {}
         self._build_contexts()
+        self._build_fast_paths()
         self._task_group: anyio.abc.TaskGroup | None = None
         self._stopped = anyio.Event()
+        self._served = frozenset((BROADCAST_UNIT, *self.units))
+        self._queue: deque[LinkEvent] = deque()
+        self._wake: anyio.Event | None = None
+        self._link_closed = False
 
     # -- handlers --------------------------------------------------------------------
 
@@ -161,6 +172,7 @@ class Slave:
             self._handlers.pop(function_code, None)
         else:
             self._handlers[function_code] = handler
+        self._build_fast_paths()
 
     def handler(self, function_code: int) -> Callable[[Handler], Handler]:
         """Decorator form of :meth:`set_handler`."""
@@ -217,6 +229,10 @@ class Slave:
         self._contexts = {
             unit: RequestContext(unit, store, machine=machine) for unit, store in stores.items()
         }
+        # The built-in MemoryStore (not a subclass, not routed) takes the fast paths.
+        self._fast_stores = {
+            unit: store for unit, store in stores.items() if type(store) is MemoryStore
+        }
         # A broadcast runs once per store: units that share one store run it once.
         seen: set[int] = set()
         self._broadcast_contexts = []
@@ -226,6 +242,16 @@ class Slave:
                 self._broadcast_contexts.append(
                     RequestContext(unit, store, broadcast=True, machine=machine)
                 )
+
+    def _build_fast_paths(self) -> None:
+        # A fast path stands in for a built-in handler only while that handler serves
+        # its function code (hooks are checked per request).
+        handlers = self._handlers
+        self._fast_paths = {
+            code: fast
+            for code, (handler, fast) in FAST_PATHS.items()
+            if handlers.get(code) is handler
+        }
 
     @property
     def function_codes(self) -> frozenset[int]:
@@ -292,45 +318,133 @@ class Slave:
     # -- the serve loop --------------------------------------------------------------
 
     async def _serve_frames(self) -> None:
+        """Take the link's events and answer the requests, until the link closes.
+
+        The link hands its events to :meth:`_on_link_event` in its reader task. Discards
+        and frames for other units are dealt with there at once when nothing is pending
+        (they only count), so they never wake this task; a frame for one of our units is
+        queued, and this task answers it. It drains the queue before it waits again, so a
+        flood of events costs one wake-up per batch, not one per event.
+        """
         link = self.link
-        machine = self.machine
-        while True:
-            event = await link.receive()
-            trace = self.trace
-            if not isinstance(event, FrameReceived):
-                if trace is not None:
-                    trace("discarded", event.data)
-                if event.reason is DiscardReason.CRC:
-                    machine.frame_corrupt()
-                elif event.reason is DiscardReason.OVERFLOW:
-                    machine.character_overrun()
-                continue
-            frame = event.frame
-            if trace is not None:
-                trace("received", frame)
-            unit = frame[0]
-            if not machine.frame_received(unit, frame[1]):
-                continue
-            if machine.listen_only and frame[1:4] != _RESTART_COMMUNICATIONS:
-                machine.ignore()
-                continue
-            reply = await self._answer(unit, frame[1:-2])
-            if reply is not None and machine.should_reply:
-                if type(reply) is bytes:
-                    out = encode_frame(unit, reply)
+        backend = link.backend
+        queue = self._queue
+        queue.clear()
+        self._link_closed = False
+        try:
+            while (early := link.receive_nowait()) is not None:  # queued before we listened
+                queue.append(early)
+        except ConnectionLost:
+            self._link_closed = True
+        link.listen(self._on_link_event)
+        try:
+            while True:
+                if not queue:
+                    if self._link_closed:
+                        raise link.connection_lost_error()
+                    wake = self._wake = anyio.Event() if backend is None else backend.create_event()
+                    await wake.wait()
+                    continue
+                event = queue.popleft()
+                if type(event) is FrameReceived:
+                    if self._take_frame(event):
+                        await self._serve_request(event.frame)
                 else:
-                    assert isinstance(reply, Reply)
-                    assert reply.response is not None
-                    if reply.delay > 0:
-                        await anyio.sleep(reply.delay)
-                    answer_unit = unit if reply.unit is None else reply.unit
-                    out = encode_frame(answer_unit, reply.response.encode())
-                await link.send(out)
-                if trace is not None:
-                    trace("sent", out)
-                machine.reply_sent()
+                    self._take_discard(event)
+        finally:
+            self._wake = None
+            link.listen(None)
+
+    def _on_link_event(self, event: LinkEvent | None) -> None:
+        """The link's listener (in its reader task): count at once, or queue for the serve loop."""
+        queue = self._queue
+        if event is None:
+            self._link_closed = True
+        elif (
+            not queue
+            and self.machine.state is SlaveState.IDLE
+            and (type(event) is not FrameReceived or event.frame[0] not in self._served)
+        ):
+            # Nothing pending, no request under way, and nothing to answer: it only
+            # counts, so it is done here.
+            if type(event) is FrameReceived:
+                self._take_frame(event)
             else:
-                machine.no_reply()
+                self._take_discard(event)
+            return
+        else:
+            if len(queue) >= self.link.queue_size:
+                queue.popleft()  # a reader that falls behind never stalls the line
+                self.link.events_dropped += 1
+            queue.append(event)
+        wake = self._wake
+        if wake is not None:
+            self._wake = None
+            wake.set()
+
+    def _take_discard(self, event: LinkEvent) -> None:
+        trace = self.trace
+        if trace is not None:
+            trace("discarded", event.data)  # type: ignore[union-attr]
+        reason = event.reason  # type: ignore[union-attr]
+        if reason is DiscardReason.CRC:
+            self.machine.frame_corrupt()
+        elif reason is DiscardReason.OVERFLOW:
+            self.machine.character_overrun()
+
+    def _take_frame(self, event: FrameReceived) -> bool:
+        """Count a frame; tell whether it is a request for this slave to serve."""
+        frame = event.frame
+        trace = self.trace
+        if trace is not None:
+            trace("received", frame)
+        machine = self.machine
+        if not machine.frame_received(frame[0], frame[1]):
+            return False
+        if machine.listen_only and frame[1:4] != _RESTART_COMMUNICATIONS:
+            machine.ignore()
+            return False
+        return True
+
+    async def _serve_request(self, frame: bytes) -> None:
+        """Answer a request for one of our units (counted by the machine, now CHECKING)."""
+        machine = self.machine
+        unit = frame[0]
+        pdu = frame[1:-2]
+        reply: bytes | Reply | None = None
+        fast = self._fast_paths.get(frame[1])
+        store = self._fast_stores.get(unit) if fast is not None else None
+        if store is not None and not (self._before or self._after):
+            assert fast is not None
+            try:
+                reply = fast(store, pdu)
+            except ExceptionResponse as error:
+                machine.check_request(supported=True)
+                machine.processing_failed(error.code)
+                reply = _exception_pdu(frame[1], error.code)
+            else:
+                if reply is not None:
+                    machine.check_request(supported=True)
+                    machine.processed()
+        if reply is None:
+            reply = await self._answer(unit, pdu)
+        if reply is not None and machine.should_reply:
+            if type(reply) is bytes:
+                out = encode_frame(unit, reply)
+            else:
+                assert isinstance(reply, Reply)
+                assert reply.response is not None
+                if reply.delay > 0:
+                    await anyio.sleep(reply.delay)
+                answer_unit = unit if reply.unit is None else reply.unit
+                out = encode_frame(answer_unit, reply.response.encode())
+            await self.link.send(out)
+            trace = self.trace
+            if trace is not None:
+                trace("sent", out)
+            machine.reply_sent()
+        else:
+            machine.no_reply()
 
     async def _answer(self, unit: int, pdu: bytes) -> bytes | Reply | None:
         """Check and execute one request; return the reply PDU (or a Reply), or None."""

@@ -485,15 +485,76 @@ def test_garbage_never_makes_a_frame_and_good_frames_survive(
 
 def test_garbage_right_before_a_frame_then_silence() -> None:
     line = LineSettings(19200)
-    frame = H("11 03 06 AE 41 56 52 43 40 49 AD")
+    reply = H("11 03 06 AE 41 56 52 43 40 49 AD")
+    request = encode_frame(OWN_UNIT, H("03 00 00 00 01"))
     for role in ROLES:
-        receiver = Receiver(line, role=role, units=(OWN_UNIT,))
-        out = receiver.feed(b"\x99\x17\x42" + frame, 1.0)
-        out += receiver.expire(2.0)
-        assert [r.frame for r in received(out)] == [frame]
-        assert [(d.data, d.reason) for d in discarded(out)] == [
-            (b"\x99\x17\x42", DiscardReason.CRC)
-        ]
+        for frame in (reply, request):
+            receiver = Receiver(line, role=role, units=(OWN_UNIT,))
+            out = receiver.feed(b"\x99\x17\x42" + frame, 1.0)
+            out += receiver.expire(2.0)
+            if role is Role.MASTER and frame is request:
+                continue  # not a reply: a master has no use for it
+            if role is Role.SLAVE and frame is reply:
+                # Inside garbage a slave looks for its own requests only: another unit's
+                # frame glued to garbage goes with it.
+                assert not received(out)
+                assert [(d.data, d.reason) for d in discarded(out)] == [
+                    (b"\x99\x17\x42" + frame, DiscardReason.CRC)
+                ]
+                continue
+            assert [r.frame for r in received(out)] == [frame]
+            assert [(d.data, d.reason) for d in discarded(out)] == [
+                (b"\x99\x17\x42", DiscardReason.CRC)
+            ]
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_request_inside_a_continuous_flood_of_garbage(seed: int) -> None:
+    """A request to the slave's unit glued to random garbage on both sides, no silence.
+
+    The flood overflows the buffer again and again; the request, at a random offset and
+    cut by random chunk boundaries, must still be received, and nothing else: a frame
+    received is the request, never a piece of garbage with a good CRC at a length the
+    receiver predicted (those are left out of the draw, as they are real frames).
+    """
+    rng = random.Random(seed)
+    line = LineSettings(19200, parity="N", stopbits=2)
+    request = encode_frame(
+        1, ReadHoldingRegistersRequest(rng.randrange(0x10000 - 125), 10).encode()
+    )
+    for _ in range(100):
+        before = rng.randbytes(rng.randrange(4000, 12000))
+        after = rng.randbytes(rng.randrange(300, 3000))
+        stream = before + request + after
+        receiver = Receiver(line, role=Role.SLAVE, units={1})
+        # Any offset where a request to unit 1 or a broadcast with a good CRC starts, other
+        # than the one sent, would be a true frame; the draw avoids them.
+        probe = Receiver(line, role=Role.SLAVE, units={1})
+        probe.feed(before, 1.0)
+        probe.feed(after, 2.0)
+        if not any(isinstance(o, FrameReceived) for o in probe.expire(3.0)):
+            break
+    else:
+        pytest.fail("no draw without a true frame in the garbage")
+    wire = Wire(line.char_time)
+    wire.add(stream)
+    cuts: set[int] = set()
+    position = 0
+    while position < len(stream):
+        position += rng.choice((1, 2, 7, rng.randrange(1, 600)))
+        cuts.add(position)
+    outputs: list[ReceiverOutput] = []
+    for data, when in wire.chunks(cut for cut in cuts if cut < len(stream)):
+        outputs += receiver.feed(data, when)
+    # Found while the flood goes on, before any silence ends it.
+    assert [r.frame for r in received(outputs)] == [request]
+    (got,) = received(outputs)
+    assert got.start == pytest.approx(wire.times[len(before)], abs=1e-9)
+    assert got.end == pytest.approx(wire.times[len(before) + len(request) - 1], abs=1e-9)
+    outputs += receiver.expire(wire.times[-1] + 1.0)
+    assert [r.frame for r in received(outputs)] == [request]
+    assert b"".join(o.frame if isinstance(o, FrameReceived) else o.data for o in outputs) == stream
+    assert {d.reason for d in discarded(outputs)} <= {DiscardReason.OVERFLOW, DiscardReason.NOISE}
 
 
 def test_device_identification_reply_is_found_after_garbage() -> None:

@@ -3,6 +3,7 @@ records (14, 15) and device identification (2B/0E) on the slave, byte for byte."
 
 from __future__ import annotations
 
+import anyio
 import pytest
 
 from aiortu.core.comm_events import receive_event, send_event
@@ -34,6 +35,9 @@ async def test_08_counters_after_scripted_traffic() -> None:
         await master.request(UNIT, "0D")  # 3 exception 01
         await master.send_request(0, "06 00 01 00 05")  # 4 broadcast: no response
         await master.send(encode_frame(UNIT, bytes.fromhex("03 00 6B 00 03"))[:-1] + b"\x00")
+        # Silence after the bad frame: glued to it, another unit's request would be part
+        # of the garbage (a slave searches garbage for its own requests only) and not count.
+        await anyio.sleep(0.05)
         await master.send_request(99, "03 00 00 00 01")  # 5 another unit's request
         await master.assert_silent_then_alive()  # 6 (07)
         slave.machine.diagnostic_register = 0x1234

@@ -23,9 +23,15 @@ Two things go beyond the timer-driven spec, as DESIGN.md explains:
   a slave expects requests for its own units and either layout for other units, since on
   a multi-drop bus it also hears other slaves' replies (a reply and a request with the
   same function code have different lengths, and the CRC tells which one it is).
-* It resynchronises. A buffer that fails its CRC is searched for a frame that starts
-  later in it (garbage right before a good frame), and a frame whose CRC fails is never
-  accepted.
+* It resynchronises. A buffer that fails its CRC, or outgrows the longest frame, is
+  searched for a frame that starts later in it (garbage right before a good frame), and a
+  frame whose CRC fails is never accepted. The search is cheap, as it runs at every
+  overflow of a continuous flood of noise: a precompiled pattern finds the offsets that
+  hold a possible unit address followed by a function code with a known layout, the
+  predicted length is checked for plausibility, and only then the CRC; after an overflow
+  the bytes kept are not searched again, except the offsets that still needed more bytes
+  (see :meth:`Receiver._salvage`). A slave searches garbage for its own requests only
+  (see :attr:`Role.SLAVE`).
 
 Timing comes in as arguments: :meth:`Receiver.feed` takes a chunk and the time it
 arrived, :meth:`Receiver.expire` the current time, and :meth:`Receiver.next_deadline`
@@ -43,11 +49,12 @@ t3.5 when that is longer).
 from __future__ import annotations
 
 import enum
-from collections.abc import Callable, Iterable
+import re
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Final
 
-from aiortu.core.codes import BROADCAST_UNIT
+from aiortu.core.codes import BROADCAST_UNIT, MEI_READ_DEVICE_IDENTIFICATION
 from aiortu.core.crc import crc16
 from aiortu.core.frame import (
     CANNOT_KNOW,
@@ -84,6 +91,10 @@ may split one frame into two deliveries; frames of known length complete before 
 class ReceiverState(enum.Enum):
     """The states of the RTU receiver, named after the spec."""
 
+    # Members are singletons: hashing by identity (in C) makes the transition table's
+    # lookups about twice as fast as Enum's hash of the member name.
+    __hash__ = object.__hash__
+
     INIT = "INIT"
     IDLE = "IDLE"
     START = "START"
@@ -93,6 +104,10 @@ class ReceiverState(enum.Enum):
 
 class ReceiverEvent(enum.Enum):
     """What can happen to the receiver."""
+
+    # Members are singletons: hashing by identity (in C) makes the transition table's
+    # lookups about twice as fast as Enum's hash of the member name.
+    __hash__ = object.__hash__
 
     CHARS = "chars"
     """Characters arrived within the allowed gap of the previous ones."""
@@ -115,7 +130,16 @@ class Role(enum.Enum):
     MASTER = "master"
     """Replies only."""
     SLAVE = "slave"
-    """Requests to its own units and broadcasts; requests or replies of other units."""
+    """Requests to its own units and broadcasts; requests or replies of other units.
+
+    Inside garbage (bytes that did not make a frame, searched after a CRC failure or an
+    overflow) a slave looks only for requests to its own units and broadcasts: frames of
+    other units found there would help nobody, and leaving them out makes the search
+    cheap. Frames of other units framed normally (after silence, or back to back with
+    other frames) are still received; one glued to garbage is discarded with it, so a
+    slave's bus message count (diagnostics 08/0B) does not count it, and its bytes count
+    towards the communication error or overrun counters instead.
+    """
     MONITOR = "monitor"
     """Requests or replies of any unit (a passive sniffer)."""
 
@@ -247,6 +271,9 @@ class Receiver:
         self._strict = self.timing is TimingMode.STRICT
         self.state = ReceiverState.IDLE if now is None else ReceiverState.INIT
         self._buffer = bytearray()
+        self._starts = _start_pattern(role, self.units)
+        self._scan_from = 0
+        self._pending: list[int] = []
         self._candidates: list[int] = []
         self._predicted = False
         self._first: float = 0.0
@@ -310,6 +337,7 @@ class Receiver:
     def reset(self, now: float) -> None:
         """Forget any partial frame and wait for silence from *now* (after reopening a port)."""
         self._buffer.clear()
+        self._forget_search()
         self._last = now
         self.state = ReceiverState.INIT
 
@@ -347,6 +375,7 @@ class Receiver:
     def _gather_noise(self, data: bytes, position: int) -> int:
         if not self._buffer:
             self._first = self._arrival(position)
+            self._forget_search()
         room = MAX_FRAME_LENGTH - len(self._buffer)
         take = len(data) - position
         if take > room:
@@ -372,6 +401,7 @@ class Receiver:
         self._first = self._arrival(position)
         self._candidates = []
         self._predicted = False
+        self._forget_search()
         return position + 1
 
     def _store(self, data: bytes, position: int) -> int:
@@ -487,85 +517,161 @@ class Receiver:
 
         With *keep_tail* (overflow), bytes at the end that could still begin a frame stay
         in the buffer; otherwise the buffer is emptied.
+
+        The search looks at the offsets where the start pattern matches (a unit address
+        the role expects, then a function code with a known layout; for a slave, its own
+        units and broadcast only), predicts the length there, and checks the CRC only when
+        the predicted frame is all in the buffer. Whether a frame starts at an offset
+        depends only on the bytes from there, so an offset judged once stays judged: after
+        an overflow the search remembers how far it got in the bytes it keeps
+        (``_scan_from``) and which offsets needed more bytes (``_pending``), and the next
+        search looks only at those and at the new bytes. A continuous flood of noise then
+        costs a pattern scan per byte, not a prediction and a copy per offset per overflow.
         """
-        buffer = bytes(self._buffer)
+        buffer = self._buffer
         if end is None:
             end = self._last_arrival()
-        garbage_from = 0
-        offset = 0
         length = len(buffer)
-        keep_from = length
-        while offset <= length - MIN_FRAME_LENGTH:
-            found = self._frame_at(buffer, offset)
+        last_start = length - MIN_FRAME_LENGTH
+        garbage_from = 0
+        resume = 0
+        pending: list[int] = []
+        frame_at = self._frame_at
+        for offset in self._search_offsets(buffer, last_start):
+            if offset < resume:
+                continue  # inside a frame found before
+            found = frame_at(buffer, offset)
             if found > 0:
                 if offset > garbage_from:
                     self._discard(
-                        buffer[garbage_from:offset],
+                        bytes(buffer[garbage_from:offset]),
                         reason,
                         self._estimate(offset - 1, end),
                         self._estimate(garbage_from, end),
                     )
                 self._out.append(
                     FrameReceived(
-                        buffer[offset : offset + found],
+                        bytes(buffer[offset : offset + found]),
                         self._estimate(offset, end),
                         self._estimate(offset + found - 1, end),
                     )
                 )
-                offset += found
-                garbage_from = offset
-                continue
-            if found == NEED_MORE and keep_tail and keep_from == length:
-                keep_from = offset
-            offset += 1
+                resume = garbage_from = offset + found
+            elif found == NEED_MORE:
+                pending.append(offset)
         if keep_tail:
-            # The last bytes are too few to judge and may begin a frame: keep them too.
+            # The bytes from the first offset that needs more bytes stay; so do the last
+            # bytes, too few to judge, which may begin a frame.
+            keep_from = pending[0] if pending else length
             keep_from = min(keep_from, length - (MIN_FRAME_LENGTH - 1))
             keep_from = max(keep_from, garbage_from, length - (MAX_FRAME_LENGTH - 1))
             if keep_from > garbage_from:
                 self._discard(
-                    buffer[garbage_from:keep_from],
+                    bytes(buffer[garbage_from:keep_from]),
                     reason,
                     self._estimate(keep_from - 1, end),
                     self._estimate(garbage_from, end),
                 )
-            del self._buffer[:keep_from]
+            del buffer[:keep_from]
             # Later salvages time the kept bytes from the first of them.
             self._first = self._estimate(keep_from, end)
+            self._pending = [offset - keep_from for offset in pending if offset >= keep_from]
+            self._scan_from = max(0, max(resume, last_start + 1) - keep_from)
         else:
             if length > garbage_from:
-                self._discard(buffer[garbage_from:], reason, end, self._estimate(garbage_from, end))
-            self._buffer.clear()
+                self._discard(
+                    bytes(buffer[garbage_from:]), reason, end, self._estimate(garbage_from, end)
+                )
+            buffer.clear()
+            self._forget_search()
+
+    def _forget_search(self) -> None:
+        """The buffer starts afresh: no offset of it has been searched yet."""
+        self._scan_from = 0
+        if self._pending:
+            self._pending = []
+
+    def _search_offsets(self, buffer: bytearray, last_start: int) -> Iterator[int]:
+        """The offsets up to *last_start* where a frame may start, in order, not yet judged."""
+        yield from self._pending
+        # The pattern looks two bytes ahead: offsets up to last_start need last_start + 2.
+        for match in self._starts.finditer(buffer, self._scan_from, last_start + 2):
+            yield match.start()
 
     def _estimate(self, index: int, end: float) -> float:
         """When byte *index* of the buffer arrived, assuming back-to-back characters."""
         return min(end, self._first + index * self.char_time)
 
-    def _frame_at(self, buffer: bytes, offset: int) -> int:
-        """The length of a valid frame starting at *offset*, or NEED_MORE / CANNOT_KNOW."""
-        # The whole rest, not a fixed head: a 2B/0E reply's length needs every object's
-        # length byte, however far into the frame.
-        head = buffer[offset : offset + MAX_FRAME_LENGTH]
-        unit = head[0]
-        if unit > 247:
-            return CANNOT_KNOW
-        if self.role is Role.MASTER:
-            guesses: tuple[int, ...] = (expected_response_length(head),)
-        elif self.role is Role.SLAVE and (unit in self.units or unit == BROADCAST_UNIT):
-            guesses = (expected_request_length(head),)
+    def _frame_at(self, buffer: bytearray, offset: int) -> int:
+        """The length of a valid frame starting at *offset*, or NEED_MORE / CANNOT_KNOW.
+
+        Only called where the start pattern matched: the unit address and the function
+        code have been checked.
+        """
+        function_code = buffer[offset + 1]
+        role = self.role
+        if role is Role.SLAVE:
+            head = buffer[offset : offset + _HEAD]
+            guesses: tuple[int, ...] = (expected_request_length(head),)
         else:
-            guesses = (expected_request_length(head), expected_response_length(head))
+            # A 2B/0E reply's length needs every object's length byte, however far into
+            # the frame; every other layout is told by the first few bytes.
+            size = MAX_FRAME_LENGTH if function_code == _MEI else _HEAD
+            head = buffer[offset : offset + size]
+            if role is Role.MASTER:
+                guesses = (expected_response_length(head),)
+            else:
+                guesses = (expected_request_length(head), expected_response_length(head))
         need_more = False
+        available = len(buffer) - offset
         for guess in guesses:
             if guess == NEED_MORE:
                 need_more = True
             elif guess >= MIN_FRAME_LENGTH:
-                if offset + guess <= len(buffer):
-                    if crc16(buffer[offset : offset + guess]) == 0:
-                        return guess
-                else:
+                if guess > available:
                     need_more = True
+                elif crc16(buffer[offset : offset + guess]) == 0:
+                    return guess
         return NEED_MORE if need_more else CANNOT_KNOW
+
+
+_HEAD: Final = 11
+"""Bytes that tell the length of every frame layout but the 2B/0E reply (the longest: the
+byte count of a 17 request at offset 10)."""
+
+_MEI: Final = 0x2B
+
+_LAST_UNIT: Final = 247
+
+
+def _known_codes(predict: Callable[[bytes], int]) -> frozenset[int]:
+    """The function codes whose frames *predict* can tell the length of."""
+    return frozenset(
+        code
+        for code in range(256)
+        if predict(bytes((1, code)) + bytes(_HEAD - 2)) != CANNOT_KNOW
+        or predict(bytes((1, code, MEI_READ_DEVICE_IDENTIFICATION)) + bytes(_HEAD - 3))
+        != CANNOT_KNOW
+    )
+
+
+_REQUEST_CODES: Final = _known_codes(expected_request_length)
+_RESPONSE_CODES: Final = _known_codes(expected_response_length)
+
+
+def _byte_class(values: Iterable[int]) -> bytes:
+    return b"".join(b"\\x%02x" % value for value in sorted(values))
+
+
+def _start_pattern(role: Role, units: frozenset[int]) -> re.Pattern[bytes]:
+    """Matches (without consuming) where a frame the role looks for in garbage may start."""
+    if role is Role.SLAVE:
+        addresses: Iterable[int] = {BROADCAST_UNIT, *(unit for unit in units if 0 <= unit < 256)}
+        codes = _REQUEST_CODES
+    else:
+        addresses = range(_LAST_UNIT + 1)
+        codes = _RESPONSE_CODES if role is Role.MASTER else _REQUEST_CODES | _RESPONSE_CODES
+    return re.compile(b"(?=[" + _byte_class(addresses) + b"][" + _byte_class(codes) + b"])")
 
 
 _MID_FRAME = frozenset((ReceiverState.START, ReceiverState.DATABUF))

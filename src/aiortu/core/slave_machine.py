@@ -74,6 +74,10 @@ _NOT_COUNTED_AS_EVENTS = frozenset(
 class SlaveState(enum.Enum):
     """The states of the slave, named after the spec."""
 
+    # Members are singletons: hashing by identity (in C) makes the transition table's
+    # lookups about twice as fast as Enum's hash of the member name.
+    __hash__ = object.__hash__
+
     IDLE = "IDLE"
     CHECKING = "CHECKING"
     PROCESSING = "PROCESSING"
@@ -83,6 +87,10 @@ class SlaveState(enum.Enum):
 
 class SlaveEvent(enum.Enum):
     """What can happen to the slave."""
+
+    # Members are singletons: hashing by identity (in C) makes the transition table's
+    # lookups about twice as fast as Enum's hash of the member name.
+    __hash__ = object.__hash__
 
     FRAME_RECEIVED = "frame received"
     """A frame with a good CRC arrived."""

@@ -1,0 +1,82 @@
+"""The fast paths for the built-in MemoryStore answer exactly as the handlers do."""
+
+from __future__ import annotations
+
+import random
+
+from aiortu.core.codes import FunctionCode
+from aiortu.slave_handlers import FAST_PATHS
+from aiortu.store import Block, MemoryStore, Table
+
+from .helpers import UNIT, slave_line
+
+
+def _store() -> MemoryStore:
+    return MemoryStore(
+        coils=[Block(0, 40, [1, 0, 1, 1, 0, 0, 1] * 5), Block(100, 3000)],
+        discrete_inputs=Block(10, 20, [1] * 20),
+        holding_registers=[Block(0, 100, range(100)), Block(200, 10)],
+        input_registers=Table.HOLDING_REGISTERS,
+        read_only={Table.HOLDING_REGISTERS: [range(50, 60)]},
+    )
+
+
+def _requests(rng: random.Random) -> list[bytes]:
+    """Well-formed requests, and ones wrong in each way a fast path checks."""
+    found = []
+    for code in FAST_PATHS:
+        for _ in range(40):
+            address = rng.choice((0, 1, 5, 45, 95, 99, 150, 200, 205, 0xFFF0, 0xFFFF))
+            count = rng.choice((0, 1, 3, 10, 100, 123, 124, 125, 126, 2000, 2001, 0x7FFF))
+            if code in (FunctionCode.WRITE_SINGLE_REGISTER,):
+                pdu = bytes((code,)) + address.to_bytes(2, "big") + rng.randbytes(2)
+            elif code == FunctionCode.WRITE_MULTIPLE_REGISTERS:
+                values = rng.randbytes(2 * min(count, 125))
+                byte_count = rng.choice((len(values), len(values) + 2, (len(values) - 2) % 256))
+                pdu = (
+                    bytes((code,))
+                    + address.to_bytes(2, "big")
+                    + count.to_bytes(2, "big")
+                    + bytes((byte_count % 256,))
+                    + values
+                )
+            else:
+                pdu = bytes((code,)) + address.to_bytes(2, "big") + count.to_bytes(2, "big")
+            cut = rng.random()
+            if cut < 0.05:
+                pdu = pdu[:-1]
+            elif cut < 0.1:
+                pdu += b"\x00"
+            found.append(pdu[:253])
+    rng.shuffle(found)
+    return found
+
+
+async def test_fast_paths_answer_as_the_handlers_do() -> None:
+    fast_store = _store()
+    slow_store = _store()
+    # A store value the application put out of range: the handler answers 04.
+    fast_store.blocks(Table.HOLDING_REGISTERS)[1].values[3] = 0x10000
+    slow_store.blocks(Table.HOLDING_REGISTERS)[1].values[3] = 0x10000
+    changes: dict[str, list[object]] = {"fast": [], "slow": []}
+    fast_store.observe(changes["fast"].append)
+    slow_store.observe(changes["slow"].append)
+    requests = _requests(random.Random(20261123))
+    requests.append(bytes.fromhex("03 00 C8 00 05"))  # reads the bad value
+    async with (
+        slave_line({UNIT: fast_store}) as (fast, fast_slave),
+        slave_line({UNIT: slow_store}) as (slow, slow_slave),
+    ):
+        slow_slave.before_request(lambda request, context: None)  # no fast path with a hook
+        assert fast_slave._fast_paths
+        assert fast_slave._fast_stores
+        for pdu in requests:
+            expected = await slow.request(UNIT, pdu.hex())
+            assert await fast.request(UNIT, pdu.hex()) == expected, pdu.hex(" ")
+        assert fast_slave.counters == slow_slave.counters
+        assert fast_slave.machine.event_log.events() == slow_slave.machine.event_log.events()
+    assert changes["fast"] == changes["slow"]
+    for table in Table:
+        assert [b.values for b in fast_store.blocks(table)] == [
+            b.values for b in slow_store.blocks(table)
+        ]
