@@ -39,6 +39,9 @@ several processes can share one bus, each with its own units:
   aiortu serve /dev/pts/6 --config meters.toml --parity N --stopbits 2
   aiortu serve /dev/pts/7 --config valves.toml --parity N --stopbits 2
   mbpoll -m rtu -a 17 -b 19200 -P none -s 2 -t 4 -r 1 -c 3 -1 /dev/pts/5
+
+exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the port cannot be opened or
+failed; 2 bad arguments or a bad configuration file (one line naming file, key, problem)
 """
 
 

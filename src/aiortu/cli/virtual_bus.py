@@ -30,8 +30,11 @@ examples:
   aiortu virtual-bus --bit-error-rate 1e-4 --gap-rate 0.001 --gap 0.01 --seed 7
       a noisy line, the same noise on every run with the same seed
 
-then, in another shell, for example:
-  mbpoll -m rtu -a 1 -b 19200 -P even -t 4 -r 1 -c 3 -1 /dev/pts/5
+then, in another shell, for example (ptys keep no parity on Linux: use N and 2 stop bits):
+  mbpoll -m rtu -a 1 -b 19200 -P none -s 2 -t 4 -r 1 -c 3 -1 /dev/pts/5
+
+exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the ptys cannot be created;
+2 bad arguments
 """
 
 
