@@ -66,13 +66,14 @@ def draw(rows: list[dict[str, object]]) -> str:
         met = ratio >= target
         colour = "#2e7d32" if met else "#c62828"
         label = html.escape(str(row["label"]))
+        tick = LABEL_WIDTH + target * scale
         parts += [
             f'<text x="10" y="{y + 16}">{label}</text>',
             f'<rect x="{LABEL_WIDTH}" y="{y}" width="{ratio * scale:.1f}" '
             f'height="{BAR_HEIGHT}" fill="{colour}"/>',
             f'<text x="{LABEL_WIDTH + ratio * scale + 6:.1f}" y="{y + 16}">{ratio:.2f}x</text>',
-            f'<line x1="{LABEL_WIDTH + target * scale:.1f}" x2="{LABEL_WIDTH + target * scale:.1f}" '
-            f'y1="{y - 3}" y2="{y + BAR_HEIGHT + 3}" stroke="black" stroke-width="2"/>',
+            f'<line x1="{tick:.1f}" x2="{tick:.1f}" y1="{y - 3}" y2="{y + BAR_HEIGHT + 3}" '
+            'stroke="black" stroke-width="2"/>',
         ]
     bottom = TOP + len(rows) * (BAR_HEIGHT + GAP)
     parts += [
