@@ -129,3 +129,22 @@ async def test_async_with_in_the_test_loop():
                 while len(data) < 13:
                     data += await b.receive()
             assert data == b"over the loop"
+
+
+def test_unpaced_relay_holds_what_a_slow_reader_has_no_room_for(pty_bus):
+    # The direct relay writes to a master until it is full, then waits for room: nothing
+    # is lost or reordered while it fits in the bus's receive buffer.
+    bus = pty_bus(ports=2)
+    payload = bytes(range(251)) * 160  # more than a pty holds
+    with (
+        serial.Serial(bus.paths[0], 19200, timeout=0.5) as a,
+        serial.Serial(bus.paths[1], 19200, timeout=0.5) as b,
+    ):
+        a.write(payload)
+        a.flush()
+        wait_for(lambda: sum(len(entry.data) for entry in bus.trace) == len(payload))
+        assert read_exactly(b, len(payload)) == payload
+        b.write(b"back")
+        assert read_exactly(a, 4) == b"back"
+    assert bus.bus[1].overrun_bytes == 0
+    assert [entry.start == entry.end for entry in bus.trace] == [True] * len(bus.trace)

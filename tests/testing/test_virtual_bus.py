@@ -244,3 +244,28 @@ async def test_send_waits_when_the_wire_backlog_is_full():
     await a.send(bytes(10))
     assert anyio.current_time() - started >= 200 * settings.char_time - 1e-3
     assert len(await receive_exactly(b, 310)) == 310
+
+
+@pytest.mark.parametrize("baudrate", [9600, 115200])
+async def test_last_byte_of_a_frame_arrives_on_time_never_before(baudrate):
+    # Under asyncio the bus wakes its receivers with a timer of its own, so the last byte
+    # of a frame comes at its due time, not up to a millisecond later as the loop's timers
+    # would hand it over; the middle of the frame may come in pieces, never early.
+    settings = LineSettings(baudrate)
+    a, b = virtual_pair(settings=settings)
+    lateness = []
+    for frame in range(20):
+        size = 8 + frame
+        await anyio.sleep(0.002)
+        await a.send(bytes(size))
+        start = a.bus.trace[-1].start
+        received = 0
+        with anyio.fail_after(5):
+            while received < size:
+                received += len(await b.receive())
+                now = anyio.current_time()
+                assert now >= start + received * settings.char_time - 1e-9
+        lateness.append(now - (start + size * settings.char_time))
+    assert min(lateness) >= -1e-9
+    if type(a.bus._timer).__name__ == "_WakeTimer":
+        assert sorted(lateness)[len(lateness) // 2] < 0.0005

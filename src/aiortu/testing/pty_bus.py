@@ -32,6 +32,15 @@ the same settings still fails with parity E or O: pyserial's ``timeout`` setter 
 before the relay has seen the close. Programs that reconfigure an open port are best run
 with parity N on a pty bus; the bus paces by its own *settings* anyway.
 
+Two ways to relay: on an unpaced bus with no adapter model and no faults, under asyncio,
+the relay reads a port's master from an event-loop reader callback, puts the bytes on the
+bus and writes what the bus delivered straight to the other ports' masters, in the same
+callback (a port whose master is full keeps the rest and takes it up again in a writer
+callback, with the bus's bounded receive buffer behind it). Otherwise two tasks per port
+carry the bytes, one reading the master onto the bus, one writing what the bus delivers
+at its paced times back to the master. Both follow the open-port tracking above, and both
+keep the same trace.
+
 The slave devices are put in raw mode when created (no echo, no line editing, no
 translation of bytes), which is how serial libraries set them anyway, and back in it when
 the last program closes them.
@@ -39,9 +48,11 @@ the last program closes them.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import ctypes
 import os
+import select
 import struct
 import termios
 from collections.abc import Callable, Iterator
@@ -115,12 +126,18 @@ class _OpenWatch:
                 if watch < 0:
                     raise OSError(ctypes.get_errno(), "inotify_add_watch failed", path)
                 self._ports[watch] = index
+            # Asking an epoll of its own whether events are queued costs a fraction of a
+            # read that fails: the relay asks before every delivery.
+            self._probe = select.epoll()
+            self._probe.register(fd, select.EPOLLIN)
         except BaseException:
             os.close(fd)
             raise
 
     def poll(self) -> None:
         """Take in every event already queued, calling back when the last program left a port."""
+        if self._fd < 0 or not self._probe.poll(0):
+            return
         while True:
             try:
                 data = os.read(self._fd, 65536)
@@ -154,6 +171,7 @@ class _OpenWatch:
         """Stop watching."""
         if self._fd >= 0:
             anyio.notify_closing(self._fd)
+            self._probe.close()
             os.close(self._fd)
             self._fd = -1
 
@@ -174,13 +192,19 @@ def _set_idle_settings(fd: int, baudrate: int | None) -> None:
 class _Port:
     """One pty: the master the relay uses, the slave it keeps open, and their names."""
 
-    __slots__ = ("link", "master", "path", "slave")
+    __slots__ = ("fd", "link", "master", "path", "slave", "stopped", "unsent", "writing")
 
     def __init__(self, master: FileDescriptorStream, slave: int, path: str) -> None:
         self.master = master
+        self.fd = master.fd
         self.slave = slave
         self.path = path
         self.link: str | None = None
+        # The direct relay's state: bytes taken from the bus but not yet written to the
+        # master, whether a writer callback waits for room, and whether the port is done.
+        self.unsent: memoryview | None = None
+        self.writing = False
+        self.stopped = False
 
 
 class PtyBus:
@@ -226,6 +250,7 @@ class PtyBus:
         self._task_group: anyio.abc.TaskGroup | None = None
         self._watch: _OpenWatch | None = None
         self._entered = False
+        self._loop: asyncio.AbstractEventLoop | None = None
 
     @property
     def paths(self) -> tuple[str, ...]:
@@ -262,6 +287,7 @@ class PtyBus:
         """Drop every byte that waits to be read on *port*, in the relay and in the kernel."""
         endpoint = self.bus[port]
         endpoint._buffer.clear()
+        self._ports[port].unsent = None
         termios.tcflush(self._ports[port].slave, termios.TCIFLUSH)
 
     async def __aenter__(self) -> PtyBus:
@@ -277,6 +303,12 @@ class PtyBus:
             raise
         if self._watch is not None:
             self._task_group.start_soon(self._watch_ports, name="pty bus port watch")
+        loop = self._direct_loop()
+        if loop is not None:
+            self._loop = loop
+            for index, port in enumerate(self._ports):
+                loop.add_reader(port.fd, self._forward, index)
+            return self
         for index in range(len(self._ports)):
             self._task_group.start_soon(self._pump_in, index, name=f"pty bus port {index} in")
             self._task_group.start_soon(self._pump_out, index, name=f"pty bus port {index} out")
@@ -344,6 +376,7 @@ class PtyBus:
         return link
 
     async def _close_ports(self) -> None:
+        self._stop_direct()
         ports, self._ports = self._ports, []
         self.bus.close()
         if self._watch is not None:
@@ -355,6 +388,103 @@ class PtyBus:
                 with contextlib.suppress(OSError):
                     if os.readlink(port.link) == port.path:
                         os.unlink(port.link)
+
+    # --- the direct relay (unpaced, no adapter model, no faults, asyncio) -----------------
+
+    def _direct_loop(self) -> asyncio.AbstractEventLoop | None:
+        """The running asyncio loop if the bytes can go straight through, else None."""
+        bus = self.bus
+        if (
+            bus.settings is not None
+            or bus.injector is not None
+            or bus.chunk_size is not None
+            or bus.latency > 0
+        ):
+            return None
+        try:
+            return asyncio.get_running_loop()
+        except RuntimeError:  # another event loop (trio): the tasks do the relaying
+            return None
+
+    def _stop_direct(self) -> None:
+        """Take the direct relay's callbacks off the loop (before the masters are closed)."""
+        loop, self._loop = self._loop, None
+        if loop is None:
+            return
+        for port in self._ports:
+            port.stopped = True
+            loop.remove_reader(port.fd)
+            if port.writing:
+                port.writing = False
+                loop.remove_writer(port.fd)
+
+    def _forward(self, index: int) -> None:
+        """Reader callback: carry what the program on port *index* wrote to the other ports."""
+        port = self._ports[index]
+        try:
+            data = os.read(port.fd, 65536)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        loop = self._loop
+        assert loop is not None
+        endpoint = self.bus.endpoints[index]
+        if not data or endpoint.closed:
+            # The end of the stream, or the bus is closed: this port sends nothing more.
+            loop.remove_reader(port.fd)
+            return
+        self.bus._transmit_now(endpoint, data, loop.time())
+        # Read the open events before writing: a program that opened its port before these
+        # bytes were sent must get them.
+        self._update_open_ports()
+        for other_index, other in enumerate(self._ports):
+            if other_index != index and not other.writing and not other.stopped:
+                self._drain(other, other_index)
+
+    def _drain(self, port: _Port, index: int) -> None:
+        """Write what the bus delivered to *port* (number *index*) to its master, as it fits."""
+        endpoint = self.bus.endpoints[index]
+        watch = self._watch
+        fd = port.fd
+        while True:
+            view = port.unsent
+            if view is None:
+                data = endpoint._take()
+                if not data:
+                    break
+                if watch is not None and watch.counts[index] == 0:
+                    continue  # nobody has the port open: the bytes are lost, as on a cable
+                view = memoryview(data)
+            try:
+                written = os.write(fd, view)
+            except BlockingIOError:
+                written = 0
+            except OSError:
+                # The master is broken: this port gets nothing more (its bus buffer fills
+                # up and drops its oldest bytes, as for a program that does not read).
+                port.stopped = True
+                port.unsent = None
+                break
+            if written < len(view):
+                port.unsent = view[written:]
+                if not port.writing:
+                    assert self._loop is not None
+                    port.writing = True
+                    self._loop.add_writer(fd, self._resume, index)
+                return
+            port.unsent = None
+        if port.writing:
+            assert self._loop is not None
+            port.writing = False
+            self._loop.remove_writer(fd)
+
+    def _resume(self, index: int) -> None:
+        """Writer callback: the master of port *index* has room again."""
+        self._update_open_ports()
+        self._drain(self._ports[index], index)
+
+    # --- the relay tasks (pacing, adapter model, faults, or an event loop other than asyncio)
 
     async def _pump_in(self, index: int) -> None:
         """Carry what the program on port *index* writes onto the wire."""
