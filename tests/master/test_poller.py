@@ -153,8 +153,10 @@ async def test_a_dead_unit_does_not_stall_the_cycle() -> None:
     typical = sorted(all_alive)[len(all_alive) // 2]
     # The next request after a failed one waits the master's late-reply guard (0.1 s),
     # which falls in the second cycle; from then on the dead unit costs nothing.
-    assert with_dead[1] < 0.1 + 2 * typical + 0.01, (all_alive, with_dead)
-    assert max(with_dead[2:]) < 2 * typical + 0.01, (all_alive, with_dead)
+    # A stall would cost at least the 0.1 s timeout; the margins below stay under it, so
+    # the test tells a stall from the noise of a busy machine.
+    assert with_dead[1] < 0.1 + 2 * typical + 0.05, (all_alive, with_dead)
+    assert max(with_dead[2:]) < 2 * typical + 0.05, (all_alive, with_dead)
 
 
 async def test_an_offline_unit_is_probed_every_offline_probe_interval() -> None:
