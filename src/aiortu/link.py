@@ -1,9 +1,17 @@
 """One serial line: a byte stream pumped through the receiver with a clock.
 
 A :class:`Link` owns a byte stream (a serial port, a TCP connection to a serial device
-server, a virtual line). A task reads it, timestamps every chunk with the link's clock,
-runs the sans-IO :class:`~aiortu.core.receiver.Receiver`, wakes it at its deadlines, and
-queues what it yields: frames, and the bytes it discarded with the reason.
+server, a virtual line). It timestamps every chunk with the link's clock, runs the
+sans-IO :class:`~aiortu.core.receiver.Receiver`, wakes it at its deadlines, and queues
+what it yields: frames, and the bytes it discarded with the reason.
+
+Two ways in. A stream that pushes its bytes (it has ``set_receiver(receiver, on_lost)``,
+as the serial port's :class:`~aiortu.transport.serial.SerialStream` does) hands each chunk
+to the link from the event loop's read callback, and the receiver's silence deadline is
+one event loop timer, armed and cancelled by the link; the reader task then only waits
+for the stream's end, so a chunk costs no task wake-up. Any other byte stream (virtual
+lines, TCP, file descriptors) is read by the reader task, with the deadline as a cancel
+scope around ``receive()``.
 
 :meth:`Link.send` keeps the spec's silence: it first waits until the line has been quiet,
 in both directions, for ``frame_gap`` (t3.5 of the line settings by default; 0 is allowed
@@ -15,7 +23,7 @@ The master and the slave are built on this; users rarely need it directly, excep
 watch a line (``role=Role.MONITOR``).
 
 Events go to a queue that :meth:`Link.receive` reads, or, while a listener is set
-(:meth:`Link.listen`), straight to that listener from the reader task: the master's
+(:meth:`Link.listen`), straight to that listener from the reader: the master's
 line engine listens, so that a reply reaches the waiting transaction with no task hop in
 between. The hot path avoids work that does nothing: the default clock is bound to the
 running event loop's clock when the link opens, and :meth:`Link.send` yields to the loop
@@ -26,10 +34,12 @@ from __future__ import annotations
 
 import contextlib
 import math
+import sys
+import time
 from collections import Counter
 from collections.abc import Callable, Iterable
 from types import TracebackType
-from typing import Self, cast
+from typing import Any, Self, cast
 
 import anyio
 import anyio.abc
@@ -53,7 +63,7 @@ LinkEvent = FrameReceived | FrameDiscarded
 """What a link delivers: a frame whose CRC checks, or bytes discarded with a reason."""
 
 LinkListener = Callable[[LinkEvent | None], None]
-"""Called by the reader task with each event, and with ``None`` once the reader stops."""
+"""Called by the reader with each event, and with ``None`` once the reader stops."""
 
 _STREAM_ERRORS = (
     anyio.EndOfStream,
@@ -64,11 +74,17 @@ _STREAM_ERRORS = (
 
 
 def _loop_clock(token: anyio.lowlevel.EventLoopToken) -> Callable[[], float]:
-    """The running backend's clock, as cheap to read as it gets: the event loop's own
-    ``time`` method where the loop has one that tells the backend's time (asyncio),
-    else the backend's ``current_time``."""
+    """The running backend's clock, as cheap to read as it gets: :func:`time.monotonic`
+    under asyncio's own event loops (which tell that time), else the event loop's own
+    ``time`` method where the loop has one that tells the backend's time, else the
+    backend's ``current_time``."""
     backend_time = token.backend_class.current_time
-    loop_time = getattr(token.native_token, "time", None)
+    native = token.native_token
+    loop_time = getattr(native, "time", None)
+    base_loop = getattr(sys.modules.get("asyncio"), "BaseEventLoop", None)
+    if base_loop is not None and getattr(type(native), "time", None) is base_loop.time:
+        # asyncio's own loops tell time.monotonic(): read it without the method call.
+        return time.monotonic
     if callable(loop_time):
         with contextlib.suppress(Exception):
             if abs(float(loop_time()) - backend_time()) < 0.1:
@@ -104,6 +120,8 @@ class Link:
     ) -> None:
         self.stream = stream
         self.settings = settings if settings is not None else LineSettings()
+        self.char_time = self.settings.char_time
+        """Seconds one character takes on the wire, from :attr:`settings`."""
         self.frame_gap = self.settings.t3_5 if frame_gap is None else frame_gap
         if self.frame_gap < 0 or math.isnan(self.frame_gap):
             raise ValueError(f"frame_gap must be >= 0 seconds, not {frame_gap}")
@@ -137,6 +155,15 @@ class Link:
         self._transmit_end = -math.inf
         self._error: BaseException | None = None
         self._closed = anyio.Event()
+        self._stopped = False
+        self.loop: Any = None
+        """The event loop, where the link reads a stream that pushes its bytes (see
+        :meth:`_push`); ``None`` otherwise. Its futures and :meth:`call_at` timers are the
+        cheapest way to wait for the link there."""
+        self._timer: Any = None
+        self._timer_deadline = -math.inf
+        self._push_lost: anyio.Event | None = None
+        self._push_error: BaseException | None = None
         self.frames_received = 0
         self.frames_sent = 0
         self.discarded: Counter[DiscardReason] = Counter()
@@ -155,7 +182,13 @@ class Link:
         self.receiver.reset(self.clock())
         self._task_group = anyio.create_task_group()
         await self._task_group.__aenter__()
-        self._task_group.start_soon(self._pump, name="aiortu link reader")
+        set_receiver = getattr(self.stream, "set_receiver", None)
+        native = token.native_token
+        if callable(set_receiver) and callable(getattr(native, "call_at", None)):
+            self.loop = native
+            self._task_group.start_soon(self._push, set_receiver, name="aiortu link reader")
+        else:
+            self._task_group.start_soon(self._pump, name="aiortu link reader")
         return self
 
     async def __aexit__(
@@ -199,8 +232,9 @@ class Link:
 
     def listen(self, listener: LinkListener | None) -> None:
         """Hand every event to *listener* from now on, instead of queueing it (``None``
-        queues again). The listener runs in the reader task and must not block; it is
-        called with ``None`` once the reader has stopped (at once if it already has)."""
+        queues again). The listener runs in the reader task, or in the event loop's read
+        callback for a stream that pushes its bytes, and must not block; it is called with
+        ``None`` once the reader has stopped (at once if it already has)."""
         self._listener = listener
         if listener is not None and self._closed.is_set():
             listener(None)
@@ -268,9 +302,91 @@ class Link:
             self._error = error
         finally:
             self._send_events.close()
+            self._stopped = True
             self._closed.set()
             if self._listener is not None:
                 self._listener(None)
+
+    # The push path: a stream that offers ``set_receiver(receiver, on_lost)`` (the serial
+    # port) calls :meth:`_on_chunk` from the event loop's read callback, and the
+    # receiver's silence deadline is one loop timer (:meth:`_arm_timer`). The reader task
+    # only waits for the stream's end, so a chunk costs no task wake-up.
+
+    async def _push(self, set_receiver: Callable[..., None]) -> None:
+        backend = self.backend
+        assert backend is not None
+        lost = self._push_lost = backend.create_event()
+        try:
+            set_receiver(self._on_chunk, lost.set)
+            self._arm_timer()
+            await lost.wait()
+            if self._push_error is not None:
+                raise self._push_error
+            await self.stream.receive()  # raises why the stream ended
+        except _STREAM_ERRORS as error:
+            self._error = error
+        finally:
+            set_receiver(None)
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            self._send_events.close()
+            self._stopped = True
+            self._closed.set()
+            if self._listener is not None:
+                self._listener(None)
+
+    def _on_chunk(self, chunk: bytes) -> None:
+        try:
+            now = self.clock()
+            self._last_received = now
+            # Half duplex: see _pump.
+            self._transmit_end = min(self._transmit_end, now)
+            events = self.receiver.feed(chunk, now)
+            if events:
+                self._deliver(events)
+            self._arm_timer()
+        except BaseException as error:  # a bug: the reader task raises it
+            self._fail_push(error)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        try:
+            events = self.receiver.expire(self.clock())
+            if events:
+                self._deliver(events)
+            self._arm_timer()
+        except BaseException as error:
+            self._fail_push(error)
+
+    def _fail_push(self, error: BaseException) -> None:
+        if self._push_error is None:
+            self._push_error = error
+        if self._push_lost is not None:
+            self._push_lost.set()
+
+    def _arm_timer(self) -> None:
+        """Keep one loop timer at the receiver's next deadline (none without one)."""
+        deadline = self.receiver.next_deadline()
+        timer = self._timer
+        if timer is not None:
+            if deadline == self._timer_deadline:
+                return
+            timer.cancel()
+            self._timer = None
+        if deadline is None:
+            return
+        self._timer_deadline = deadline
+        self._timer = self.call_at(deadline, self._on_timer)
+
+    def call_at(self, when: float, callback: Callable[..., object], *args: object) -> Any:
+        """Have the event loop call ``callback(*args)`` at *when* (the link's clock);
+        return a handle with ``cancel()``. Only where :attr:`loop` is set."""
+        loop = self.loop
+        assert loop is not None
+        if self.backend_clock:
+            return loop.call_at(when, callback, *args)
+        return loop.call_later(max(0.0, when - self.clock()), callback, *args)
 
     def _deliver(self, events: list[LinkEvent]) -> None:
         for event in events:
@@ -306,10 +422,12 @@ class Link:
         else:
             self._sending = True
         try:
-            await self.wait_for_silence(self.frame_gap)
-            if self._error is not None or self._closed.is_set():
-                raise self._connection_lost()
             clock = self.clock
+            last = max(self._last_received, self._transmit_end)
+            if last + self.frame_gap > clock():
+                await self.wait_for_silence(self.frame_gap)
+            if self._error is not None or self._stopped:
+                raise self._connection_lost()
             start = self.last_write_start = clock()
             self.writes_begun += 1
             try:
@@ -320,11 +438,14 @@ class Link:
             self.frames_sent += 1
             # The OS may buffer the write, so it returns early; the wire is busy until
             # the last character has gone, whichever is later.
-            end = max(start + self.settings.wire_time(len(frame)), clock())
+            end = max(start + len(frame) * self.char_time, clock())
             self._transmit_end = end
             return end
         finally:
-            self._pass_turn_to_send()
+            if self._send_waiters:
+                self._pass_turn_to_send()
+            else:
+                self._sending = False
 
     async def _wait_turn_to_send(self) -> None:
         turn = anyio.Event() if self.backend is None else self.backend.create_event()

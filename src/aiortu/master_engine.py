@@ -26,11 +26,10 @@ It also keeps :class:`UnitStats` per unit and their health: a unit is offline af
 except for one probe every *probe_interval* seconds.
 
 When the link fails, the request in flight and the queued ones fail with
-ConnectionLost and :meth:`LineEngine.serve` returns;
-:class:`~aiortu.master_connection.LineConnection` then closes the engine for good
-(:meth:`LineEngine.close`) or serves it again on a reopened link. Meanwhile
-:meth:`LineEngine.submit` waits for the line within the request's timeout, or fails at
-once (see :attr:`LineEngine.wait_for_reconnect`).
+ConnectionLost and :meth:`LineEngine.serve` returns; the
+:class:`~aiortu.master_connection.LineConnection` closes the engine for good or serves it
+again on a reopened link, while :meth:`LineEngine.submit` waits for the line within the
+request's timeout or fails at once (see :attr:`LineEngine.wait_for_reconnect`).
 
 :class:`~aiortu.master.Master` is the API built on this; see its docstring for the guard
 against late replies.
@@ -43,6 +42,7 @@ import itertools
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 import anyio
 
@@ -203,6 +203,11 @@ class LineEngine:
         self._link_closed = False
         self._events: deque[LinkEvent] = deque()
         self._arrival: anyio.Event | None = None
+        self._waiter: Any = None
+        """The event loop future a transaction waits on, where the link has a loop."""
+        self._waiter_deadline = math.inf
+        self._timer: Any = None
+        self._timer_at = math.inf
         self._adopted: _Job | None = None
         self._wake = anyio.Event()
         self._quiet_until = -math.inf
@@ -394,6 +399,9 @@ class LineEngine:
                 events.popleft()  # the newest frame is the one a waiting master wants
                 self.link.events_dropped += 1
             events.append(event)
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
         arrival = self._arrival
         if arrival is not None:
             arrival.set()
@@ -415,10 +423,11 @@ class LineEngine:
         machine.begin(transaction)
         try:
             while True:
-                await self._keep_guard()
+                if self._quiet_until > link.clock():
+                    await self._keep_guard()
                 frame = machine.frame
                 self._events.clear()  # nothing that came before can answer the request
-                wire_time = link.settings.wire_time(len(frame))
+                wire_time = len(frame) * link.char_time
                 writes = link.writes_begun
                 try:
                     end = await link.send(frame)
@@ -494,7 +503,13 @@ class LineEngine:
         events = self._events
         while True:
             while events:
-                outcome = self._feed(events.popleft())
+                event = events.popleft()
+                if isinstance(event, FrameReceived):
+                    frame = event.frame
+                    outcome = machine.frame_received(frame[0], frame[1:-2], event.start, event.end)
+                else:
+                    error = frame_error_from_discard(event.data, str(event.reason))
+                    outcome = machine.frame_error(error, event.end)
                 if outcome.skipped is not None:
                     stats.skipped_frames += 1
                 if outcome.kind is not OutcomeKind.WAIT:
@@ -509,6 +524,18 @@ class LineEngine:
                 if outcome.kind is not OutcomeKind.WAIT:
                     return outcome
                 continue
+            loop = link.loop
+            if loop is not None:
+                # A future of the link's loop, set by the listener or the engine's timer.
+                waiter = self._waiter = loop.create_future()
+                self._waiter_deadline = deadline
+                if deadline < self._timer_at:
+                    self._arm_timer(deadline)
+                try:
+                    await waiter
+                finally:
+                    self._waiter = None
+                continue
             if not link.backend_clock:
                 deadline = backend.current_time() + (deadline - now)
             arrival = self._arrival = backend.create_event()
@@ -518,11 +545,22 @@ class LineEngine:
             finally:
                 self._arrival = None
 
-    def _feed(self, event: LinkEvent) -> Outcome:
-        if isinstance(event, FrameReceived):
-            return self.machine.frame_received(event.unit, event.pdu, event.start, event.end)
-        error = frame_error_from_discard(event.data, str(event.reason))
-        return self.machine.frame_error(error, event.end)
+    def _arm_timer(self, deadline: float) -> None:
+        """One timer serves every wait on a link with a loop: armed for the earliest
+        deadline, it is armed again for the current one if it fires before it."""
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer_at = deadline
+        self._timer = self.link.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer, self._timer_at, waiter = None, math.inf, self._waiter
+        if waiter is None or waiter.done():
+            return
+        if self.link.clock() >= self._waiter_deadline:
+            waiter.set_result(None)
+        else:
+            self._arm_timer(self._waiter_deadline)
 
     def _count_failed_attempt(self, stats: UnitStats, transaction: Transaction) -> None:
         error = transaction.frame_error

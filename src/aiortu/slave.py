@@ -154,6 +154,8 @@ class Slave:
         self._served = frozenset((BROADCAST_UNIT, *self.units))
         self._queue: deque[LinkEvent] = deque()
         self._wake: anyio.Event | None = None
+        self._waiter: Any = None
+        """The event loop future the serve loop waits on, where the link has a loop."""
         self._link_closed = False
 
     # -- handlers --------------------------------------------------------------------
@@ -342,6 +344,12 @@ class Slave:
                 if not queue:
                     if self._link_closed:
                         raise link.connection_lost_error()
+                    if link.loop is not None:
+                        # The link's stream pushes its bytes on this event loop: one of
+                        # its futures is the cheapest wait.
+                        waiter = self._waiter = link.loop.create_future()
+                        await waiter
+                        continue
                     wake = self._wake = anyio.Event() if backend is None else backend.create_event()
                     await wake.wait()
                     continue
@@ -352,7 +360,7 @@ class Slave:
                 else:
                     self._take_discard(event)
         finally:
-            self._wake = None
+            self._wake = self._waiter = None
             link.listen(None)
 
     def _on_link_event(self, event: LinkEvent | None) -> None:
@@ -377,6 +385,11 @@ class Slave:
                 queue.popleft()  # a reader that falls behind never stalls the line
                 self.link.events_dropped += 1
             queue.append(event)
+        waiter = self._waiter
+        if waiter is not None:
+            self._waiter = None
+            if not waiter.done():
+                waiter.set_result(None)
         wake = self._wake
         if wake is not None:
             self._wake = None

@@ -38,6 +38,7 @@ Time comes in as arguments; the machine never reads a clock.
 from __future__ import annotations
 
 import enum
+import struct
 from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from typing import Final
@@ -47,6 +48,7 @@ from aiortu.core.crc import crc16
 from aiortu.core.errors import CRCError, FrameError, MalformedPDU, ResponseTimeout
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_response
+from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
 
 __all__ = (
     "DEFAULT_FRAME_ERROR_GRACE",
@@ -74,6 +76,8 @@ DEFAULT_FRAME_ERROR_GRACE: Final = 0.05
 class MasterState(enum.Enum):
     """The states of the master, named after the spec."""
 
+    __hash__ = object.__hash__  # singletons: identity hashing, in C (fast table lookups)
+
     IDLE = "IDLE"
     WAITING_REPLY = "WAITING_REPLY"
     WAITING_TURNAROUND = "WAITING_TURNAROUND"
@@ -83,6 +87,8 @@ class MasterState(enum.Enum):
 
 class MasterEvent(enum.Enum):
     """What can happen to the master."""
+
+    __hash__ = object.__hash__  # singletons: identity hashing, in C (fast table lookups)
 
     SEND_UNICAST = "send unicast"
     """A request that expects a reply has left the wire."""
@@ -192,6 +198,9 @@ class Outcome:
 
 _WAIT = Outcome(OutcomeKind.WAIT)
 
+_FRAME_CACHE_SIZE: Final = 256
+"""Request frames a machine remembers (see :attr:`MasterMachine.frame`)."""
+
 
 @dataclass(slots=True)
 class Transaction:
@@ -237,17 +246,24 @@ def frame_error_from_discard(data: bytes, reason: str) -> FrameError:
     )
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class _ArrivedFrame:
     unit: int
     pdu: bytes
     end: float
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class _BadBytes:
     error: FrameError
     end: float
+
+
+_REGISTER_READS: Final = frozenset((ReadHoldingRegistersRequest, ReadInputRegistersRequest))
+
+
+def _unpack_words(count: int, pdu: bytes) -> tuple[int, ...]:
+    return struct.unpack_from(f">{count}H", pdu, 2)
 
 
 _S = MasterState
@@ -305,6 +321,7 @@ class MasterMachine:
 
     __slots__ = (
         "_actions",
+        "_frames",
         "_on_transition",
         "_outcome",
         "deadline",
@@ -329,6 +346,7 @@ class MasterMachine:
         """Seconds the wait goes on after a frame error (never past the response timeout)."""
         self._on_transition = on_transition
         self._outcome = _WAIT
+        self._frames: dict[tuple[int, int], tuple[Request, bytes]] = {}
         self._actions: dict[
             tuple[MasterState, MasterEvent], tuple[MasterState, Callable[[object], None]]
         ] = {
@@ -347,8 +365,22 @@ class MasterMachine:
 
     @property
     def frame(self) -> bytes:
-        """The frame to send for the transaction in progress."""
-        return self._current.frame
+        """The frame to send for the transaction in progress.
+
+        Frames are remembered by unit and request object (requests are immutable), so a
+        request sent again, as a master's poll loop does, is not encoded again.
+        """
+        transaction = self._current
+        request = transaction.request
+        key = (transaction.unit, id(request))
+        known = self._frames.get(key)
+        if known is not None and known[0] is request:
+            return known[1]
+        frame = transaction.frame
+        if len(self._frames) >= _FRAME_CACHE_SIZE:
+            self._frames.clear()
+        self._frames[key] = (request, frame)  # holding the request keeps its id unique
+        return frame
 
     def sent(self, start: float, end: float) -> float:
         """The request began to go out at *start* and left the wire at *end*.
@@ -414,7 +446,8 @@ class MasterMachine:
     # -- actions ---------------------------------------------------------------------
 
     def _start_response_timeout(self, _: object) -> None:
-        transaction = self._current
+        transaction = self.transaction
+        assert transaction is not None
         self.deadline = transaction.attempt_end + transaction.timeout
 
     def _start_turnaround(self, _: object) -> None:
@@ -428,7 +461,8 @@ class MasterMachine:
     def _examine_frame(self, argument: object) -> None:
         assert isinstance(argument, _ArrivedFrame)
         unit, pdu, end = argument.unit, argument.pdu, argument.end
-        transaction = self._current
+        transaction = self.transaction
+        assert transaction is not None
         request = transaction.request
         reason: SkipReason | None = None
         response: Response | ExceptionPDU | None = None
@@ -438,6 +472,16 @@ class MasterMachine:
             reason = SkipReason.OTHER_UNIT
         elif not pdu or pdu[0] & ~EXCEPTION_BIT != request.function_code:
             reason = SkipReason.OTHER_FUNCTION
+        elif (
+            type(request) in _REGISTER_READS
+            and isinstance(request, ReadHoldingRegistersRequest)
+            and pdu[0] == request.function_code
+            and len(pdu) == 2 + 2 * request.count == pdu[1] + 2
+        ):
+            # The usual reply to a register read, built without decode_response's general
+            # checks: its length is the request's count, and 16-bit words are in range.
+            response = object.__new__(request.response_class)
+            object.__setattr__(response, "values", _unpack_words(request.count, pdu))
         else:
             try:
                 response = decode_response(pdu)

@@ -25,13 +25,10 @@ Two things go beyond the timer-driven spec, as DESIGN.md explains:
   same function code have different lengths, and the CRC tells which one it is).
 * It resynchronises. A buffer that fails its CRC, or outgrows the longest frame, is
   searched for a frame that starts later in it (garbage right before a good frame), and a
-  frame whose CRC fails is never accepted. The search is cheap, as it runs at every
-  overflow of a continuous flood of noise: a precompiled pattern finds the offsets that
-  hold a possible unit address followed by a function code with a known layout, the
-  predicted length is checked for plausibility, and only then the CRC; after an overflow
-  the bytes kept are not searched again, except the offsets that still needed more bytes
-  (see :meth:`Receiver._salvage`). A slave searches garbage for its own requests only
-  (see :attr:`Role.SLAVE`).
+  frame whose CRC fails is never accepted. The search is cheap even in a flood of noise:
+  a precompiled pattern finds where a unit address and a function code with a known
+  layout may start a frame (see :meth:`Receiver._salvage`). A slave searches garbage for
+  its own requests only (see :attr:`Role.SLAVE`).
 
 Timing comes in as arguments: :meth:`Receiver.feed` takes a chunk and the time it
 arrived, :meth:`Receiver.expire` the current time, and :meth:`Receiver.next_deadline`
@@ -81,19 +78,14 @@ __all__ = (
 )
 
 TOLERANT_FRAME_SILENCE: Final = 0.020
-"""Silence (seconds) that ends a frame in tolerant mode, unless t3.5 is longer.
-
-Long enough to ride over the latency timer of common USB adapters (often 16 ms), which
-may split one frame into two deliveries; frames of known length complete before it.
-"""
+"""Silence (seconds) that ends a frame in tolerant mode, unless t3.5 is longer: it rides
+over the latency timer of USB adapters (often 16 ms), which may split a frame in two."""
 
 
 class ReceiverState(enum.Enum):
     """The states of the RTU receiver, named after the spec."""
 
-    # Members are singletons: hashing by identity (in C) makes the transition table's
-    # lookups about twice as fast as Enum's hash of the member name.
-    __hash__ = object.__hash__
+    __hash__ = object.__hash__  # singletons: identity hashing, in C (fast table lookups)
 
     INIT = "INIT"
     IDLE = "IDLE"
@@ -105,9 +97,7 @@ class ReceiverState(enum.Enum):
 class ReceiverEvent(enum.Enum):
     """What can happen to the receiver."""
 
-    # Members are singletons: hashing by identity (in C) makes the transition table's
-    # lookups about twice as fast as Enum's hash of the member name.
-    __hash__ = object.__hash__
+    __hash__ = object.__hash__  # singletons: identity hashing, in C (fast table lookups)
 
     CHARS = "chars"
     """Characters arrived within the allowed gap of the previous ones."""
@@ -239,10 +229,8 @@ class Receiver:
     that ends a frame (default: t3.5 in strict mode, the longer of t3.5 and
     :data:`TOLERANT_FRAME_SILENCE` in tolerant mode).
 
-    *now* is the time the receiver starts listening. Given, it starts in INIT and the
-    silence timer runs from then, as the spec asks after power-up: a frame already under
-    way when the port opened is not mistaken for a whole one. Left out, the line is
-    taken to have been quiet and the receiver starts in IDLE.
+    *now* is when it starts listening: given, it starts in INIT (a frame under way when
+    the port opened is not taken for a whole one); left out, in IDLE.
     """
 
     def __init__(
@@ -284,6 +272,7 @@ class Receiver:
         self._chunk_end = 0.0
         self._chunk_length = 0
         self._end_index = 0
+        self._whole = self._whole_length if role is not Role.MONITOR else (lambda data: CANNOT_KNOW)
         self._actions: dict[
             tuple[ReceiverState, ReceiverEvent], tuple[ReceiverState, Callable[..., int]]
         ] = {
@@ -310,7 +299,18 @@ class Receiver:
                 self._fire(ReceiverEvent.SILENCE, b"", 0, last + self.frame_silence)
         else:
             silence = float("inf")
-        late = self._strict and silence > self.t1_5 and self.state in _MID_FRAME
+        state = self.state
+        # A whole frame in one chunk: what START, DATABUF and RESPONSE would do, at once.
+        if (
+            state is _S.IDLE
+            and count >= MIN_FRAME_LENGTH
+            and self._whole(data) == count
+            and crc16(data) == 0
+        ):
+            out.append(FrameReceived(bytes(data), first_arrival, now))
+            self._last = now
+            return out
+        late = self._strict and silence > self.t1_5 and state in _MID_FRAME
         event = ReceiverEvent.LATE_CHARS if late else ReceiverEvent.CHARS
         self._first_arrival = first_arrival
         self._chunk_end = now
@@ -433,6 +433,13 @@ class Receiver:
             return end
         return position
 
+    def _whole_length(self, data: bytes) -> int:
+        """The length of the frame *data* begins with, where one layout tells it (else < 1)."""
+        if self.role is Role.MASTER:
+            return expected_response_length(data)
+        own = data[0] in self.units or data[0] == BROADCAST_UNIT
+        return expected_request_length(data) if own else CANNOT_KNOW
+
     def _predict(self) -> None:
         """Set the candidate lengths of the frame in the buffer, once its first bytes tell."""
         buffer = self._buffer
@@ -518,15 +525,11 @@ class Receiver:
         With *keep_tail* (overflow), bytes at the end that could still begin a frame stay
         in the buffer; otherwise the buffer is emptied.
 
-        The search looks at the offsets where the start pattern matches (a unit address
-        the role expects, then a function code with a known layout; for a slave, its own
-        units and broadcast only), predicts the length there, and checks the CRC only when
-        the predicted frame is all in the buffer. Whether a frame starts at an offset
-        depends only on the bytes from there, so an offset judged once stays judged: after
-        an overflow the search remembers how far it got in the bytes it keeps
-        (``_scan_from``) and which offsets needed more bytes (``_pending``), and the next
-        search looks only at those and at the new bytes. A continuous flood of noise then
-        costs a pattern scan per byte, not a prediction and a copy per offset per overflow.
+        The search predicts a length only where the start pattern matches, and checks the
+        CRC only when the predicted frame is all in the buffer. An offset judged once stays
+        judged: after an overflow the search remembers how far it got in the bytes it keeps
+        (``_scan_from``) and which offsets needed more bytes (``_pending``), so a flood of
+        noise costs a pattern scan per byte, not a prediction per offset per overflow.
         """
         buffer = self._buffer
         if end is None:
@@ -603,11 +606,8 @@ class Receiver:
         return min(end, self._first + index * self.char_time)
 
     def _frame_at(self, buffer: bytearray, offset: int) -> int:
-        """The length of a valid frame starting at *offset*, or NEED_MORE / CANNOT_KNOW.
-
-        Only called where the start pattern matched: the unit address and the function
-        code have been checked.
-        """
+        """The length of a valid frame starting at *offset*, or NEED_MORE / CANNOT_KNOW
+        (only where the start pattern matched: unit address and function code are known)."""
         function_code = buffer[offset + 1]
         role = self.role
         if role is Role.SLAVE:

@@ -9,6 +9,14 @@ slave can use like any other stream.
 this transport runs on anyio's asyncio backend and nowhere else; under trio, use RTU over
 TCP or a pty :class:`~aiortu.transport.fd.FileDescriptorStream` instead.
 
+pyserial opens, configures (RS-485 mode included) and closes the port; the bytes go
+through the port's file descriptor directly, one non-blocking ``read`` per readiness
+event and one ``write`` per frame (pyserial's own ``read`` adds a ``select`` before and
+after each read), with the transport buffering only what the driver does not take at
+once. :meth:`SerialStream.set_receiver` hands received bytes straight from the event
+loop's read callback to a consumer (the :class:`~aiortu.link.Link` uses it), with no task
+wake-up per chunk.
+
 Errors while opening are :class:`~aiortu.errors.PortError` subclasses that name the port
 and the cause: :class:`~aiortu.errors.PortNotFound` (no such device, or not a serial
 device), :class:`~aiortu.errors.PortBusy` (another program holds the port),
@@ -39,7 +47,7 @@ import anyio.lowlevel
 import serial
 import serial.rs485
 from anyio.abc import ByteStream
-from serial_asyncio_fast import connection_for_serial
+from serial_asyncio_fast import SerialTransport
 
 from aiortu.core.timing import LineSettings, Parity
 from aiortu.errors import (
@@ -130,6 +138,56 @@ class SerialAttribute(anyio.TypedAttributeSet):
     """The underlying :class:`serial.Serial`, for modem lines; never read or write it."""
 
 
+_NO_DATA = (
+    "device reports readiness to read but returned no data "
+    "(device disconnected or multiple access on port?)"
+)
+"""What pyserial says of a port that reads as ready but empty (a device gone)."""
+
+
+class _PortTransport(SerialTransport):
+    """pyserial-asyncio-fast's transport, with the port's descriptor read and written
+    directly: one ``read`` system call per readiness event (pyserial's ``read`` selects
+    before and after it) and one ``write`` per frame. pyserial still opens, configures
+    and closes the port; its errors are reported as pyserial reports them."""
+
+    def __init__(
+        self, loop: asyncio.AbstractEventLoop, protocol: _PortProtocol, serial_instance: Any
+    ) -> None:
+        super().__init__(loop, protocol, serial_instance)
+        self._fd: int = serial_instance.fileno()
+
+    def _read_ready(self) -> None:
+        try:
+            data = os.read(self._fd, self._max_read_size)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:
+            self._close(exc=serial.SerialException(f"read failed: {exc}"))
+            return
+        if not data:
+            self._close(exc=serial.SerialException(_NO_DATA))
+            return
+        self._protocol.data_received(data)
+
+    def _write_data(self, data: bytes | bytearray | memoryview) -> None:
+        try:
+            written = os.write(self._fd, data)
+        except (BlockingIOError, InterruptedError):
+            written = 0
+        except OSError as exc:
+            error = serial.SerialException(f"write failed: {exc}")
+            self._fatal_error(error, "Fatal write error on serial transport")
+            return
+        if written == len(data):
+            if self._closing:
+                self._close()
+            return
+        self._write_buffer.append(data[written:])  # the rest when the port can take it
+        self._maybe_pause_protocol()
+        self._ensure_writer()
+
+
 class _PortProtocol(asyncio.Protocol):
     """Collects what the transport reports; the stream waits on its events."""
 
@@ -144,6 +202,10 @@ class _PortProtocol(asyncio.Protocol):
         self.lost = False
         self.error: BaseException | None = None
         self._reading_paused = False
+        self.receiver: Callable[[bytes], None] | None = None
+        """While set, received bytes go straight to it instead of to :attr:`buffer`."""
+        self.on_lost: Callable[[], None] | None = None
+        """Called once the port has failed or closed, while a receiver is set."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -153,6 +215,10 @@ class _PortProtocol(asyncio.Protocol):
         if self.echo is not None:
             data = self.echo.feed(data)
         if not data:
+            return
+        receiver = self.receiver
+        if receiver is not None:
+            receiver(data)
             return
         self.buffer += data
         self.data_ready.set()
@@ -183,6 +249,8 @@ class _PortProtocol(asyncio.Protocol):
         self.data_ready.set()
         self.writable.set()
         self.done.set()
+        if self.on_lost is not None:
+            self.on_lost()
 
 
 class SerialStream(ByteStream):
@@ -212,6 +280,7 @@ class SerialStream(ByteStream):
         self._eof_sent = False
         self._receive_guard = anyio.ResourceGuard("reading from")
         self._send_guard = anyio.ResourceGuard("writing to")
+        self._backend: Any = None
 
     @property
     def port(self) -> str:
@@ -241,6 +310,30 @@ class SerialStream(ByteStream):
         error = anyio.BrokenResourceError(f"{self._port}: the serial port failed or disappeared")
         error.__cause__ = self._protocol.error
         return error
+
+    def set_receiver(
+        self,
+        receiver: Callable[[bytes], None] | None,
+        on_lost: Callable[[], None] | None = None,
+    ) -> None:
+        """Hand received bytes to *receiver* as they arrive, from the event loop's read
+        callback, instead of keeping them for :meth:`receive` (``None`` keeps them again).
+
+        Bytes already kept go to *receiver* at once. *on_lost* is called once the port has
+        failed or closed (at once if it already has); :meth:`receive` then raises the
+        error. While a receiver is set, nothing is left for :meth:`receive` to return.
+        This is how a :class:`~aiortu.link.Link` reads the port without a task wake-up per
+        chunk.
+        """
+        protocol = self._protocol
+        protocol.receiver = receiver
+        protocol.on_lost = on_lost if receiver is not None else None
+        if receiver is None:
+            return
+        if protocol.buffer:
+            receiver(protocol.take(len(protocol.buffer)))
+        if (protocol.lost or self._closed) and on_lost is not None:
+            on_lost()
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
         """Return the next chunk of received bytes, at most *max_bytes*, waiting for one.
@@ -281,7 +374,9 @@ class SerialStream(ByteStream):
         with self._send_guard:
             # A cancellation point, but no yield unless the driver's buffer is full: a
             # request goes out in the same loop iteration that sends it.
-            await anyio.lowlevel.checkpoint_if_cancelled()
+            if self._backend is None:
+                self._backend = anyio.lowlevel.current_token().backend_class
+            await self._backend.checkpoint_if_cancelled()
             if self._closed or self._eof_sent:
                 raise anyio.ClosedResourceError
             if self._protocol.lost or self._transport.is_closing():
@@ -292,7 +387,9 @@ class SerialStream(ByteStream):
                 # Before the write: the echo may be read in the same loop iteration.
                 self._protocol.echo.expect(item)
             self._transport.write(item)
-            await self._protocol.writable.wait()
+            writable = self._protocol.writable
+            if not writable.is_set():
+                await writable.wait()
             if self._closed:
                 raise anyio.ClosedResourceError
             # The transport reports a failed write by closing itself, not by raising.
@@ -314,6 +411,8 @@ class SerialStream(ByteStream):
             self._closed = True
             self._protocol.data_ready.set()
             self._protocol.writable.set()
+            if self._protocol.on_lost is not None:
+                self._protocol.on_lost()
             if not self._transport.is_closing():
                 self._transport.close()
             with anyio.move_on_after(_CLOSE_TIMEOUT, shield=True):
@@ -472,7 +571,7 @@ async def open_serial(
     protocol = _PortProtocol(LocalEchoFilter() if local_echo else None)
     try:
         # The transport sets non-blocking timeouts, which reconfigures the open port.
-        transport, _ = await connection_for_serial(loop, lambda: protocol, instance)
+        transport = _PortTransport(loop, protocol, instance)
     except (serial.SerialException, OSError, ValueError, _TERMIOS_ERROR) as exc:
         instance.close()
         raise _open_error(port, exc, what) from exc

@@ -1,0 +1,109 @@
+"""The serial port's push path: bytes from the read callback, and a Link that uses it."""
+
+from __future__ import annotations
+
+import anyio
+import pytest
+
+from aiortu.core.crc import crc16
+from aiortu.core.receiver import DiscardReason, FrameDiscarded, FrameReceived, Role
+from aiortu.errors import ConnectionLost, ResponseTimeout
+from aiortu.link import Link
+from aiortu.master import Master
+from aiortu.transport.serial import open_serial
+from tests.transport.ptys import LINE, open_pty, read_master
+
+REPLY = bytes.fromhex("1103060ae10000000000")  # unit 17, FC 03, 3 registers, no CRC yet
+
+
+def _with_crc(body: bytes) -> bytes:
+    crc = crc16(body)
+    return body + bytes((crc & 0xFF, crc >> 8))
+
+
+async def test_receiver_gets_kept_bytes_then_pushed_ones() -> None:
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        pty.write(b"\x01\x02")
+        await anyio.sleep(0.05)  # kept for receive(): no receiver yet
+        got: list[bytes] = []
+        second = anyio.Event()
+
+        def take(data: bytes) -> None:
+            got.append(data)
+            if len(got) == 2:
+                second.set()
+
+        stream.set_receiver(take)
+        assert got == [b"\x01\x02"]
+        pty.write(b"\x03")
+        with anyio.fail_after(2):
+            await second.wait()
+        assert got[1] == b"\x03"
+        stream.set_receiver(None)
+        pty.write(b"\x04")
+        with anyio.fail_after(2):
+            assert await stream.receive() == b"\x04"
+        await stream.aclose()
+
+
+async def test_on_lost_is_called_at_hangup_and_receive_then_breaks() -> None:
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        lost = anyio.Event()
+        stream.set_receiver(lambda data: None, lost.set)
+        pty.close_master()
+        with anyio.fail_after(2):
+            await lost.wait()
+        with pytest.raises(anyio.BrokenResourceError):
+            await stream.receive()
+        await stream.aclose()
+
+
+async def test_link_on_a_port_frames_split_chunks_and_times_out_noise() -> None:
+    reply = _with_crc(REPLY)
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Link(stream, LINE, role=Role.MASTER, frame_silence=0.02) as link:
+            await anyio.sleep(0.05)  # the power-up silence (INIT) ends on the link's timer
+            pty.write(reply[:4])
+            await anyio.sleep(0.005)
+            pty.write(reply[4:])
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameReceived)
+            assert event.frame == reply
+            pty.write(b"\x11\x03")  # a fragment: only the silence timer ends it
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameDiscarded)
+            assert event.reason is DiscardReason.TOO_SHORT
+            assert event.data == b"\x11\x03"
+            pty.close_master()
+            with anyio.fail_after(2), pytest.raises(ConnectionLost):
+                await link.receive()
+            assert link.closed
+
+
+async def test_master_on_a_port_times_out_on_the_engine_timer_then_reads() -> None:
+    reply = _with_crc(bytes.fromhex("0103020007"))  # unit 1, FC 03, one register: 7
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        request = _with_crc(bytes.fromhex("010300000001"))
+        async with Master(stream, LINE, timeout=0.05, retries=0, frame_gap=0) as master:
+            for _ in range(2):
+                started = anyio.current_time()
+                with anyio.fail_after(2), pytest.raises(ResponseTimeout):
+                    await master.read_holding_registers(1, 0, 1)
+                assert anyio.current_time() - started >= 0.05
+                assert await read_master(pty, len(request)) == request  # unanswered
+            await anyio.sleep(0.15)  # past the late-reply guard
+
+            async def device() -> None:
+                assert await read_master(pty, len(request)) == request
+                pty.write(reply)
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(device)
+                with anyio.fail_after(2):
+                    assert await master.read_holding_registers(1, 0, 1) == [7]
