@@ -9,10 +9,13 @@ needs to decide whether to fix their code, retry, or look at the wiring::
     │   └── InvalidRequest           (the caller) a request that must not be sent; nothing was sent
     ├── ExceptionResponse            (the peer)   the device answered with a Modbus exception code
     ├── ResponseTimeout              (peer or line) no valid reply in time; a TimeoutError
+    │   ├── UnitOffline              (the peer)   an offline unit, failing fast: nothing sent
+    │   └── UnitSkipped              (the peer)   the poller skipped an offline unit's read
     ├── FrameError                   (peer or line) bytes that are not a valid frame
     │   ├── CRCError                 (the line)   the CRC does not match: noise, wrong settings
     │   └── MalformedPDU             (the peer)   the CRC is good but the content breaks the spec
     ├── ConnectionLost               (the line)   the byte stream closed or failed under us
+    ├── ConfigError                  (the caller) a device description file is wrong
     └── PortError                    (the environment) a port that cannot be opened as asked
         ├── PortNotFound             no such device or host
         ├── PortBusy                 another program holds the port
@@ -31,6 +34,7 @@ users import them from.
 from __future__ import annotations
 
 from aiortu.core.errors import (
+    ConfigError,
     ConnectionLost,
     CRCError,
     ExceptionResponse,
@@ -44,11 +48,14 @@ from aiortu.core.errors import (
     PortNotFound,
     PortPermissionDenied,
     ResponseTimeout,
+    UnitOffline,
+    UnitSkipped,
     UnsupportedSettings,
 )
 
 __all__ = (
     "CRCError",
+    "ConfigError",
     "ConnectionLost",
     "ExceptionResponse",
     "FrameError",
@@ -61,5 +68,7 @@ __all__ = (
     "PortNotFound",
     "PortPermissionDenied",
     "ResponseTimeout",
+    "UnitOffline",
+    "UnitSkipped",
     "UnsupportedSettings",
 )

@@ -104,7 +104,7 @@ class Master(SerialLineFunctions):
     before each request (``None``: t3.5; 0 for virtual lines and TCP gateways).
     *turnaround_delay* is the wait after a broadcast. Health: *offline_after*
     consecutive failures mark a unit offline; with *fail_fast_offline* calls to it raise
-    :class:`~aiortu.master_engine.UnitOffline` except one probe every *probe_interval*
+    :class:`~aiortu.errors.UnitOffline` except one probe every *probe_interval*
     seconds. *timing* is the receiver's t1.5 mode.
 
     Reconnecting (see :mod:`aiortu.master_connection`): when the stream fails, the

@@ -58,25 +58,10 @@ from aiortu.core.master_machine import (
 )
 from aiortu.core.pdu import ExceptionPDU, Response
 from aiortu.core.receiver import FrameReceived
-from aiortu.errors import ConnectionLost, ResponseTimeout
+from aiortu.errors import ConnectionLost, ResponseTimeout, UnitOffline
 from aiortu.link import Link, LinkEvent
 
 __all__ = ("HealthPolicy", "LineEngine", "UnitOffline", "UnitStats")
-
-
-class UnitOffline(ResponseTimeout):
-    """The unit is marked offline and the master fails fast: nothing was sent.
-
-    Raised only with ``fail_fast_offline=True``, between probes. Also a
-    :class:`~aiortu.errors.ResponseTimeout`, since the unit has not been answering.
-    """
-
-    def __init__(self, unit: int, failures: int) -> None:
-        self.unit = unit
-        super().__init__(
-            f"unit {unit} is offline after {failures} consecutive failures; "
-            "not sent (fail_fast_offline)"
-        )
 
 
 @dataclass(frozen=True, slots=True)

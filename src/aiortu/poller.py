@@ -53,22 +53,13 @@ from aiortu.core.poll_plan import (
     Point,
     plan_reads,
 )
-from aiortu.errors import ConnectionLost, InvalidValue, ModbusError, ResponseTimeout
+from aiortu.errors import ConnectionLost, InvalidValue, ModbusError, UnitSkipped
 from aiortu.master import Master
 
 __all__ = ("CycleReport", "CycleStats", "Point", "Poller", "Sample", "UnitHealth", "UnitSkipped")
 
 Value = bool | int | float
 """A decoded point value: a bool for bits, an int or a float for registers."""
-
-
-class UnitSkipped(ResponseTimeout):
-    """The unit is offline and this read was skipped until the next probe; nothing was sent."""
-
-    def __init__(self, unit: int, next_probe_in: float) -> None:
-        self.unit = unit
-        self.next_probe_in = next_probe_in
-        super().__init__(f"unit {unit} is offline; next probe in {next_probe_in:.1f} s")
 
 
 @dataclass(frozen=True, slots=True)

@@ -59,7 +59,7 @@ from typing import Any
 
 from aiortu.core.codes import DeviceIdObject, ExceptionCode
 from aiortu.core.data_model import ServerId, Table
-from aiortu.errors import InvalidValue
+from aiortu.errors import ConfigError, InvalidValue
 from aiortu.store import Block, MemoryStore
 
 __all__ = ("ConfigError", "DeviceConfig", "load_config", "parse_config")
@@ -90,19 +90,6 @@ _OBJECT_NAMES = {
     "model_name": DeviceIdObject.MODEL_NAME,
     "user_application_name": DeviceIdObject.USER_APPLICATION_NAME,
 }
-
-
-class ConfigError(ValueError):
-    """A device description is wrong: ``FILE: KEY: PROBLEM`` on one line."""
-
-    def __init__(self, source: str, key: str, problem: str) -> None:
-        super().__init__(f"{source}: {key}: {problem}")
-        self.source = source
-        """The file (or ``<string>``)."""
-        self.key = key
-        """The key path, such as ``slave[0].coils[1].count``."""
-        self.problem = problem
-        """What is wrong."""
 
 
 @dataclass(frozen=True, slots=True)

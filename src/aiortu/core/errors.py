@@ -12,6 +12,7 @@ from aiortu.core.codes import ExceptionCode
 
 __all__ = (
     "CRCError",
+    "ConfigError",
     "ConnectionLost",
     "ExceptionResponse",
     "FrameError",
@@ -24,6 +25,8 @@ __all__ = (
     "PortNotFound",
     "PortPermissionDenied",
     "ResponseTimeout",
+    "UnitOffline",
+    "UnitSkipped",
     "UnsupportedSettings",
 )
 
@@ -194,3 +197,44 @@ class PortPermissionDenied(PortError):
 
 class UnsupportedSettings(PortError):
     """The port or the OS refuses the requested line settings (baud rate, parity, RS-485)."""
+
+
+class UnitOffline(ResponseTimeout):
+    """The unit is marked offline and the master fails fast: nothing was sent. Caused by the peer.
+
+    Raised only with ``fail_fast_offline=True``, between probes. Also a
+    :class:`ResponseTimeout`, since the unit has not been answering.
+    """
+
+    def __init__(self, unit: int, failures: int) -> None:
+        self.unit = unit
+        super().__init__(
+            f"unit {unit} is offline after {failures} consecutive failures; "
+            "not sent (fail_fast_offline)"
+        )
+
+
+class UnitSkipped(ResponseTimeout):
+    """The poller skipped a read of an offline unit until its next probe. Caused by the peer.
+
+    Nothing was sent. Also a :class:`ResponseTimeout`, since the unit has not been answering.
+    """
+
+    def __init__(self, unit: int, next_probe_in: float) -> None:
+        self.unit = unit
+        self.next_probe_in = next_probe_in
+        super().__init__(f"unit {unit} is offline; next probe in {next_probe_in:.1f} s")
+
+
+class ConfigError(ModbusError, ValueError):
+    """A device description file is wrong. Caused by the caller (the file's author).
+
+    The message is one line, ``FILE: KEY: PROBLEM``; :attr:`source`, :attr:`key` (a key
+    path such as ``slave[0].coils[1].count``) and :attr:`problem` hold the parts.
+    """
+
+    def __init__(self, source: str, key: str, problem: str) -> None:
+        super().__init__(f"{source}: {key}: {problem}")
+        self.source = source
+        self.key = key
+        self.problem = problem
