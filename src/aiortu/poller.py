@@ -29,7 +29,10 @@ delivering samples with :class:`UnitSkipped`, except for one probe read every
 *offline_probe_interval* seconds; a probe that succeeds brings the unit back (the
 master marks it online) and its other reads go on in the same cycle. Within a cycle, a
 read that fails and leaves the unit offline skips the unit's remaining reads, so one
-dead device costs at most one timeout per cycle, and none between probes.
+dead device costs at most one timeout per cycle, and none between probes. And at most
+*max_probes_per_cycle* offline units (1 by default; ``None`` for no limit) are probed
+in one cycle, the one waiting longest first: with many dead devices on a bus, a cycle
+pays for one probe, not for one per dead device, and they take turns.
 """
 
 from __future__ import annotations
@@ -171,6 +174,7 @@ class Poller:
         max_registers: int = MAX_READ_REGISTERS,
         max_bits: int = MAX_READ_BITS,
         offline_probe_interval: float = 5.0,
+        max_probes_per_cycle: int | None = 1,
         timeout: float | None = None,
         on_sample: SampleCallback | Iterable[SampleCallback] | None = None,
         on_cycle: CycleCallback | Iterable[CycleCallback] | None = None,
@@ -189,8 +193,11 @@ class Poller:
             raise InvalidValue("interval", interval, "seconds > 0")
         if not offline_probe_interval >= 0:
             raise InvalidValue("offline_probe_interval", offline_probe_interval, "seconds >= 0")
+        if max_probes_per_cycle is not None and max_probes_per_cycle < 1:
+            raise InvalidValue("max_probes_per_cycle", max_probes_per_cycle, "None or >= 1")
         self.interval = interval
         self.offline_probe_interval = offline_probe_interval
+        self.max_probes_per_cycle = max_probes_per_cycle
         self.timeout = timeout
         by_interval: dict[float, list[Point]] = {}
         for point in self.points:
@@ -212,6 +219,7 @@ class Poller:
         self._sample_callbacks = _as_list(on_sample)
         self._cycle_callbacks = _as_list(on_cycle)
         self._last_probe: dict[int, float] = {}
+        self._probe_slots: set[int] | None = None
         self._skipped: dict[int, int] = {}
         self._send: MemoryObjectSendStream[Sample]
         self._receive: MemoryObjectReceiveStream[Sample]
@@ -334,6 +342,7 @@ class Poller:
         index = group.cycle
         samples: list[Sample] = []
         skip: dict[int, Exception] = {}
+        self._probe_slots = self._units_to_probe(group, start)
         for read in group.reads:
             error = skip.get(read.unit) or self._gate(read.unit)
             if error is not None:
@@ -367,6 +376,18 @@ class Poller:
             await _call(callback, report)
         return samples
 
+    def _units_to_probe(self, group: _Group, now: float) -> set[int] | None:
+        """The offline units this cycle may probe: those due, longest waiting first."""
+        if self.max_probes_per_cycle is None:
+            return None
+        due = sorted(
+            (self._last_probe.get(unit, -math.inf), unit)
+            for unit in {read.unit for read in group.reads}
+            if not self.master.is_online(unit)
+            and now - self._last_probe.get(unit, -math.inf) >= self.offline_probe_interval
+        )
+        return {unit for _, unit in due[: self.max_probes_per_cycle]}
+
     def _gate(self, unit: int) -> UnitSkipped | None:
         """None if a read of *unit* may go now (online, or due for a probe), else why not."""
         if self.master.is_online(unit):
@@ -375,6 +396,8 @@ class Poller:
         last = self._last_probe.get(unit, -math.inf)
         if now - last < self.offline_probe_interval:
             return UnitSkipped(unit, last + self.offline_probe_interval - now)
+        if self._probe_slots is not None and unit not in self._probe_slots:
+            return UnitSkipped(unit, 0.0)  # due, waiting for its turn among the dead
         self._last_probe[unit] = now
         return None
 

@@ -197,3 +197,33 @@ async def test_the_poll_command_redraws_its_table_in_place_on_a_terminal() -> No
     assert lines[2] == f"a                   1  {register_value(1, 0)}"
     # The second table moves back up over the first and clears it.
     assert second.startswith("5F\x1b[J")
+
+
+async def test_dead_units_take_turns_for_one_probe_per_cycle() -> None:
+    options = {"timeout": 0.05, "retries": 0, "offline_after": 1}
+    dead_units = (4, 5, 6)
+    async with line(units=frozenset({1}), **options) as (master, slave, _):
+        points = [Point.of("alive", 1, "40001")]
+        points += [Point.of(f"dead{unit}", unit, "40001") for unit in dead_units]
+        poller = Poller(master, points, interval=0.001, offline_probe_interval=0)
+        await poller.run(cycles=10)
+        sent = [seen.unit for seen in slave.seen if seen.unit in dead_units]
+    # Cycle 1 tries each dead unit once (they are not known to be dead yet); from then on
+    # one probe per cycle, the unit waiting longest first: 4, 5, 6, 4, 5, 6, ...
+    assert sent[:3] == [4, 5, 6]
+    assert sent[3:] == [4, 5, 6, 4, 5, 6, 4, 5, 6]
+
+
+async def test_max_probes_per_cycle_none_probes_every_due_unit() -> None:
+    options = {"timeout": 0.05, "retries": 0, "offline_after": 1}
+    async with line(units=frozenset({1}), **options) as (master, slave, _):
+        points = [Point.of("alive", 1, "40001")]
+        points += [Point.of(f"dead{unit}", unit, "40001") for unit in (4, 5)]
+        poller = Poller(
+            master, points, interval=0.001, offline_probe_interval=0, max_probes_per_cycle=None
+        )
+        await poller.run(cycles=3)
+        sent = [seen.unit for seen in slave.seen if seen.unit in (4, 5)]
+    assert sent == [4, 5, 4, 5, 4, 5]
+    with pytest.raises(aiortu.InvalidValue):
+        Poller(master, points, max_probes_per_cycle=0)
