@@ -297,13 +297,21 @@ class Master(SerialLineFunctions):
         *,
         timeout: float | None = None,
         priority: int = 0,
+        retries: int | None = None,
     ) -> _ResponseT:
-        """Send *pdu*, raise ExceptionResponse for an exception reply, return the reply."""
+        """Send *pdu*, raise ExceptionResponse for an exception reply, return the reply.
+
+        *retries* overrides the master's retry count for this call (a poller probing a
+        unit that has stopped answering sends once).
+        """
         # execute(), inlined: one coroutine less per call.
         _check_unit(unit)
         if not isinstance(pdu, Request):
             raise InvalidRequest("pdu", pdu, "a Request PDU")
-        transaction = Transaction(unit, pdu, self._timeout(timeout), self.policy)
+        policy = self.policy
+        if retries is not None and retries != policy.retries:
+            policy = RetryPolicy(retries, policy.retry_on)
+        transaction = Transaction(unit, pdu, self._timeout(timeout), policy)
         response = await self.engine.submit(transaction, priority)
         assert response is not None
         if isinstance(response, ExceptionPDU):

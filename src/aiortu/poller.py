@@ -29,7 +29,10 @@ delivering samples with :class:`UnitSkipped`, except for one probe read every
 *offline_probe_interval* seconds; a probe that succeeds brings the unit back (the
 master marks it online) and its other reads go on in the same cycle. Within a cycle, a
 read that fails and leaves the unit offline skips the unit's remaining reads, so one
-dead device costs at most one timeout per cycle, and none between probes. And at most
+dead device costs at most one timeout per cycle, and none between probes. The poller
+does not wait for the master's ``offline_after``: a unit whose read failed (no reply, a
+garbled one; not an exception response, which is an answer) is treated as down from the
+next read on, and probes are sent once, without the master's retries. And at most
 *max_probes_per_cycle* offline units (1 by default; ``None`` for no limit) are probed
 in one cycle, the one waiting longest first: with many dead devices on a bus, a cycle
 pays for one probe, not for one per dead device, and they take turns.
@@ -49,6 +52,19 @@ import anyio.abc
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
 from aiortu.core.addressing import Table
+from aiortu.core.pdu import Response
+from aiortu.core.pdu_bits import (
+    ReadCoilsRequest,
+    ReadCoilsResponse,
+    ReadDiscreteInputsRequest,
+    ReadDiscreteInputsResponse,
+)
+from aiortu.core.pdu_registers import (
+    ReadHoldingRegistersRequest,
+    ReadHoldingRegistersResponse,
+    ReadInputRegistersRequest,
+    ReadInputRegistersResponse,
+)
 from aiortu.core.poll_plan import (
     MAX_READ_BITS,
     MAX_READ_REGISTERS,
@@ -56,7 +72,13 @@ from aiortu.core.poll_plan import (
     Point,
     plan_reads,
 )
-from aiortu.errors import ConnectionLost, InvalidValue, ModbusError, UnitSkipped
+from aiortu.errors import (
+    ConnectionLost,
+    ExceptionResponse,
+    InvalidValue,
+    ModbusError,
+    UnitSkipped,
+)
 from aiortu.master import Master
 
 __all__ = ("CycleReport", "CycleStats", "Point", "Poller", "Sample", "UnitHealth", "UnitSkipped")
@@ -219,6 +241,7 @@ class Poller:
         self._sample_callbacks = _as_list(on_sample)
         self._cycle_callbacks = _as_list(on_cycle)
         self._last_probe: dict[int, float] = {}
+        self._suspect: set[int] = set()
         self._probe_slots: set[int] | None = None
         self._skipped: dict[int, int] = {}
         self._send: MemoryObjectSendStream[Sample]
@@ -352,17 +375,21 @@ class Poller:
                 samples += await self._deliver_error(read, error, index)
                 continue
             try:
-                elements = await self._read(read)
+                # A probe of a unit that stopped answering is sent once: its retries
+                # would stall the cycle for every other unit.
+                elements = await self._read(read, 0 if self._is_down(read.unit) else None)
             except ModbusError as failure:
                 samples += await self._deliver_error(read, failure, index)
                 if isinstance(failure, ConnectionLost):
                     # The line is down: every other unit would fail the same way.
                     for other in group.reads:
                         skip.setdefault(other.unit, failure)
-                elif not self.master.is_online(read.unit):
+                elif not isinstance(failure, ExceptionResponse):
+                    self._suspect.add(read.unit)
                     self._last_probe[read.unit] = clock()
                     skip[read.unit] = failure
                 continue
+            self._suspect.discard(read.unit)
             now = clock()
             for point, value in read.decode(elements):
                 sample = Sample(point, value, now, index)
@@ -376,6 +403,9 @@ class Poller:
             await _call(callback, report)
         return samples
 
+    def _is_down(self, unit: int) -> bool:
+        return unit in self._suspect or not self.master.is_online(unit)
+
     def _units_to_probe(self, group: _Group, now: float) -> set[int] | None:
         """The offline units this cycle may probe: those due, longest waiting first."""
         if self.max_probes_per_cycle is None:
@@ -383,14 +413,14 @@ class Poller:
         due = sorted(
             (self._last_probe.get(unit, -math.inf), unit)
             for unit in {read.unit for read in group.reads}
-            if not self.master.is_online(unit)
+            if self._is_down(unit)
             and now - self._last_probe.get(unit, -math.inf) >= self.offline_probe_interval
         )
         return {unit for _, unit in due[: self.max_probes_per_cycle]}
 
     def _gate(self, unit: int) -> UnitSkipped | None:
         """None if a read of *unit* may go now (online, or due for a probe), else why not."""
-        if self.master.is_online(unit):
+        if not self._is_down(unit):
             return None
         now = self.master.link.clock()
         last = self._last_probe.get(unit, -math.inf)
@@ -401,21 +431,17 @@ class Poller:
         self._last_probe[unit] = now
         return None
 
-    async def _read(self, read: PlannedRead) -> Sequence[int | bool]:
-        master, timeout = self.master, self.timeout
-        if read.table is Table.COILS:
-            return await master.read_coils(read.unit, read.address, read.count, timeout=timeout)
-        if read.table is Table.DISCRETE_INPUTS:
-            return await master.read_discrete_inputs(
-                read.unit, read.address, read.count, timeout=timeout
-            )
-        if read.table is Table.INPUT_REGISTERS:
-            return await master.read_input_registers(
-                read.unit, read.address, read.count, timeout=timeout
-            )
-        return await master.read_holding_registers(
-            read.unit, read.address, read.count, timeout=timeout
+    async def _read(self, read: PlannedRead, retries: int | None) -> Sequence[int | bool]:
+        request_class, response_class = _READS[read.table]
+        request = request_class(read.address, read.count)
+        reply = await self.master.request(
+            read.unit, request, response_class, timeout=self.timeout, retries=retries
         )
+        if isinstance(request, ReadCoilsRequest):
+            assert isinstance(reply, ReadCoilsResponse)
+            return request.bits_of(reply)
+        assert isinstance(reply, ReadHoldingRegistersResponse)
+        return reply.values
 
     async def _deliver_error(self, read: PlannedRead, error: Exception, index: int) -> list[Sample]:
         now = self.master.link.clock()
@@ -436,6 +462,15 @@ class Poller:
             self._send.send_nowait(sample)
         except anyio.ClosedResourceError:
             pass
+
+
+_READS: dict[Table, tuple[type[ReadCoilsRequest | ReadHoldingRegistersRequest], type[Response]]] = {
+    Table.COILS: (ReadCoilsRequest, ReadCoilsResponse),
+    Table.DISCRETE_INPUTS: (ReadDiscreteInputsRequest, ReadDiscreteInputsResponse),
+    Table.HOLDING_REGISTERS: (ReadHoldingRegistersRequest, ReadHoldingRegistersResponse),
+    Table.INPUT_REGISTERS: (ReadInputRegistersRequest, ReadInputRegistersResponse),
+}
+"""The request and reply classes of a read of each table."""
 
 
 def _as_list(callbacks: _C | Iterable[_C] | None) -> list[_C]:

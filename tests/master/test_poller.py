@@ -227,3 +227,20 @@ async def test_max_probes_per_cycle_none_probes_every_due_unit() -> None:
     assert sent == [4, 5, 4, 5, 4, 5]
     with pytest.raises(aiortu.InvalidValue):
         Poller(master, points, max_probes_per_cycle=0)
+
+
+async def test_the_poller_backs_off_after_one_failure_and_probes_without_retries() -> None:
+    # The master keeps its defaults: 2 retries, offline after 3 failed transactions.
+    async with line(units=frozenset({1}), timeout=0.05) as (master, slave, _):
+        points = [Point.of("alive", 1, "40001"), Point.of("dead", 2, "40001")]
+        poller = Poller(master, points, interval=0.001, offline_probe_interval=0.2)
+        await poller.run(duration=0.9)
+        attempts = [seen.time for seen in slave.seen if seen.unit == 2]
+        alive = [seen for seen in slave.seen if seen.unit == 1]
+    # The first read tries three times (the master's retries); the probes that follow,
+    # one per 0.2 s at most, are single attempts.
+    first, probes = attempts[:3], attempts[3:]
+    assert max(first) - min(first) < 0.2
+    assert 1 <= len(probes) <= 4, attempts
+    assert all(b - a >= 0.2 for a, b in itertools.pairwise(probes)), attempts
+    assert len(alive) > 20
