@@ -155,8 +155,10 @@ async def test_a_dead_unit_does_not_stall_the_cycle() -> None:
     # which falls in the second cycle; from then on the dead unit costs nothing.
     # A stall would cost at least the 0.1 s timeout; the margins below stay under it, so
     # the test tells a stall from the noise of a busy machine.
-    assert with_dead[1] < 0.1 + 2 * typical + 0.05, (all_alive, with_dead)
-    assert max(with_dead[2:]) < 2 * typical + 0.05, (all_alive, with_dead)
+    assert with_dead[1] < 0.1 + 2 * typical + 0.08, (all_alive, with_dead)
+    later = sorted(with_dead[2:])
+    # The median, so that one cycle slowed by the machine does not count as a stall.
+    assert later[len(later) // 2] < 2 * typical + 0.05, (all_alive, with_dead)
 
 
 async def test_an_offline_unit_is_probed_every_offline_probe_interval() -> None:

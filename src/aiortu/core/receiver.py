@@ -46,12 +46,11 @@ t3.5 when that is longer).
 from __future__ import annotations
 
 import enum
-import re
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Final
 
-from aiortu.core.codes import BROADCAST_UNIT, MEI_READ_DEVICE_IDENTIFICATION
+from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.crc import crc16
 from aiortu.core.frame import (
     CANNOT_KNOW,
@@ -61,6 +60,7 @@ from aiortu.core.frame import (
     expected_request_length,
     expected_response_length,
 )
+from aiortu.core.frame_search import LAST_UNIT, FrameSearch
 from aiortu.core.timing import LineSettings
 
 __all__ = (
@@ -259,9 +259,12 @@ class Receiver:
         self._strict = self.timing is TimingMode.STRICT
         self.state = ReceiverState.IDLE if now is None else ReceiverState.INIT
         self._buffer = bytearray()
-        self._starts = _start_pattern(role, self.units)
-        self._scan_from = 0
-        self._pending: list[int] = []
+        if role is Role.SLAVE:
+            self._search = FrameSearch((BROADCAST_UNIT, *self.units), requests=True, replies=False)
+        else:
+            self._search = FrameSearch(
+                range(LAST_UNIT + 1), requests=role is Role.MONITOR, replies=True
+            )
         self._candidates: list[int] = []
         self._predicted = False
         self._first: float = 0.0
@@ -337,7 +340,7 @@ class Receiver:
     def reset(self, now: float) -> None:
         """Forget any partial frame and wait for silence from *now* (after reopening a port)."""
         self._buffer.clear()
-        self._forget_search()
+        self._search.forget()
         self._last = now
         self.state = ReceiverState.INIT
 
@@ -375,7 +378,7 @@ class Receiver:
     def _gather_noise(self, data: bytes, position: int) -> int:
         if not self._buffer:
             self._first = self._arrival(position)
-            self._forget_search()
+            self._search.forget()
         room = MAX_FRAME_LENGTH - len(self._buffer)
         take = len(data) - position
         if take > room:
@@ -401,7 +404,7 @@ class Receiver:
         self._first = self._arrival(position)
         self._candidates = []
         self._predicted = False
-        self._forget_search()
+        self._search.forget()
         return position + 1
 
     def _store(self, data: bytes, position: int) -> int:
@@ -525,11 +528,8 @@ class Receiver:
         With *keep_tail* (overflow), bytes at the end that could still begin a frame stay
         in the buffer; otherwise the buffer is emptied.
 
-        The search predicts a length only where the start pattern matches, and checks the
-        CRC only when the predicted frame is all in the buffer. An offset judged once stays
-        judged: after an overflow the search remembers how far it got in the bytes it keeps
-        (``_scan_from``) and which offsets needed more bytes (``_pending``), so a flood of
-        noise costs a pattern scan per byte, not a prediction per offset per overflow.
+        Where frames may start, and whether one does, is :class:`FrameSearch`'s business;
+        after an overflow it remembers what it judged in the bytes kept.
         """
         buffer = self._buffer
         if end is None:
@@ -539,8 +539,9 @@ class Receiver:
         garbage_from = 0
         resume = 0
         pending: list[int] = []
-        frame_at = self._frame_at
-        for offset in self._search_offsets(buffer, last_start):
+        search = self._search
+        frame_at = search.frame_at
+        for offset in search.offsets(buffer, last_start):
             if offset < resume:
                 continue  # inside a frame found before
             found = frame_at(buffer, offset)
@@ -578,100 +579,18 @@ class Receiver:
             del buffer[:keep_from]
             # Later salvages time the kept bytes from the first of them.
             self._first = self._estimate(keep_from, end)
-            self._pending = [offset - keep_from for offset in pending if offset >= keep_from]
-            self._scan_from = max(0, max(resume, last_start + 1) - keep_from)
+            search.keep(pending, keep_from, max(resume, last_start + 1))
         else:
             if length > garbage_from:
                 self._discard(
                     bytes(buffer[garbage_from:]), reason, end, self._estimate(garbage_from, end)
                 )
             buffer.clear()
-            self._forget_search()
-
-    def _forget_search(self) -> None:
-        """The buffer starts afresh: no offset of it has been searched yet."""
-        self._scan_from = 0
-        if self._pending:
-            self._pending = []
-
-    def _search_offsets(self, buffer: bytearray, last_start: int) -> Iterator[int]:
-        """The offsets up to *last_start* where a frame may start, in order, not yet judged."""
-        yield from self._pending
-        # The pattern looks two bytes ahead: offsets up to last_start need last_start + 2.
-        for match in self._starts.finditer(buffer, self._scan_from, last_start + 2):
-            yield match.start()
+            search.forget()
 
     def _estimate(self, index: int, end: float) -> float:
         """When byte *index* of the buffer arrived, assuming back-to-back characters."""
         return min(end, self._first + index * self.char_time)
-
-    def _frame_at(self, buffer: bytearray, offset: int) -> int:
-        """The length of a valid frame starting at *offset*, or NEED_MORE / CANNOT_KNOW
-        (only where the start pattern matched: unit address and function code are known)."""
-        function_code = buffer[offset + 1]
-        role = self.role
-        if role is Role.SLAVE:
-            head = buffer[offset : offset + _HEAD]
-            guesses: tuple[int, ...] = (expected_request_length(head),)
-        else:
-            # A 2B/0E reply's length needs every object's length byte, however far into
-            # the frame; every other layout is told by the first few bytes.
-            size = MAX_FRAME_LENGTH if function_code == _MEI else _HEAD
-            head = buffer[offset : offset + size]
-            if role is Role.MASTER:
-                guesses = (expected_response_length(head),)
-            else:
-                guesses = (expected_request_length(head), expected_response_length(head))
-        need_more = False
-        available = len(buffer) - offset
-        for guess in guesses:
-            if guess == NEED_MORE:
-                need_more = True
-            elif guess >= MIN_FRAME_LENGTH:
-                if guess > available:
-                    need_more = True
-                elif crc16(buffer[offset : offset + guess]) == 0:
-                    return guess
-        return NEED_MORE if need_more else CANNOT_KNOW
-
-
-_HEAD: Final = 11
-"""Bytes that tell the length of every frame layout but the 2B/0E reply (the longest: the
-byte count of a 17 request at offset 10)."""
-
-_MEI: Final = 0x2B
-
-_LAST_UNIT: Final = 247
-
-
-def _known_codes(predict: Callable[[bytes], int]) -> frozenset[int]:
-    """The function codes whose frames *predict* can tell the length of."""
-    return frozenset(
-        code
-        for code in range(256)
-        if predict(bytes((1, code)) + bytes(_HEAD - 2)) != CANNOT_KNOW
-        or predict(bytes((1, code, MEI_READ_DEVICE_IDENTIFICATION)) + bytes(_HEAD - 3))
-        != CANNOT_KNOW
-    )
-
-
-_REQUEST_CODES: Final = _known_codes(expected_request_length)
-_RESPONSE_CODES: Final = _known_codes(expected_response_length)
-
-
-def _byte_class(values: Iterable[int]) -> bytes:
-    return b"".join(b"\\x%02x" % value for value in sorted(values))
-
-
-def _start_pattern(role: Role, units: frozenset[int]) -> re.Pattern[bytes]:
-    """Matches (without consuming) where a frame the role looks for in garbage may start."""
-    if role is Role.SLAVE:
-        addresses: Iterable[int] = {BROADCAST_UNIT, *(unit for unit in units if 0 <= unit < 256)}
-        codes = _REQUEST_CODES
-    else:
-        addresses = range(_LAST_UNIT + 1)
-        codes = _RESPONSE_CODES if role is Role.MASTER else _REQUEST_CODES | _RESPONSE_CODES
-    return re.compile(b"(?=[" + _byte_class(addresses) + b"][" + _byte_class(codes) + b"])")
 
 
 _MID_FRAME = frozenset((ReceiverState.START, ReceiverState.DATABUF))
