@@ -134,6 +134,17 @@ class PDU:
                 exception_code=_exception_code_for(error.field),
             ) from None
 
+    def _encode_words(self, *words: int) -> bytes:
+        """The function code, then *words* as big-endian 16-bit fields (already checked)."""
+        return bytes((self.function_code,)) + pack_registers(words)
+
+    @classmethod
+    def _decode_words(cls, pdu: bytes, count: int) -> Self:
+        """Decode a PDU made of the function code and *count* 16-bit fields, in field order."""
+        cls._expect_function_code(pdu)
+        cls._expect_length(pdu, 1 + 2 * count)
+        return cls._build(lambda: cls(*unpack_registers(pdu, 1, count)))
+
     @classmethod
     def _expect_function_code(cls, pdu: bytes) -> None:
         # decode_request dispatches on the code, but a class's decode may be called directly.

@@ -103,11 +103,7 @@ class ReadCoilsRequest(Request):
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 5)
-        return cls._build(
-            lambda: cls(int.from_bytes(pdu[1:3], "big"), int.from_bytes(pdu[3:5], "big"))
-        )
+        return cls._decode_words(pdu, 2)
 
     def check_response(self, response: Response) -> None:
         Request.check_response(self, response)
@@ -179,7 +175,7 @@ class WriteSingleCoilResponse(Response):
         self._check("address", self.address, ADDRESS_RANGE)
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + pack_registers((self.address, _coil_word(self.value)))
+        return self._encode_words(self.address, _coil_word(self.value))
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
@@ -206,7 +202,7 @@ class WriteSingleCoilRequest(Request):
         self._check("address", self.address, ADDRESS_RANGE)
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + pack_registers((self.address, _coil_word(self.value)))
+        return self._encode_words(self.address, _coil_word(self.value))
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
@@ -234,13 +230,11 @@ class WriteMultipleCoilsResponse(Response):
         self._check("address + count", self.address + self.count, _END_RANGE)
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + pack_registers((self.address, self.count))
+        return self._encode_words(self.address, self.count)
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 5)
-        return cls._build(lambda: cls(*unpack_registers(pdu, 1, 2)))
+        return cls._decode_words(pdu, 2)
 
 
 @dataclass(frozen=True, slots=True)

@@ -109,13 +109,11 @@ class ReadHoldingRegistersRequest(Request):
         self._check("address + count", self.address + self.count, range(ADDRESS_RANGE.stop + 1))
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + pack_registers((self.address, self.count))
+        return self._encode_words(self.address, self.count)
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 5)
-        return cls._build(lambda: cls(*unpack_registers(pdu, 1, 2)))
+        return cls._decode_words(pdu, 2)
 
     def check_response(self, response: Response) -> None:
         Request.check_response(self, response)
@@ -157,13 +155,11 @@ class WriteSingleRegisterResponse(Response):
         self._check("value", self.value, REGISTER_RANGE)
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + pack_registers((self.address, self.value))
+        return self._encode_words(self.address, self.value)
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 5)
-        return cls._build(lambda: cls(*unpack_registers(pdu, 1, 2)))
+        return cls._decode_words(pdu, 2)
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,13 +180,11 @@ class WriteSingleRegisterRequest(Request):
         self._check("value", self.value, REGISTER_RANGE)
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + pack_registers((self.address, self.value))
+        return self._encode_words(self.address, self.value)
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 5)
-        return cls._build(lambda: cls(*unpack_registers(pdu, 1, 2)))
+        return cls._decode_words(pdu, 2)
 
     def check_response(self, response: Response) -> None:
         Request.check_response(self, response)
@@ -213,13 +207,11 @@ class WriteMultipleRegistersResponse(Response):
         self._check("address + count", self.address + self.count, _END_RANGE)
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + pack_registers((self.address, self.count))
+        return self._encode_words(self.address, self.count)
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 5)
-        return cls._build(lambda: cls(*unpack_registers(pdu, 1, 2)))
+        return cls._decode_words(pdu, 2)
 
 
 def _decode_write_count(
@@ -497,7 +489,7 @@ class ReadFifoQueueRequest(Request):
         self._check("address", self.address, ADDRESS_RANGE)
 
     def encode(self) -> bytes:
-        return bytes((self.function_code,)) + pack_registers((self.address,))
+        return self._encode_words(self.address)
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:

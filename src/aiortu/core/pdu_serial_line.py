@@ -323,11 +323,7 @@ class GetCommEventCounterResponse(Response):
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 5)
-        return cls._build(
-            lambda: cls(int.from_bytes(pdu[1:3], "big"), int.from_bytes(pdu[3:5], "big"))
-        )
+        return cls._decode_words(pdu, 2)
 
 
 @dataclass(frozen=True, slots=True)
