@@ -86,6 +86,17 @@ _UNIT_RANGE = range(1, 248)
 _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
 
 
+class _Taken:
+    """A request the read callback took (counted, the machine CHECKING) and left to the
+    serve loop: to answer (*reply* None), or with its *reply* PDU to send."""
+
+    __slots__ = ("frame", "reply")
+
+    def __init__(self, frame: bytes, reply: bytes | None) -> None:
+        self.frame = frame
+        self.reply = reply
+
+
 class Slave:
     """A Modbus RTU slave on one line (see the module docstring).
 
@@ -152,7 +163,7 @@ class Slave:
         self._task_group: anyio.abc.TaskGroup | None = None
         self._stopped = anyio.Event()
         self._served = frozenset((BROADCAST_UNIT, *self.units))
-        self._queue: deque[LinkEvent] = deque()
+        self._queue: deque[LinkEvent | _Taken] = deque()
         self._wake: anyio.Event | None = None
         self._waiter: Any = None
         """The event loop future the serve loop waits on, where the link has a loop."""
@@ -357,8 +368,13 @@ class Slave:
                 if type(event) is FrameReceived:
                     if self._take_frame(event):
                         await self._serve_request(event.frame)
+                elif type(event) is _Taken:
+                    if event.reply is None:
+                        await self._serve_request(event.frame)
+                    else:
+                        await self._send_reply(event.frame[0], event.reply)
                 else:
-                    self._take_discard(event)
+                    self._take_discard(event)  # type: ignore[arg-type]
         finally:
             self._wake = self._waiter = None
             link.listen(None)
@@ -368,22 +384,28 @@ class Slave:
         queue = self._queue
         if event is None:
             self._link_closed = True
-        elif (
-            not queue
-            and self.machine.state is SlaveState.IDLE
-            and (type(event) is not FrameReceived or event.frame[0] not in self._served)
-        ):
-            # Nothing pending, no request under way, and nothing to answer: it only
-            # counts, so it is done here.
-            if type(event) is FrameReceived:
-                self._take_frame(event)
-            else:
+        elif not queue and self.machine.state is SlaveState.IDLE:
+            # Nothing pending and no request under way: a discard, or a frame for another
+            # unit, only counts, and a request the store answers at once is answered
+            # here, with no task wake-up; only the rest wakes the serve loop.
+            if type(event) is not FrameReceived:
                 self._take_discard(event)
-            return
+                return
+            if event.frame[0] not in self._served:
+                self._take_frame(event)
+                return
+            taken = self._answer_at_once(event)
+            if taken is None:
+                return
+            queue.append(taken)
         else:
             if len(queue) >= self.link.queue_size:
-                queue.popleft()  # a reader that falls behind never stalls the line
-                self.link.events_dropped += 1
+                # A reader that falls behind never stalls the line; a request already
+                # taken (only ever first in the queue) is never dropped: it is under way.
+                drop = 1 if type(queue[0]) is _Taken else 0
+                if drop < len(queue):
+                    del queue[drop]
+                    self.link.events_dropped += 1
             queue.append(event)
         waiter = self._waiter
         if waiter is not None:
@@ -419,28 +441,67 @@ class Slave:
             return False
         return True
 
+    def _answer_at_once(self, event: FrameReceived) -> _Taken | None:
+        """Serve a request for one of our units from the link's read callback, as far as
+        that goes without a wait; return what is left for the serve loop, or None.
+
+        The request is counted (the machine is CHECKING). Without hooks, a built-in
+        MemoryStore answers the common reads and writes at once (the fast paths); the
+        reply then goes out at once too when the line allows it (frame gap 0, or already
+        kept). Whatever needs a wait is left to the serve loop, in order.
+        """
+        frame = event.frame
+        if not self._take_frame(event):
+            return None
+        reply = self._fast_reply(frame)
+        if reply is None:
+            return _Taken(frame, None)
+        machine = self.machine
+        if not machine.should_reply:
+            machine.no_reply()
+            return None
+        out = encode_frame(frame[0], reply)
+        if self.link.send_now(out) is None:
+            return _Taken(frame, reply)
+        trace = self.trace
+        if trace is not None:
+            trace("sent", out)
+        machine.reply_sent()
+        return None
+
+    def _fast_reply(self, frame: bytes) -> bytes | None:
+        """The reply PDU from a fast path (see slave_handlers), counted by the machine;
+        None where none applies (hooks, another store, or a request it leaves to the
+        handler)."""
+        fast = self._fast_paths.get(frame[1])
+        if fast is None or self._before or self._after:
+            return None
+        store = self._fast_stores.get(frame[0])
+        if store is None:
+            return None
+        machine = self.machine
+        try:
+            reply = fast(store, frame[1:-2])
+        except ExceptionResponse as error:
+            machine.check_request(supported=True)
+            machine.processing_failed(error.code)
+            return _exception_pdu(frame[1], error.code)
+        if reply is not None:
+            machine.check_request(supported=True)
+            machine.processed()
+        return reply
+
     async def _serve_request(self, frame: bytes) -> None:
         """Answer a request for one of our units (counted by the machine, now CHECKING)."""
-        machine = self.machine
         unit = frame[0]
-        pdu = frame[1:-2]
-        reply: bytes | Reply | None = None
-        fast = self._fast_paths.get(frame[1])
-        store = self._fast_stores.get(unit) if fast is not None else None
-        if store is not None and not (self._before or self._after):
-            assert fast is not None
-            try:
-                reply = fast(store, pdu)
-            except ExceptionResponse as error:
-                machine.check_request(supported=True)
-                machine.processing_failed(error.code)
-                reply = _exception_pdu(frame[1], error.code)
-            else:
-                if reply is not None:
-                    machine.check_request(supported=True)
-                    machine.processed()
+        reply: bytes | Reply | None = self._fast_reply(frame)
         if reply is None:
-            reply = await self._answer(unit, pdu)
+            reply = await self._answer(unit, frame[1:-2])
+        await self._send_reply(unit, reply)
+
+    async def _send_reply(self, unit: int, reply: bytes | Reply | None) -> None:
+        """Send *reply* (a PDU or a Reply) for *unit*, unless there is none to send."""
+        machine = self.machine
         if reply is not None and machine.should_reply:
             if type(reply) is bytes:
                 out = encode_frame(unit, reply)

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from aiortu.core.timing import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.testing import FaultPlan, VirtualBus, virtual_pair
+from aiortu.wake_timer import WakeTimer
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -267,5 +268,5 @@ async def test_last_byte_of_a_frame_arrives_on_time_never_before(baudrate):
                 assert now >= start + received * settings.char_time - 1e-9
         lateness.append(now - (start + size * settings.char_time))
     assert min(lateness) >= -1e-9
-    if type(a.bus._timer).__name__ == "_WakeTimer":
+    if isinstance(a.bus._timer, WakeTimer):
         assert sorted(lateness)[len(lateness) // 2] < 0.0005

@@ -35,11 +35,11 @@ The wire model:
 Wake-ups: a receiver waiting for paced bytes sleeps until they are due. asyncio's event
 loop waits in whole milliseconds (rounded up), which would hand over the last byte of a
 frame up to a millisecond late; so under asyncio on Linux the bus wakes its receivers
-with a timer of its own (a ``timerfd`` at the due time, to the nanosecond) and never
-before the due time. Bytes in the middle of a transmission are handed over at most about
-a millisecond apart (all that are due at each wake-up, as a UART's FIFO would), the last
-byte of each run of bytes at its due time. Elsewhere (trio, other systems) the receivers
-sleep with the event loop's own timers.
+with a :class:`~aiortu.wake_timer.WakeTimer` (a ``timerfd`` at the due time, to the
+nanosecond) and never before the due time. Bytes in the middle of a transmission are
+handed over at most about a millisecond apart (all that are due at each wake-up, as a
+UART's FIFO would), the last byte of each run of bytes at its due time. Elsewhere (trio,
+other systems) the receivers sleep with the event loop's own timers.
 
 There is no background task: the wire is a schedule computed when bytes are sent, and
 deliveries happen when a receiver (or sender) looks at the clock. The endpoints therefore
@@ -50,15 +50,9 @@ work with or without ``async with``, under asyncio and trio alike; ``async with`
 from __future__ import annotations
 
 import asyncio
-import ctypes
-import functools
 import math
-import os
-import sys
-import time
-import weakref
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -69,6 +63,7 @@ import anyio.lowlevel
 from aiortu.core.timing import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.testing.faults import FaultedChunk, FaultInjector, FaultPlan
+from aiortu.wake_timer import WakeTimer, create_wake_timer
 
 __all__ = ("TraceEntry", "VirtualBus", "VirtualEndpoint", "virtual_pair")
 
@@ -81,124 +76,6 @@ _EPSILON = 1e-6
 # sleeps again for at least this long (but never past the last byte of the run): about the
 # event loop's own timer granularity, so precise wake-ups cost no more wake-ups than before.
 _BATCH = 1e-3
-
-
-class _Timespec(ctypes.Structure):
-    _fields_ = (("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long))
-
-
-class _Itimerspec(ctypes.Structure):
-    _fields_ = (("it_interval", _Timespec), ("it_value", _Timespec))
-
-
-_CLOCK_MONOTONIC = 1
-_TFD_TIMER_ABSTIME = 1
-
-
-@functools.cache
-def _timerfd_libc() -> ctypes.CDLL | None:
-    """The C library, if it has timerfd and the loop clock is CLOCK_MONOTONIC."""
-    implementation = time.get_clock_info("monotonic").implementation
-    if not sys.platform.startswith("linux") or "CLOCK_MONOTONIC" not in implementation:
-        return None
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.timerfd_create.argtypes = (ctypes.c_int, ctypes.c_int)
-        libc.timerfd_settime.argtypes = (
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.POINTER(_Itimerspec),
-            ctypes.c_void_p,
-        )
-    except (OSError, AttributeError):
-        return None
-    return libc
-
-
-class _WakeTimer:
-    """Calls *on_fire* (held weakly) at an exact ``time.monotonic()`` time, in an asyncio loop.
-
-    A ``timerfd`` watched by the loop while at least one receiver waits: epoll wakes as
-    soon as the timer expires, where the loop's own timers round up to whole milliseconds.
-    """
-
-    __slots__ = (
-        "__weakref__",
-        "_armed",
-        "_fd",
-        "_finalizer",
-        "_libc",
-        "_loop",
-        "_on_fire",
-        "_spec",
-        "_waiters",
-    )
-
-    def __init__(self, libc: ctypes.CDLL, on_fire: weakref.WeakMethod[Callable[[], None]]) -> None:
-        fd = libc.timerfd_create(_CLOCK_MONOTONIC, os.O_NONBLOCK | os.O_CLOEXEC)
-        if fd < 0:
-            raise OSError(ctypes.get_errno(), "timerfd_create failed")
-        self._fd: int = fd
-        self._libc = libc
-        self._on_fire = on_fire
-        self._spec = _Itimerspec()
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._waiters = 0
-        self._armed = math.inf
-        # The descriptor is closed by close(), or when the timer is collected.
-        self._finalizer = weakref.finalize(self, os.close, fd)
-
-    def begin(self, loop: asyncio.AbstractEventLoop, deadline: float) -> None:
-        """A receiver starts waiting, until *deadline* at the latest (``math.inf``: no limit)."""
-        if self._waiters == 0:
-            loop.add_reader(self._fd, self._fire)
-            self._loop = loop
-        self._waiters += 1
-        if deadline < self._armed:
-            self._arm(deadline)
-
-    def end(self) -> None:
-        """A receiver stops waiting."""
-        self._waiters = max(0, self._waiters - 1)
-        if self._waiters == 0 and self._loop is not None:
-            self._loop.remove_reader(self._fd)
-            self._loop = None
-            if self._armed < math.inf:
-                self._arm(0.0)
-
-    def _arm(self, deadline: float) -> None:
-        value = self._spec.it_value
-        if deadline <= 0:  # disarm
-            self._armed = math.inf
-            value.tv_sec = value.tv_nsec = 0
-        else:
-            self._armed = deadline
-            seconds = math.floor(deadline)
-            nanoseconds = math.ceil((deadline - seconds) * 1e9)  # never before the deadline
-            if nanoseconds >= 1_000_000_000:
-                seconds, nanoseconds = seconds + 1, nanoseconds - 1_000_000_000
-            value.tv_sec = seconds
-            value.tv_nsec = max(nanoseconds, 1) if seconds == 0 else nanoseconds
-        if self._libc.timerfd_settime(self._fd, _TFD_TIMER_ABSTIME, ctypes.byref(self._spec), None):
-            raise OSError(ctypes.get_errno(), "timerfd_settime failed")
-
-    def _fire(self) -> None:
-        try:
-            os.read(self._fd, 8)
-        except BlockingIOError:  # re-armed since it went off
-            return
-        self._armed = math.inf
-        callback = self._on_fire()
-        if callback is not None:
-            callback()
-
-    def close(self) -> None:
-        """Stop watching and close the descriptor; the timer is not used again."""
-        if self._loop is not None:
-            self._loop.remove_reader(self._fd)
-            self._loop = None
-        self._waiters = 0
-        self._finalizer()
 
 
 @dataclass(frozen=True, slots=True)
@@ -384,7 +261,7 @@ class VirtualBus:
         self._pending_since = 0.0
         self._event: anyio.Event | None = None
         self._closed = False
-        self._timer: _WakeTimer | bool | None = False  # False: not made yet; None: none
+        self._timer: WakeTimer | bool | None = False  # False: not made yet; None: none
         self._immediate = (
             self._char_time == 0 and self.injector is None and chunk_size is None and latency == 0
         )
@@ -429,7 +306,7 @@ class VirtualBus:
         self._segments.clear()
         self._pending.clear()
         self._pending_count = 0
-        if isinstance(self._timer, _WakeTimer):
+        if isinstance(self._timer, WakeTimer):
             self._timer.close()
         self._timer = None
 
@@ -455,32 +332,18 @@ class VirtualBus:
             with anyio.move_on_at(self._next_event_time()):
                 await event.wait()
             return
-        assert isinstance(timer, _WakeTimer)
+        assert isinstance(timer, WakeTimer)
         timer.begin(asyncio.get_running_loop(), self._wake_time(now))
         try:
             await event.wait()
         finally:
             timer.end()
 
-    def _make_timer(self) -> _WakeTimer | None:
+    def _make_timer(self) -> WakeTimer | None:
         """A precise wake-up timer if the bus runs in a standard asyncio loop on Linux."""
         if self._char_time == 0 and self.latency == 0:
             return None  # nothing is ever due later than it is sent
-        libc = _timerfd_libc()
-        if libc is None:
-            return None
-        try:
-            loop = asyncio.get_running_loop()
-        except RuntimeError:  # another event loop (trio)
-            return None
-        if not isinstance(loop, asyncio.SelectorEventLoop):
-            return None
-        if type(loop).time is not asyncio.BaseEventLoop.time:  # a loop with its own clock
-            return None
-        try:
-            return _WakeTimer(libc, weakref.WeakMethod(self._notify))
-        except OSError:
-            return None
+        return create_wake_timer(self._notify)
 
     def _wake_time(self, now: float) -> float:
         """When a receiver should look again: see "Wake-ups" in the module docs."""

@@ -360,6 +360,32 @@ class SerialStream(ByteStream):
                 protocol.data_ready.clear()
                 await protocol.data_ready.wait()
 
+    def send_nowait(self, item: bytes) -> bool:
+        """Write *item* now, without a yield, if the port can take it; return whether it
+        did.
+
+        False means nothing was written: the port is closed or failed, or earlier bytes
+        still wait in the transport; :meth:`send` then says why or waits its turn. True
+        means the transport has the bytes: the driver took them, or the few it could not
+        take yet follow as soon as it can (a failure there closes the port, as for
+        :meth:`send`). A :class:`~aiortu.link.Link` writes its frames this way, in the
+        loop iteration that decided to send them.
+        """
+        protocol = self._protocol
+        transport = self._transport
+        if (
+            self._closed
+            or self._eof_sent
+            or protocol.lost
+            or transport.get_write_buffer_size()
+            or transport.is_closing()
+        ):
+            return False
+        if protocol.echo is not None:
+            protocol.echo.expect(item)
+        transport.write(item)
+        return True
+
     async def send(self, item: bytes) -> None:
         """Write all of *item* and wait until the transport has handed it to the driver.
 

@@ -1,0 +1,143 @@
+"""A slave on a serial port answers what its store answers at once from the read callback.
+
+Over a pty (the serial transport writes without a yield) with ``frame_gap=0``, the
+requests the fast paths serve are answered inside the link's read callback, with no task
+wake-up; the rest go to the serve loop. Either way the replies, the counters and the
+store must be what the same slave gives on a virtual line, where every reply goes out
+from the serve loop.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+import tty
+from typing import Any
+
+import anyio
+import pytest
+
+import aiortu
+from aiortu.core.frame import CANNOT_KNOW, encode_frame, expected_response_length
+from aiortu.core.receiver import FrameReceived
+from aiortu.slave import Slave, _Taken
+from aiortu.slave_handlers import FAST_PATHS
+from aiortu.store import Table
+from aiortu.testing.virtual_bus import virtual_pair
+
+from .helpers import UNIT, example_store, slave_line
+
+REQUESTS = [
+    (UNIT, "03 00 6B 00 03"),  # holding registers
+    (UNIT, "01 00 13 00 13"),  # coils
+    (UNIT, "02 00 C4 00 16"),  # discrete inputs
+    (UNIT, "04 00 08 00 01"),  # input registers
+    (UNIT, "06 00 01 00 03"),  # one register written
+    (UNIT, "10 00 01 00 02 04 00 0A 01 02"),  # two registers written
+    (UNIT, "03 00 6B 00 7E"),  # 126 registers: exception 03
+    (UNIT, "03 01 00 00 01"),  # unmapped: exception 02
+    (UNIT, "07"),  # no fast path: the serve loop answers
+    (UNIT, "08 00 00 12 34"),  # diagnostics, echo
+    (5, "03 00 00 00 01"),  # another unit: no reply
+    (0, "06 00 02 00 05"),  # broadcast: executed, no reply
+    (UNIT, "03 00 00 00 04"),  # sees the broadcast write
+    (UNIT, "0B"),  # the event counter after all that
+]
+
+
+async def _exchange_on_pty(master_fd: int, frame: bytes) -> bytes:
+    """Write *frame* as the master; return the reply, or b"" when none comes."""
+    os.write(master_fd, frame)
+    reply = bytearray()
+    with anyio.move_on_after(0.2):
+        while True:
+            length = expected_response_length(bytes(reply))
+            if length != CANNOT_KNOW and 0 < length <= len(reply):
+                break
+            await anyio.wait_readable(master_fd)
+            with contextlib.suppress(BlockingIOError):
+                reply += os.read(master_fd, 256)
+    return bytes(reply)
+
+
+@pytest.mark.parametrize("frame_gap", [0.0, 0.004])
+async def test_answers_from_the_read_callback_equal_the_serve_loops(frame_gap: float) -> None:
+    sent_by_the_serve_loop: list[bytes] = []
+    master_fd, port_fd = os.openpty()
+    tty.setraw(port_fd)
+    os.set_blocking(master_fd, False)
+    pty_store = example_store()
+    try:
+        async with aiortu.serve(
+            os.ttyname(port_fd), {UNIT: pty_store}, parity="N", stopbits=2, frame_gap=frame_gap
+        ) as slave:
+            assert isinstance(slave, Slave)
+            send_reply = slave._send_reply
+
+            async def counted(unit: int, reply: Any) -> None:
+                sent_by_the_serve_loop.append(reply)
+                await send_reply(unit, reply)
+
+            slave._send_reply = counted  # type: ignore[method-assign]
+            await anyio.sleep(0.05)  # the receiver first waits for silence
+            on_pty = [
+                await _exchange_on_pty(master_fd, encode_frame(unit, bytes.fromhex(pdu)))
+                for unit, pdu in REQUESTS
+            ]
+            pty_counters = dataclasses.asdict(slave.counters)
+    finally:
+        for fd in (master_fd, port_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+    async with slave_line() as (master, oracle):
+        on_virtual_line = []
+        for unit, pdu in REQUESTS:
+            await master.send_request(unit, pdu)
+            on_virtual_line.append((await master.receive_frame(0.2)) or b"")
+        oracle_counters = dataclasses.asdict(oracle.counters)
+        oracle_store = oracle.units[UNIT]
+
+    assert [reply.hex(" ") for reply in on_pty] == [r.hex(" ") for r in on_virtual_line]
+    assert sum(1 for reply in on_pty if reply) == 12  # not the other unit's, nor the broadcast
+    assert pty_counters == oracle_counters
+    assert isinstance(oracle_store, aiortu.MemoryStore)
+    for table, address, count in [
+        (Table.COILS, 0x13, 19),
+        (Table.HOLDING_REGISTERS, 0, 20),
+        (Table.HOLDING_REGISTERS, 0x6B, 3),
+    ]:
+        assert pty_store.get(table, address, count) == oracle_store.get(table, address, count)
+    assert pty_store.get(Table.HOLDING_REGISTERS, 0, 4) == [0, 0x0A, 5, 0xFE]  # broadcast last
+    # Only what the fast paths leave to the handlers went through the serve loop's
+    # sender: the malformed read (the handler answers 03), 07, 08, the broadcast (no
+    # reply) and 0B. Reads, writes and the unmapped read's 02 went from the callback.
+    # With a frame gap to keep, every reply waits for it in the serve loop (computed at
+    # once all the same).
+    codes = [reply[0] if isinstance(reply, bytes) else reply for reply in sent_by_the_serve_loop]
+    if frame_gap:
+        expected = [
+            reply[1] if reply else None
+            for (unit, _), reply in zip(REQUESTS, on_pty, strict=True)
+            if unit in (UNIT, 0)
+        ]
+        assert codes == expected
+    else:
+        assert codes == [0x83, 0x07, 0x08, None, 0x0B]
+    assert {0x01, 0x02, 0x03, 0x04, 0x06, 0x10} <= set(FAST_PATHS)
+
+
+async def test_a_request_under_way_is_never_dropped_when_the_queue_overflows() -> None:
+    _, slave_end = virtual_pair()
+    slave = Slave(slave_end, {UNIT: example_store()}, frame_gap=0)
+    queue = slave._queue
+    taken = _Taken(encode_frame(UNIT, bytes.fromhex("07")), None)
+    queue.append(taken)
+    other = FrameReceived(encode_frame(9, bytes.fromhex("07")), 0.0, 0.0)
+    size = slave.link.queue_size
+    for _ in range(size + 5):
+        slave._on_link_event(other)
+    assert queue[0] is taken
+    assert len(queue) == size
+    assert slave.link.events_dropped == 6

@@ -1,0 +1,173 @@
+"""The link's wait for silence: never before the silence has elapsed, on the precise timer
+where there is one, cancellable, and closed with the link."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import anyio
+import anyio.abc
+import pytest
+
+import aiortu.link
+from aiortu.core.frame import encode_frame
+from aiortu.core.receiver import FrameReceived
+from aiortu.core.timing import LineSettings
+from aiortu.link import Link
+from aiortu.testing import virtual_pair
+from aiortu.wake_timer import WakeTimer
+
+REPLY = encode_frame(0x11, bytes.fromhex("03 06 AE 41 56 52 43 40"))
+FAST = LineSettings(115200)
+GAP = 0.050
+"""A silence far longer than scheduling noise, for the waits that other events interrupt."""
+
+
+async def _settle() -> None:
+    """Let the link's reader open: it ignores what arrives in its first frame silence."""
+    await anyio.sleep(0.03)
+
+
+async def _receive_a_frame(link: Link, far: anyio.abc.ByteStream) -> None:
+    await far.send(REPLY)
+    with anyio.fail_after(2):
+        event = await link.receive()
+    assert isinstance(event, FrameReceived)
+
+
+def _timer_of(link: Link) -> WakeTimer:
+    timer = link._silence_timer
+    if timer is None:
+        pytest.skip("no precise timer for this event loop")
+    return timer
+
+
+@pytest.mark.parametrize(
+    "clock",
+    [anyio.current_time, lambda: time.monotonic() + 1000.0],
+    ids=["loop clock", "own clock"],
+)
+async def test_never_returns_before_the_silence_has_elapsed(clock) -> None:
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=0, clock=clock) as link:
+        await _settle()
+        for _ in range(20):
+            await _receive_a_frame(link, far)
+            quiet_at = link.last_activity + FAST.t3_5
+            await link.wait_for_silence(FAST.t3_5)
+            assert link.clock() >= quiet_at
+        _timer_of(link)
+
+
+async def test_one_timer_per_link_made_on_first_use() -> None:
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=0) as link:
+        await _settle()
+        assert link._silence_timer is None
+        await _receive_a_frame(link, far)
+        await link.wait_for_silence(FAST.t3_5)
+        timer = _timer_of(link)
+        await _receive_a_frame(link, far)
+        await link.wait_for_silence(FAST.t3_5)
+        assert link._silence_timer is timer
+
+
+async def test_bytes_arriving_meanwhile_restart_the_wait() -> None:
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=0) as link:
+        await _settle()
+        await _receive_a_frame(link, far)
+        first_quiet_at = link.last_activity + GAP
+        returned_at = math.nan
+
+        async def wait() -> None:
+            nonlocal returned_at
+            await link.wait_for_silence(GAP)
+            returned_at = link.clock()
+
+        with anyio.fail_after(2):
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(wait)
+                await anyio.sleep(GAP / 2)
+                await _receive_a_frame(link, far)
+                quiet_at = link.last_activity + GAP
+        assert quiet_at > first_quiet_at
+        assert returned_at >= quiet_at
+
+
+async def test_a_cancelled_wait_leaves_the_timer_disarmed() -> None:
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=0) as link:
+        await _settle()
+        await _receive_a_frame(link, far)
+        await link.wait_for_silence(FAST.t3_5)  # makes the timer
+        timer = _timer_of(link)
+        await _receive_a_frame(link, far)
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(link.wait_for_silence, 10.0)
+            await anyio.sleep(0.01)
+            assert timer.deadline < math.inf  # the wait is on the timer
+            tg.cancel_scope.cancel()
+        assert timer.deadline == math.inf
+        assert link._silence_waiters == []
+        # The timer still serves the next wait.
+        await _receive_a_frame(link, far)
+        quiet_at = link.last_activity + FAST.t3_5
+        await link.wait_for_silence(FAST.t3_5)
+        assert link.clock() >= quiet_at
+        assert link._silence_timer is timer
+
+
+async def test_falls_back_to_the_loop_timers_without_the_precise_timer(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(aiortu.link, "create_wake_timer", lambda on_fire: None)
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=0) as link:
+        await _settle()
+        for _ in range(3):
+            await _receive_a_frame(link, far)
+            quiet_at = link.last_activity + FAST.t3_5
+            await link.wait_for_silence(FAST.t3_5)
+            assert link.clock() >= quiet_at
+        assert link._silence_timer is None
+
+
+async def test_the_timer_is_closed_when_the_link_stops() -> None:
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=0) as link:
+        await _settle()
+        await _receive_a_frame(link, far)
+        await link.wait_for_silence(FAST.t3_5)
+        timer = _timer_of(link)
+        assert not timer.closed
+    assert timer.closed
+    assert link._silence_timer is None
+
+
+async def test_a_wait_outlasting_the_link_still_ends_after_the_silence() -> None:
+    near, far = virtual_pair()
+    returned_at = math.nan
+
+    async def wait(link: Link) -> None:
+        nonlocal returned_at
+        await link.wait_for_silence(GAP)
+        returned_at = link.clock()
+
+    with anyio.fail_after(2):
+        # The waiter's task is outside the link's scope, so closing the link does not
+        # cancel it: it goes on waiting with the timer closed under it.
+        async with anyio.create_task_group() as tg:
+            async with Link(near, FAST, frame_gap=0) as link:
+                await _settle()
+                await _receive_a_frame(link, far)
+                await link.wait_for_silence(FAST.t3_5)
+                timer = _timer_of(link)
+                await _receive_a_frame(link, far)
+                quiet_at = link.last_activity + GAP
+                tg.start_soon(wait, link)
+                await anyio.sleep(GAP / 5)
+                assert timer.deadline < math.inf
+            assert timer.closed
+    assert returned_at >= quiet_at
