@@ -23,6 +23,7 @@ from aiortu.core.master_machine import (
 from aiortu.core.pdu_registers import (
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
+    ReadInputRegistersRequest,
     WriteSingleRegisterRequest,
 )
 
@@ -159,3 +160,46 @@ def test_a_second_transaction_cannot_begin_mid_way() -> None:
     machine.sent(0.0, 0.001)
     with pytest.raises(MasterMachineError):
         machine.begin(Transaction(1, ReadHoldingRegistersRequest(0, 1), 1.0))
+
+
+register_replies = st.one_of(
+    st.binary(max_size=12),
+    st.builds(
+        lambda function, values: (
+            bytes([function, 2 * len(values)]) + b"".join(v.to_bytes(2, "big") for v in values)
+        ),
+        st.sampled_from([3, 4, 0x83, 6]),
+        st.lists(st.integers(0, 0xFFFF), max_size=4),
+    ),
+)
+
+
+@given(
+    st.sampled_from([ReadHoldingRegistersRequest, ReadInputRegistersRequest]),
+    st.integers(1, 4),
+    st.integers(0, 3),
+    register_replies,
+    st.sampled_from([9.5, 10.0, 10.01]),
+)
+def test_the_usual_reply_in_one_step_equals_the_table_step_by_step(
+    kind: type[ReadHoldingRegistersRequest],
+    count: int,
+    unit: int,
+    pdu: bytes,
+    end: float,
+) -> None:
+    """Without an observer the machine takes a register read's usual reply in one step;
+    with one it fires every transition: the outcome and the state must be the same."""
+    seen: list[tuple[MasterState, MasterEvent, MasterState]] = []
+    results = []
+    for machine in (MasterMachine(), MasterMachine(on_transition=lambda *s: seen.append(s))):
+        machine.begin(Transaction(2 if unit == 3 else 1, kind(0, count), 1.0))
+        machine.sent(10.0, 10.004)
+        outcome = machine.frame_received(unit, pdu, end - 0.001, end)
+        results.append((outcome, machine.state, machine.deadline, machine.transaction))
+    assert results[0][:3] == results[1][:3]
+    assert results[0][3] is not None
+    assert results[1][3] is not None
+    assert repr(results[0][3].frame_error) == repr(results[1][3].frame_error)
+    for state, event, target in seen:
+        assert TRANSITIONS[state, event][0] is target
