@@ -3,12 +3,15 @@ and memory can be read from /proc.
 
     python benchmarks/bench_servers.py pymodbus PORT
     python benchmarks/bench_servers.py aiortu PORT [--frame-gap SECONDS] [--units N]
+    python benchmarks/bench_servers.py bare PORT
     python benchmarks/bench_servers.py paced-lines --lines 16 [--baudrate 19200] [--units N]
         [--latency SECONDS]
 
 ``pymodbus`` runs pymodbus's RTU server, ``aiortu`` runs :func:`aiortu.serve`, both on
 PORT at 19200 8N2 (ptys keep no parity) with holding registers 0..99 holding 0..99 on
-unit 1 (``--units N``: units 1..N sharing one store). ``paced-lines`` starts *lines*
+unit 1 (``--units N``: units 1..N sharing one store). ``bare`` is the reference with no
+Modbus logic: blocking reads of 8-byte requests, each answered with the fixed reply to a
+read of registers 0..9 of unit 1, whatever it asked. ``paced-lines`` starts *lines*
 :class:`aiortu.testing.PtyBus` buses paced at *baudrate*, each with an aiortu slave
 (frame gap t3.5) on its port 1 (``--latency``: the bus's adapter latency, bytes
 handed over in chunks), and prints the port-0 paths, space separated, before
@@ -95,6 +98,21 @@ async def serve_aiortu(port: str, units: int, frame_gap: float | None) -> None:
         await _until_signal()
 
 
+def serve_bare(port: str) -> None:
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import benchlib
+
+    from aiortu.core.frame import encode_frame
+    from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
+
+    reply = encode_frame(1, ReadHoldingRegistersResponse(tuple(range(10))).encode())
+    fd = benchlib.open_raw(port)
+    _ready()
+    while True:
+        benchlib.read_exactly(fd, 8)
+        os.write(fd, reply)
+
+
 async def paced_lines(lines: int, baudrate: int, units: int, latency: float) -> None:
     import contextlib
 
@@ -123,7 +141,7 @@ async def paced_lines(lines: int, baudrate: int, units: int, latency: float) -> 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("mode", choices=["pymodbus", "aiortu", "paced-lines"])
+    parser.add_argument("mode", choices=["pymodbus", "aiortu", "bare", "paced-lines"])
     parser.add_argument("port", nargs="?")
     parser.add_argument("--frame-gap", type=float, default=None)
     parser.add_argument("--units", type=int, default=1)
@@ -135,6 +153,8 @@ def main() -> None:
         asyncio.run(serve_pymodbus(args.port, args.units))
     elif args.mode == "aiortu":
         asyncio.run(serve_aiortu(args.port, args.units, args.frame_gap))
+    elif args.mode == "bare":
+        serve_bare(args.port)
     else:
         asyncio.run(paced_lines(args.lines, args.baudrate, args.units, args.latency))
     sys.stdout.flush()

@@ -191,3 +191,72 @@ def read_exactly(fd: int, count: int) -> bytes:
             raise EOFError
         data += chunk
     return data
+
+
+# -- references with no Modbus logic: what the pty pair and the peer allow -------------------
+
+
+def blocking_reads(path: str, request: bytes, reply: bytes, count: int) -> tuple[float, float]:
+    """Send *request* and read *reply* back *count* times with blocking system calls.
+
+    The cheapest client there is: no event loop and no Modbus logic, only the check that
+    the reply is the expected bytes. Returns (reads/s, this process's CPU s per read).
+    """
+    fd = open_raw(path)
+    try:
+        for _ in range(20):
+            os.write(fd, request)
+            read_exactly(fd, len(reply))
+        wall, cpu = time.perf_counter(), time.process_time()
+        for _ in range(count):
+            os.write(fd, request)
+            if read_exactly(fd, len(reply)) != reply:
+                raise AssertionError("the blocking client read a wrong reply")
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    finally:
+        os.close(fd)
+    return count / wall, cpu / count
+
+
+async def bare_asyncio_reads(
+    path: str, request: bytes, reply: bytes, count: int
+) -> tuple[float, float]:
+    """Like :func:`blocking_reads`, on an asyncio event loop: the port's descriptor is
+    watched by the loop, each read awaits a future that the read callback completes.
+
+    The cheapest async client there is: what any asyncio Modbus master pays before it
+    does any Modbus work. Returns (reads/s, this process's CPU s per read).
+    """
+    import asyncio
+
+    loop = asyncio.get_running_loop()
+    fd = open_raw(path)
+    os.set_blocking(fd, False)
+    received = bytearray()
+    waiter: list[asyncio.Future[bytes]] = []
+
+    def on_readable() -> None:
+        received.extend(os.read(fd, 256))
+        if len(received) >= len(reply) and waiter:
+            waiter.pop().set_result(bytes(received))
+            received.clear()
+
+    async def read_once() -> bytes:
+        future = loop.create_future()
+        waiter.append(future)
+        os.write(fd, request)
+        return await future
+
+    loop.add_reader(fd, on_readable)
+    try:
+        for _ in range(20):
+            await read_once()
+        wall, cpu = time.perf_counter(), time.process_time()
+        for _ in range(count):
+            if await read_once() != reply:
+                raise AssertionError("the bare asyncio client read a wrong reply")
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    finally:
+        loop.remove_reader(fd)
+        os.close(fd)
+    return count / wall, cpu / count
