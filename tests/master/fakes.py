@@ -65,7 +65,7 @@ from aiortu.core.pdu_serial_line import (
     ReportServerIdRequest,
     ReportServerIdResponse,
 )
-from aiortu.core.receiver import FrameReceived, Role
+from aiortu.core.receiver import FrameReceived, ReceiverState, Role
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost
 from aiortu.link import Link
@@ -218,6 +218,20 @@ class FakeSlave:
                 await step(self, event.unit, request)
 
 
+async def until_idle(master: Master, slave: FakeSlave) -> None:
+    """Wait until both receivers have left INIT, where they start by waiting for silence
+    (20 ms in tolerant mode): a frame that comes sooner is taken for noise."""
+    for _ in range(1000):
+        if (
+            slave.link is not None
+            and slave.link.receiver.state is not ReceiverState.INIT
+            and master.engine.link.receiver.state is not ReceiverState.INIT
+        ):
+            return
+        await anyio.sleep(0.002)
+    raise AssertionError("the receivers did not leave INIT within 2 s")
+
+
 @contextlib.asynccontextmanager
 async def line(
     *,
@@ -240,7 +254,6 @@ async def line(
     async with anyio.create_task_group() as tasks:
         tasks.start_soon(slave.run)
         async with Master(bus.endpoints[0], **options) as master:  # type: ignore[arg-type]
-            # Both receivers start by waiting for silence (INIT); let them reach IDLE.
-            await anyio.sleep(0.03)
+            await until_idle(master, slave)
             yield master, slave, bus
         tasks.cancel_scope.cancel()

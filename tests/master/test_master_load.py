@@ -20,7 +20,7 @@ from aiortu.core.pdu_registers import ReadHoldingRegistersRequest
 from aiortu.core.timing import LineSettings
 from aiortu.testing import FaultPlan, VirtualBus
 
-from .fakes import FakeSlave, answer, register_value
+from .fakes import FakeSlave, answer, register_value, until_idle
 
 SETTINGS = LineSettings(19200, parity="E")
 
@@ -49,7 +49,7 @@ async def test_many_callers_on_a_paced_line_keep_order_and_t3_5() -> None:
     async with anyio.create_task_group() as tasks:
         tasks.start_soon(slave.run)
         async with aiortu.Master(bus.endpoints[0], SETTINGS, timeout=0.5) as master:
-            await anyio.sleep(0.01)
+            await until_idle(master, slave)
             with anyio.fail_after(40):
                 async with anyio.create_task_group() as callers_group:
                     for index in range(callers):
@@ -100,7 +100,7 @@ async def test_a_noisy_line_gives_right_values_or_typed_errors(
             timeout=0.05,
             late_reply_guard=0.01,
         ) as master:
-            await anyio.sleep(0.01)
+            await until_idle(master, slave)
             with anyio.fail_after(40):
                 for index in range(transactions):
                     unit = generator.randint(1, 5)
