@@ -165,6 +165,7 @@ class Link:
         """A stream's write without a yield (the serial port's), tried before ``send``."""
         self._timer: Any = None
         self._timer_deadline = -math.inf
+        self._expected: tuple[bytes, int, Callable[[bytes, float], None]] | None = None
         self._push_lost: anyio.Event | None = None
         self._push_error: BaseException | None = None
         self.frames_received = 0
@@ -350,12 +351,39 @@ class Link:
             self._last_received = now
             # Half duplex: see _pump.
             self._transmit_end = min(self._transmit_end, now)
-            events = self.receiver.feed(chunk, now)
-            if events:
-                self._deliver(events)
+            expected = self._expected
+            if (
+                expected is not None
+                and len(chunk) == expected[1]
+                and chunk.startswith(expected[0])
+                and self.receiver.take_expected_frame(chunk, now)
+            ):
+                self._expected = None
+                self.frames_received += 1
+                expected[2](chunk, now)
+            else:
+                events = self.receiver.feed(chunk, now)
+                if events:
+                    self._deliver(events)
             self._arm_timer()
         except BaseException as error:  # a bug: the reader task raises it
             self._fail_push(error)
+
+    def expect(self, prefix: bytes, length: int, on_frame: Callable[[bytes, float], None]) -> None:
+        """Hand the next chunk that is exactly one good frame of *length* bytes starting
+        with *prefix* straight to ``on_frame(frame, end)``, once, instead of to the listener
+        as a :class:`~aiortu.core.receiver.FrameReceived`; :meth:`forget_expected` undoes it.
+        *prefix* and *length* must fit one frame layout (the receiver checks the CRC only).
+
+        Only where the stream pushes its bytes (see :meth:`_push`); anything else takes
+        the usual way. A master waiting for the reply it knows the shape of (a register
+        read's) saves the event and the queue this way.
+        """
+        self._expected = (prefix, length, on_frame)
+
+    def forget_expected(self) -> None:
+        """Undo :meth:`expect`, if the frame has not come."""
+        self._expected = None
 
     def _on_timer(self) -> None:
         self._timer = None

@@ -191,6 +191,8 @@ class LineEngine:
         self._waiter: Any = None
         """The event loop future a transaction waits on, where the link has a loop."""
         self._waiter_deadline = math.inf
+        self._usual: tuple[bytes, float] | None = None
+        """The usual reply, handed over by the link's read callback (see Link.expect)."""
         self._timer: Any = None
         self._timer_at = math.inf
         self._adopted: _Job | None = None
@@ -341,6 +343,7 @@ class LineEngine:
         self.link = link
         self._link_closed = False
         self._events.clear()
+        self._usual = None
         link.listen(self._on_link_event)
         try:
             while link.receive_nowait() is not None:  # queued before we listened
@@ -391,6 +394,13 @@ class LineEngine:
         if arrival is not None:
             arrival.set()
 
+    def _on_usual_reply(self, frame: bytes, end: float) -> None:
+        """The link's read callback found the usual reply (see Link.expect)."""
+        self._usual = (frame, end)
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
     def _fail_queued(self, error: ConnectionLost) -> None:
         while self._queue:
             job = heapq.heappop(self._queue)
@@ -411,7 +421,9 @@ class LineEngine:
                 if self._quiet_until > link.clock():
                     await self._keep_guard()
                 frame = machine.frame
-                self._events.clear()  # nothing that came before can answer the request
+                # Nothing that came before can answer the request.
+                self._events.clear()
+                self._usual = None
                 wire_time = len(frame) * link.char_time
                 writes = link.writes_begun
                 try:
@@ -486,6 +498,10 @@ class LineEngine:
         backend = link.backend
         assert backend is not None
         events = self._events
+        loop = link.loop
+        # Where the link has a loop, the usual reply (a register read's) comes straight
+        # from its read callback to _on_usual_reply, without an event and the queue.
+        usual = machine.usual_reply if loop is not None else None
         while True:
             while events:
                 event = events.popleft()
@@ -499,6 +515,15 @@ class LineEngine:
                     stats.skipped_frames += 1
                 if outcome.kind is not OutcomeKind.WAIT:
                     return outcome
+            if self._usual is not None:
+                frame, end = self._usual
+                self._usual = None
+                response = machine.take_usual_reply(frame, end)
+                if response is not None:
+                    return Outcome(OutcomeKind.DONE, response)
+                # Not for this machine at this moment: the usual way, as an event.
+                events.append(FrameReceived(frame, end - (len(frame) - 1) * link.char_time, end))
+                continue
             if self._link_closed:
                 raise link.connection_lost_error()
             deadline = machine.deadline
@@ -509,17 +534,20 @@ class LineEngine:
                 if outcome.kind is not OutcomeKind.WAIT:
                     return outcome
                 continue
-            loop = link.loop
             if loop is not None:
                 # A future of the link's loop, set by the listener or the engine's timer.
                 waiter = self._waiter = loop.create_future()
                 self._waiter_deadline = deadline
                 if deadline < self._timer_at:
                     self._arm_timer(deadline)
+                if usual is not None:
+                    link.expect(usual[0], usual[1], self._on_usual_reply)
                 try:
                     await waiter
                 finally:
                     self._waiter = None
+                    if usual is not None:
+                        link.forget_expected()
                 continue
             if not link.backend_clock:
                 deadline = backend.current_time() + (deadline - now)

@@ -203,3 +203,56 @@ def test_the_usual_reply_in_one_step_equals_the_table_step_by_step(
     assert repr(results[0][3].frame_error) == repr(results[1][3].frame_error)
     for state, event, target in seen:
         assert TRANSITIONS[state, event][0] is target
+
+
+@given(
+    st.sampled_from([ReadHoldingRegistersRequest, ReadInputRegistersRequest]),
+    st.integers(1, 4),
+    st.integers(0, 3),
+    register_replies,
+    st.sampled_from([9.5, 10.0, 10.01]),
+)
+def test_taking_the_usual_reply_equals_receiving_it(
+    kind: type[ReadHoldingRegistersRequest],
+    count: int,
+    unit: int,
+    pdu: bytes,
+    end: float,
+) -> None:
+    """What a link hands over as the usual reply ends the transaction exactly as
+    frame_received would; anything else is refused with nothing changed."""
+    frame = bytes([unit]) + pdu + b"\x00\x00"  # the CRC is the link's to check
+    by_frame, by_take = MasterMachine(), MasterMachine()
+    for machine in (by_frame, by_take):
+        machine.begin(Transaction(1, kind(0, count), 1.0))
+        machine.sent(10.0, 10.004)
+    shape = by_take.usual_reply
+    assert shape == (bytes([1, kind.function_code, 2 * count]), 5 + 2 * count)
+    expected = by_frame.frame_received(unit, pdu, end - 0.001, end)
+    taken = by_take.take_usual_reply(frame, end)
+    fits = len(frame) == shape[1] and frame.startswith(shape[0]) and end >= 10.0
+    if fits:
+        assert expected.kind is OutcomeKind.DONE
+        assert taken == expected.response
+        assert by_take.state is by_frame.state is MasterState.IDLE
+        assert by_take.deadline is by_frame.deadline is None
+    else:
+        assert taken is None
+        assert by_take.state is MasterState.WAITING_REPLY  # unchanged
+        assert by_take.deadline == pytest.approx(11.004)
+
+
+def test_only_register_reads_have_a_usual_reply_and_an_observer_takes_none() -> None:
+    machine = MasterMachine()
+    machine.begin(Transaction(1, WriteSingleRegisterRequest(0, 1), 1.0))
+    assert machine.usual_reply is None
+    machine.sent(10.0, 10.004)
+    assert machine.take_usual_reply(b"\x01\x06\x00\x00\x00\x01\x00\x00", 10.01) is None
+    observed = MasterMachine(on_transition=lambda *step: None)
+    observed.begin(Transaction(1, ReadHoldingRegistersRequest(0, 1), 1.0))
+    observed.sent(10.0, 10.004)
+    frame = b"\x01\x03\x02\x00\x07\x00\x00"
+    assert observed.usual_reply is not None
+    # With an observer every transition is fired one by one: frame_received does it.
+    assert observed.take_usual_reply(frame, 10.01) is None
+    assert observed.state is MasterState.WAITING_REPLY

@@ -5,6 +5,7 @@ from __future__ import annotations
 import anyio
 import pytest
 
+import aiortu
 from aiortu.core.crc import crc16
 from aiortu.core.receiver import DiscardReason, FrameDiscarded, FrameReceived, Role
 from aiortu.errors import ConnectionLost, ResponseTimeout
@@ -107,3 +108,108 @@ async def test_master_on_a_port_times_out_on_the_engine_timer_then_reads() -> No
                 tg.start_soon(device)
                 with anyio.fail_after(2):
                     assert await master.read_holding_registers(1, 0, 1) == [7]
+
+
+async def test_an_expected_frame_goes_to_its_callback_and_anything_else_as_events() -> None:
+    reply = _with_crc(REPLY)
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Link(stream, LINE, role=Role.MASTER, frame_silence=0.02) as link:
+            await anyio.sleep(0.05)  # past INIT
+            taken: list[tuple[bytes, float]] = []
+            arrived = anyio.Event()
+
+            def on_frame(frame: bytes, end: float) -> None:
+                taken.append((frame, end))
+                arrived.set()
+
+            link.expect(reply[:3], len(reply), on_frame)
+            # Another unit's frame of the same length is not the one expected.
+            other = _with_crc(bytes([18]) + REPLY[1:])
+            pty.write(other)
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameReceived)
+            assert event.frame == other
+            assert not taken
+            pty.write(reply)
+            with anyio.fail_after(2):
+                await arrived.wait()
+            assert taken[0][0] == reply
+            assert taken[0][1] <= link.clock()
+            assert link.frames_received == 2
+            # Once only: the same frame again comes as an event.
+            pty.write(reply)
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameReceived)
+            # A bad CRC is never handed over: the receiver discards it.
+            link.expect(reply[:3], len(reply), on_frame)
+            pty.write(reply[:-1] + bytes([reply[-1] ^ 1]))
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameDiscarded)
+            assert len(taken) == 1
+            link.forget_expected()
+            pty.write(reply)
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameReceived)
+            assert len(taken) == 1
+
+
+@pytest.mark.parametrize(
+    ("answer", "expected", "skipped", "handed_over"),
+    [
+        # The usual reply, whole: the link hands it over without an event.
+        (["0103020007"], [7], 0, 1),
+        # Split in two chunks: the receiver assembles it as usual.
+        (["01030200|07"], [7], 0, 0),
+        # Another unit first, then ours.
+        (["0203020009", "0103020007"], [7], 1, 1),
+        # An exception reply.
+        (["018302"], aiortu.ExceptionResponse, 0, 0),
+    ],
+)
+async def test_master_reads_on_a_port_whatever_way_the_reply_comes(
+    answer: list[str], expected: object, skipped: int, handed_over: int
+) -> None:
+    request = _with_crc(bytes.fromhex("010300000001"))
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=0.5, retries=0, frame_gap=0) as master:
+            await anyio.sleep(0.05)  # past INIT
+            engine = master.engine
+            on_usual_reply = engine._on_usual_reply
+            usual_replies: list[bytes] = []
+
+            def counted(frame: bytes, end: float) -> None:
+                usual_replies.append(frame)
+                on_usual_reply(frame, end)
+
+            engine._on_usual_reply = counted  # type: ignore[method-assign]
+
+            async def device() -> None:
+                assert await read_master(pty, len(request)) == request
+                for frame in answer:
+                    # "|" splits the frame (with its CRC) into two chunks.
+                    head, _, tail = frame.partition("|")
+                    data = _with_crc(bytes.fromhex(head + tail))
+                    cut = len(head) // 2 if tail else len(data)
+                    for chunk in (data[:cut], data[cut:]):
+                        if chunk:
+                            pty.write(chunk)
+                            await anyio.sleep(0.005)
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(device)
+                with anyio.fail_after(2):
+                    if isinstance(expected, list):
+                        assert await master.read_holding_registers(1, 0, 1) == expected
+                    else:
+                        with pytest.raises(aiortu.ExceptionResponse):
+                            await master.read_holding_registers(1, 0, 1)
+            stats = master.unit_stats(1)
+            assert stats.successes == 1
+            assert len(usual_replies) == handed_over
+            assert stats.skipped_frames + master.unit_stats(2).skipped_frames == skipped

@@ -186,9 +186,10 @@ class OutcomeKind(enum.Enum):
     """The transaction is over: raise :attr:`Outcome.error`."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Outcome:
-    """The machine's answer to an event; see :class:`OutcomeKind`."""
+    """The machine's answer to an event; see :class:`OutcomeKind`. Read it, do not change
+    it (not frozen: one is made per reply, and a frozen dataclass takes twice as long)."""
 
     kind: OutcomeKind
     response: Response | ExceptionPDU | None = None
@@ -259,11 +260,23 @@ class _BadBytes:
     end: float
 
 
+_Known = tuple[Request, bytes, tuple[bytes, int] | None]
+"""A remembered request: the request, its frame, and its usual reply's shape."""
+
 _REGISTER_READS: Final = frozenset((ReadHoldingRegistersRequest, ReadInputRegistersRequest))
 
 
-def _unpack_words(count: int, pdu: bytes) -> tuple[int, ...]:
-    return struct.unpack_from(f">{count}H", pdu, 2)
+_WORDS: Final = tuple(struct.Struct(f">{count}H") for count in range(126))
+"""The layouts of 0..125 big-endian 16-bit words, made once."""
+
+
+def _register_reply(request: ReadHoldingRegistersRequest, data: bytes, offset: int) -> Response:
+    """The response to a register read whose words start at *offset* of *data*, built
+    without decode_response's general checks: the caller has matched the length to the
+    request's count, and 16-bit words are always in range."""
+    response = object.__new__(request.response_class)
+    object.__setattr__(response, "values", _WORDS[request.count].unpack_from(data, offset))
+    return response
 
 
 _S = MasterState
@@ -329,6 +342,7 @@ class MasterMachine:
         "_frames",
         "_on_transition",
         "_outcome",
+        "_shape",
         "deadline",
         "frame_error_grace",
         "state",
@@ -351,7 +365,9 @@ class MasterMachine:
         """Seconds the wait goes on after a frame error (never past the response timeout)."""
         self._on_transition = on_transition
         self._outcome = _WAIT
-        self._frames: dict[tuple[int, int], tuple[Request, bytes]] = {}
+        self._frames: dict[tuple[int, int], _Known] = {}
+        self._shape: tuple[bytes, int] | None = None
+        """The usual reply's shape for the transaction in progress, once looked up."""
         self._actions: dict[
             tuple[MasterState, MasterEvent], tuple[MasterState, Callable[[object], None]]
         ] = {
@@ -367,6 +383,7 @@ class MasterMachine:
             raise MasterMachineError(f"a transaction begins in state IDLE, not {self.state.name}")
         self.transaction = transaction
         self.deadline = None
+        self._shape = None
 
     @property
     def frame(self) -> bytes:
@@ -375,17 +392,61 @@ class MasterMachine:
         Frames are remembered by unit and request object (requests are immutable), so a
         request sent again, as a master's poll loop does, is not encoded again.
         """
+        return self._known()[1]
+
+    @property
+    def usual_reply(self) -> tuple[bytes, int] | None:
+        """The first bytes and the length of the usual reply to the transaction in
+        progress, where it has one (a register read's: unit, function code, byte count);
+        else None. A link can spot that frame without decoding it
+        (:meth:`aiortu.link.Link.expect`) and hand it to :meth:`take_usual_reply`."""
+        return self._known()[2]
+
+    def _known(self) -> _Known:
+        """What the machine remembers of the request in progress (see :attr:`frame`)."""
         transaction = self._current
         request = transaction.request
         key = (transaction.unit, id(request))
         known = self._frames.get(key)
-        if known is not None and known[0] is request:
-            return known[1]
-        frame = transaction.frame
-        if len(self._frames) >= _FRAME_CACHE_SIZE:
-            self._frames.clear()
-        self._frames[key] = (request, frame)  # holding the request keeps its id unique
-        return frame
+        if known is None or known[0] is not request:
+            shape = None
+            if type(request) in _REGISTER_READS and transaction.unit != BROADCAST_UNIT:
+                assert isinstance(request, ReadHoldingRegistersRequest)
+                size = 2 * request.count
+                shape = bytes((transaction.unit, request.function_code, size)), size + 5
+            if len(self._frames) >= _FRAME_CACHE_SIZE:
+                self._frames.clear()
+            # Holding the request keeps its id unique.
+            known = self._frames[key] = (request, transaction.frame, shape)
+        self._shape = known[2]
+        return known
+
+    def take_usual_reply(self, frame: bytes, end: float) -> Response | None:
+        """Finish the transaction with *frame*, a whole frame with a good CRC that ended
+        at *end* and has the shape :attr:`usual_reply` gives; return its response.
+
+        This is :meth:`frame_received` for that frame in one step: the table's
+        REPLY_RECEIVED and REPLY_OK. None, with nothing changed, where that does not
+        apply (not waiting, a frame from before the request, a transition observer, or
+        another shape): then call :meth:`frame_received`.
+        """
+        transaction = self.transaction
+        shape = self._shape
+        if (
+            shape is None
+            or self.state is not MasterState.WAITING_REPLY
+            or self._on_transition is not None
+            or transaction is None
+            or len(frame) != shape[1]
+            or not frame.startswith(shape[0])
+            or end < transaction.attempt_start
+        ):
+            return None
+        request = transaction.request
+        assert isinstance(request, ReadHoldingRegistersRequest)
+        self.state = _USUAL_REPLY_TARGET
+        self.deadline = None
+        return _register_reply(request, frame, 3)
 
     def sent(self, start: float, end: float) -> float:
         """The request began to go out at *start* and left the wire at *end*.
@@ -521,9 +582,7 @@ class MasterMachine:
             and pdu[0] == request.function_code
             and len(pdu) == 2 + 2 * request.count == pdu[1] + 2
         ):
-            response = object.__new__(request.response_class)
-            object.__setattr__(response, "values", _unpack_words(request.count, pdu))
-            return response
+            return _register_reply(request, pdu, 2)
         return None
 
     def _skip_frame(self, reason: object) -> None:

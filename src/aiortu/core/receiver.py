@@ -275,7 +275,14 @@ class Receiver:
         self._chunk_end = 0.0
         self._chunk_length = 0
         self._end_index = 0
-        self._whole = self._whole_length if role is not Role.MONITOR else (lambda data: CANNOT_KNOW)
+        # The length of the whole frame a chunk begins with, where one layout tells it.
+        self._whole: Callable[[bytes], int]
+        if role is Role.MASTER:
+            self._whole = expected_response_length
+        elif role is Role.SLAVE:
+            self._whole = self._whole_request_length
+        else:
+            self._whole = lambda data: CANNOT_KNOW  # a monitor cannot tell which layout
         self._actions: dict[
             tuple[ReceiverState, ReceiverEvent], tuple[ReceiverState, Callable[..., int]]
         ] = {
@@ -298,20 +305,15 @@ class Receiver:
         if last is not None:
             first_arrival = max(first_arrival, last)
             silence = first_arrival - char_time - last
-            if silence >= self.frame_silence:
+            # (IDLE, SILENCE) does nothing (see TRANSITIONS), and IDLE is where each frame
+            # of a poll loop finds the receiver: no need to fire it there.
+            if silence >= self.frame_silence and self.state is not _S.IDLE:
                 self._fire(ReceiverEvent.SILENCE, b"", 0, last + self.frame_silence)
         else:
             silence = float("inf")
         state = self.state
-        # A whole frame in one chunk: what START, DATABUF and RESPONSE would do, at once.
-        if (
-            state is _S.IDLE
-            and count >= MIN_FRAME_LENGTH
-            and self._whole(data) == count
-            and crc16(data) == 0
-        ):
+        if state is _S.IDLE and self.take_whole_frame(data, now):
             out.append(FrameReceived(bytes(data), first_arrival, now))
-            self._last = now
             return out
         late = self._strict and silence > self.t1_5 and state in _MID_FRAME
         event = ReceiverEvent.LATE_CHARS if late else ReceiverEvent.CHARS
@@ -324,6 +326,34 @@ class Receiver:
             event = ReceiverEvent.CHARS
         self._last = now
         return out
+
+    def take_whole_frame(self, data: bytes, now: float) -> bool:
+        """Take *data*, a chunk that finished arriving at *now*, if it is exactly one frame
+        with a good CRC reaching an idle receiver; return whether it was.
+
+        This is what :meth:`feed` does with such a chunk (the work of START, DATABUF and
+        RESPONSE at once), without building the :class:`FrameReceived`: a link that knows
+        the frame it waits for hands it on as it is. False changes nothing: give the
+        chunk to :meth:`feed`.
+        """
+        if (
+            self.state is _S.IDLE
+            and len(data) >= MIN_FRAME_LENGTH
+            and self._whole(data) == len(data)
+            and crc16(data) == 0
+        ):
+            self._last = now
+            return True
+        return False
+
+    def take_expected_frame(self, data: bytes, now: float) -> bool:
+        """:meth:`take_whole_frame` for a chunk whose length its caller has already
+        matched to the layout of the frame it expects (a link told what reply to look
+        for): only the state and the CRC are left to check."""
+        if self.state is _S.IDLE and len(data) >= MIN_FRAME_LENGTH and crc16(data) == 0:
+            self._last = now
+            return True
+        return False
 
     def expire(self, now: float) -> list[ReceiverOutput]:
         """Tell the receiver the time is *now*; return what the silence so far completed."""
@@ -436,10 +466,9 @@ class Receiver:
             return end
         return position
 
-    def _whole_length(self, data: bytes) -> int:
-        """The length of the frame *data* begins with, where one layout tells it (else < 1)."""
-        if self.role is Role.MASTER:
-            return expected_response_length(data)
+    def _whole_request_length(self, data: bytes) -> int:
+        """The length of the request *data* begins with, if it is for one of our units
+        (else < 1: a slave salvages no other unit's frame out of a chunk)."""
         own = data[0] in self.units or data[0] == BROADCAST_UNIT
         return expected_request_length(data) if own else CANNOT_KNOW
 

@@ -156,6 +156,7 @@ class _PortTransport(SerialTransport):
     ) -> None:
         super().__init__(loop, protocol, serial_instance)
         self._fd: int = serial_instance.fileno()
+        self._port_protocol = protocol
 
     def _read_ready(self) -> None:
         try:
@@ -168,7 +169,11 @@ class _PortTransport(SerialTransport):
         if not data:
             self._close(exc=serial.SerialException(_NO_DATA))
             return
-        self._protocol.data_received(data)
+        protocol = self._port_protocol
+        if protocol.receiver is not None and protocol.echo is None:
+            protocol.receiver(data)  # what data_received would do, one call shorter
+            return
+        protocol.data_received(data)
 
     def _write_data(self, data: bytes | bytearray | memoryview) -> None:
         try:
