@@ -72,6 +72,7 @@ from aiortu.master_serial import SerialLineFunctions
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
 
 UNIT_RANGE = range(1, 248)
+_LAST_UNIT = UNIT_RANGE[-1]
 """The unit addresses a unicast request may go to."""
 
 _ResponseT = TypeVar("_ResponseT", bound=Response)
@@ -305,7 +306,8 @@ class Master(SerialLineFunctions):
         unit that has stopped answering sends once).
         """
         # execute(), inlined: one coroutine less per call.
-        _check_unit(unit)
+        if type(unit) is not int or not 1 <= unit <= _LAST_UNIT:
+            _check_unit(unit)  # raises, saying why
         if not isinstance(pdu, Request):
             raise InvalidRequest("pdu", pdu, "a Request PDU")
         policy = self.policy

@@ -116,11 +116,6 @@ class UnitStats:
     last_probe: float = -math.inf
     """When a request was last let through to the unit while offline (fail fast)."""
 
-    def _record_latency(self, latency: float) -> None:
-        self.last_latency = latency
-        previous = self.mean_latency if self.mean_latency is not None else 0.0
-        self.mean_latency = previous + (latency - previous) / self.successes
-
 
 class _Job:
     """A transaction, its place in the queue, and its result."""
@@ -232,7 +227,8 @@ class LineEngine:
             raise ConnectionLost(str(self._failed))
         if not self._connected.is_set():
             await self._wait_connected(transaction.timeout)
-        self._check_offline(transaction.unit)
+        if self.health.fail_fast_offline:
+            self._check_offline(transaction.unit)
         job = _Job(transaction, priority, next(self._sequence))
         if self._busy or not self._serving or self._link_closed:
             await self._wait_turn(job)
@@ -280,6 +276,9 @@ class LineEngine:
 
     def _release(self) -> None:
         """The transaction that had the line is over: hand the line on."""
+        if not self._queue and self._serving and not self._link_closed:
+            self._busy = False  # nobody waits: what _grant_next would find
+            return
         if self._link_closed or not self._serving:
             # The queue waits for the line task: it fails it (dead link) or serves it.
             self._busy = False
@@ -312,7 +311,7 @@ class LineEngine:
             raise ConnectionLost(f"the line is down and did not come back within {seconds} s")
 
     def _check_offline(self, unit: int) -> None:
-        if not self.health.fail_fast_offline or unit == BROADCAST_UNIT:
+        if unit == BROADCAST_UNIT:
             return
         stats = self.stats.get(unit)
         if stats is None or stats.online:
@@ -412,7 +411,7 @@ class LineEngine:
         transaction = job.transaction
         machine = self.machine
         link = self.link
-        stats = self.unit_stats(transaction.unit)
+        stats = self.stats.get(transaction.unit) or self.unit_stats(transaction.unit)
         stats.requests += 1
         self.transactions += 1
         machine.begin(transaction)
@@ -426,8 +425,10 @@ class LineEngine:
                 self._usual = None
                 wire_time = len(frame) * link.char_time
                 writes = link.writes_begun
+                # At once where the line allows it (no coroutine, nothing to cancel).
+                sent_at_once = link.send_now(frame)
                 try:
-                    end = await link.send(frame)
+                    end = await link.send(frame) if sent_at_once is None else sent_at_once
                 except ConnectionLost:
                     raise
                 except BaseException:
@@ -610,5 +611,9 @@ class LineEngine:
             stats.online = True
             if isinstance(response, ExceptionPDU):
                 stats.exceptions += 1
-            stats._record_latency(self.link.clock() - transaction.attempt_start)
+            latency = stats.last_latency = self.link.clock() - transaction.attempt_start
+            mean = stats.mean_latency
+            stats.mean_latency = (
+                latency if mean is None else mean + (latency - mean) / stats.successes
+            )
         job.finish(response, None)

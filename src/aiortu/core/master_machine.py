@@ -302,6 +302,9 @@ TRANSITIONS: Final[dict[tuple[MasterState, MasterEvent], tuple[MasterState, str]
 }
 """The master's transitions: ``(state, event) -> (next state, action name)``."""
 
+_UNICAST_SENT_TARGET: Final = TRANSITIONS[_S.IDLE, _E.SEND_UNICAST][0]
+"""Where sending a unicast request leaves the machine (the deadline: the response timeout)."""
+
 _USUAL_REPLY_TARGET: Final = TRANSITIONS[
     TRANSITIONS[_S.WAITING_REPLY, _E.REPLY_RECEIVED][0], _E.REPLY_OK
 ][0]
@@ -339,10 +342,10 @@ class MasterMachine:
 
     __slots__ = (
         "_actions",
+        "_entry",
         "_frames",
         "_on_transition",
         "_outcome",
-        "_shape",
         "deadline",
         "frame_error_grace",
         "state",
@@ -366,8 +369,8 @@ class MasterMachine:
         self._on_transition = on_transition
         self._outcome = _WAIT
         self._frames: dict[tuple[int, int], _Known] = {}
-        self._shape: tuple[bytes, int] | None = None
-        """The usual reply's shape for the transaction in progress, once looked up."""
+        self._entry: _Known | None = None
+        """What is remembered of the transaction in progress, once looked up."""
         self._actions: dict[
             tuple[MasterState, MasterEvent], tuple[MasterState, Callable[[object], None]]
         ] = {
@@ -383,7 +386,7 @@ class MasterMachine:
             raise MasterMachineError(f"a transaction begins in state IDLE, not {self.state.name}")
         self.transaction = transaction
         self.deadline = None
-        self._shape = None
+        self._entry = None
 
     @property
     def frame(self) -> bytes:
@@ -392,7 +395,7 @@ class MasterMachine:
         Frames are remembered by unit and request object (requests are immutable), so a
         request sent again, as a master's poll loop does, is not encoded again.
         """
-        return self._known()[1]
+        return (self._entry or self._known())[1]
 
     @property
     def usual_reply(self) -> tuple[bytes, int] | None:
@@ -400,7 +403,7 @@ class MasterMachine:
         progress, where it has one (a register read's: unit, function code, byte count);
         else None. A link can spot that frame without decoding it
         (:meth:`aiortu.link.Link.expect`) and hand it to :meth:`take_usual_reply`."""
-        return self._known()[2]
+        return (self._entry or self._known())[2]
 
     def _known(self) -> _Known:
         """What the machine remembers of the request in progress (see :attr:`frame`)."""
@@ -418,7 +421,7 @@ class MasterMachine:
                 self._frames.clear()
             # Holding the request keeps its id unique.
             known = self._frames[key] = (request, transaction.frame, shape)
-        self._shape = known[2]
+        self._entry = known
         return known
 
     def take_usual_reply(self, frame: bytes, end: float) -> Response | None:
@@ -431,7 +434,8 @@ class MasterMachine:
         another shape): then call :meth:`frame_received`.
         """
         transaction = self.transaction
-        shape = self._shape
+        entry = self._entry
+        shape = None if entry is None else entry[2]
         if (
             shape is None
             or self.state is not MasterState.WAITING_REPLY
@@ -458,8 +462,15 @@ class MasterMachine:
         transaction.attempt_start = start
         transaction.attempt_end = end
         transaction.frame_error = None
-        event = _E.SEND_UNICAST if transaction.expects_reply else _E.SEND_BROADCAST
-        self._fire(event, None)
+        if transaction.expects_reply:
+            if self.state is _S.IDLE and self._on_transition is None:
+                # What SEND_UNICAST does from IDLE (see TRANSITIONS), without the lookup.
+                self.state = _UNICAST_SENT_TARGET
+                deadline = self.deadline = end + transaction.timeout
+                return deadline
+            self._fire(_E.SEND_UNICAST, None)
+        else:
+            self._fire(_E.SEND_BROADCAST, None)
         assert self.deadline is not None
         return self.deadline
 
