@@ -17,7 +17,16 @@ scope around ``receive()``.
 in both directions, for ``frame_gap`` (t3.5 of the line settings by default; 0 is allowed
 for virtual lines and TCP, where there is no wire to keep quiet), then writes the frame
 and returns when, by the clock, its last byte will have left the wire. The master starts
-its response timeout from that time, not from when ``write()`` returned.
+its response timeout from that time, not from when ``write()`` returned. Under asyncio
+on Linux the wait ends on a :class:`~aiortu.wake_timer.WakeTimer`, at the time itself
+rather than on the loop's next whole millisecond. :meth:`Link.send_now` sends without a
+wait or a yield when the line allows it (a stream with ``send_nowait``, the gap kept):
+a slave answers from the read callback that way.
+
+On the push path a master can also tell the link the exact shape of the reply it waits
+for (:meth:`Link.expect`: its first bytes and length); a chunk that is exactly that frame
+with a good CRC goes straight to the master, with no event built or queued. Anything
+else, a split or garbled reply included, takes the usual way through the receiver.
 
 The master and the slave are built on this; users rarely need it directly, except to
 watch a line (``role=Role.MONITOR``).

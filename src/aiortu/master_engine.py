@@ -10,7 +10,11 @@ itself, so a read on an idle line costs no hand-over between tasks. When the lin
 busy, the caller queues (FIFO, lower *priority* first) and waits for its turn; the
 transaction that ends hands the line straight to the next one in the queue. The link
 hands every frame to the engine (:meth:`~aiortu.link.Link.listen`), which wakes the
-waiting transaction directly.
+waiting transaction directly. On a serial port, the usual reply to a register read (the
+shape :attr:`~aiortu.core.master_machine.MasterMachine.usual_reply` gives) is handed over
+by the link's read callback as it came (:meth:`~aiortu.link.Link.expect`) and ends the
+transaction in one step (:meth:`~aiortu.core.master_machine.MasterMachine.take_usual_reply`);
+any other frame goes through the machine's table as usual.
 
 Cancellation never leaves the line half way through an exchange. A caller cancelled
 while queued is dropped; one cancelled before its request began to go out gives the line
