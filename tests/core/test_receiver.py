@@ -785,3 +785,48 @@ def test_reset_forgets_the_partial_frame() -> None:
 def test_bad_frame_silence_is_refused() -> None:
     with pytest.raises(ValueError, match="frame_silence"):
         Receiver(frame_silence=-1.0)
+
+
+@pytest.mark.parametrize("timing", list(TimingMode))
+@settings(max_examples=60)
+@given(data=st.data())
+def test_taking_an_expected_frame_is_what_feed_does_with_it(
+    timing: TimingMode, data: st.DataObject
+) -> None:
+    """A chunk the caller expects (its length matched to a layout) is taken exactly when
+    feed() would receive it whole, and leaves the receiver as feed() does."""
+    # The caller's part: the length matches the layout the first bytes give.
+    sample = data.draw(responses().filter(lambda s: s.predictable))
+    assume(expected_response_length(sample.frame) == len(sample.frame))
+    frame = sample.frame
+    if data.draw(st.booleans()):  # a bit flipped: the CRC no longer checks
+        position = data.draw(st.integers(0, len(frame) - 1))
+        frame = frame[:position] + bytes([frame[position] ^ 1 << data.draw(st.integers(0, 7))])
+        frame += sample.frame[position + 1 :]
+    by_feed = make(Role.MASTER, LineSettings(19200), timing, now=0.0)
+    by_take = make(Role.MASTER, LineSettings(19200), timing, now=0.0)
+    for receiver in (by_feed, by_take):
+        receiver.expire(1.0)  # out of INIT
+    outputs = by_feed.feed(frame, 2.0)
+    taken = by_take.take_expected_frame(frame, 2.0)
+    fed_whole = [output.frame for output in received(outputs)] == [frame]
+    assert taken is (crc16(frame) == 0)
+    if taken:
+        assert fed_whole
+        assert by_take.state is by_feed.state is S.IDLE
+        assert by_take.next_deadline() == by_feed.next_deadline()
+        # The next frame finds both the same way.
+        assert by_take.feed(sample.frame, 3.0) == by_feed.feed(sample.frame, 3.0)
+    else:
+        assert by_take.state is S.IDLE  # nothing changed: the chunk goes to feed()
+        assert by_take.feed(frame, 2.0) == outputs
+
+
+def test_an_expected_frame_is_refused_unless_the_receiver_is_idle() -> None:
+    receiver = make(Role.MASTER, LineSettings(19200), TimingMode.TOLERANT, now=0.0)
+    reply = H("0103020007") + crc16(H("0103020007")).to_bytes(2, "little")
+    assert not receiver.take_expected_frame(reply, 0.001)  # still INIT
+    receiver.expire(1.0)
+    receiver.feed(reply[:3], 1.5)  # a frame under way
+    assert not receiver.take_expected_frame(reply, 1.6)
+    assert receiver.state is not S.IDLE

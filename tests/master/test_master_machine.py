@@ -174,13 +174,18 @@ register_replies = st.one_of(
 )
 
 
-@given(
+usual_reply_cases = given(
     st.sampled_from([ReadHoldingRegistersRequest, ReadInputRegistersRequest]),
     st.integers(1, 4),
     st.integers(0, 3),
     register_replies,
     st.sampled_from([9.5, 10.0, 10.01]),
 )
+"""A register read of 1..4 registers to unit 1 (unit 3 stands for a read sent to unit 2),
+any frame from unit 0..3 ending before, at or after the request began."""
+
+
+@usual_reply_cases
 def test_the_usual_reply_in_one_step_equals_the_table_step_by_step(
     kind: type[ReadHoldingRegistersRequest],
     count: int,
@@ -205,13 +210,7 @@ def test_the_usual_reply_in_one_step_equals_the_table_step_by_step(
         assert TRANSITIONS[state, event][0] is target
 
 
-@given(
-    st.sampled_from([ReadHoldingRegistersRequest, ReadInputRegistersRequest]),
-    st.integers(1, 4),
-    st.integers(0, 3),
-    register_replies,
-    st.sampled_from([9.5, 10.0, 10.01]),
-)
+@usual_reply_cases
 def test_taking_the_usual_reply_equals_receiving_it(
     kind: type[ReadHoldingRegistersRequest],
     count: int,

@@ -312,7 +312,7 @@ class Receiver:
         else:
             silence = float("inf")
         state = self.state
-        if state is _S.IDLE and self.take_whole_frame(data, now):
+        if state is _S.IDLE and self._take_whole_frame(data, now):
             out.append(FrameReceived(bytes(data), first_arrival, now))
             return out
         late = self._strict and silence > self.t1_5 and state in _MID_FRAME
@@ -327,15 +327,10 @@ class Receiver:
         self._last = now
         return out
 
-    def take_whole_frame(self, data: bytes, now: float) -> bool:
+    def _take_whole_frame(self, data: bytes, now: float) -> bool:
         """Take *data*, a chunk that finished arriving at *now*, if it is exactly one frame
-        with a good CRC reaching an idle receiver; return whether it was.
-
-        This is what :meth:`feed` does with such a chunk (the work of START, DATABUF and
-        RESPONSE at once), without building the :class:`FrameReceived`: a link that knows
-        the frame it waits for hands it on as it is. False changes nothing: give the
-        chunk to :meth:`feed`.
-        """
+        with a good CRC reaching an idle receiver (the work of START, DATABUF and RESPONSE
+        at once); return whether it was. False changes nothing."""
         if (
             self.state is _S.IDLE
             and len(data) >= MIN_FRAME_LENGTH
@@ -347,9 +342,14 @@ class Receiver:
         return False
 
     def take_expected_frame(self, data: bytes, now: float) -> bool:
-        """:meth:`take_whole_frame` for a chunk whose length its caller has already
-        matched to the layout of the frame it expects (a link told what reply to look
-        for): only the state and the CRC are left to check."""
+        """Take *data*, a chunk that finished arriving at *now*, if it is one frame with a
+        good CRC reaching an idle receiver; return whether it was. False changes nothing:
+        give the chunk to :meth:`feed`.
+
+        This is what :meth:`feed` does with such a chunk, without building its
+        :class:`FrameReceived`, for a caller that has already matched the chunk's length
+        to the layout of the frame it expects (a link told what reply to look for): only
+        the state and the CRC are left to check here."""
         if self.state is _S.IDLE and len(data) >= MIN_FRAME_LENGTH and crc16(data) == 0:
             self._last = now
             return True
