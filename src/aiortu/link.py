@@ -370,6 +370,8 @@ class Link:
                 self._expected = None
                 self.frames_received += 1
                 expected[2](chunk, now)
+                if self._timer is None:
+                    return  # an idle receiver has no deadline: no timer to arm
             else:
                 events = self.receiver.feed(chunk, now)
                 if events:

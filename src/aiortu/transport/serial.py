@@ -175,6 +175,15 @@ class _PortTransport(SerialTransport):
             return
         protocol.data_received(data)
 
+    def can_write_now(self) -> bool:
+        """Whether :meth:`write_now` may be used: open, and nothing queued before it."""
+        return not self._write_buffer and not self._closing
+
+    def write_now(self, data: bytes) -> None:
+        """``write()`` where :meth:`can_write_now` said yes: straight to the descriptor,
+        the rest queued if the driver takes only part of it."""
+        self._write_data(data)
+
     def _write_data(self, data: bytes | bytearray | memoryview) -> None:
         try:
             written = os.write(self._fd, data)
@@ -272,7 +281,7 @@ class SerialStream(ByteStream):
         self,
         port: str,
         settings: LineSettings,
-        transport: asyncio.Transport,
+        transport: _PortTransport,
         protocol: _PortProtocol,
         serial_instance: Any,
     ) -> None:
@@ -378,17 +387,11 @@ class SerialStream(ByteStream):
         """
         protocol = self._protocol
         transport = self._transport
-        if (
-            self._closed
-            or self._eof_sent
-            or protocol.lost
-            or transport.get_write_buffer_size()
-            or transport.is_closing()
-        ):
+        if self._closed or self._eof_sent or protocol.lost or not transport.can_write_now():
             return False
         if protocol.echo is not None:
             protocol.echo.expect(item)
-        transport.write(item)
+        transport.write_now(item)
         return True
 
     async def send(self, item: bytes) -> None:
