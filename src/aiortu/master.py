@@ -40,7 +40,7 @@ import anyio
 import anyio.abc
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.master_machine import Failure, RetryPolicy, Transaction
+from aiortu.core.master_transaction import Failure, RetryPolicy, Transaction
 from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.core.pdu_bits import (
     ReadCoilsRequest,

@@ -2,7 +2,7 @@
 
 :class:`LineEngine` owns a :class:`~aiortu.link.Link` and runs the sans-IO
 :class:`~aiortu.core.master_machine.MasterMachine` on it. Callers hand it
-:class:`~aiortu.core.master_machine.Transaction` objects through :meth:`LineEngine.submit`.
+:class:`~aiortu.core.master_transaction.Transaction` objects through :meth:`LineEngine.submit`.
 
 The line belongs to one transaction at a time, and the transaction runs in the task of
 the caller that submitted it: the caller sends the request and waits for the reply
@@ -52,9 +52,9 @@ import anyio
 
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import CRCError, FrameError
-from aiortu.core.master_machine import (
+from aiortu.core.master_machine import MasterMachine
+from aiortu.core.master_transaction import (
     Failure,
-    MasterMachine,
     Outcome,
     OutcomeKind,
     Transaction,

@@ -9,16 +9,18 @@ from hypothesis import strategies as st
 from aiortu.core.errors import CRCError, FrameError, ResponseTimeout
 from aiortu.core.master_machine import (
     TRANSITIONS,
-    Failure,
     MasterEvent,
     MasterMachine,
     MasterMachineError,
     MasterState,
+    next_state,
+)
+from aiortu.core.master_transaction import (
+    Failure,
     OutcomeKind,
     RetryPolicy,
     SkipReason,
     Transaction,
-    next_state,
 )
 from aiortu.core.pdu_registers import (
     ReadHoldingRegistersRequest,

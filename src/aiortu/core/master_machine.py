@@ -29,8 +29,9 @@ sleeps until :attr:`MasterMachine.deadline`:
 * Bytes that fail the CRC or the framing are noted; the wait goes on for a short grace
   (a good frame may follow in the same burst), and if nothing answers, the attempt fails
   with that frame error rather than a plain timeout.
-* Retries follow a :class:`RetryPolicy`: by default on timeouts and frame errors only,
-  never on exception responses (a device that refused will refuse again).
+* Retries follow a :class:`~aiortu.core.master_transaction.RetryPolicy`: by default on
+  timeouts and frame errors only, never on exception responses (a device that refused
+  will refuse again).
 
 Time comes in as arguments; the machine never reads a clock.
 """
@@ -39,33 +40,30 @@ from __future__ import annotations
 
 import enum
 import struct
-from collections.abc import Callable, Collection
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Final
 
 from aiortu.core.codes import BROADCAST_UNIT, EXCEPTION_BIT
-from aiortu.core.crc import crc16
-from aiortu.core.errors import CRCError, FrameError, MalformedPDU, ResponseTimeout
-from aiortu.core.frame import encode_frame
+from aiortu.core.errors import FrameError, MalformedPDU, ResponseTimeout
+from aiortu.core.master_transaction import (
+    Failure,
+    Outcome,
+    OutcomeKind,
+    SkipReason,
+    Transaction,
+)
 from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_response
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
 
 __all__ = (
     "DEFAULT_FRAME_ERROR_GRACE",
-    "DEFAULT_RETRY_ON",
     "TRANSITIONS",
-    "Failure",
     "MasterEvent",
     "MasterMachine",
     "MasterMachineError",
     "MasterState",
-    "Outcome",
-    "OutcomeKind",
-    "RetryPolicy",
-    "SkipReason",
-    "Transaction",
     "TransitionObserver",
-    "frame_error_from_discard",
     "next_state",
 )
 
@@ -122,129 +120,10 @@ class MasterMachineError(RuntimeError):
     """An event arrived in a state whose table has no entry for it. Caused by a bug in aiortu."""
 
 
-class Failure(enum.Enum):
-    """The kinds of failed attempt a :class:`RetryPolicy` can retry."""
-
-    TIMEOUT = "timeout"
-    """No reply within the response timeout."""
-    FRAME_ERROR = "frame error"
-    """Bad bytes (CRC, framing) or a reply that did not decode, and no good reply."""
-
-
-DEFAULT_RETRY_ON: Final[frozenset[Failure | int]] = frozenset(
-    (Failure.TIMEOUT, Failure.FRAME_ERROR)
-)
-"""Retry on timeouts and frame errors, never on exception responses."""
-
-
-@dataclass(frozen=True, slots=True)
-class RetryPolicy:
-    """How often a failed attempt is repeated, and after which failures.
-
-    *retries* is the number of extra attempts (0 sends once). *retry_on* holds
-    :class:`Failure` members and, to retry exception responses too, exception codes
-    (``ExceptionCode.SERVER_DEVICE_BUSY``, for instance).
-    """
-
-    retries: int = 2
-    retry_on: frozenset[Failure | int] = DEFAULT_RETRY_ON
-
-    def __post_init__(self) -> None:
-        if isinstance(self.retries, bool) or not isinstance(self.retries, int) or self.retries < 0:
-            raise ValueError(f"retries must be an int >= 0, not {self.retries!r}")
-        object.__setattr__(self, "retry_on", frozenset(self.retry_on))
-
-    @classmethod
-    def of(cls, retries: int, retry_on: Collection[Failure | int] | None = None) -> RetryPolicy:
-        """A policy from the usual arguments; *retry_on* ``None`` means the default."""
-        return cls(retries, DEFAULT_RETRY_ON if retry_on is None else frozenset(retry_on))
-
-
-class SkipReason(enum.StrEnum):
-    """Why a frame was not taken as the reply."""
-
-    STALE = "stale"
-    """It ended before the request began to go out."""
-    OTHER_UNIT = "other unit"
-    """It comes from another unit."""
-    OTHER_FUNCTION = "other function"
-    """Its function code is neither the request's nor its exception form."""
-    MALFORMED = "malformed"
-    """It does not decode, or does not answer the request (count, echo)."""
-
-
-class OutcomeKind(enum.Enum):
-    """What the caller of the machine does next."""
-
-    WAIT = "wait"
-    """Keep waiting until :attr:`MasterMachine.deadline`."""
-    DONE = "done"
-    """The transaction is over: :attr:`Outcome.response` (or ``None`` without reply)."""
-    RETRY = "retry"
-    """Send :attr:`MasterMachine.frame` again, then call :meth:`MasterMachine.sent`."""
-    FAILED = "failed"
-    """The transaction is over: raise :attr:`Outcome.error`."""
-
-
-@dataclass(slots=True)
-class Outcome:
-    """The machine's answer to an event; see :class:`OutcomeKind`. Read it, do not change
-    it (not frozen: one is made per reply, and a frozen dataclass takes twice as long)."""
-
-    kind: OutcomeKind
-    response: Response | ExceptionPDU | None = None
-    error: Exception | None = None
-    skipped: SkipReason | None = None
-
-
 _WAIT = Outcome(OutcomeKind.WAIT)
 
 _FRAME_CACHE_SIZE: Final = 256
 """Request frames a machine remembers (see :attr:`MasterMachine.frame`)."""
-
-
-@dataclass(slots=True)
-class Transaction:
-    """One request to one unit, and what happened to it so far.
-
-    *expects_reply* is false for broadcasts and for requests a device never answers
-    (diagnostics 04, force listen-only mode); those wait *turnaround* seconds instead.
-    Set :attr:`abandoned` when the caller is gone: the attempt in flight finishes (so
-    that its reply cannot reach a later request) but is not retried.
-    """
-
-    unit: int
-    request: Request
-    timeout: float
-    policy: RetryPolicy = field(default_factory=RetryPolicy)
-    expects_reply: bool = True
-    turnaround: float = 0.0
-    abandoned: bool = False
-    attempts: int = 0
-    """Attempts sent so far."""
-    attempt_start: float = 0.0
-    """When the current attempt began to go out."""
-    attempt_end: float = 0.0
-    """When the current attempt had left the wire."""
-    frame_error: FrameError | None = None
-    """The last frame error of the current attempt, if any."""
-    failures: list[Failure] = field(default_factory=list)
-    """The failure of every failed attempt, in order."""
-
-    @property
-    def frame(self) -> bytes:
-        """The RTU frame of the request."""
-        return encode_frame(self.unit, self.request.encode())
-
-
-def frame_error_from_discard(data: bytes, reason: str) -> FrameError:
-    """The error that discarded bytes stand for: :class:`CRCError` when a CRC is there to
-    compare, else :class:`FrameError` with *reason*."""
-    if reason == "crc" and len(data) >= 4:
-        return CRCError(data[-2] | data[-1] << 8, crc16(data[:-2]))
-    return FrameError(
-        f"{len(data)} bytes discarded ({reason}): {data[:16].hex(' ')}", reason=reason
-    )
 
 
 @dataclass(slots=True)
@@ -328,7 +207,7 @@ class MasterMachine:
 
     Drive it like this for each transaction:
 
-    1. :meth:`begin` with a :class:`Transaction` (state IDLE).
+    1. :meth:`begin` with a :class:`~aiortu.core.master_transaction.Transaction` (state IDLE).
     2. Send :attr:`frame`, then :meth:`sent` with when it began to go out and when it had
        left the wire.
     3. Until the outcome is DONE or FAILED: feed :meth:`frame_received`,
