@@ -25,15 +25,15 @@ time per call (``process_time_ns``), and the ratio to pymodbus.
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
-import platform
-import shlex
 import statistics
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import benchlib
 
 from aiortu.core import crc as crc_module
 from aiortu.core.crc import crc16
@@ -92,39 +92,6 @@ def run_group(contenders: list[Contender], rounds: int, target_ms: float) -> Non
             cpu = time.process_time_ns() - cpu_start
             contender.wall_ns.append(wall / contender.number)
             contender.cpu_ns.append(cpu / contender.number)
-
-
-def machine() -> list[str]:
-    cpu = platform.processor() or "unknown"
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as info:
-            for line in info:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return [
-        f"date:     {datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}",
-        f"command:  {shlex.join(['python', *sys.argv])}",
-        f"machine:  {platform.platform()}; CPU {cpu}, {os.cpu_count()} logical CPUs",
-        f"python:   {platform.python_implementation()} {platform.python_version()}",
-    ]
-
-
-def table(headers: list[str], rows: list[list[str]]) -> str:
-    """A Markdown table, so the output can go to benchmarks/README.md as it is."""
-    widths = [max(len(row[i]) for row in [headers, *rows]) for i in range(len(headers))]
-
-    def line(cells: list[str]) -> str:
-        return (
-            "| "
-            + " | ".join(cell.ljust(width) for cell, width in zip(cells, widths, strict=True))
-            + " |"
-        )
-
-    rule = "|" + "|".join("-" * (width + 2) for width in widths) + "|"
-    return "\n".join([line(headers), rule, *(line(row) for row in rows)])
 
 
 # (a) CRC
@@ -221,7 +188,7 @@ def bench_crc(rounds: int, target_ms: float) -> str:
         "8 B: ns/frame",
         "vs pymodbus",
     ]
-    return table(headers, rows)
+    return benchlib.table(headers, rows)
 
 
 # (b) Read holding registers response, 125 registers
@@ -322,7 +289,7 @@ def bench_registers(rounds: int, target_ms: float) -> str:
         "aiortu faster (wall)",
         "(CPU)",
     ]
-    return table(headers, rows)
+    return benchlib.table(headers, rows)
 
 
 def main() -> None:
@@ -332,7 +299,7 @@ def main() -> None:
         "--target-ms", type=float, default=20.0, help="wall time of one contender's round"
     )
     args = parser.parse_args()
-    print("\n".join(machine()))
+    print("\n".join(benchlib.header()))
     print(f"rounds:   {args.rounds}, interleaved; medians of per-call time\n")
     print(bench_crc(args.rounds, args.target_ms))
     print()

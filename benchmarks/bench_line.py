@@ -19,7 +19,7 @@ writing one more and listing it in ``SECTIONS``):
     relay (:class:`aiortu.testing.PtyBus`, unpaced, 2 ports, run in a process of its own)
     against a socat pty pair (``socat pty,raw,echo=0 pty,raw,echo=0``). This process
     writes the request to one end and reads the reply from it; a responder process
-    (this script with ``--respond PATH``) reads the 8 bytes at the other end and writes
+    (``bench_servers.py bare``) reads the 8 bytes at the other end and writes
     the 25 back. The two lines take turns round by round; the table gives the median
     round trip of each round's *rtts* round trips, then the median over the rounds.
 (c) flood: the sans-IO receiver's throughput on a continuous flood of random bytes (no
@@ -35,16 +35,15 @@ writing one more and listing it in ``SECTIONS``):
 from __future__ import annotations
 
 import argparse
-import contextlib
-import datetime
 import os
-import platform
-import shlex
 import statistics
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import benchlib
 
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
@@ -53,26 +52,6 @@ from aiortu.core.timing import LineSettings
 
 TARGET_FRAMES_PER_SECOND = 50_000
 """The issue's target for frames fed whole."""
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
-            for line in cpuinfo:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
-def header() -> list[str]:
-    return [
-        f"Date: {datetime.date.today().isoformat()}",
-        f"Machine: {platform.platform()}; {cpu_model()}, {os.cpu_count()} logical CPUs",
-        f"Python: {platform.python_implementation()} {platform.python_version()}",
-        "Command: " + shlex.join(["python", *sys.argv]),
-    ]
 
 
 # -- (a) the receiver ------------------------------------------------------------------------
@@ -167,19 +146,6 @@ TARGET_RELAY_RATIO = 1.5
 """The issue's target: the relay's round trip at most this many times socat's."""
 
 
-def respond(path: str) -> None:
-    """Answer every 8 bytes read on *path* with 25 bytes, until the line goes away."""
-    import benchlib
-
-    fd = benchlib.open_raw(path)
-    reply = bytes(range(25))
-    print("ready", flush=True)
-    with contextlib.suppress(OSError, EOFError):
-        while True:
-            benchlib.read_exactly(fd, 8)
-            os.write(fd, reply)
-
-
 def serve_relay() -> None:
     """Run an unpaced two-port PtyBus, print its paths, and run until killed."""
     import anyio
@@ -195,8 +161,6 @@ def serve_relay() -> None:
 
 
 def round_trips(fd: int, count: int) -> list[float]:
-    import benchlib
-
     request = bytes(range(8))
     times = []
     for _ in range(count):
@@ -209,9 +173,6 @@ def round_trips(fd: int, count: int) -> list[float]:
 
 def section_relay(args: argparse.Namespace) -> list[str]:
     import subprocess
-
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    import benchlib
 
     rounds = 3 if args.quick else args.rounds
     count = 200 if args.quick else args.rtts
@@ -230,14 +191,7 @@ def section_relay(args: argparse.Namespace) -> list[str]:
         for name, (near, far) in zip(
             medians, ((socat_a, socat_b), (relay_a, relay_b)), strict=True
         ):
-            responder = children.start(
-                [sys.executable, os.path.abspath(__file__), "--respond", far],
-                stdout=subprocess.PIPE,
-                stdin=subprocess.DEVNULL,
-            )
-            assert responder.stdout is not None
-            if responder.stdout.readline().decode().strip() != "ready":
-                raise RuntimeError("the responder did not start")
+            children.server("bare", far)  # answers each 8 bytes with 25
             ends[name] = benchlib.open_raw(near)
             round_trips(ends[name], 50)  # warm up
         try:
@@ -385,23 +339,13 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=2000)
     parser.add_argument("--rtts", type=int, default=1000, help="round trips per relay round")
     parser.add_argument("--quick", action="store_true", help="a short smoke run (relay)")
-    parser.add_argument("--respond", metavar="PATH", help=argparse.SUPPRESS)
     parser.add_argument("--serve-relay", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument(
-        "--section", action="append", choices=sorted(SECTIONS), help="run only these sections"
-    )
+    benchlib.add_section_argument(parser, SECTIONS)
     args = parser.parse_args()
-    if args.respond:
-        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-        respond(args.respond)
-        return
     if args.serve_relay:
         serve_relay()
         return
-    print("\n".join(header()))
-    for name in args.section or list(SECTIONS):
-        print()
-        print("\n".join(SECTIONS[name](args)))
+    benchlib.run_sections(args, SECTIONS)
 
 
 if __name__ == "__main__":

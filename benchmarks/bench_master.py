@@ -522,14 +522,8 @@ SECTIONS: dict[str, Callable[[argparse.Namespace], list[str]]] = {
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="a short smoke run")
-    parser.add_argument(
-        "--section", action="append", choices=list(SECTIONS), help="run only these sections"
-    )
-    args = parser.parse_args()
-    print("\n".join(benchlib.header()))
-    for name in args.section or list(SECTIONS):
-        print()
-        print("\n".join(SECTIONS[name](args)), flush=True)
+    benchlib.add_section_argument(parser, SECTIONS)
+    benchlib.run_sections(parser.parse_args(), SECTIONS)
 
 
 if __name__ == "__main__":

@@ -309,14 +309,8 @@ def main() -> None:
     parser.add_argument(
         "--flood-seconds", type=float, default=None, help="flood duration (default 60, quick 5)"
     )
-    parser.add_argument(
-        "--section", action="append", choices=list(SECTIONS), help="run only these sections"
-    )
-    args = parser.parse_args()
-    print("\n".join(benchlib.header()))
-    for name in args.section or list(SECTIONS):
-        print()
-        print("\n".join(SECTIONS[name](args)), flush=True)
+    benchlib.add_section_argument(parser, SECTIONS)
+    benchlib.run_sections(parser.parse_args(), SECTIONS)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ same directory.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import datetime
 import os
@@ -19,7 +20,7 @@ import subprocess
 import sys
 import termios
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SERVERS = os.path.join(HERE, "bench_servers.py")
@@ -58,6 +59,23 @@ def header() -> list[str]:
         f"Python: {', '.join(versions)}",
         "Command: " + shlex.join(["python", *sys.argv]),
     ]
+
+
+def add_section_argument(parser: argparse.ArgumentParser, sections: Mapping[str, object]) -> None:
+    """``--section NAME`` (repeatable): run only these sections."""
+    parser.add_argument(
+        "--section", action="append", choices=list(sections), help="run only these sections"
+    )
+
+
+def run_sections(
+    args: argparse.Namespace, sections: Mapping[str, Callable[[argparse.Namespace], list[str]]]
+) -> None:
+    """Print the :func:`header`, then each section chosen by ``--section`` (all by default)."""
+    print("\n".join(header()))
+    for name in args.section or list(sections):
+        print()
+        print("\n".join(sections[name](args)), flush=True)
 
 
 def table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
