@@ -22,6 +22,7 @@ from contextlib import asynccontextmanager
 
 import anyio
 
+from aiortu.cli._arguments import address, positive_int, seconds
 from aiortu.core.addressing import Table
 from aiortu.errors import (
     ConnectionLost,
@@ -79,36 +80,6 @@ TABLES: dict[str, Table] = {
 """The ``--table`` names and the tables they mean."""
 
 TABLE_NAMES: dict[Table, str] = {table: name for name, table in TABLES.items()}
-
-
-def address(text: str) -> int:
-    """An address or a count: decimal or ``0x`` hex."""
-    try:
-        value = int(text, 16) if text.lower().startswith("0x") else int(text, 10)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a decimal or 0x hex number: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0: {text!r}")
-    return value
-
-
-def positive_int(text: str) -> int:
-    """An integer >= 1, decimal or ``0x`` hex."""
-    value = address(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
-    return value
-
-
-def seconds(text: str) -> float:
-    """A number of seconds > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0: {text!r}")
-    return value
 
 
 def add_line_options(parser: argparse.ArgumentParser) -> None:

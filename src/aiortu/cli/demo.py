@@ -21,6 +21,7 @@ from typing import TextIO
 import anyio
 
 from aiortu.cli import Subparsers
+from aiortu.cli._arguments import positive_int, seconds
 from aiortu.core.addressing import Table
 from aiortu.testing.demo import Demo, DeviceView, ReadingView, Snapshot
 
@@ -52,26 +53,6 @@ _HIDE_CURSOR = "\x1b[?25l"
 _SHOW_CURSOR = "\x1b[?25h"
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
-    return value
-
-
-def _positive_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0: {text!r}")
-    return value
-
-
 def register(subparsers: Subparsers) -> None:
     """Add the ``demo`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
@@ -89,17 +70,17 @@ def register(subparsers: Subparsers) -> None:
     )
     parser.add_argument(
         "--duration",
-        type=_positive_seconds,
+        type=seconds,
         default=None,
         metavar="SECONDS",
         help="stop after this many seconds (default: run until Ctrl-C)",
     )
     parser.add_argument(
-        "--baudrate", type=_positive_int, default=19200, help="the bus's baud rate (19200)"
+        "--baudrate", type=positive_int, default=19200, help="the bus's baud rate (19200)"
     )
     parser.add_argument(
         "--interval",
-        type=_positive_seconds,
+        type=seconds,
         default=0.5,
         metavar="SECONDS",
         help="poll interval (0.5)",

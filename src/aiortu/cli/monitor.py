@@ -23,6 +23,7 @@ from typing import TextIO
 import anyio
 
 from aiortu.cli import CommandFailed, Subparsers
+from aiortu.cli._arguments import positive_int
 from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
 from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
@@ -60,16 +61,6 @@ exit codes:
 """
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
-    return value
-
-
 def register(subparsers: Subparsers) -> None:
     """Add the ``monitor`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
@@ -87,7 +78,7 @@ def register(subparsers: Subparsers) -> None:
     )
     parser.add_argument("port", metavar="PORT", help="a serial device path or rtu+tcp://host:port")
     line = parser.add_argument_group("line settings")
-    line.add_argument("--baudrate", type=_positive_int, default=19200, help="baud rate (19200)")
+    line.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
     line.add_argument("--parity", choices=("N", "E", "O"), default="E", help="parity (E)")
     line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
     line.add_argument(

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 import anyio
 
 from aiortu.cli import CommandFailed, Subparsers
+from aiortu.cli._arguments import seconds_or_zero
 from aiortu.core.bus_decoder import describe_frame
 from aiortu.errors import PortError
 from aiortu.slave import serve
@@ -45,16 +46,6 @@ failed; 2 bad arguments or a bad configuration file (one line naming file, key, 
 """
 
 
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number of seconds >= 0: {text!r}")
-    return value
-
-
 def register(subparsers: Subparsers) -> None:
     """Add the ``serve`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
@@ -78,7 +69,7 @@ def register(subparsers: Subparsers) -> None:
     line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
     line.add_argument(
         "--frame-gap",
-        type=_seconds,
+        type=seconds_or_zero,
         default=None,
         metavar="SECONDS",
         help="silence kept before each reply (t3.5 of the line settings)",

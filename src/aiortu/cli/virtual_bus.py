@@ -13,6 +13,7 @@ import sys
 import anyio
 
 from aiortu.cli import CommandFailed, Subparsers
+from aiortu.cli._arguments import positive_int, probability, seconds_or_zero
 from aiortu.core.timing import LineSettings
 from aiortu.testing.faults import FaultPlan
 from aiortu.testing.pty_bus import PtyBus
@@ -38,36 +39,6 @@ exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the ptys cannot be create
 """
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
-    return value
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number of seconds >= 0: {text!r}")
-    return value
-
-
-def _probability(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a probability: {text!r}") from None
-    if not 0 <= value <= 1:
-        raise argparse.ArgumentTypeError(f"must be a probability from 0 to 1: {text!r}")
-    return value
-
-
 def register(subparsers: Subparsers) -> None:
     """Add the ``virtual-bus`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
@@ -82,9 +53,9 @@ def register(subparsers: Subparsers) -> None:
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--ports", type=_positive_int, default=2, help="number of ports (2)")
+    parser.add_argument("--ports", type=positive_int, default=2, help="number of ports (2)")
     line = parser.add_argument_group("line settings (for pacing)")
-    line.add_argument("--baudrate", type=_positive_int, default=19200, help="baud rate (19200)")
+    line.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
     line.add_argument("--parity", choices=("N", "E", "O"), default="E", help="parity (E)")
     line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
     line.add_argument(
@@ -92,17 +63,20 @@ def register(subparsers: Subparsers) -> None:
     )
     adapter = parser.add_argument_group("adapter model")
     adapter.add_argument(
-        "--chunk-size", type=_positive_int, default=None, help="at most this many bytes per read"
+        "--chunk-size", type=positive_int, default=None, help="at most this many bytes per read"
     )
     adapter.add_argument(
-        "--latency", type=_seconds, default=0.0, help="hold received bytes this long (seconds)"
+        "--latency",
+        type=seconds_or_zero,
+        default=0.0,
+        help="hold received bytes this long (seconds)",
     )
     faults = parser.add_argument_group("faults")
-    faults.add_argument("--bit-error-rate", type=_probability, default=0.0, metavar="R")
-    faults.add_argument("--drop-rate", type=_probability, default=0.0, metavar="R")
-    faults.add_argument("--garbage-rate", type=_probability, default=0.0, metavar="R")
-    faults.add_argument("--gap-rate", type=_probability, default=0.0, metavar="R")
-    faults.add_argument("--gap", type=_seconds, default=0.0, metavar="S", help="gap length")
+    faults.add_argument("--bit-error-rate", type=probability, default=0.0, metavar="R")
+    faults.add_argument("--drop-rate", type=probability, default=0.0, metavar="R")
+    faults.add_argument("--garbage-rate", type=probability, default=0.0, metavar="R")
+    faults.add_argument("--gap-rate", type=probability, default=0.0, metavar="R")
+    faults.add_argument("--gap", type=seconds_or_zero, default=0.0, metavar="S", help="gap length")
     faults.add_argument("--seed", type=int, default=0, help="seed of the fault generator (0)")
     parser.add_argument(
         "--link-dir", default=None, metavar="DIR", help="make links DIR/port0, DIR/port1, ..."
