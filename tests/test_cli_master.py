@@ -15,11 +15,11 @@ import pytest
 from aiortu.core.timing import LineSettings
 from aiortu.testing import PtyBus
 
-from .master.pymodbus_tables_server import COILS, HOLDING_REGISTERS, INPUT_REGISTERS
+from . import pymodbus_server
+from .pymodbus_server import COILS, HOLDING_REGISTERS, INPUT_REGISTERS
 
 pytestmark = [pytest.mark.interop, pytest.mark.timeout(90)]
 
-SERVER = Path(__file__).parent / "master" / "pymodbus_tables_server.py"
 LINE = ["--parity", "N", "--stopbits", "2"]
 
 
@@ -27,20 +27,11 @@ LINE = ["--parity", "N", "--stopbits", "2"]
 def port() -> Iterator[str]:
     """A pty bus port whose other port pymodbus's server (unit 1) serves."""
     settings = LineSettings(19200, parity="N", stopbits=2)
-    with PtyBus(2, settings=settings).running_in_thread() as bus:
-        server = subprocess.Popen(
-            [sys.executable, "-W", "ignore", str(SERVER), bus.paths[1]],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            text=True,
-        )
-        try:
-            assert server.stdout is not None
-            assert server.stdout.readline().strip() == "ready"
-            yield bus.paths[0]
-        finally:
-            server.terminate()
-            server.wait(timeout=10)
+    with (
+        PtyBus(2, settings=settings).running_in_thread() as bus,
+        pymodbus_server.running(bus.paths[1]),
+    ):
+        yield bus.paths[0]
 
 
 @pytest.fixture(scope="module")

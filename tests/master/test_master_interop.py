@@ -4,42 +4,29 @@ table and for the writes."""
 from __future__ import annotations
 
 import contextlib
-import subprocess
-import sys
 from collections.abc import AsyncIterator, Iterator
-from pathlib import Path
 
 import pytest
 
 import aiortu
 from aiortu.core.timing import LineSettings
 from aiortu.testing import PtyBus
-
-from .pymodbus_tables_server import COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS
+from tests import pymodbus_server
+from tests.pymodbus_server import COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS
 
 pytestmark = [pytest.mark.interop, pytest.mark.timeout(60)]
 
-SERVER = Path(__file__).with_name("pymodbus_tables_server.py")
 SETTINGS = LineSettings(19200, parity="N", stopbits=2)
 
 
 @pytest.fixture(scope="module")
 def port() -> Iterator[str]:
     """The master's port on a pty bus whose other port pymodbus's server serves."""
-    with PtyBus(2, settings=SETTINGS).running_in_thread() as bus:
-        server = subprocess.Popen(
-            [sys.executable, "-W", "ignore", str(SERVER), bus.paths[1]],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            text=True,
-        )
-        try:
-            assert server.stdout is not None
-            assert server.stdout.readline().strip() == "ready"
-            yield bus.paths[0]
-        finally:
-            server.terminate()
-            server.wait(timeout=10)
+    with (
+        PtyBus(2, settings=SETTINGS).running_in_thread() as bus,
+        pymodbus_server.running(bus.paths[1]),
+    ):
+        yield bus.paths[0]
 
 
 @contextlib.asynccontextmanager

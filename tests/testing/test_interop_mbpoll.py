@@ -6,12 +6,12 @@ import os
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
+from tests import pymodbus_server
+
 MBPOLL = shutil.which("mbpoll")
-SERVER = Path(__file__).with_name("pymodbus_rtu_server.py")
 
 pytestmark = [
     pytest.mark.interop,
@@ -38,21 +38,12 @@ def bus_paths():
 
 
 @pytest.fixture
-def pymodbus_server(bus_paths):
-    server = subprocess.Popen(
-        [sys.executable, "-W", "ignore", str(SERVER), bus_paths[1]],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-    )
-    assert server.stdout is not None
-    assert server.stdout.readline().strip() == "ready"
-    yield
-    server.terminate()
-    server.wait(timeout=10)
+def pymodbus(bus_paths):
+    with pymodbus_server.running(bus_paths[1]):
+        yield
 
 
-def test_mbpoll_reads_pymodbus_holding_registers(bus_paths, pymodbus_server):
+def test_mbpoll_reads_pymodbus_holding_registers(bus_paths, pymodbus):
     assert MBPOLL is not None, "mbpoll must be installed in CI"
     result = subprocess.run(
         [MBPOLL, "-m", "rtu", "-a", "1", "-b", "19200", "-P", "none", "-s", "2",

@@ -1,15 +1,19 @@
-"""A pymodbus RTU server with all four tables, for the master's interop tests.
+"""pymodbus's RTU server with all four tables, for the interop tests.
 
-``python pymodbus_tables_server.py PORT`` serves unit 1 at 19200 8N2 (ptys keep no
-parity; see aiortu.testing.pty_bus) and prints ``ready`` once the port is open. Runs
-until killed. The initial values are :data:`COILS`, :data:`DISCRETE_INPUTS`,
-:data:`INPUT_REGISTERS` and :data:`HOLDING_REGISTERS` from protocol address 0.
+``python pymodbus_server.py PORT`` serves unit 1 at 19200 8N2 (ptys keep no parity; see
+aiortu.testing.pty_bus) and prints ``ready`` once the port is open. Runs until killed.
+The initial values are :data:`COILS`, :data:`DISCRETE_INPUTS`, :data:`INPUT_REGISTERS`
+and :data:`HOLDING_REGISTERS` from protocol address 0. Tests start it with
+:func:`running`.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import subprocess
 import sys
+from collections.abc import Iterator
 
 from pymodbus import FramerType
 from pymodbus.datastore import (
@@ -50,6 +54,24 @@ async def serve(port: str) -> None:
         trace_connect=_connected,
     )
     await server.serve_forever()
+
+
+@contextlib.contextmanager
+def running(port: str) -> Iterator[None]:
+    """Run this server on *port* in a subprocess for the ``with`` block, once it is ready."""
+    server = subprocess.Popen(
+        [sys.executable, "-W", "ignore", __file__, port],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        assert server.stdout is not None
+        assert server.stdout.readline().strip() == "ready"
+        yield
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
 
 
 if __name__ == "__main__":
