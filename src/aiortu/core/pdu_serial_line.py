@@ -94,15 +94,19 @@ _ECHO_SUB_FUNCTIONS = frozenset(
 )
 
 
-class _NoFields:
+class _NoFieldsRequest(Request):
     """Requests made of the function code alone (07, 0B, 0C, 11)."""
 
     __slots__ = ()
 
-    function_code: ClassVar[int]
-
     def encode(self) -> bytes:
         return bytes((self.function_code,))
+
+    @classmethod
+    def decode(cls, pdu: bytes) -> Self:
+        cls._expect_function_code(pdu)
+        cls._expect_length(pdu, 1)
+        return cls()
 
 
 # ---------------------------------------------------------------------------------------
@@ -138,17 +142,11 @@ class ReadExceptionStatusResponse(Response):
 
 
 @dataclass(frozen=True, slots=True)
-class ReadExceptionStatusRequest(_NoFields, Request):
+class ReadExceptionStatusRequest(_NoFieldsRequest):
     """Read the eight exception status bits of a device (serial line only; no fields)."""
 
     function_code: ClassVar[int] = FunctionCode.READ_EXCEPTION_STATUS
     response_class: ClassVar[type[Response]] = ReadExceptionStatusResponse
-
-    @classmethod
-    def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 1)
-        return cls()
 
 
 # ---------------------------------------------------------------------------------------
@@ -327,17 +325,11 @@ class GetCommEventCounterResponse(Response):
 
 
 @dataclass(frozen=True, slots=True)
-class GetCommEventCounterRequest(_NoFields, Request):
+class GetCommEventCounterRequest(_NoFieldsRequest):
     """Read the comm event counter of a device (serial line only; no fields)."""
 
     function_code: ClassVar[int] = FunctionCode.GET_COMM_EVENT_COUNTER
     response_class: ClassVar[type[Response]] = GetCommEventCounterResponse
-
-    @classmethod
-    def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 1)
-        return cls()
 
 
 # ---------------------------------------------------------------------------------------
@@ -400,17 +392,11 @@ class GetCommEventLogResponse(Response):
 
 
 @dataclass(frozen=True, slots=True)
-class GetCommEventLogRequest(_NoFields, Request):
+class GetCommEventLogRequest(_NoFieldsRequest):
     """Read the comm event log of a device (serial line only; no fields)."""
 
     function_code: ClassVar[int] = FunctionCode.GET_COMM_EVENT_LOG
     response_class: ClassVar[type[Response]] = GetCommEventLogResponse
-
-    @classmethod
-    def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 1)
-        return cls()
 
 
 # ---------------------------------------------------------------------------------------
@@ -497,17 +483,11 @@ class ReportServerIdResponse(Response):
 
 
 @dataclass(frozen=True, slots=True)
-class ReportServerIdRequest(_NoFields, Request):
+class ReportServerIdRequest(_NoFieldsRequest):
     """Ask a device for its server id, run indicator and device-specific data (no fields)."""
 
     function_code: ClassVar[int] = FunctionCode.REPORT_SERVER_ID
     response_class: ClassVar[type[Response]] = ReportServerIdResponse
-
-    @classmethod
-    def decode(cls, pdu: bytes) -> Self:
-        cls._expect_function_code(pdu)
-        cls._expect_length(pdu, 1)
-        return cls()
 
 
 register(ReadExceptionStatusRequest)
