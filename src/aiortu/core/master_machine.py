@@ -357,8 +357,9 @@ class MasterMachine:
         """A frame with a good CRC arrived (``start``/``end``: its first and last byte)."""
         if self.state is MasterState.WAITING_REPLY and self._on_transition is None:
             # The usual reply to a register read takes the table's two transitions
-            # (REPLY_RECEIVED, then REPLY_OK) in one step; with an observer every
-            # transition is fired one by one, and the tests hold both ways equal.
+            # (REPLY_RECEIVED, then REPLY_OK) in one step; anything else, and every frame
+            # with an observer, is examined the general way (_examine_frame), one
+            # transition at a time. The tests hold both ways equal.
             response = self._usual_reply(unit, pdu, end)
             if response is not None:
                 self.state = _USUAL_REPLY_TARGET
@@ -430,10 +431,8 @@ class MasterMachine:
         assert transaction is not None
         request = transaction.request
         reason: SkipReason | None = None
-        response: Response | ExceptionPDU | None = self._usual_reply(unit, pdu, end)
-        if response is not None:
-            pass  # the usual reply to a register read passes every check below
-        elif end < transaction.attempt_start:
+        response: Response | ExceptionPDU | None = None
+        if end < transaction.attempt_start:
             reason = SkipReason.STALE
         elif unit != transaction.unit or unit == BROADCAST_UNIT:
             reason = SkipReason.OTHER_UNIT
