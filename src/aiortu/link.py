@@ -484,7 +484,7 @@ class Link:
                 except _STREAM_ERRORS as error:
                     self._error = error
                     raise self._connection_lost() from error
-            return self._sent(frame, start)
+            return self._sent(frame, start, self.clock())
         finally:
             if self._send_waiters:
                 self._pass_turn_to_send()
@@ -500,26 +500,24 @@ class Link:
         slave answers this way from the link's read callback, with no task wake-up.
         """
         send_nowait = self._send_nowait
-        if (
-            send_nowait is None
-            or self._sending
-            or self._error is not None
-            or self._stopped
-            or max(self._last_received, self._transmit_end) + self.frame_gap > self.clock()
-        ):
+        if send_nowait is None or self._sending or self._error is not None or self._stopped:
             return None
         start = self.clock()
+        if max(self._last_received, self._transmit_end) + self.frame_gap > start:
+            return None
         if not send_nowait(frame):
             return None
         self.last_write_start = start
         self.writes_begun += 1
-        return self._sent(frame, start)
+        # The write took microseconds, far less than the wire time: no second clock read.
+        return self._sent(frame, start, start)
 
-    def _sent(self, frame: bytes, start: float) -> float:
+    def _sent(self, frame: bytes, start: float, now: float) -> float:
+        """*frame* began to go out at *start*, and the write returned at *now*."""
         self.frames_sent += 1
         # The OS may buffer the write, so it returns early; the wire is busy until the
         # last character has gone, whichever is later.
-        end = max(start + len(frame) * self.char_time, self.clock())
+        end = max(start + len(frame) * self.char_time, now)
         self._transmit_end = end
         return end
 

@@ -313,8 +313,9 @@ class Master(SerialLineFunctions):
         policy = self.policy
         if retries is not None and retries != policy.retries:
             policy = RetryPolicy(retries, policy.retry_on)
-        transaction = Transaction(unit, pdu, self._timeout(timeout), policy)
-        response = await self.engine.submit(transaction, priority)
+        response = await self.engine.submit_request(
+            unit, pdu, self._timeout(timeout), policy, priority
+        )
         assert response is not None
         if isinstance(response, ExceptionPDU):
             raise ExceptionResponse(response.exception_code, pdu.function_code, unit)

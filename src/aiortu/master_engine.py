@@ -57,10 +57,11 @@ from aiortu.core.master_transaction import (
     Failure,
     Outcome,
     OutcomeKind,
+    RetryPolicy,
     Transaction,
     frame_error_from_discard,
 )
-from aiortu.core.pdu import ExceptionPDU, Response
+from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.core.receiver import FrameReceived
 from aiortu.errors import ConnectionLost, ResponseTimeout, UnitOffline
 from aiortu.link import Link, LinkEvent
@@ -207,6 +208,9 @@ class LineEngine:
         """With :attr:`wait_for_reconnect`: raise at once instead of waiting."""
         self.transactions = 0
         """Transactions run on the line (abandoned ones included)."""
+        self.usual_exchanges = True
+        """Whether register reads may run their usual exchange without the machine (see
+        :meth:`submit_request`); false runs every transaction through it."""
 
     # -- the callers' side -----------------------------------------------------------
 
@@ -238,15 +242,109 @@ class LineEngine:
             await self._wait_turn(job)
         else:
             self._busy = True  # an idle line: the transaction runs at once, here
+        return await self._run(job, None)
+
+    async def _run(
+        self, job: _Job, sent: tuple[float, float] | None
+    ) -> Response | ExceptionPDU | None:
+        """Run *job*, which has the line (*sent*: see :meth:`_exchange`); return its reply."""
         if not job.done:
             try:
-                await self._exchange(job)
+                await self._exchange(job, sent)
             finally:
                 if self._adopted is not job:
                     self._release()
         if job.error is not None:
             raise job.error
         return job.response
+
+    async def submit_request(
+        self,
+        unit: int,
+        request: Request,
+        response_timeout: float,
+        policy: RetryPolicy,
+        priority: int = 0,
+    ) -> Response | ExceptionPDU | None:
+        """:meth:`submit` of ``Transaction(unit, request, response_timeout, policy)``.
+
+        On an idle line with a loop, a register read whose reply comes as usual runs
+        without the master machine (see
+        :meth:`~aiortu.core.master_machine.MasterMachine.usual_exchange`): it sends the
+        request at once, waits for that reply from the link's read callback, and
+        counts it. Anything else that happens while it waits (another frame, bad bytes,
+        the timeout, the link failing, the caller cancelled) hands the attempt in flight
+        to the machine, which goes on exactly as if it had sent the request itself. Set
+        :attr:`usual_exchanges` false to run every transaction through the machine.
+        """
+        link = self.link
+        loop = link.loop
+        known = None
+        if (
+            self.usual_exchanges
+            and loop is not None
+            and not self._busy
+            and self._serving
+            and not self._link_closed
+            and self._failed is None
+            and not self.health.fail_fast_offline
+            and (self._quiet_until == -math.inf or self._quiet_until <= link.clock())
+        ):
+            known = self.machine.usual_exchange(unit, request)
+        if known is None:
+            return await self.submit(Transaction(unit, request, response_timeout, policy), priority)
+        frame = known[1]
+        self._forget_arrivals()
+        end = link.send_now(frame)
+        if end is None:  # the line asks for a wait: the usual way
+            return await self.submit(Transaction(unit, request, response_timeout, policy), priority)
+        self._busy = True
+        sent = (end - len(frame) * link.char_time, end)
+        stats = self.stats.get(unit) or self.unit_stats(unit)
+        stats.requests += 1
+        self.transactions += 1
+        deadline = end + response_timeout
+        waiter = self._waiter = loop.create_future()
+        self._waiter_deadline = deadline
+        if deadline < self._timer_at:
+            self._arm_timer(deadline)
+        shape = known[2]
+        assert shape is not None
+        link.expect(shape[0], shape[1], self._on_usual_reply)
+        try:
+            await waiter
+        except BaseException:
+            # The caller is gone with the request on the wire: the line task finishes it.
+            self._waiter = None
+            link.forget_expected()
+            self._adopt(
+                self._late_job(Transaction(unit, request, response_timeout, policy), priority, sent)
+            )
+            raise
+        self._waiter = None
+        link.forget_expected()
+        usual = self._usual
+        if usual is None or self._events:
+            # Not (only) the usual reply: the machine takes the attempt over.
+            job = self._late_job(
+                Transaction(unit, request, response_timeout, policy), priority, sent
+            )
+            return await self._run(job, sent)
+        self._usual = None
+        stats.successes += 1
+        stats.consecutive_failures = 0
+        stats.online = True
+        latency = stats.last_latency = link.clock() - sent[0]
+        mean = stats.mean_latency
+        stats.mean_latency = latency if mean is None else mean + (latency - mean) / stats.successes
+        self._release()
+        return self.machine.usual_response(request, usual[0])
+
+    def _late_job(self, transaction: Transaction, priority: int, sent: tuple[float, float]) -> _Job:
+        """The job of a usual exchange that the machine takes over, begun and sent."""
+        self.machine.begin(transaction)
+        self.machine.sent(*sent)
+        return _Job(transaction, priority, next(self._sequence))
 
     async def _wait_turn(self, job: _Job) -> None:
         """Queue *job* and wait until it is handed the line (or failed)."""
@@ -410,23 +508,34 @@ class LineEngine:
             if not job.done:
                 job.finish(None, ConnectionLost(str(error)))
 
-    async def _exchange(self, job: _Job) -> None:
-        """Run *job*'s transaction on the line; the line is the caller's meanwhile."""
+    async def _exchange(self, job: _Job, sent: tuple[float, float] | None = None) -> None:
+        """Run *job*'s transaction on the line; the line is the caller's meanwhile.
+
+        *sent* is for a usual exchange taken over (see :meth:`submit_request`): the
+        machine has begun the transaction and its first attempt is on the wire.
+        """
         transaction = job.transaction
         machine = self.machine
         link = self.link
         stats = self.stats.get(transaction.unit) or self.unit_stats(transaction.unit)
-        stats.requests += 1
-        self.transactions += 1
-        machine.begin(transaction)
+        if sent is None:
+            stats.requests += 1
+            self.transactions += 1
+            machine.begin(transaction)
         try:
             while True:
+                if sent is not None:
+                    sent = None
+                    outcome = await self._wait_for_attempt(job, stats)
+                    if outcome.kind is not OutcomeKind.RETRY:
+                        break
+                    self._count_failed_attempt(stats, transaction)
+                    stats.retries += 1
+                    continue
                 if self._quiet_until > link.clock():
                     await self._keep_guard()
                 frame = machine.frame
-                # Nothing that came before can answer the request.
-                self._events.clear()
-                self._usual = None
+                self._forget_arrivals()
                 wire_time = len(frame) * link.char_time
                 writes = link.writes_begun
                 # At once where the line allows it (no coroutine, nothing to cancel).
@@ -443,13 +552,7 @@ class LineEngine:
                         self._adopt(job)
                     raise
                 machine.sent(end - wire_time, end)
-                try:
-                    outcome = await self._wait_for_outcome(stats)
-                except ConnectionLost:
-                    raise
-                except BaseException:
-                    self._adopt(job)
-                    raise
+                outcome = await self._wait_for_attempt(job, stats)
                 if outcome.kind is not OutcomeKind.RETRY:
                     break
                 self._count_failed_attempt(stats, transaction)
@@ -468,6 +571,22 @@ class LineEngine:
                     self._quiet_until = link.clock() + self.late_reply_guard
             raise
         self._settle(job, outcome, stats)
+
+    def _forget_arrivals(self) -> None:
+        """A request is about to go out: nothing that came before can answer it."""
+        self._events.clear()
+        self._usual = None
+
+    async def _wait_for_attempt(self, job: _Job, stats: UnitStats) -> Outcome:
+        """The outcome of the attempt on the wire; a caller gone meanwhile leaves it to
+        the line task."""
+        try:
+            return await self._wait_for_outcome(stats)
+        except ConnectionLost:
+            raise
+        except BaseException:
+            self._adopt(job)
+            raise
 
     def _adopt(self, job: _Job) -> None:
         """The caller is gone mid-attempt: the line task finishes the attempt."""

@@ -32,6 +32,9 @@ sleeps until :attr:`MasterMachine.deadline`:
 * Retries follow a :class:`~aiortu.core.master_transaction.RetryPolicy`: by default on
   timeouts and frame errors only, never on exception responses (a device that refused
   will refuse again).
+* A register read that gets its usual reply changes nothing in the machine, so a driver
+  may run it without the machine and hand it over only if something else happens
+  (:meth:`MasterMachine.usual_exchange`).
 
 Time comes in as arguments; the machine never reads a clock.
 """
@@ -46,6 +49,7 @@ from typing import Final
 
 from aiortu.core.codes import BROADCAST_UNIT, EXCEPTION_BIT
 from aiortu.core.errors import FrameError, MalformedPDU, ResponseTimeout
+from aiortu.core.frame import encode_frame
 from aiortu.core.master_transaction import (
     Failure,
     Outcome,
@@ -287,21 +291,56 @@ class MasterMachine:
     def _known(self) -> _Known:
         """What the machine remembers of the request in progress (see :attr:`frame`)."""
         transaction = self._current
-        request = transaction.request
-        key = (transaction.unit, id(request))
+        known = self._entry = self._remember(transaction.unit, transaction.request)
+        return known
+
+    def _remember(self, unit: int, request: Request) -> _Known:
+        key = (unit, id(request))
         known = self._frames.get(key)
         if known is None or known[0] is not request:
             shape = None
-            if type(request) in _REGISTER_READS and transaction.unit != BROADCAST_UNIT:
+            if type(request) in _REGISTER_READS and unit != BROADCAST_UNIT:
                 assert isinstance(request, ReadHoldingRegistersRequest)
                 size = 2 * request.count
-                shape = bytes((transaction.unit, request.function_code, size)), size + 5
+                shape = bytes((unit, request.function_code, size)), size + 5
             if len(self._frames) >= _FRAME_CACHE_SIZE:
                 self._frames.clear()
             # Holding the request keeps its id unique.
-            known = self._frames[key] = (request, transaction.frame, shape)
-        self._entry = known
+            known = self._frames[key] = (request, encode_frame(unit, request.encode()), shape)
         return known
+
+    def usual_exchange(self, unit: int, request: Request) -> _Known | None:
+        """``(request, frame, usual reply's shape)`` where a transaction of *request* to
+        *unit* may run without the machine until something other than its usual reply
+        happens; else None.
+
+        A transaction that gets its usual reply leaves the machine as it found it: IDLE,
+        after SEND_UNICAST, REPLY_RECEIVED and REPLY_OK, with nothing to remember. So a
+        driver may send *frame* and wait for the reply of that shape (first bytes,
+        length) without telling the machine. If that reply comes whole with a good CRC
+        before the response timeout, :meth:`usual_response` makes it the response. On
+        anything else (another frame, bad bytes, the timeout, the caller gone), the
+        driver calls :meth:`begin` and then :meth:`sent` with the times the frame went out,
+        and goes on the usual way: the machine then knows everything it would have known.
+
+        This applies where the machine is IDLE, has no transition observer (which must
+        see every transition), and the request has a usual reply (a register read's).
+        """
+        if self.state is not _S.IDLE or self._on_transition is not None:
+            return None
+        known = self._frames.get((unit, id(request)))
+        if known is None or known[0] is not request:
+            known = self._remember(unit, request)
+        return known if known[2] is not None else None
+
+    @staticmethod
+    def usual_response(request: Request, frame: bytes) -> Response:
+        """The response in *frame*, the usual reply to *request* (see
+        :meth:`usual_exchange`): its shape is matched and its CRC checked."""
+        assert isinstance(request, ReadHoldingRegistersRequest)
+        response = object.__new__(request.response_class)
+        object.__setattr__(response, "values", _WORDS[request.count].unpack_from(frame, 3))
+        return response
 
     def take_usual_reply(self, frame: bytes, end: float) -> Response | None:
         """Finish the transaction with *frame*, a whole frame with a good CRC that ended

@@ -1,0 +1,175 @@
+"""The usual exchange: a register read on an idle serial line runs without the master
+machine while its reply comes as usual, and the machine takes the attempt over on anything
+else (LineEngine.submit_request, MasterMachine.usual_exchange).
+
+Every scenario runs twice over a pty, once that way and once with every transaction
+through the machine (``usual_exchanges = False``); the results, the statistics and the
+requests on the wire must be the same.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Awaitable, Callable
+
+import anyio
+import pytest
+
+import aiortu
+from aiortu.core.crc import crc16
+from aiortu.core.master_machine import MasterState
+from aiortu.errors import ConnectionLost
+from aiortu.master import Master
+from aiortu.transport.serial import open_serial
+from tests.transport.ptys import LINE, Pty, open_pty, read_master
+
+TIMEOUT = 0.15
+
+
+def _with_crc(body: bytes) -> bytes:
+    crc = crc16(body)
+    return body + bytes((crc & 0xFF, crc >> 8))
+
+
+REQUEST = _with_crc(bytes.fromhex("010300000002"))  # unit 1, FC 03, 2 registers at 0
+REPLY = _with_crc(bytes.fromhex("01030400070008"))  # [7, 8]
+OTHER_UNIT = _with_crc(bytes.fromhex("02030400090009"))
+WRONG_COUNT = _with_crc(bytes.fromhex("010302000700"))  # 2 bytes where 4 are due
+EXCEPTION = _with_crc(bytes.fromhex("018302"))
+BAD_CRC = REPLY[:-1] + bytes((REPLY[-1] ^ 0xFF,))
+
+# What the device does with each request it reads, in order: a list of steps, each a
+# pause in seconds or bytes to write ("split" writes a frame in two chunks).
+Step = float | bytes | tuple[str, bytes]
+SCENARIOS: dict[str, list[list[Step]]] = {
+    "usual reply": [[REPLY]],
+    "split reply": [[("split", REPLY)]],
+    "another unit first": [[OTHER_UNIT, 0.01, REPLY]],
+    "noise first": [[b"\x00\xff\x13", 0.03, REPLY]],
+    "exception": [[EXCEPTION]],
+    "wrong byte count": [[WRONG_COUNT], [WRONG_COUNT]],
+    "bad CRC, then retried": [[BAD_CRC], [REPLY]],
+    "silent, then retried": [[], [REPLY]],
+    "late, then retried": [[TIMEOUT + 0.05, REPLY], [REPLY]],
+    "silent twice": [[], []],
+    "usual reply, then noise": [[REPLY, b"\x55"]],
+}
+
+
+async def _play(pty: Pty, steps: list[list[Step]]) -> list[bytes]:
+    """Play the device: read each request, answer it as *steps* say; return the requests."""
+    seen = []
+    for answer in steps:
+        seen.append(await read_master(pty, len(REQUEST)))
+        for step in answer:
+            if isinstance(step, float):
+                await anyio.sleep(step)
+            elif isinstance(step, tuple):
+                frame = step[1]
+                pty.write(frame[:3])
+                await anyio.sleep(0.003)
+                pty.write(frame[3:])
+            else:
+                pty.write(step)
+    return seen
+
+
+async def _read_once(
+    usual_exchanges: bool, steps: list[list[Step]]
+) -> tuple[object, dict[str, object], list[bytes], int]:
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=TIMEOUT, retries=1, frame_gap=0) as master:
+            engine = master.engine
+            engine.usual_exchanges = usual_exchanges
+            await anyio.sleep(0.05)  # past INIT
+            result: object = None
+            seen: list[bytes] = []
+
+            async def device() -> None:
+                seen.extend(await _play(pty, steps))
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(device)
+                with anyio.fail_after(3):
+                    try:
+                        result = await master.read_holding_registers(1, 0, 2)
+                    except (aiortu.ModbusError, aiortu.ExceptionResponse) as error:
+                        result = type(error)
+            await anyio.sleep(0.05)  # whatever follows the reply has come
+            stats = dataclasses.asdict(master.unit_stats(1))
+            for timing in ("last_latency", "mean_latency", "last_probe"):
+                stats.pop(timing)
+            return result, stats, seen, engine.transactions
+
+
+@pytest.mark.parametrize("steps", SCENARIOS.values(), ids=SCENARIOS.keys())
+async def test_a_usual_exchange_ends_as_the_machine_would(steps: list[list[Step]]) -> None:
+    through_machine = await _read_once(False, steps)
+    usual = await _read_once(True, steps)
+    assert usual == through_machine
+    assert all(request == REQUEST for request in usual[2])
+
+
+async def test_the_usual_reply_leaves_the_machine_untouched() -> None:
+    for usual_exchanges, begun in ((True, False), (False, True)):
+        with open_pty() as pty:
+            stream = await open_serial(pty.path, LINE)
+            async with Master(stream, LINE, timeout=TIMEOUT, frame_gap=0) as master:
+                master.engine.usual_exchanges = usual_exchanges
+                await anyio.sleep(0.05)
+                async with anyio.create_task_group() as tg:
+                    tg.start_soon(_play, pty, [[REPLY]])
+                    assert await master.read_holding_registers(1, 0, 2) == [7, 8]
+                assert (master.engine.machine.transaction is not None) is begun
+                assert master.engine.machine.state is MasterState.IDLE
+
+
+async def _cancelled_mid_wait(
+    pty: Pty, master: Master, answer_late: Callable[[], Awaitable[None]]
+) -> None:
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(answer_late)
+        with anyio.move_on_after(0.03) as scope:
+            await master.read_holding_registers(1, 0, 2)
+        assert scope.cancelled_caught
+
+
+async def test_a_caller_cancelled_mid_wait_leaves_the_reply_to_the_line() -> None:
+    # The caller is gone while its request is on the wire; the reply comes later. It
+    # must not reach the next read, which must get its own data.
+    second = _with_crc(bytes.fromhex("010304000a000b"))
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=TIMEOUT, retries=0, frame_gap=0) as master:
+            await anyio.sleep(0.05)
+
+            async def answer_late() -> None:
+                assert await read_master(pty, len(REQUEST)) == REQUEST
+                await anyio.sleep(0.06)  # after the caller is gone, within the timeout
+                pty.write(REPLY)
+
+            await _cancelled_mid_wait(pty, master, answer_late)
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(_play, pty, [[second]])
+                with anyio.fail_after(2):
+                    assert await master.read_holding_registers(1, 0, 2) == [10, 11]
+            stats = master.unit_stats(1)
+            assert (stats.requests, stats.successes, stats.failures) == (2, 2, 0)
+            assert master.engine.transactions == 2
+
+
+async def test_a_link_lost_mid_wait_fails_the_read_with_connection_lost() -> None:
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=1.0, retries=0, frame_gap=0) as master:
+            await anyio.sleep(0.05)
+
+            async def hang_up() -> None:
+                assert await read_master(pty, len(REQUEST)) == REQUEST
+                pty.close_master()
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(hang_up)
+                with anyio.fail_after(2), pytest.raises(ConnectionLost):
+                    await master.read_holding_registers(1, 0, 2)
