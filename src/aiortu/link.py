@@ -46,7 +46,7 @@ import math
 import sys
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Container, Iterable
 from types import TracebackType
 from typing import Any, Self, cast
 
@@ -175,6 +175,7 @@ class Link:
         self._timer: Any = None
         self._timer_deadline = -math.inf
         self._expected: tuple[bytes, int, Callable[[bytes, float], None]] | None = None
+        self._requests: tuple[Container[int], int, Callable[[bytes, float], None]] | None = None
         self._push_lost: anyio.Event | None = None
         self._push_error: BaseException | None = None
         self.frames_received = 0
@@ -361,6 +362,7 @@ class Link:
             # Half duplex: see _pump.
             self._transmit_end = min(self._transmit_end, now)
             expected = self._expected
+            requests = self._requests
             if (
                 expected is not None
                 and len(chunk) == expected[1]
@@ -372,6 +374,16 @@ class Link:
                 expected[2](chunk, now)
                 if self._timer is None:
                     return  # an idle receiver has no deadline: no timer to arm
+            elif (
+                requests is not None
+                and len(chunk) == requests[1]
+                and chunk[1] in requests[0]
+                and self.receiver.take_expected_frame(chunk, now)
+            ):
+                self.frames_received += 1
+                requests[2](chunk, now)
+                if self._timer is None:
+                    return
             else:
                 events = self.receiver.feed(chunk, now)
                 if events:
@@ -391,6 +403,24 @@ class Link:
         read's) saves the event and the queue this way.
         """
         self._expected = (prefix, length, on_frame)
+
+    def expect_requests(
+        self,
+        function_codes: Container[int],
+        length: int,
+        on_request: Callable[[bytes, float], None] | None,
+    ) -> None:
+        """Hand every chunk that is exactly one good request of *length* bytes with one
+        of *function_codes* straight to ``on_request(frame, end)``, from the read
+        callback, instead of to the listener as a
+        :class:`~aiortu.core.receiver.FrameReceived`; ``None`` stops it. Every request
+        with those function codes must be *length* bytes long (01 to 06 are 8), whatever
+        its unit: the receiver checks the CRC only.
+
+        Like :meth:`expect`, only where the stream pushes its bytes. A slave answers the
+        commonest requests this way without building an event.
+        """
+        self._requests = None if on_request is None else (function_codes, length, on_request)
 
     def forget_expected(self) -> None:
         """Undo :meth:`expect`, if the frame has not come."""

@@ -37,7 +37,7 @@ from collections import deque
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from contextlib import asynccontextmanager
 from types import TracebackType
-from typing import Any, Self
+from typing import Any, Final, Self
 
 import anyio
 import anyio.abc
@@ -350,6 +350,7 @@ class Slave:
         except ConnectionLost:
             self._link_closed = True
         link.listen(self._on_link_event)
+        link.expect_requests(_EIGHT_BYTE_FAST_PATHS, 8, self._on_whole_request)
         try:
             while True:
                 if not queue:
@@ -377,6 +378,7 @@ class Slave:
                     self._take_discard(event)  # type: ignore[arg-type]
         finally:
             self._wake = self._waiter = None
+            link.expect_requests((), 8, None)
             link.listen(None)
 
     def _on_link_event(self, event: LinkEvent | None) -> None:
@@ -416,6 +418,63 @@ class Slave:
         if wake is not None:
             self._wake = None
             wake.set()
+
+    def _on_whole_request(self, frame: bytes, end: float) -> None:
+        """The link's read callback got *frame*, a whole 8-byte request with a good CRC
+        (see Link.expect_requests): answer it here when a fast path does and the reply
+        goes out at once, counted in one step (SlaveMachine.answered_at_once); otherwise
+        it is the FrameReceived the receiver would have made, and goes the usual way."""
+        machine = self.machine
+        fast = self._fast_paths.get(frame[1])
+        store = self._fast_stores.get(frame[0])
+        if (
+            fast is None
+            or store is None
+            or self._queue
+            or self.trace is not None
+            or self._before
+            or self._after
+            or machine.state is not SlaveState.IDLE
+            or machine.listen_only
+        ):
+            self._on_link_event(FrameReceived(frame, end - 7 * self.link.char_time, end))
+            return
+        try:
+            reply = fast(store, frame[1:-2])
+        except ExceptionResponse as error:
+            # A fast path raises before it changes anything: counted step by step.
+            machine.frame_received(frame[0], frame[1])
+            machine.check_request(supported=True)
+            machine.processing_failed(error.code)
+            self._reply_at_once(frame, _exception_pdu(frame[1], error.code))
+            return
+        if reply is None:
+            self._on_link_event(FrameReceived(frame, end - 7 * self.link.char_time, end))
+            return
+        if self.link.send_now(encode_frame(frame[0], reply)) is not None:
+            machine.answered_at_once(frame[0], frame[1])
+            return
+        machine.frame_received(frame[0], frame[1])
+        machine.check_request(supported=True)
+        machine.processed()
+        self._leave_reply(frame, reply)
+
+    def _reply_at_once(self, frame: bytes, reply: bytes) -> None:
+        """Send *reply* now if the line allows it, else leave it to the serve loop (the
+        machine is FORMATTING_REPLY or FORMATTING_ERROR)."""
+        if self.link.send_now(encode_frame(frame[0], reply)) is None:
+            self._leave_reply(frame, reply)
+        else:
+            self.machine.reply_sent()
+
+    def _leave_reply(self, frame: bytes, reply: bytes) -> None:
+        """The serve loop sends *reply* once the line allows it."""
+        self._queue.append(_Taken(frame, reply))
+        waiter = self._waiter
+        if waiter is not None:
+            self._waiter = None
+            if not waiter.done():
+                waiter.set_result(None)
 
     def _take_discard(self, event: LinkEvent) -> None:
         trace = self.trace
@@ -590,6 +649,10 @@ async def _call(
 
 _RESTART_COMMUNICATIONS = bytes((0x08, 0x00, 0x01))
 """Diagnostics, restart communications: the one request served in listen-only mode."""
+
+
+_EIGHT_BYTE_FAST_PATHS: Final = frozenset(FAST_PATHS) & frozenset(range(0x01, 0x07))
+"""Fast paths whose requests are always 8 bytes: 01 to 06."""
 
 
 def _exception_pdu(function_code: int, exception_code: int | None) -> bytes:

@@ -43,6 +43,7 @@ REQUESTS = [
     (0, "06 00 02 00 05"),  # broadcast: executed, no reply
     (UNIT, "03 00 00 00 04"),  # sees the broadcast write
     (UNIT, "0B"),  # the event counter after all that
+    (UNIT, "0C"),  # and the event log
 ]
 
 
@@ -100,7 +101,7 @@ async def test_answers_from_the_read_callback_equal_the_serve_loops(frame_gap: f
         oracle_store = oracle.units[UNIT]
 
     assert [reply.hex(" ") for reply in on_pty] == [r.hex(" ") for r in on_virtual_line]
-    assert sum(1 for reply in on_pty if reply) == 12  # not the other unit's, nor the broadcast
+    assert sum(1 for reply in on_pty if reply) == 13  # not the other unit's, nor the broadcast
     assert pty_counters == oracle_counters
     assert isinstance(oracle_store, aiortu.MemoryStore)
     for table, address, count in [
@@ -124,7 +125,7 @@ async def test_answers_from_the_read_callback_equal_the_serve_loops(frame_gap: f
         ]
         assert codes == expected
     else:
-        assert codes == [0x83, 0x07, 0x08, None, 0x0B]
+        assert codes == [0x83, 0x07, 0x08, None, 0x0B, 0x0C]
     assert {0x01, 0x02, 0x03, 0x04, 0x06, 0x10} <= set(FAST_PATHS)
 
 

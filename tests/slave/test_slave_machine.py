@@ -179,3 +179,72 @@ def test_counters_follow_the_spec_definitions() -> None:
     assert machine.counters.word("bus_message_count") == 5
     machine.counters.clear()
     assert machine.counters == SerialLineCounters()
+
+
+def _machine_after(steps: list[tuple[str, int | None]]) -> SlaveMachine:
+    """A machine driven through *steps* as the random test above does, refusals skipped."""
+    machine = SlaveMachine({17, 18})
+    for name, argument in steps:
+        try:
+            if name == "frame":
+                assert argument is not None
+                machine.frame_received(argument, 3)
+            elif name == "check":
+                machine.check_request(supported=True, violation=argument)
+            elif name == "processed":
+                machine.processed()
+            elif name == "failed":
+                assert argument is not None
+                machine.processing_failed(argument)
+            elif name == "sent":
+                machine.reply_sent()
+            elif name == "silent":
+                machine.no_reply()
+            elif name == "corrupt":
+                machine.frame_corrupt()
+        except SlaveMachineError:
+            pass
+    return machine
+
+
+def _snapshot(machine: SlaveMachine) -> tuple[object, ...]:
+    return (
+        machine.state,
+        machine.counters,
+        machine.event_log.events(),
+        machine.event_log.event_count,
+        machine.unit,
+        machine.function_code,
+        machine.broadcast,
+        machine.exception_code,
+        machine.should_reply,
+    )
+
+
+@given(_STEPS, st.sampled_from([17, 18]), st.sampled_from([1, 2, 3, 4, 5, 6, 0x0B, 0x0C]))
+def test_answered_at_once_equals_the_four_steps(
+    steps: list[tuple[str, int | None]], unit: int, function_code: int
+) -> None:
+    one_step = _machine_after(steps)
+    step_by_step = _machine_after(steps)
+    if one_step.state is not SlaveState.IDLE:
+        with pytest.raises(SlaveMachineError):
+            one_step.answered_at_once(unit, function_code)
+        return
+    one_step.answered_at_once(unit, function_code)
+    assert step_by_step.frame_received(unit, function_code)
+    assert step_by_step.check_request(supported=True)
+    step_by_step.processed()
+    step_by_step.reply_sent()
+    assert _snapshot(one_step) == _snapshot(step_by_step)
+
+
+def test_answered_at_once_refuses_what_it_does_not_stand_for() -> None:
+    machine = SlaveMachine({17})
+    for unit in (0, 5):  # a broadcast, another unit
+        with pytest.raises(SlaveMachineError):
+            machine.answered_at_once(unit, 3)
+    machine.listen_only = True
+    with pytest.raises(SlaveMachineError):
+        machine.answered_at_once(17, 3)
+    assert machine.counters == SerialLineCounters()

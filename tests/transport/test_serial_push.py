@@ -158,6 +158,53 @@ async def test_an_expected_frame_goes_to_its_callback_and_anything_else_as_event
             assert len(taken) == 1
 
 
+async def test_expected_requests_go_to_their_callback_until_stopped() -> None:
+    read = _with_crc(bytes.fromhex("0103006b0003"))  # 8 bytes, FC 03
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Link(stream, LINE, role=Role.SLAVE, frame_silence=0.02) as link:
+            await anyio.sleep(0.05)  # past INIT
+            taken: list[bytes] = []
+            arrived = anyio.Event()
+
+            def on_request(frame: bytes, end: float) -> None:
+                assert end <= link.clock()
+                taken.append(frame)
+                arrived.set()
+
+            link.expect_requests({0x03}, 8, on_request)
+            pty.write(read)
+            with anyio.fail_after(2):
+                await arrived.wait()
+            assert taken == [read]
+            # Not one of the codes: an event, even at that length.
+            other = _with_crc(bytes.fromhex("0105000aff00"))
+            pty.write(other)
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameReceived)
+            assert event.frame == other
+            # A bad CRC: the receiver discards it.
+            pty.write(read[:-1] + bytes([read[-1] ^ 1]))
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameDiscarded)
+            assert event.reason is DiscardReason.CRC
+            # Persistent, unlike expect(); None stops it.
+            arrived = anyio.Event()
+            pty.write(read)
+            with anyio.fail_after(2):
+                await arrived.wait()
+            assert len(taken) == 2
+            link.expect_requests((), 8, None)
+            pty.write(read)
+            with anyio.fail_after(2):
+                event = await link.receive()
+            assert isinstance(event, FrameReceived)
+            assert len(taken) == 2
+            assert link.frames_received == 4  # not the bad CRC
+
+
 @pytest.mark.parametrize(
     ("answer", "expected", "skipped", "handed_over"),
     [

@@ -144,6 +144,16 @@ TRANSITIONS: Final[dict[tuple[SlaveState, SlaveEvent], SlaveState]] = {
 }
 """The slave's transitions: ``(state, event) -> next state``."""
 
+_ANSWERED_TARGET: Final = TRANSITIONS[
+    TRANSITIONS[TRANSITIONS[TRANSITIONS[_S.IDLE, _E.FRAME_RECEIVED], _E.REQUEST_OK], _E.PROCESSED],
+    _E.REPLY_SENT,
+]
+"""Where a request answered normally leaves the machine (see answered_at_once)."""
+
+_RECEIVE_EVENT: Final = receive_event()
+_SEND_EVENT: Final = send_event()
+"""The log entries of a unicast request answered normally outside listen-only mode."""
+
 
 @dataclass(slots=True)
 class SerialLineCounters:
@@ -307,6 +317,34 @@ class SlaveMachine:
         self._reply_allowed = not (self.broadcast or self.listen_only)
         self.event_log.add(receive_event(broadcast=self.broadcast, listen_only=self.listen_only))
         return True
+
+    def answered_at_once(self, unit: int, function_code: int) -> None:
+        """A request for *unit* (one of ours, not a broadcast) arrived, was executed and
+        got its normal reply, which has gone out, all while the machine was IDLE and not
+        in listen-only mode: :meth:`frame_received`, :meth:`check_request`,
+        :meth:`processed` and :meth:`reply_sent` in one step, the same counters and log
+        entries at a fraction of the work. A slave that answers a request in the read
+        callback counts it this way; the tests hold both ways equal.
+        """
+        if self.state is not _S.IDLE or self.listen_only or unit not in self._units:
+            raise SlaveMachineError(
+                f"a request answered at once needs IDLE, not listen-only, and unit {unit} "
+                f"served; the state is {self.state.name}"
+            )
+        counters = self.counters
+        counters.bus_message_count += 1
+        counters.server_message_count += 1
+        self.exception_code = None
+        self.unit = unit
+        self.function_code = function_code
+        self.broadcast = False
+        self._reply_allowed = True
+        self.state = _ANSWERED_TARGET
+        log = self.event_log
+        log.add(_RECEIVE_EVENT)
+        log.add(_SEND_EVENT)
+        if function_code not in _NOT_COUNTED_AS_EVENTS:
+            log.completed()
 
     def ignore(self) -> None:
         """Listen-only mode: the request is not executed nor answered; count it."""
