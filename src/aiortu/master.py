@@ -88,6 +88,18 @@ _READ_CACHE_SIZE = 256
 """Read requests a master keeps made (see :meth:`Master._read_request`)."""
 
 
+def _answer(
+    response: Response | ExceptionPDU, pdu: Request, unit: int, expected: type[_ResponseT]
+) -> _ResponseT:
+    """*response* as the reply to *pdu*; raise ExceptionResponse for an exception reply
+    and MalformedPDU for a reply of another kind."""
+    if isinstance(response, ExceptionPDU):
+        raise ExceptionResponse(response.exception_code, pdu.function_code, unit)
+    if not isinstance(response, expected):
+        raise MalformedPDU(f"{type(response).__name__} does not answer {type(pdu).__name__}")
+    return response
+
+
 def _check_unit(unit: object) -> int:
     """Return *unit* if a unicast may go to it, else raise InvalidRequest."""
     if isinstance(unit, bool) or not isinstance(unit, int) or unit not in UNIT_RANGE:
@@ -314,14 +326,39 @@ class Master(SerialLineFunctions):
         if retries is not None and retries != policy.retries:
             policy = RetryPolicy(retries, policy.retry_on)
         response = await self.engine.submit_request(
-            unit, pdu, self._timeout(timeout), policy, priority
+            unit, pdu, self.timeout if timeout is None else self._timeout(timeout), policy, priority
         )
         assert response is not None
-        if isinstance(response, ExceptionPDU):
-            raise ExceptionResponse(response.exception_code, pdu.function_code, unit)
-        if not isinstance(response, expected):
-            raise MalformedPDU(f"{type(response).__name__} does not answer {type(pdu).__name__}")
-        return response
+        return _answer(response, pdu, unit, expected)
+
+    async def _read_registers(
+        self,
+        kind: type[ReadHoldingRegistersRequest],
+        unit: int,
+        address: int,
+        count: int,
+        *,
+        timeout: float | None,
+        priority: int,
+    ) -> list[int]:
+        """The values of a register read (03 or 04): :meth:`request`, with the checks a
+        request made by :meth:`_read_request` no longer needs, for the commonest call."""
+        request = self._reads.get((kind, address, count))
+        if request is None:
+            request = self._read_request(kind, address, count)  # raises, saying why
+        if type(unit) is not int or not 1 <= unit <= _LAST_UNIT:
+            _check_unit(unit)  # raises, saying why
+        response = await self.engine.submit_request(
+            unit,
+            request,
+            self.timeout if timeout is None else self._timeout(timeout),
+            self.policy,
+            priority,
+        )
+        if type(response) is not ReadHoldingRegistersResponse:
+            assert response is not None
+            response = _answer(response, request, unit, ReadHoldingRegistersResponse)
+        return list(response.values)
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
         """``kind(address, count)``, made once per address and count: a poll loop reads
@@ -416,11 +453,9 @@ class Master(SerialLineFunctions):
         priority: int = 0,
     ) -> list[int]:
         """Read *count* (1..125) holding registers from *address* (03)."""
-        request = self._read_request(ReadHoldingRegistersRequest, address, count)
-        reply = await self.request(
-            unit, request, ReadHoldingRegistersResponse, timeout=timeout, priority=priority
+        return await self._read_registers(
+            ReadHoldingRegistersRequest, unit, address, count, timeout=timeout, priority=priority
         )
-        return list(reply.values)
 
     async def read_input_registers(
         self,
@@ -432,11 +467,9 @@ class Master(SerialLineFunctions):
         priority: int = 0,
     ) -> list[int]:
         """Read *count* (1..125) input registers from *address* (04)."""
-        request = self._read_request(ReadInputRegistersRequest, address, count)
-        reply = await self.request(
-            unit, request, ReadHoldingRegistersResponse, timeout=timeout, priority=priority
+        return await self._read_registers(
+            ReadInputRegistersRequest, unit, address, count, timeout=timeout, priority=priority
         )
-        return list(reply.values)
 
     async def write_register(
         self,

@@ -294,7 +294,8 @@ class LineEngine:
         if known is None:
             return await self.submit(Transaction(unit, request, response_timeout, policy), priority)
         frame = known[1]
-        self._forget_arrivals()
+        if self._events or self._usual is not None:
+            self._forget_arrivals()
         end = link.send_now(frame)
         if end is None:  # the line asks for a wait: the usual way
             return await self.submit(Transaction(unit, request, response_timeout, policy), priority)
@@ -322,8 +323,9 @@ class LineEngine:
             )
             raise
         self._waiter = None
-        link.forget_expected()
         usual = self._usual
+        if usual is None:
+            link.forget_expected()  # the link forgets it once it hands the reply over
         if usual is None or self._events:
             # Not (only) the usual reply: the machine takes the attempt over.
             job = self._late_job(

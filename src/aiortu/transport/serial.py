@@ -176,13 +176,17 @@ class _PortTransport(SerialTransport):
         protocol.data_received(data)
 
     def can_write_now(self) -> bool:
-        """Whether :meth:`write_now` may be used: open, and nothing queued before it."""
+        """Whether :meth:`write_now` would take data: open, and nothing queued before it."""
         return not self._write_buffer and not self._closing
 
-    def write_now(self, data: bytes) -> None:
-        """``write()`` where :meth:`can_write_now` said yes: straight to the descriptor,
-        the rest queued if the driver takes only part of it."""
+    def write_now(self, data: bytes) -> bool:
+        """``write()`` straight to the descriptor, where :meth:`can_write_now` says yes
+        (the rest is queued if the driver takes only part of it); else nothing is
+        written. Returns whether *data* was taken."""
+        if self._write_buffer or self._closing:
+            return False
         self._write_data(data)
+        return True
 
     def _write_data(self, data: bytes | bytearray | memoryview) -> None:
         try:
@@ -387,12 +391,15 @@ class SerialStream(ByteStream):
         """
         protocol = self._protocol
         transport = self._transport
-        if self._closed or self._eof_sent or protocol.lost or not transport.can_write_now():
+        if self._closed or self._eof_sent or protocol.lost:
             return False
-        if protocol.echo is not None:
-            protocol.echo.expect(item)
-        transport.write_now(item)
-        return True
+        echo = protocol.echo
+        if echo is None:
+            return transport.write_now(item)
+        if not transport.can_write_now():
+            return False
+        echo.expect(item)  # before the write: the echo may come back at once
+        return transport.write_now(item)
 
     async def send(self, item: bytes) -> None:
         """Write all of *item* and wait until the transport has handed it to the driver.
