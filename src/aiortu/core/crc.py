@@ -9,15 +9,16 @@ unit address and the PDU and sent low byte first::
     '76 87'
 
 How it is fast. The classic method looks up one byte at a time in a 256-entry table; inputs
-under 8 bytes use exactly that, because any setup costs more than it saves on so few bytes.
+under 32 bytes (most requests and replies) use exactly that, because anything more costs
+more than it saves on so few bytes once the CPU caches are cold (see _WORD_THRESHOLD).
 Longer inputs take two bytes per step: the CRC register is 16 bits wide, so XOR-ing a
 little-endian data word into it and then running two zero-byte steps is one lookup in a
 65536-entry table indexed by the register itself. That halves the number of Python-level
 iterations, and reading the words through ``memoryview.cast("H")`` keeps the loop free of
 shifts and masks; on CPython 3.11 it is 2.5 to 3 times as fast as the byte loop on 256-byte
-frames and about a quarter faster on 8-byte requests. The word table (about 2.6 MB as a
-list of ints, built in 3 to 5 ms with bytes-level operations rather than 65536 Python steps)
-is built on first use, not at import, so importing the core stays cheap.
+frames. The word table (about 2.6 MB as a list of ints, built in 3 to 5 ms with
+bytes-level operations rather than 65536 Python steps) is built on first use, not at
+import, so importing the core stays cheap.
 
 Why no compiled extension. Compiled CRC packages from PyPI (fastcrc, crcmod, anycrc) are 10
 to 70 times faster on a 256-byte frame, but this pure-Python code already checks such a
@@ -45,12 +46,15 @@ _POLYNOMIAL = 0xA001
 
 _CRC_RANGE = range(0x10000)
 
-_WORD_THRESHOLD = 8 if sys.byteorder == "little" else sys.maxsize
-"""Inputs shorter than this take the byte loop: below it the word loop's setup (a
-memoryview, a slice and a cast) costs more than the iterations it saves (measured: the two
-cross between 6 and 10 bytes). The word loop reads little-endian words through
-``memoryview.cast("H")``, which is native order, so a big-endian machine always takes the
-byte loop."""
+_WORD_THRESHOLD = 32 if sys.byteorder == "little" else sys.maxsize
+"""Inputs shorter than this take the byte loop. In a tight loop the two cross between 6 and
+10 bytes, but a master or a slave computes one CRC per frame, between which the other
+processes of the machine evict the CPU caches: then the word loop's setup (a memoryview, a
+slice, a cast) and its 2.6 MB table cost more than they save on short frames (measured
+with ``benchmarks/bench_core.py``: a 23-byte reply, caches flushed before each call). The
+frames of the commonest requests and replies are under 32 bytes. The word loop reads
+little-endian words through ``memoryview.cast("H")``, which is native order, so a
+big-endian machine always takes the byte loop."""
 
 
 def _byte_table() -> list[int]:
