@@ -339,7 +339,10 @@ class LineEngine:
         latency = stats.last_latency = link.clock() - sent[0]
         mean = stats.mean_latency
         stats.mean_latency = latency if mean is None else mean + (latency - mean) / stats.successes
-        self._release()
+        if self._queue or not self._serving or self._link_closed:
+            self._release()
+        else:
+            self._busy = False  # nobody waits: what _release would do
         return self.machine.usual_response(request, usual[0])
 
     def _late_job(self, transaction: Transaction, priority: int, sent: tuple[float, float]) -> _Job:
