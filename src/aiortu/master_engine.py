@@ -14,7 +14,9 @@ waiting transaction directly. On a serial port, the usual reply to a register re
 shape :attr:`~aiortu.core.master_machine.MasterMachine.usual_reply` gives) is handed over
 by the link's read callback as it came (:meth:`~aiortu.link.Link.expect`) and ends the
 transaction in one step (:meth:`~aiortu.core.master_machine.MasterMachine.take_usual_reply`);
-any other frame goes through the machine's table as usual.
+any other frame goes through the machine's table as usual. On an idle line such a read
+does not even begin in the machine unless something unusual happens
+(:meth:`LineEngine.submit_request`).
 
 Cancellation never leaves the line half way through an exchange. A caller cancelled
 while queued is dropped; one cancelled before its request began to go out gives the line
@@ -45,16 +47,14 @@ import heapq
 import itertools
 import math
 from collections import deque
-from dataclasses import dataclass
 from typing import Any
 
 import anyio
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.errors import CRCError, FrameError
+from aiortu.core.errors import FrameError
 from aiortu.core.master_machine import MasterMachine
 from aiortu.core.master_transaction import (
-    Failure,
     Outcome,
     OutcomeKind,
     RetryPolicy,
@@ -65,61 +65,9 @@ from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.core.receiver import FrameReceived
 from aiortu.errors import ConnectionLost, ResponseTimeout, UnitOffline
 from aiortu.link import Link, LinkEvent
+from aiortu.master_stats import HealthPolicy, UnitStats
 
 __all__ = ("HealthPolicy", "LineEngine", "UnitOffline", "UnitStats")
-
-
-@dataclass(frozen=True, slots=True)
-class HealthPolicy:
-    """When a unit counts as offline, and what calls to it do then.
-
-    *offline_after* consecutive failed transactions (timeouts, frame errors) mark a unit
-    offline; a success marks it online. With *fail_fast_offline*, calls to an offline
-    unit raise :class:`UnitOffline` without sending, except one probe every
-    *probe_interval* seconds.
-    """
-
-    offline_after: int = 3
-    fail_fast_offline: bool = False
-    probe_interval: float = 5.0
-
-
-@dataclass(slots=True)
-class UnitStats:
-    """What happened between the master and one unit.
-
-    Counters count transactions, except ``timeouts``, ``crc_errors`` and ``frame_errors``,
-    which count failed attempts (a retried transaction may add several).
-    """
-
-    requests: int = 0
-    """Transactions sent to the unit (a broadcast counts for unit 0)."""
-    successes: int = 0
-    """Transactions that got their reply (an exception response counts: the unit answered)."""
-    failures: int = 0
-    """Transactions that ended without a usable reply (timeouts, frame errors)."""
-    timeouts: int = 0
-    """Attempts that got no reply in time."""
-    crc_errors: int = 0
-    """Attempts that ended with a CRC error."""
-    frame_errors: int = 0
-    """Attempts that ended with any other frame error (framing, malformed reply)."""
-    exceptions: int = 0
-    """Exception responses received."""
-    retries: int = 0
-    """Attempts repeated."""
-    skipped_frames: int = 0
-    """Frames skipped while waiting for this unit (stale, other units, not matching)."""
-    last_latency: float | None = None
-    """Seconds from the start of the request to the end of the reply, last success."""
-    mean_latency: float | None = None
-    """The mean of that latency over every success."""
-    consecutive_failures: int = 0
-    """Failed transactions since the last success."""
-    online: bool = True
-    """False after ``offline_after`` consecutive failures, until a success."""
-    last_probe: float = -math.inf
-    """When a request was last let through to the unit while offline (fail fast)."""
 
 
 class _Job:
@@ -333,12 +281,7 @@ class LineEngine:
             )
             return await self._run(job, sent)
         self._usual = None
-        stats.successes += 1
-        stats.consecutive_failures = 0
-        stats.online = True
-        latency = stats.last_latency = link.clock() - sent[0]
-        mean = stats.mean_latency
-        stats.mean_latency = latency if mean is None else mean + (latency - mean) / stats.successes
+        stats.count_success(link.clock() - sent[0])
         if self._queue or not self._serving or self._link_closed:
             self._release()
         else:
@@ -534,7 +477,7 @@ class LineEngine:
                     outcome = await self._wait_for_attempt(job, stats)
                     if outcome.kind is not OutcomeKind.RETRY:
                         break
-                    self._count_failed_attempt(stats, transaction)
+                    stats.count_failed_attempt(transaction)
                     stats.retries += 1
                     continue
                 if self._quiet_until > link.clock():
@@ -560,7 +503,7 @@ class LineEngine:
                 outcome = await self._wait_for_attempt(job, stats)
                 if outcome.kind is not OutcomeKind.RETRY:
                     break
-                self._count_failed_attempt(stats, transaction)
+                stats.count_failed_attempt(transaction)
                 stats.retries += 1
         except ConnectionLost as error:
             # Back to IDLE, wherever the line failed: the next line may serve again.
@@ -605,7 +548,7 @@ class LineEngine:
             outcome = await self._wait_for_outcome(stats)
             # Abandoned: the machine retries nothing, so this is the end.
             if outcome.kind is OutcomeKind.RETRY:  # pragma: no cover - defensive
-                self._count_failed_attempt(stats, job.transaction)
+                stats.count_failed_attempt(job.transaction)
             else:
                 self._settle(job, outcome, stats)
         except ConnectionLost as error:
@@ -704,15 +647,6 @@ class LineEngine:
         else:
             self._arm_timer(self._waiter_deadline)
 
-    def _count_failed_attempt(self, stats: UnitStats, transaction: Transaction) -> None:
-        error = transaction.frame_error
-        if isinstance(error, CRCError):
-            stats.crc_errors += 1
-        elif error is not None:
-            stats.frame_errors += 1
-        elif transaction.failures and transaction.failures[-1] is Failure.TIMEOUT:
-            stats.timeouts += 1
-
     def _settle(self, job: _Job, outcome: Outcome, stats: UnitStats) -> None:
         transaction = job.transaction
         if transaction.failures or outcome.kind is OutcomeKind.FAILED:
@@ -720,28 +654,17 @@ class LineEngine:
             # so that such a reply arrives before the next request and is dropped.
             self._quiet_until = self.link.clock() + self.late_reply_guard
         if outcome.kind is OutcomeKind.FAILED:
-            self._count_failed_attempt(stats, transaction)
+            stats.count_failed_attempt(transaction)
             error = outcome.error
             assert error is not None
             if isinstance(error, ResponseTimeout | FrameError):
-                stats.failures += 1
-                stats.consecutive_failures += 1
-                if stats.online and stats.consecutive_failures >= self.health.offline_after:
-                    stats.online = False
-                    # The first probe comes a whole interval after the unit went offline.
-                    stats.last_probe = self.link.clock()
+                stats.count_failure(self.health, self.link.clock())
             job.finish(None, error)
             return
         response = outcome.response
         if response is not None:
-            stats.successes += 1
-            stats.consecutive_failures = 0
-            stats.online = True
-            if isinstance(response, ExceptionPDU):
-                stats.exceptions += 1
-            latency = stats.last_latency = self.link.clock() - transaction.attempt_start
-            mean = stats.mean_latency
-            stats.mean_latency = (
-                latency if mean is None else mean + (latency - mean) / stats.successes
+            stats.count_success(
+                self.link.clock() - transaction.attempt_start,
+                exception=isinstance(response, ExceptionPDU),
             )
         job.finish(response, None)

@@ -396,10 +396,8 @@ class Slave:
             if event.frame[0] not in self._served:
                 self._take_frame(event)
                 return
-            taken = self._answer_at_once(event)
-            if taken is None:
-                return
-            queue.append(taken)
+            self._answer_at_once(event)
+            return
         else:
             if len(queue) >= self.link.queue_size:
                 # A reader that falls behind never stalls the line; a request already
@@ -409,6 +407,9 @@ class Slave:
                     del queue[drop]
                     self.link.events_dropped += 1
             queue.append(event)
+        self._wake_serve_loop()
+
+    def _wake_serve_loop(self) -> None:
         waiter = self._waiter
         if waiter is not None:
             self._waiter = None
@@ -418,6 +419,11 @@ class Slave:
         if wake is not None:
             self._wake = None
             wake.set()
+
+    def _leave(self, taken: _Taken) -> None:
+        """The serve loop finishes *taken*, in order."""
+        self._queue.append(taken)
+        self._wake_serve_loop()
 
     def _on_whole_request(self, frame: bytes, end: float) -> None:
         """The link's read callback got *frame*, a whole 8-byte request with a good CRC
@@ -457,24 +463,19 @@ class Slave:
         machine.frame_received(frame[0], frame[1])
         machine.check_request(supported=True)
         machine.processed()
-        self._leave_reply(frame, reply)
+        self._leave(_Taken(frame, reply))
 
     def _reply_at_once(self, frame: bytes, reply: bytes) -> None:
-        """Send *reply* now if the line allows it, else leave it to the serve loop (the
-        machine is FORMATTING_REPLY or FORMATTING_ERROR)."""
-        if self.link.send_now(encode_frame(frame[0], reply)) is None:
-            self._leave_reply(frame, reply)
-        else:
-            self.machine.reply_sent()
-
-    def _leave_reply(self, frame: bytes, reply: bytes) -> None:
-        """The serve loop sends *reply* once the line allows it."""
-        self._queue.append(_Taken(frame, reply))
-        waiter = self._waiter
-        if waiter is not None:
-            self._waiter = None
-            if not waiter.done():
-                waiter.set_result(None)
+        """Send *reply* to *frame* now if the line allows it, else leave it to the serve
+        loop (the machine is FORMATTING_REPLY or FORMATTING_ERROR)."""
+        out = encode_frame(frame[0], reply)
+        if self.link.send_now(out) is None:
+            self._leave(_Taken(frame, reply))
+            return
+        trace = self.trace
+        if trace is not None:
+            trace("sent", out)
+        self.machine.reply_sent()
 
     def _take_discard(self, event: LinkEvent) -> None:
         trace = self.trace
@@ -500,9 +501,9 @@ class Slave:
             return False
         return True
 
-    def _answer_at_once(self, event: FrameReceived) -> _Taken | None:
+    def _answer_at_once(self, event: FrameReceived) -> None:
         """Serve a request for one of our units from the link's read callback, as far as
-        that goes without a wait; return what is left for the serve loop, or None.
+        that goes without a wait, and leave the rest to the serve loop.
 
         The request is counted (the machine is CHECKING). Without hooks, a built-in
         MemoryStore answers the common reads and writes at once (the fast paths); the
@@ -511,22 +512,14 @@ class Slave:
         """
         frame = event.frame
         if not self._take_frame(event):
-            return None
+            return
         reply = self._fast_reply(frame)
         if reply is None:
-            return _Taken(frame, None)
-        machine = self.machine
-        if not machine.should_reply:
-            machine.no_reply()
-            return None
-        out = encode_frame(frame[0], reply)
-        if self.link.send_now(out) is None:
-            return _Taken(frame, reply)
-        trace = self.trace
-        if trace is not None:
-            trace("sent", out)
-        machine.reply_sent()
-        return None
+            self._leave(_Taken(frame, None))
+        elif self.machine.should_reply:
+            self._reply_at_once(frame, reply)
+        else:
+            self.machine.no_reply()
 
     def _fast_reply(self, frame: bytes) -> bytes | None:
         """The reply PDU from a fast path (see slave_handlers), counted by the machine;
