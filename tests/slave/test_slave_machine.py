@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -64,6 +66,30 @@ _STEPS = st.lists(
 )
 
 
+def _step(machine: SlaveMachine, name: str, argument: int | None) -> None:
+    """Take one of the _STEPS."""
+    if name == "frame":
+        assert argument is not None
+        machine.frame_received(argument, 3)
+    elif name == "check":
+        machine.check_request(supported=True, violation=argument)
+    elif name == "unsupported":
+        machine.check_request(supported=False, violation=3)
+    elif name == "processed":
+        machine.processed()
+    elif name == "failed":
+        assert argument is not None
+        machine.processing_failed(argument)
+    elif name == "sent":
+        machine.reply_sent()
+    elif name == "silent":
+        machine.no_reply()
+    elif name == "corrupt":
+        machine.frame_corrupt()
+    else:
+        machine.character_overrun()
+
+
 @given(_STEPS, st.booleans())
 def test_random_driving_either_follows_the_table_or_raises(
     steps: list[tuple[str, int | None]], listen_only: bool
@@ -73,26 +99,7 @@ def test_random_driving_either_follows_the_table_or_raises(
     for name, argument in steps:
         before = machine.state
         try:
-            if name == "frame":
-                assert argument is not None
-                machine.frame_received(argument)
-            elif name == "check":
-                machine.check_request(supported=True, violation=argument)
-            elif name == "unsupported":
-                machine.check_request(supported=False, violation=3)
-            elif name == "processed":
-                machine.processed()
-            elif name == "failed":
-                assert argument is not None
-                machine.processing_failed(argument)
-            elif name == "sent":
-                machine.reply_sent()
-            elif name == "silent":
-                machine.no_reply()
-            elif name == "corrupt":
-                machine.frame_corrupt()
-            else:
-                machine.character_overrun()
+            _step(machine, name, argument)
         except SlaveMachineError:
             # A refused step changes nothing, except reply_sent where no reply may go.
             assert machine.state is before
@@ -182,28 +189,11 @@ def test_counters_follow_the_spec_definitions() -> None:
 
 
 def _machine_after(steps: list[tuple[str, int | None]]) -> SlaveMachine:
-    """A machine driven through *steps* as the random test above does, refusals skipped."""
+    """A machine serving units 17 and 18, driven through *steps*, refusals skipped."""
     machine = SlaveMachine({17, 18})
     for name, argument in steps:
-        try:
-            if name == "frame":
-                assert argument is not None
-                machine.frame_received(argument, 3)
-            elif name == "check":
-                machine.check_request(supported=True, violation=argument)
-            elif name == "processed":
-                machine.processed()
-            elif name == "failed":
-                assert argument is not None
-                machine.processing_failed(argument)
-            elif name == "sent":
-                machine.reply_sent()
-            elif name == "silent":
-                machine.no_reply()
-            elif name == "corrupt":
-                machine.frame_corrupt()
-        except SlaveMachineError:
-            pass
+        with contextlib.suppress(SlaveMachineError):
+            _step(machine, name, argument)
     return machine
 
 
