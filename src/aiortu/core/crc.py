@@ -109,10 +109,13 @@ def crc16(data: bytes | bytearray | memoryview, initial: int = CRC_INITIAL) -> i
     A :class:`memoryview` must be contiguous; it is read as bytes whatever its format.
     Raises :class:`~aiortu.errors.InvalidValue` when *initial* is not 0..0xFFFF.
     """
-    if initial >> 16 or initial < 0:
-        raise InvalidValue("initial", initial, _CRC_RANGE)
-    if type(data) is memoryview:
-        data = data.cast("B")
+    # A frame's bytes from the initial value, the call made per frame, check nothing
+    # more: with cold caches every step counts.
+    if type(data) is not bytes or initial != CRC_INITIAL:
+        if initial >> 16 or initial < 0:
+            raise InvalidValue("initial", initial, _CRC_RANGE)
+        if type(data) is memoryview:
+            data = data.cast("B")
     crc = initial
     length = len(data)
     if length < _WORD_THRESHOLD:
