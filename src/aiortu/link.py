@@ -361,29 +361,22 @@ class Link:
             self._last_received = now
             # Half duplex: see _pump.
             self._transmit_end = min(self._transmit_end, now)
+            # A chunk of the layout the master expects (once) or the slave takes (each
+            # time) goes straight to them once the receiver has checked its CRC.
             expected = self._expected
             requests = self._requests
-            if (
-                expected is not None
-                and len(chunk) == expected[1]
-                and chunk.startswith(expected[0])
-                and self.receiver.take_expected_frame(chunk, now)
-            ):
-                self._expected = None
+            take = None
+            if expected is not None and len(chunk) == expected[1] and chunk.startswith(expected[0]):
+                take = expected[2]
+            elif requests is not None and len(chunk) == requests[1] and chunk[1] in requests[0]:
+                take = requests[2]
+            if take is not None and self.receiver.take_expected_frame(chunk, now):
+                if expected is not None and take is expected[2]:
+                    self._expected = None  # expect() hands over one frame only
                 self.frames_received += 1
-                expected[2](chunk, now)
+                take(chunk, now)
                 if self._timer is None:
                     return  # an idle receiver has no deadline: no timer to arm
-            elif (
-                requests is not None
-                and len(chunk) == requests[1]
-                and chunk[1] in requests[0]
-                and self.receiver.take_expected_frame(chunk, now)
-            ):
-                self.frames_received += 1
-                requests[2](chunk, now)
-                if self._timer is None:
-                    return
             else:
                 events = self.receiver.feed(chunk, now)
                 if events:
@@ -539,11 +532,8 @@ class Link:
             return None
         self.last_write_start = start
         self.writes_begun += 1
-        self.frames_sent += 1
-        # What _sent does; the write took microseconds, far less than the wire time, so
-        # the wire is busy until the last character has gone: no second clock read.
-        end = self._transmit_end = start + len(frame) * self.char_time
-        return end
+        # The write took microseconds, far less than the wire time: no second clock read.
+        return self._sent(frame, start, start)
 
     def _sent(self, frame: bytes, start: float, now: float) -> float:
         """*frame* began to go out at *start*, and the write returned at *now*."""

@@ -72,7 +72,6 @@ from aiortu.master_serial import SerialLineFunctions
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
 
 UNIT_RANGE = range(1, 248)
-_LAST_UNIT = UNIT_RANGE[-1]
 """The unit addresses a unicast request may go to."""
 
 _ResponseT = TypeVar("_ResponseT", bound=Response)
@@ -318,15 +317,14 @@ class Master(SerialLineFunctions):
         unit that has stopped answering sends once).
         """
         # execute(), inlined: one coroutine less per call.
-        if type(unit) is not int or not 1 <= unit <= _LAST_UNIT:
-            _check_unit(unit)  # raises, saying why
+        _check_unit(unit)
         if not isinstance(pdu, Request):
             raise InvalidRequest("pdu", pdu, "a Request PDU")
         policy = self.policy
         if retries is not None and retries != policy.retries:
             policy = RetryPolicy(retries, policy.retry_on)
         response = await self.engine.submit_request(
-            unit, pdu, self.timeout if timeout is None else self._timeout(timeout), policy, priority
+            unit, pdu, self._timeout(timeout), policy, priority
         )
         assert response is not None
         return _answer(response, pdu, unit, expected)
@@ -346,19 +344,12 @@ class Master(SerialLineFunctions):
         request = self._reads.get((kind, address, count))
         if request is None:
             request = self._read_request(kind, address, count)  # raises, saying why
-        if type(unit) is not int or not 1 <= unit <= _LAST_UNIT:
-            _check_unit(unit)  # raises, saying why
+        _check_unit(unit)
         response = await self.engine.submit_request(
-            unit,
-            request,
-            self.timeout if timeout is None else self._timeout(timeout),
-            self.policy,
-            priority,
+            unit, request, self._timeout(timeout), self.policy, priority
         )
-        if type(response) is not ReadHoldingRegistersResponse:
-            assert response is not None
-            response = _answer(response, request, unit, ReadHoldingRegistersResponse)
-        return list(response.values)
+        assert response is not None
+        return list(_answer(response, request, unit, ReadHoldingRegistersResponse).values)
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
         """``kind(address, count)``, made once per address and count: a poll loop reads

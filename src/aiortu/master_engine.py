@@ -228,6 +228,7 @@ class LineEngine:
         link = self.link
         loop = link.loop
         known = None
+        end = None
         if (
             self.usual_exchanges
             and loop is not None
@@ -236,17 +237,15 @@ class LineEngine:
             and not self._link_closed
             and self._failed is None
             and not self.health.fail_fast_offline
-            and (self._quiet_until == -math.inf or self._quiet_until <= link.clock())
+            and self._quiet_until <= link.clock()
         ):
             known = self.machine.usual_exchange(unit, request)
-        if known is None:
+            if known is not None:
+                self._forget_arrivals()
+                end = link.send_now(known[1])  # None: the line asks for a wait
+        if known is None or end is None:
             return await self.submit(Transaction(unit, request, response_timeout, policy), priority)
         frame = known[1]
-        if self._events or self._usual is not None:
-            self._forget_arrivals()
-        end = link.send_now(frame)
-        if end is None:  # the line asks for a wait: the usual way
-            return await self.submit(Transaction(unit, request, response_timeout, policy), priority)
         self._busy = True
         sent = (end - len(frame) * link.char_time, end)
         stats = self.stats.get(unit) or self.unit_stats(unit)
@@ -282,10 +281,7 @@ class LineEngine:
             return await self._run(job, sent)
         self._usual = None
         stats.count_success(link.clock() - sent[0])
-        if self._queue or not self._serving or self._link_closed:
-            self._release()
-        else:
-            self._busy = False  # nobody waits: what _release would do
+        self._release()
         return self.machine.usual_response(request, usual[0])
 
     def _late_job(self, transaction: Transaction, priority: int, sent: tuple[float, float]) -> _Job:

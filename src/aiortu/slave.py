@@ -427,47 +427,38 @@ class Slave:
 
     def _on_whole_request(self, frame: bytes, end: float) -> None:
         """The link's read callback got *frame*, a whole 8-byte request with a good CRC
-        (see Link.expect_requests): answer it here when a fast path does and the reply
-        goes out at once, counted in one step (SlaveMachine.answered_at_once); otherwise
+        (see Link.expect_requests): answer it here when a fast path does, counted in one
+        step when the reply goes out at once (SlaveMachine.answered_at_once); otherwise
         it is the FrameReceived the receiver would have made, and goes the usual way."""
         machine = self.machine
-        fast = self._fast_paths.get(frame[1])
-        store = self._fast_stores.get(frame[0])
+        answer = None
         if (
-            fast is None
-            or store is None
-            or self._queue
-            or self.trace is not None
-            or self._before
-            or self._after
-            or machine.state is not SlaveState.IDLE
-            or machine.listen_only
+            not self._queue
+            and self.trace is None
+            and machine.state is SlaveState.IDLE
+            and not machine.listen_only
         ):
-            self._on_link_event(FrameReceived(frame, end - 7 * self.link.char_time, end))
+            answer = self._fast_answer(frame)
+        if answer is None:
+            start = end - (len(frame) - 1) * self.link.char_time
+            self._on_link_event(FrameReceived(frame, start, end))
             return
-        try:
-            reply = fast(store, frame[1:-2])
-        except ExceptionResponse as error:
-            # A fast path raises before it changes anything: counted step by step.
+        # Counted step by step unless a normal reply goes out at once.
+        if isinstance(answer, bytes):
+            if self.link.send_now(encode_frame(frame[0], answer)) is not None:
+                machine.answered_at_once(frame[0], frame[1])
+                return
             machine.frame_received(frame[0], frame[1])
-            machine.check_request(supported=True)
-            machine.processing_failed(error.code)
-            self._reply_at_once(frame, _exception_pdu(frame[1], error.code))
-            return
-        if reply is None:
-            self._on_link_event(FrameReceived(frame, end - 7 * self.link.char_time, end))
-            return
-        if self.link.send_now(encode_frame(frame[0], reply)) is not None:
-            machine.answered_at_once(frame[0], frame[1])
+            self._count_fast(answer)
+            self._leave(_Taken(frame, answer))  # the serve loop sends it after the gap
             return
         machine.frame_received(frame[0], frame[1])
-        machine.check_request(supported=True)
-        machine.processed()
-        self._leave(_Taken(frame, reply))
+        self._count_fast(answer)
+        self._reply_at_once(frame, _exception_pdu(frame[1], answer))
 
     def _reply_at_once(self, frame: bytes, reply: bytes) -> None:
-        """Send *reply* to *frame* now if the line allows it, else leave it to the serve
-        loop (the machine is FORMATTING_REPLY or FORMATTING_ERROR)."""
+        """Send *reply*, the PDU answering *frame*, now if the line allows it, else leave
+        it to the serve loop (the machine is FORMATTING_REPLY or FORMATTING_ERROR)."""
         out = encode_frame(frame[0], reply)
         if self.link.send_now(out) is None:
             self._leave(_Taken(frame, reply))
@@ -521,27 +512,37 @@ class Slave:
         else:
             self.machine.no_reply()
 
-    def _fast_reply(self, frame: bytes) -> bytes | None:
-        """The reply PDU from a fast path (see slave_handlers), counted by the machine;
-        None where none applies (hooks, another store, or a request it leaves to the
-        handler)."""
+    def _fast_answer(self, frame: bytes) -> bytes | int | None:
+        """What a fast path (see slave_handlers) answers to *frame*: the reply PDU, or the
+        exception code it raised (before changing anything); None where none applies
+        (hooks, another store, or a request it leaves to the handler). Counts nothing."""
         fast = self._fast_paths.get(frame[1])
         if fast is None or self._before or self._after:
             return None
         store = self._fast_stores.get(frame[0])
         if store is None:
             return None
-        machine = self.machine
         try:
-            reply = fast(store, frame[1:-2])
+            return fast(store, frame[1:-2])
         except ExceptionResponse as error:
-            machine.check_request(supported=True)
-            machine.processing_failed(error.code)
-            return _exception_pdu(frame[1], error.code)
-        if reply is not None:
-            machine.check_request(supported=True)
-            machine.processed()
-        return reply
+            return error.code
+
+    def _count_fast(self, answer: bytes | int) -> None:
+        """Count a fast path's *answer* (the machine is CHECKING)."""
+        self.machine.check_request(supported=True)
+        if isinstance(answer, bytes):
+            self.machine.processed()
+        else:
+            self.machine.processing_failed(answer)
+
+    def _fast_reply(self, frame: bytes) -> bytes | None:
+        """The reply PDU from a fast path, counted by the machine; None where none
+        applies (see _fast_answer)."""
+        answer = self._fast_answer(frame)
+        if answer is None:
+            return None
+        self._count_fast(answer)
+        return answer if isinstance(answer, bytes) else _exception_pdu(frame[1], answer)
 
     async def _serve_request(self, frame: bytes) -> None:
         """Answer a request for one of our units (counted by the machine, now CHECKING)."""

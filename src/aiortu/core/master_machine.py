@@ -328,9 +328,7 @@ class MasterMachine:
         """
         if self.state is not _S.IDLE or self._on_transition is not None:
             return None
-        known = self._frames.get((unit, id(request)))
-        if known is None or known[0] is not request:
-            known = self._remember(unit, request)
+        known = self._remember(unit, request)
         return known if known[2] is not None else None
 
     @staticmethod
@@ -338,9 +336,7 @@ class MasterMachine:
         """The response in *frame*, the usual reply to *request* (see
         :meth:`usual_exchange`): its shape is matched and its CRC checked."""
         assert isinstance(request, ReadHoldingRegistersRequest)
-        response = object.__new__(request.response_class)
-        object.__setattr__(response, "values", _WORDS[request.count].unpack_from(frame, 3))
-        return response
+        return _register_reply(request, frame, 3)
 
     def take_usual_reply(self, frame: bytes, end: float) -> Response | None:
         """Finish the transaction with *frame*, a whole frame with a good CRC that ended

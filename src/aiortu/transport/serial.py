@@ -185,38 +185,23 @@ class _PortTransport(SerialTransport):
         written. Returns whether *data* was taken."""
         if self._write_buffer or self._closing:
             return False
-        # _write_data's work, in line: this is every frame's way out.
-        try:
-            written = os.write(self._fd, data)
-        except OSError as exc:
-            self._write_failed(data, exc)
-            return True
-        if written != len(data):
-            self._keep_rest(data, written)
+        self._write_data(data)
         return True
 
     def _write_data(self, data: bytes | bytearray | memoryview) -> None:
         try:
             written = os.write(self._fd, data)
+        except (BlockingIOError, InterruptedError):
+            written = 0
         except OSError as exc:
-            self._write_failed(data, exc)
+            error = serial.SerialException(f"write failed: {exc}")
+            self._fatal_error(error, "Fatal write error on serial transport")
             return
         if written == len(data):
             if self._closing:
                 self._close()
             return
-        self._keep_rest(data, written)
-
-    def _write_failed(self, data: bytes | bytearray | memoryview, exc: OSError) -> None:
-        if isinstance(exc, BlockingIOError | InterruptedError):
-            self._keep_rest(data, 0)
-            return
-        error = serial.SerialException(f"write failed: {exc}")
-        self._fatal_error(error, "Fatal write error on serial transport")
-
-    def _keep_rest(self, data: bytes | bytearray | memoryview, written: int) -> None:
-        """Keep what the driver did not take, for when the port can take it."""
-        self._write_buffer.append(data[written:])
+        self._write_buffer.append(data[written:])  # the rest when the port can take it
         self._maybe_pause_protocol()
         self._ensure_writer()
 
