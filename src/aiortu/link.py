@@ -174,7 +174,9 @@ class Link:
         """A stream's write without a yield (the serial port's), tried before ``send``."""
         self._timer: Any = None
         self._timer_deadline = -math.inf
-        self._expected: tuple[bytes, int, Callable[[bytes, float], None]] | None = None
+        self._expected: tuple[bytes, int, Callable[[bytes, float], None], bytes | None] | None = (
+            None
+        )
         self._requests: tuple[Container[int], int, Callable[[bytes, float], None]] | None = None
         self._push_lost: anyio.Event | None = None
         self._push_error: BaseException | None = None
@@ -365,12 +367,13 @@ class Link:
             # time) goes straight to them once the receiver has checked its CRC.
             expected = self._expected
             requests = self._requests
-            take = None
+            take = checked = None
             if expected is not None and len(chunk) == expected[1] and chunk.startswith(expected[0]):
                 take = expected[2]
+                checked = expected[3]
             elif requests is not None and len(chunk) == requests[1] and chunk[1] in requests[0]:
                 take = requests[2]
-            if take is not None and self.receiver.take_expected_frame(chunk, now):
+            if take is not None and self.receiver.take_expected_frame(chunk, now, checked):
                 if expected is not None and take is expected[2]:
                     self._expected = None  # expect() hands over one frame only
                 self.frames_received += 1
@@ -385,17 +388,25 @@ class Link:
         except BaseException as error:  # a bug: the reader task raises it
             self._fail_push(error)
 
-    def expect(self, prefix: bytes, length: int, on_frame: Callable[[bytes, float], None]) -> None:
+    def expect(
+        self,
+        prefix: bytes,
+        length: int,
+        on_frame: Callable[[bytes, float], None],
+        checked: bytes | None = None,
+    ) -> None:
         """Hand the next chunk that is exactly one good frame of *length* bytes starting
         with *prefix* straight to ``on_frame(frame, end)``, once, instead of to the listener
         as a :class:`~aiortu.core.receiver.FrameReceived`; :meth:`forget_expected` undoes it.
         *prefix* and *length* must fit one frame layout (the receiver checks the CRC only).
+        *checked* is a frame of that layout whose CRC is known to be good (the last reply
+        to the same request): a chunk equal to it is not checked again.
 
         Only where the stream pushes its bytes (see :meth:`_push`); anything else takes
         the usual way. A master waiting for the reply it knows the shape of (a register
         read's) saves the event and the queue this way.
         """
-        self._expected = (prefix, length, on_frame)
+        self._expected = (prefix, length, on_frame, checked)
 
     def expect_requests(
         self,

@@ -32,9 +32,9 @@ line on. The line task also notices a dead link and fails the queue.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Callable, Collection, Mapping, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Collection, Mapping, Sequence
 from types import TracebackType
-from typing import Any, Self, TypeVar, cast
+from typing import Any, Self, TypeVar
 
 import anyio
 import anyio.abc
@@ -88,7 +88,7 @@ _READ_CACHE_SIZE = 256
 
 
 def _answer(
-    response: Response | ExceptionPDU, pdu: Request, unit: int, expected: type[_ResponseT]
+    response: Response | ExceptionPDU | None, pdu: Request, unit: int, expected: type[_ResponseT]
 ) -> _ResponseT:
     """*response* as the reply to *pdu*; raise ExceptionResponse for an exception reply
     and MalformedPDU for a reply of another kind."""
@@ -329,27 +329,19 @@ class Master(SerialLineFunctions):
         assert response is not None
         return _answer(response, pdu, unit, expected)
 
-    async def _read_registers(
-        self,
-        kind: type[ReadHoldingRegistersRequest],
-        unit: int,
-        address: int,
-        count: int,
-        *,
-        timeout: float | None,
-        priority: int,
-    ) -> list[int]:
-        """The values of a register read (03 or 04): :meth:`request`, with the checks a
-        request made by :meth:`_read_request` no longer needs, for the commonest call."""
-        request = self._reads.get((kind, address, count))
-        if request is None:
-            request = self._read_request(kind, address, count)  # raises, saying why
-        _check_unit(unit)
-        response = await self.engine.submit_request(
-            unit, request, self._timeout(timeout), self.policy, priority
-        )
-        assert response is not None
-        return list(_answer(response, request, unit, ReadHoldingRegistersResponse).values)
+    def _submit(
+        self, unit: int, request: Request, timeout: float | None, priority: int
+    ) -> Awaitable[Response | ExceptionPDU | None]:
+        """The engine's awaitable of *request* with the master's retry policy, the unit
+        and the timeout checked: :meth:`request` less the checks of a request made by
+        :meth:`_read_request`, for the commonest calls. An awaitable, not a coroutine: a
+        read that goes out at once is then one coroutine (the caller's) waiting on the
+        engine's future."""
+        # The commonest call (a unicast unit, the master's timeout) makes no further call.
+        if type(unit) is not int or unit not in UNIT_RANGE:
+            _check_unit(unit)  # raises, saying why
+        response_timeout = self.timeout if timeout is None else self._timeout(timeout)
+        return self.engine.submit_request(unit, request, response_timeout, self.policy, priority)
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
         """``kind(address, count)``, made once per address and count: a poll loop reads
@@ -363,7 +355,7 @@ class Master(SerialLineFunctions):
             if len(self._reads) >= _READ_CACHE_SIZE:
                 self._reads.clear()
             self._reads[key] = request
-        return cast(_ReadT, request)
+        return request  # type: ignore[return-value]  # the key's kind made it
 
     def _timeout(self, timeout: float | None) -> float:
         if timeout is None:
@@ -444,9 +436,9 @@ class Master(SerialLineFunctions):
         priority: int = 0,
     ) -> list[int]:
         """Read *count* (1..125) holding registers from *address* (03)."""
-        return await self._read_registers(
-            ReadHoldingRegistersRequest, unit, address, count, timeout=timeout, priority=priority
-        )
+        request = self._read_request(ReadHoldingRegistersRequest, address, count)
+        response = await self._submit(unit, request, timeout, priority)
+        return list(_answer(response, request, unit, ReadHoldingRegistersResponse).values)
 
     async def read_input_registers(
         self,
@@ -458,9 +450,9 @@ class Master(SerialLineFunctions):
         priority: int = 0,
     ) -> list[int]:
         """Read *count* (1..125) input registers from *address* (04)."""
-        return await self._read_registers(
-            ReadInputRegistersRequest, unit, address, count, timeout=timeout, priority=priority
-        )
+        request = self._read_request(ReadInputRegistersRequest, address, count)
+        response = await self._submit(unit, request, timeout, priority)
+        return list(_answer(response, request, unit, ReadHoldingRegistersResponse).values)
 
     async def write_register(
         self,

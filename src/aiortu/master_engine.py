@@ -24,7 +24,8 @@ up at once; one cancelled after that leaves its transaction to the engine's line
 (:meth:`LineEngine.serve`), which finishes the attempt in flight (its reply must not
 reach a later request) without retries and then hands the line on. So the exchanges on
 the line stay strictly one after the other, exactly as if one task ran them all: the
-line task runs only what a cancelled caller left behind, and notices a dead link.
+line task runs only what a cancelled caller left behind and the usual exchanges the
+machine took over (see :meth:`LineEngine.submit_request`), and notices a dead link.
 
 It also keeps :class:`UnitStats` per unit and their health: a unit is offline after
 *offline_after* consecutive failed transactions, and online again after a success. With
@@ -43,17 +44,19 @@ against late replies.
 
 from __future__ import annotations
 
+import asyncio
 import heapq
 import itertools
 import math
 from collections import deque
+from collections.abc import Awaitable
 from typing import Any
 
 import anyio
 
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import FrameError
-from aiortu.core.master_machine import MasterMachine
+from aiortu.core.master_machine import KnownRequest, MasterMachine
 from aiortu.core.master_transaction import (
     Outcome,
     OutcomeKind,
@@ -70,15 +73,21 @@ from aiortu.master_stats import HealthPolicy, UnitStats
 __all__ = ("HealthPolicy", "LineEngine", "UnitOffline", "UnitStats")
 
 
+_Reply = Response | ExceptionPDU | None
+_UsualExchange = tuple["asyncio.Future[_Reply]", KnownRequest, int, float, RetryPolicy, int, float]
+
+
 class _Job:
     """A transaction, its place in the queue, and its result."""
 
     __slots__ = (
+        "caller",
         "done",
         "error",
         "granted",
         "priority",
         "response",
+        "sent",
         "sequence",
         "transaction",
         "turn",
@@ -94,6 +103,11 @@ class _Job:
         self.done = False
         self.response: Response | ExceptionPDU | None = None
         self.error: Exception | None = None
+        self.caller: asyncio.Future[Response | ExceptionPDU | None] | None = None
+        """The future of a usual exchange's caller, for a job the machine took over: the
+        line task runs the job and completes it (see LineEngine.submit_request)."""
+        self.sent: tuple[float, float] | None = None
+        """When the attempt a taken-over job begins with went out (start, end)."""
 
     def __lt__(self, other: _Job) -> bool:
         return (self.priority, self.sequence) < (other.priority, other.sequence)
@@ -104,6 +118,20 @@ class _Job:
         self.done = True
         if self.turn is not None:
             self.turn.set()
+        caller = self.caller
+        if caller is not None:
+            caller.remove_done_callback(self.on_caller_done)
+            if caller.done():
+                pass  # cancelled: nobody to tell
+            elif error is None:
+                caller.set_result(response)
+            else:
+                caller.set_exception(error)
+
+    def on_caller_done(self, caller: asyncio.Future[Response | ExceptionPDU | None]) -> None:
+        """The caller's future is done: if cancelled, the caller is gone (no retries)."""
+        if caller.cancelled():
+            self.transaction.abandoned = True
 
 
 class LineEngine:
@@ -141,6 +169,10 @@ class LineEngine:
         self._waiter_deadline = math.inf
         self._usual: tuple[bytes, float] | None = None
         """The usual reply, handed over by the link's read callback (see Link.expect)."""
+        self._in_flight: _UsualExchange | None = None
+        """The usual exchange on the wire (see submit_request): the caller's future, the
+        request known, unit, response timeout, policy, priority, and when the request had
+        left the wire."""
         self._timer: Any = None
         self._timer_at = math.inf
         self._adopted: _Job | None = None
@@ -190,15 +222,13 @@ class LineEngine:
             await self._wait_turn(job)
         else:
             self._busy = True  # an idle line: the transaction runs at once, here
-        return await self._run(job, None)
+        return await self._run(job)
 
-    async def _run(
-        self, job: _Job, sent: tuple[float, float] | None
-    ) -> Response | ExceptionPDU | None:
-        """Run *job*, which has the line (*sent*: see :meth:`_exchange`); return its reply."""
+    async def _run(self, job: _Job) -> Response | ExceptionPDU | None:
+        """Run *job*, which has the line; return its reply."""
         if not job.done:
             try:
-                await self._exchange(job, sent)
+                await self._exchange(job)
             finally:
                 if self._adopted is not job:
                     self._release()
@@ -206,29 +236,33 @@ class LineEngine:
             raise job.error
         return job.response
 
-    async def submit_request(
+    def submit_request(
         self,
         unit: int,
         request: Request,
         response_timeout: float,
         policy: RetryPolicy,
         priority: int = 0,
-    ) -> Response | ExceptionPDU | None:
-        """:meth:`submit` of ``Transaction(unit, request, response_timeout, policy)``.
+    ) -> Awaitable[Response | ExceptionPDU | None]:
+        """:meth:`submit` of ``Transaction(unit, request, response_timeout, policy)``, as
+        an awaitable.
 
         On an idle line with a loop, a register read whose reply comes as usual runs
         without the master machine (see
-        :meth:`~aiortu.core.master_machine.MasterMachine.usual_exchange`): it sends the
-        request at once, waits for that reply from the link's read callback, and
-        counts it. Anything else that happens while it waits (another frame, bad bytes,
-        the timeout, the link failing, the caller cancelled) hands the attempt in flight
-        to the machine, which goes on exactly as if it had sent the request itself. Set
-        :attr:`usual_exchanges` false to run every transaction through the machine.
+        :meth:`~aiortu.core.master_machine.MasterMachine.usual_exchange`): the request
+        goes out now, and the return is a future of the link's loop that the link's read
+        callback completes with the response, counted, the line handed on. The caller's
+        task is woken once, with its result, and no coroutine of the engine runs.
+        Anything else that happens while it waits (another frame, bad bytes, the
+        timeout, the link failing) hands the attempt in flight to the machine, which
+        goes on exactly as if it had sent the request itself, in the line task; that
+        completes the future as :meth:`submit` would return or raise. A caller cancelled
+        meanwhile cancels the future: the attempt is finished without retries and its
+        reply is counted. Set :attr:`usual_exchanges` false to run every transaction
+        through the machine.
         """
         link = self.link
         loop = link.loop
-        known = None
-        end = None
         if (
             self.usual_exchanges
             and loop is not None
@@ -242,53 +276,60 @@ class LineEngine:
             known = self.machine.usual_exchange(unit, request)
             if known is not None:
                 self._forget_arrivals()
-                end = link.send_now(known[1])  # None: the line asks for a wait
-        if known is None or end is None:
-            return await self.submit(Transaction(unit, request, response_timeout, policy), priority)
-        frame = known[1]
-        self._busy = True
-        sent = (end - len(frame) * link.char_time, end)
-        stats = self.stats.get(unit) or self.unit_stats(unit)
-        stats.requests += 1
-        self.transactions += 1
-        deadline = end + response_timeout
-        waiter = self._waiter = loop.create_future()
-        self._waiter_deadline = deadline
-        if deadline < self._timer_at:
-            self._arm_timer(deadline)
-        shape = known[2]
-        assert shape is not None
-        link.expect(shape[0], shape[1], self._on_usual_reply)
-        try:
-            await waiter
-        except BaseException:
-            # The caller is gone with the request on the wire: the line task finishes it.
-            self._waiter = None
-            link.forget_expected()
-            self._adopt(
-                self._late_job(Transaction(unit, request, response_timeout, policy), priority, sent)
-            )
-            raise
-        self._waiter = None
-        usual = self._usual
-        if usual is None:
-            link.forget_expected()  # the link forgets it once it hands the reply over
-        if usual is None or self._events:
-            # Not (only) the usual reply: the machine takes the attempt over.
-            job = self._late_job(
-                Transaction(unit, request, response_timeout, policy), priority, sent
-            )
-            return await self._run(job, sent)
-        self._usual = None
-        stats.count_success(link.clock() - sent[0])
-        self._release()
-        return self.machine.usual_response(request, usual[0])
+                frame = known.frame
+                end = link.send_now(frame)  # None: the line asks for a wait
+                if end is not None:
+                    self._busy = True
+                    stats = self.stats.get(unit) or self.unit_stats(unit)
+                    stats.requests += 1
+                    self.transactions += 1
+                    deadline = end + response_timeout
+                    caller = loop.create_future()
+                    self._in_flight = (caller, known, unit, response_timeout, policy, priority, end)
+                    self._waiter_deadline = deadline
+                    if deadline < self._timer_at:
+                        self._arm_timer(deadline)
+                    shape = known.reply_shape
+                    assert shape is not None
+                    link.expect(shape[0], shape[1], self._on_reply_at_once, known.last_reply)
+                    return caller  # type: ignore[no-any-return]
+        return self.submit(Transaction(unit, request, response_timeout, policy), priority)
 
-    def _late_job(self, transaction: Transaction, priority: int, sent: tuple[float, float]) -> _Job:
-        """The job of a usual exchange that the machine takes over, begun and sent."""
+    def _on_reply_at_once(self, frame: bytes, end: float) -> None:
+        """The link's read callback found the usual reply of the usual exchange."""
+        in_flight = self._in_flight
+        assert in_flight is not None
+        caller, known, unit, _, _, _, sent_end = in_flight
+        self._in_flight = None
+        response = self.machine.usual_response(known, frame)
+        start = sent_end - len(known.frame) * self.link.char_time
+        self.stats[unit].count_success(self.link.clock() - start)
+        self._release()
+        if not caller.done():  # done: cancelled, the reply is counted all the same
+            caller.set_result(response)
+
+    def _take_over(self) -> None:
+        """Something other than the usual reply came during the usual exchange, or its
+        time ran out: the machine takes the attempt over, begun and sent, and the line
+        task runs the rest of the transaction for the caller."""
+        in_flight = self._in_flight
+        assert in_flight is not None
+        self._in_flight = None
+        caller, known, unit, response_timeout, policy, priority, end = in_flight
+        self.link.forget_expected()
+        transaction = Transaction(unit, known.request, response_timeout, policy)
+        sent = (end - len(known.frame) * self.link.char_time, end)
         self.machine.begin(transaction)
         self.machine.sent(*sent)
-        return _Job(transaction, priority, next(self._sequence))
+        job = _Job(transaction, priority, next(self._sequence))
+        job.caller = caller
+        job.sent = sent
+        if caller.done():
+            transaction.abandoned = True  # cancelled: no retries
+        else:
+            caller.add_done_callback(job.on_caller_done)
+        self._adopted = job
+        self._wake.set()
 
     async def _wait_turn(self, job: _Job) -> None:
         """Queue *job* and wait until it is handed the line (or failed)."""
@@ -419,6 +460,13 @@ class LineEngine:
         if self._failed is None:
             self._failed = error
         self._fail_queued(self._failed)
+        if self._in_flight is not None:
+            # The line task is gone with the request on the wire: nobody takes it over.
+            caller = self._in_flight[0]
+            self._in_flight = None
+            self.link.forget_expected()
+            if not caller.done():
+                caller.set_exception(ConnectionLost(str(self._failed)))
         self._connected.set()
 
     def _on_link_event(self, event: LinkEvent | None) -> None:
@@ -432,6 +480,8 @@ class LineEngine:
                 events.popleft()  # the newest frame is the one a waiting master wants
                 self.link.events_dropped += 1
             events.append(event)
+        if self._in_flight is not None:
+            self._take_over()
         waiter = self._waiter
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
@@ -539,6 +589,9 @@ class LineEngine:
         self._wake.set()
 
     async def _finish_adopted(self, job: _Job) -> None:
+        if job.caller is not None:
+            await self._finish_taken_over(job)
+            return
         stats = self.unit_stats(job.transaction.unit)
         try:
             outcome = await self._wait_for_outcome(stats)
@@ -552,6 +605,20 @@ class LineEngine:
             job.finish(None, error)
         finally:
             self._adopted = None
+            self._release()
+
+    async def _finish_taken_over(self, job: _Job) -> None:
+        """Run the rest of a usual exchange the machine took over, for its caller."""
+        try:
+            await self._exchange(job, job.sent)
+        except BaseException:
+            # The line task is cancelled: the master is closing.
+            if not job.done:
+                job.finish(None, ConnectionLost("the master is closed"))
+            raise
+        finally:
+            if self._adopted is job:
+                self._adopted = None
             self._release()
 
     async def _keep_guard(self) -> None:
@@ -636,12 +703,15 @@ class LineEngine:
 
     def _on_timer(self) -> None:
         self._timer, self._timer_at, waiter = None, math.inf, self._waiter
-        if waiter is None or waiter.done():
+        usual = self._in_flight is not None
+        if not usual and (waiter is None or waiter.done()):
             return
-        if self.link.clock() >= self._waiter_deadline:
-            waiter.set_result(None)
-        else:
+        if self.link.clock() < self._waiter_deadline:
             self._arm_timer(self._waiter_deadline)
+        elif usual:
+            self._take_over()
+        else:
+            waiter.set_result(None)
 
     def _settle(self, job: _Job, outcome: Outcome, stats: UnitStats) -> None:
         transaction = job.transaction

@@ -139,6 +139,10 @@ async def test_the_unit_handle_and_typed_values() -> None:
     [
         ("read_holding_registers", (0, 0, 1)),
         ("read_holding_registers", (248, 0, 1)),
+        ("read_holding_registers", (True, 0, 1)),
+        ("read_input_registers", ("1", 0, 1)),
+        ("read_input_registers", (1.0, 0, 1)),
+        ("read_input_registers", (1, 0, 126)),
         ("read_holding_registers", (1, 0, 0)),
         ("read_holding_registers", (1, 0, 126)),
         ("read_holding_registers", (1, 65535, 2)),
@@ -163,6 +167,17 @@ async def test_invalid_requests_raise_before_anything_is_sent(call: str, args: t
         assert not bus.trace
         assert not slave.seen
         assert master.engine.transactions == 0
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, float("nan")])
+async def test_a_call_timeout_must_be_positive(bad: float) -> None:
+    async with line() as (master, _, bus):
+        for read in (master.read_holding_registers, master.read_coils):
+            with pytest.raises(ValueError, match="timeout must be > 0"):
+                await read(1, 0, 1, timeout=bad)
+        await anyio.sleep(0.01)
+        assert not bus.trace
+        assert await master.read_holding_registers(1, 0, 1, timeout=0.5) is not None
 
 
 async def test_a_read_cannot_be_broadcast() -> None:

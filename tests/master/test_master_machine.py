@@ -257,3 +257,36 @@ def test_only_register_reads_have_a_usual_reply_and_an_observer_takes_none() -> 
     # With an observer every transition is fired one by one: frame_received does it.
     assert observed.take_usual_reply(frame, 10.01) is None
     assert observed.state is MasterState.WAITING_REPLY
+
+
+@given(
+    kind=st.sampled_from([ReadHoldingRegistersRequest, ReadInputRegistersRequest]),
+    # A few small values make repeated replies common; the others cover the range.
+    replies=st.lists(
+        st.lists(st.integers(0, 2) | st.integers(0, 0xFFFF), min_size=2, max_size=2),
+        max_size=6,
+    ),
+)
+def test_the_usual_response_is_the_reply_decoded_even_when_remembered(
+    kind: type[ReadHoldingRegistersRequest], replies: list[list[int]]
+) -> None:
+    """A reply equal to the last one gives the same (immutable) response without being
+    decoded again; any other is decoded and remembered."""
+    machine = MasterMachine()
+    request = kind(0, 2)
+    known = machine.usual_exchange(1, request)
+    assert known is not None
+    assert known.reply_shape == (bytes([1, kind.function_code, 4]), 9)
+    last = None
+    for values in replies:
+        frame = bytes([1, kind.function_code, 4]) + b"".join(v.to_bytes(2, "big") for v in values)
+        frame += b"\x00\x00"  # the CRC is the link's to check
+        response = machine.usual_response(known, bytes(bytearray(frame)))
+        assert type(response) is request.response_class
+        assert list(response.values) == values  # type: ignore[attr-defined]
+        if last is not None and last[0] == frame:
+            assert response is last[1]
+        assert known.last_reply == frame
+        last = (frame, response)
+    assert machine.state is MasterState.IDLE
+    assert machine.usual_exchange(1, request) is known  # remembered per unit and request

@@ -9,6 +9,7 @@ requests on the wire must be the same.
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 from collections.abc import Awaitable, Callable
 
@@ -61,6 +62,10 @@ async def _play(pty: Pty, steps: list[list[Step]]) -> list[bytes]:
     seen = []
     for answer in steps:
         seen.append(await read_master(pty, len(REQUEST)))
+        # A device on a real line hears the request's last byte one wire time after the
+        # master began to send it; a pty hands it over at once. Answering sooner than
+        # that makes a reply followed by noise in one chunk look older than the request.
+        await anyio.sleep(LINE.wire_time(len(REQUEST)))
         for step in answer:
             if isinstance(step, float):
                 await anyio.sleep(step)
@@ -173,3 +178,84 @@ async def test_a_link_lost_mid_wait_fails_the_read_with_connection_lost() -> Non
                 tg.start_soon(hang_up)
                 with anyio.fail_after(2), pytest.raises(ConnectionLost):
                     await master.read_holding_registers(1, 0, 2)
+
+
+async def test_a_caller_cancelled_after_the_machine_took_over_gets_no_more_retries() -> None:
+    # The first attempt times out, so the machine takes the attempt over and retries;
+    # the caller is gone during the retry: nothing is sent after it.
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=0.1, retries=3, frame_gap=0) as master:
+            await anyio.sleep(0.05)
+            with anyio.move_on_after(0.15) as scope:
+                await master.read_holding_registers(1, 0, 2)
+            assert scope.cancelled_caught
+            await anyio.sleep(0.3)  # the retry times out; a third attempt would be out
+            sent = await _drain(pty)
+            assert sent == REQUEST * 2
+            stats = master.unit_stats(1)
+            assert (stats.requests, stats.retries, stats.successes) == (1, 1, 0)
+            assert not master.engine._busy  # the line is free again
+
+
+async def _drain(pty: Pty) -> bytes:
+    """What the master has written so far."""
+    data = b""
+    while True:
+        with anyio.move_on_after(0.02):
+            data += await read_master(pty, 1)
+            continue
+        return data
+
+
+async def test_closing_the_master_fails_a_usual_exchange_in_flight() -> None:
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        outcome: list[BaseException] = []
+        ended = anyio.Event()
+        async with anyio.create_task_group() as tg:
+            async with Master(stream, LINE, timeout=5.0, frame_gap=0) as master:
+                await anyio.sleep(0.05)
+
+                async def read() -> None:
+                    try:
+                        await master.read_holding_registers(1, 0, 2)
+                    except ConnectionLost as error:
+                        outcome.append(error)
+                    finally:
+                        ended.set()
+
+                tg.start_soon(read)
+                assert await read_master(pty, len(REQUEST)) == REQUEST
+                assert master.engine._in_flight is not None  # the usual exchange waits
+            with anyio.fail_after(0.5):  # not the 5 s timeout
+                await ended.wait()
+        assert isinstance(outcome[0], ConnectionLost)
+
+
+async def test_a_caller_cancelled_once_its_reply_came_leaves_it_counted() -> None:
+    # The read callback has completed the caller's future, and the caller is cancelled
+    # before it wakes: the transaction is over and counted, and the line is free.
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=1.0, frame_gap=0) as master:
+            await anyio.sleep(0.05)
+            engine = master.engine
+            read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
+            assert await read_master(pty, len(REQUEST)) == REQUEST
+            assert engine._in_flight is not None
+            pty.write(REPLY)
+            with anyio.fail_after(1):
+                # Polled, not awaited on an event: this task must run again in the very
+                # loop pass that the read callback completes the caller's future.
+                while engine._in_flight is not None:  # noqa: ASYNC110
+                    await asyncio.sleep(0)
+            read.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await read
+            stats = master.unit_stats(1)
+            assert (stats.requests, stats.successes, stats.failures) == (1, 1, 0)
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(_play, pty, [[REPLY]])
+                with anyio.fail_after(1):
+                    assert await master.read_holding_registers(1, 0, 2) == [7, 8]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import anyio
 import pytest
 
@@ -226,15 +228,23 @@ async def test_master_reads_on_a_port_whatever_way_the_reply_comes(
         stream = await open_serial(pty.path, LINE)
         async with Master(stream, LINE, timeout=0.5, retries=0, frame_gap=0) as master:
             await anyio.sleep(0.05)  # past INIT
-            engine = master.engine
-            on_usual_reply = engine._on_usual_reply
+            link = master.link
+            expect = link.expect
             usual_replies: list[bytes] = []
 
-            def counted(frame: bytes, end: float) -> None:
-                usual_replies.append(frame)
-                on_usual_reply(frame, end)
+            def counting_expect(
+                prefix: bytes,
+                length: int,
+                on_frame: Callable[[bytes, float], None],
+                checked: bytes | None = None,
+            ) -> None:
+                def counted(frame: bytes, end: float) -> None:
+                    usual_replies.append(frame)
+                    on_frame(frame, end)
 
-            engine._on_usual_reply = counted  # type: ignore[method-assign]
+                expect(prefix, length, counted, checked)
+
+            link.expect = counting_expect  # type: ignore[method-assign]
 
             async def device() -> None:
                 assert await read_master(pty, len(request)) == request

@@ -63,6 +63,7 @@ from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegi
 __all__ = (
     "DEFAULT_FRAME_ERROR_GRACE",
     "TRANSITIONS",
+    "KnownRequest",
     "MasterEvent",
     "MasterMachine",
     "MasterMachineError",
@@ -143,8 +144,24 @@ class _BadBytes:
     end: float
 
 
-_Known = tuple[Request, bytes, tuple[bytes, int] | None]
-"""A remembered request: the request, its frame, and its usual reply's shape."""
+class KnownRequest:
+    """What a machine remembers of a request to a unit (see :attr:`MasterMachine.frame`):
+    its frame, the shape of its usual reply, and the last usual reply it decoded."""
+
+    __slots__ = ("frame", "last_reply", "last_response", "reply_shape", "request")
+
+    def __init__(self, request: Request, frame: bytes, reply_shape: tuple[bytes, int] | None):
+        self.request = request
+        self.frame = frame
+        """The request's frame, CRC included."""
+        self.reply_shape = reply_shape
+        """The first bytes (unit, function code, byte count) and the length of the usual
+        reply, where the request has one (a register read's); else None."""
+        self.last_reply: bytes | None = None
+        """The last usual reply (a whole frame whose CRC was found good), or None."""
+        self.last_response: Response | None = None
+        """The response :attr:`last_reply` holds."""
+
 
 _REGISTER_READS: Final = frozenset((ReadHoldingRegistersRequest, ReadInputRegistersRequest))
 
@@ -251,8 +268,8 @@ class MasterMachine:
         """Seconds the wait goes on after a frame error (never past the response timeout)."""
         self._on_transition = on_transition
         self._outcome = _WAIT
-        self._frames: dict[tuple[int, int], _Known] = {}
-        self._entry: _Known | None = None
+        self._frames: dict[tuple[int, int], KnownRequest] = {}
+        self._entry: KnownRequest | None = None
         """What is remembered of the transaction in progress, once looked up."""
         self._actions: dict[
             tuple[MasterState, MasterEvent], tuple[MasterState, Callable[[object], None]]
@@ -278,7 +295,7 @@ class MasterMachine:
         Frames are remembered by unit and request object (requests are immutable), so a
         request sent again, as a master's poll loop does, is not encoded again.
         """
-        return (self._entry or self._known())[1]
+        return (self._entry or self._known()).frame
 
     @property
     def usual_reply(self) -> tuple[bytes, int] | None:
@@ -286,18 +303,18 @@ class MasterMachine:
         progress, where it has one (a register read's: unit, function code, byte count);
         else None. A link can spot that frame without decoding it
         (:meth:`aiortu.link.Link.expect`) and hand it to :meth:`take_usual_reply`."""
-        return (self._entry or self._known())[2]
+        return (self._entry or self._known()).reply_shape
 
-    def _known(self) -> _Known:
+    def _known(self) -> KnownRequest:
         """What the machine remembers of the request in progress (see :attr:`frame`)."""
         transaction = self._current
         known = self._entry = self._remember(transaction.unit, transaction.request)
         return known
 
-    def _remember(self, unit: int, request: Request) -> _Known:
+    def _remember(self, unit: int, request: Request) -> KnownRequest:
         key = (unit, id(request))
         known = self._frames.get(key)
-        if known is None or known[0] is not request:
+        if known is None or known.request is not request:
             shape = None
             if type(request) in _REGISTER_READS and unit != BROADCAST_UNIT:
                 assert isinstance(request, ReadHoldingRegistersRequest)
@@ -306,20 +323,22 @@ class MasterMachine:
             if len(self._frames) >= _FRAME_CACHE_SIZE:
                 self._frames.clear()
             # Holding the request keeps its id unique.
-            known = self._frames[key] = (request, encode_frame(unit, request.encode()), shape)
+            known = self._frames[key] = KnownRequest(
+                request, encode_frame(unit, request.encode()), shape
+            )
         return known
 
-    def usual_exchange(self, unit: int, request: Request) -> _Known | None:
-        """``(request, frame, usual reply's shape)`` where a transaction of *request* to
-        *unit* may run without the machine until something other than its usual reply
-        happens; else None.
+    def usual_exchange(self, unit: int, request: Request) -> KnownRequest | None:
+        """What the machine remembers of *request* to *unit* (its frame, its usual reply's
+        shape) where a transaction of it may run without the machine until something other
+        than its usual reply happens; else None.
 
         A transaction that gets its usual reply leaves the machine as it found it: IDLE,
         after SEND_UNICAST, REPLY_RECEIVED and REPLY_OK, with nothing to remember. So a
         driver may send *frame* and wait for the reply of that shape (first bytes,
         length) without telling the machine. If that reply comes whole with a good CRC
         before the response timeout, :meth:`usual_response` makes it the response. On
-        anything else (another frame, bad bytes, the timeout, the caller gone), the
+        anything else (another frame, bad bytes, the timeout, the line lost), the
         driver calls :meth:`begin` and then :meth:`sent` with the times the frame went out,
         and goes on the usual way: the machine then knows everything it would have known.
 
@@ -329,14 +348,28 @@ class MasterMachine:
         if self.state is not _S.IDLE or self._on_transition is not None:
             return None
         known = self._remember(unit, request)
-        return known if known[2] is not None else None
+        return known if known.reply_shape is not None else None
 
     @staticmethod
-    def usual_response(request: Request, frame: bytes) -> Response:
-        """The response in *frame*, the usual reply to *request* (see
-        :meth:`usual_exchange`): its shape is matched and its CRC checked."""
+    def usual_response(known: KnownRequest, frame: bytes) -> Response:
+        """The response in *frame*, the usual reply to *known*'s request (see
+        :meth:`usual_exchange`): its shape is matched and its CRC checked.
+
+        A poll loop reads the same block again and again and often gets the same bytes
+        back. A frame equal to :attr:`KnownRequest.last_reply` holds the same response,
+        so it is not decoded again (and a link need not check its CRC again: see
+        :meth:`aiortu.link.Link.expect`). Responses are immutable, so sharing one is safe.
+        """
+        if frame == known.last_reply:
+            response = known.last_response
+            assert response is not None
+            return response
+        request = known.request
         assert isinstance(request, ReadHoldingRegistersRequest)
-        return _register_reply(request, frame, 3)
+        response = _register_reply(request, frame, 3)
+        known.last_reply = frame
+        known.last_response = response
+        return response
 
     def take_usual_reply(self, frame: bytes, end: float) -> Response | None:
         """Finish the transaction with *frame*, a whole frame with a good CRC that ended
@@ -349,7 +382,7 @@ class MasterMachine:
         """
         transaction = self.transaction
         entry = self._entry
-        shape = None if entry is None else entry[2]
+        shape = None if entry is None else entry.reply_shape
         if (
             shape is None
             or self.state is not MasterState.WAITING_REPLY
@@ -360,11 +393,10 @@ class MasterMachine:
             or end < transaction.attempt_start
         ):
             return None
-        request = transaction.request
-        assert isinstance(request, ReadHoldingRegistersRequest)
+        assert entry is not None
         self.state = _USUAL_REPLY_TARGET
         self.deadline = None
-        return _register_reply(request, frame, 3)
+        return self.usual_response(entry, frame)
 
     def sent(self, start: float, end: float) -> float:
         """The request began to go out at *start* and left the wire at *end*.
