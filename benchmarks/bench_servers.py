@@ -1,7 +1,7 @@
 """The slaves the benchmarks talk to, each run in a process of its own so that its CPU time
 and memory can be read from /proc.
 
-    python benchmarks/bench_servers.py pymodbus PORT
+    python benchmarks/bench_servers.py pymodbus PORT [--changing]
     python benchmarks/bench_servers.py aiortu PORT [--frame-gap SECONDS] [--units N]
     python benchmarks/bench_servers.py bare PORT
     python benchmarks/bench_servers.py paced-lines --lines 16 [--baudrate 19200] [--units N]
@@ -9,7 +9,9 @@ and memory can be read from /proc.
 
 ``pymodbus`` runs pymodbus's RTU server, ``aiortu`` runs :func:`aiortu.serve`, both on
 PORT at 19200 8N2 (ptys keep no parity) with holding registers 0..99 holding 0..99 on
-unit 1 (``--units N``: units 1..N sharing one store). ``bare`` is the reference with no
+unit 1 (``--units N``: units 1..N sharing one store); with ``--changing``, pymodbus's
+registers change on every read: a read of *count* registers gets ``n, n + 1, ...`` where
+*n* counts the reads, so no two replies are the same. ``bare`` is the reference with no
 Modbus logic: blocking reads of 8-byte requests, each answered with the fixed reply to a
 read of registers 0..9 of unit 1, whatever it asked. ``paced-lines`` starts *lines*
 :class:`aiortu.testing.PtyBus` buses paced at *baudrate*, each with an aiortu slave
@@ -44,7 +46,7 @@ async def _until_signal() -> None:
     await stop.wait()
 
 
-async def serve_pymodbus(port: str, units: int) -> None:
+async def serve_pymodbus(port: str, units: int, changing: bool = False) -> None:
     from pymodbus import FramerType
     from pymodbus.datastore import (
         ModbusDeviceContext,
@@ -53,9 +55,19 @@ async def serve_pymodbus(port: str, units: int) -> None:
     )
     from pymodbus.server import ModbusSerialServer
 
+    class ChangingBlock(ModbusSequentialDataBlock):  # type: ignore[misc]
+        """Registers that change on every read (see the module docstring)."""
+
+        reads = 0
+
+        def getValues(self, address: int, count: int = 1) -> list[int]:
+            self.reads += 1
+            return [(self.reads + offset) & 0xFFFF for offset in range(count)]
+
     # pymodbus's device context shifts addresses by one: the block starts at 1 for
     # protocol address 0.
-    device = ModbusDeviceContext(hr=ModbusSequentialDataBlock(1, REGISTERS))
+    block = (ChangingBlock if changing else ModbusSequentialDataBlock)(1, REGISTERS)
+    device = ModbusDeviceContext(hr=block)
     context = ModbusServerContext(devices=dict.fromkeys(range(1, units + 1), device), single=False)
     server = ModbusSerialServer(
         context,
@@ -148,9 +160,10 @@ def main() -> None:
     parser.add_argument("--lines", type=int, default=16)
     parser.add_argument("--baudrate", type=int, default=BAUDRATE)
     parser.add_argument("--latency", type=float, default=0.0)
+    parser.add_argument("--changing", action="store_true")
     args = parser.parse_args()
     if args.mode == "pymodbus":
-        asyncio.run(serve_pymodbus(args.port, args.units))
+        asyncio.run(serve_pymodbus(args.port, args.units, args.changing))
     elif args.mode == "aiortu":
         asyncio.run(serve_aiortu(args.port, args.units, args.frame_gap))
     elif args.mode == "bare":
