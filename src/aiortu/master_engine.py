@@ -68,70 +68,13 @@ from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.core.receiver import FrameReceived
 from aiortu.errors import ConnectionLost, ResponseTimeout, UnitOffline
 from aiortu.link import Link, LinkEvent
+from aiortu.master_job import Job, Reply
 from aiortu.master_stats import HealthPolicy, UnitStats
 
 __all__ = ("HealthPolicy", "LineEngine", "UnitOffline", "UnitStats")
 
 
-_Reply = Response | ExceptionPDU | None
-_UsualExchange = tuple["asyncio.Future[_Reply]", KnownRequest, int, float, RetryPolicy, int, float]
-
-
-class _Job:
-    """A transaction, its place in the queue, and its result."""
-
-    __slots__ = (
-        "caller",
-        "done",
-        "error",
-        "granted",
-        "priority",
-        "response",
-        "sent",
-        "sequence",
-        "transaction",
-        "turn",
-    )
-
-    def __init__(self, transaction: Transaction, priority: int, sequence: int) -> None:
-        self.transaction = transaction
-        self.priority = priority
-        self.sequence = sequence
-        self.turn: anyio.Event | None = None
-        """Set when a queued job is handed the line, or failed while queued."""
-        self.granted = False
-        self.done = False
-        self.response: Response | ExceptionPDU | None = None
-        self.error: Exception | None = None
-        self.caller: asyncio.Future[Response | ExceptionPDU | None] | None = None
-        """The future of a usual exchange's caller, for a job the machine took over: the
-        line task runs the job and completes it (see LineEngine.submit_request)."""
-        self.sent: tuple[float, float] | None = None
-        """When the attempt a taken-over job begins with went out (start, end)."""
-
-    def __lt__(self, other: _Job) -> bool:
-        return (self.priority, self.sequence) < (other.priority, other.sequence)
-
-    def finish(self, response: Response | ExceptionPDU | None, error: Exception | None) -> None:
-        self.response = response
-        self.error = error
-        self.done = True
-        if self.turn is not None:
-            self.turn.set()
-        caller = self.caller
-        if caller is not None:
-            caller.remove_done_callback(self.on_caller_done)
-            if caller.done():
-                pass  # cancelled: nobody to tell
-            elif error is None:
-                caller.set_result(response)
-            else:
-                caller.set_exception(error)
-
-    def on_caller_done(self, caller: asyncio.Future[Response | ExceptionPDU | None]) -> None:
-        """The caller's future is done: if cancelled, the caller is gone (no retries)."""
-        if caller.cancelled():
-            self.transaction.abandoned = True
+_UsualExchange = tuple["asyncio.Future[Reply]", KnownRequest, int, float, RetryPolicy, int, float]
 
 
 class LineEngine:
@@ -156,7 +99,7 @@ class LineEngine:
         self.machine = MasterMachine(frame_error_grace=frame_error_grace)
         self.stats: dict[int, UnitStats] = {}
         """Statistics by unit address."""
-        self._queue: list[_Job] = []
+        self._queue: list[Job] = []
         self._sequence = itertools.count()
         self._busy = False
         """The line belongs to a transaction (running, handed over, or left to the line task)."""
@@ -175,7 +118,7 @@ class LineEngine:
         left the wire."""
         self._timer: Any = None
         self._timer_at = math.inf
-        self._adopted: _Job | None = None
+        self._adopted: Job | None = None
         self._wake = anyio.Event()
         self._quiet_until = -math.inf
         self._failed: ConnectionLost | None = None
@@ -217,14 +160,14 @@ class LineEngine:
             await self._wait_connected(transaction.timeout)
         if self.health.fail_fast_offline:
             self._check_offline(transaction.unit)
-        job = _Job(transaction, priority, next(self._sequence))
+        job = Job(transaction, priority, next(self._sequence))
         if self._busy or not self._serving or self._link_closed:
             await self._wait_turn(job)
         else:
             self._busy = True  # an idle line: the transaction runs at once, here
         return await self._run(job)
 
-    async def _run(self, job: _Job) -> Response | ExceptionPDU | None:
+    async def _run(self, job: Job) -> Response | ExceptionPDU | None:
         """Run *job*, which has the line; return its reply."""
         if not job.done:
             try:
@@ -321,7 +264,7 @@ class LineEngine:
         sent = (end - len(known.frame) * self.link.char_time, end)
         self.machine.begin(transaction)
         self.machine.sent(*sent)
-        job = _Job(transaction, priority, next(self._sequence))
+        job = Job(transaction, priority, next(self._sequence))
         job.caller = caller
         job.sent = sent
         if caller.done():
@@ -331,7 +274,7 @@ class LineEngine:
         self._adopted = job
         self._wake.set()
 
-    async def _wait_turn(self, job: _Job) -> None:
+    async def _wait_turn(self, job: Job) -> None:
         """Queue *job* and wait until it is handed the line (or failed)."""
         backend = self.link.backend
         turn = job.turn = anyio.Event() if backend is None else backend.create_event()
@@ -502,7 +445,7 @@ class LineEngine:
             if not job.done:
                 job.finish(None, ConnectionLost(str(error)))
 
-    async def _exchange(self, job: _Job, sent: tuple[float, float] | None = None) -> None:
+    async def _exchange(self, job: Job, sent: tuple[float, float] | None = None) -> None:
         """Run *job*'s transaction on the line; the line is the caller's meanwhile.
 
         *sent* is for a usual exchange taken over (see :meth:`submit_request`): the
@@ -571,7 +514,7 @@ class LineEngine:
         self._events.clear()
         self._usual = None
 
-    async def _wait_for_attempt(self, job: _Job, stats: UnitStats) -> Outcome:
+    async def _wait_for_attempt(self, job: Job, stats: UnitStats) -> Outcome:
         """The outcome of the attempt on the wire; a caller gone meanwhile leaves it to
         the line task."""
         try:
@@ -582,13 +525,13 @@ class LineEngine:
             self._adopt(job)
             raise
 
-    def _adopt(self, job: _Job) -> None:
+    def _adopt(self, job: Job) -> None:
         """The caller is gone mid-attempt: the line task finishes the attempt."""
         job.transaction.abandoned = True
         self._adopted = job
         self._wake.set()
 
-    async def _finish_adopted(self, job: _Job) -> None:
+    async def _finish_adopted(self, job: Job) -> None:
         if job.caller is not None:
             await self._finish_taken_over(job)
             return
@@ -607,7 +550,7 @@ class LineEngine:
             self._adopted = None
             self._release()
 
-    async def _finish_taken_over(self, job: _Job) -> None:
+    async def _finish_taken_over(self, job: Job) -> None:
         """Run the rest of a usual exchange the machine took over, for its caller."""
         try:
             await self._exchange(job, job.sent)
@@ -713,7 +656,7 @@ class LineEngine:
         else:
             waiter.set_result(None)
 
-    def _settle(self, job: _Job, outcome: Outcome, stats: UnitStats) -> None:
+    def _settle(self, job: Job, outcome: Outcome, stats: UnitStats) -> None:
         transaction = job.transaction
         if transaction.failures or outcome.kind is OutcomeKind.FAILED:
             # An earlier attempt may still be answered late; keep the line quiet a while
