@@ -403,13 +403,17 @@ class LineEngine:
         if self._failed is None:
             self._failed = error
         self._fail_queued(self._failed)
+        # The line task is gone: nobody takes a usual exchange on the wire over, or runs
+        # one it had taken over but not begun.
         if self._in_flight is not None:
-            # The line task is gone with the request on the wire: nobody takes it over.
             caller = self._in_flight[0]
             self._in_flight = None
             self.link.forget_expected()
             if not caller.done():
                 caller.set_exception(ConnectionLost(str(self._failed)))
+        job = self._adopted
+        if job is not None and not job.done:
+            job.finish(None, ConnectionLost(str(self._failed)))
         self._connected.set()
 
     def _on_link_event(self, event: LinkEvent | None) -> None:

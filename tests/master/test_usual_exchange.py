@@ -259,3 +259,39 @@ async def test_a_caller_cancelled_once_its_reply_came_leaves_it_counted() -> Non
                 tg.start_soon(_play, pty, [[REPLY]])
                 with anyio.fail_after(1):
                     assert await master.read_holding_registers(1, 0, 2) == [7, 8]
+
+
+async def test_closing_the_master_fails_a_read_the_machine_took_over() -> None:
+    # Another unit's frame makes the machine take the read over, in the line task; the
+    # master closes at once: the caller gets ConnectionLost, not a wait forever.
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=5.0, frame_gap=0) as master:
+            await anyio.sleep(0.05)
+            engine = master.engine
+            read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
+            assert await read_master(pty, len(REQUEST)) == REQUEST
+            pty.write(OTHER_UNIT)
+            with anyio.fail_after(1):
+                # Polled: this task must run in the loop pass the take-over happens.
+                while engine._adopted is None:  # noqa: ASYNC110
+                    await asyncio.sleep(0)
+        with anyio.fail_after(1), pytest.raises(ConnectionLost):
+            await read
+
+
+async def test_closing_the_engine_fails_a_read_taken_over_and_not_finished() -> None:
+    # The engine closes once its line task is gone. A read taken over meanwhile (its
+    # timer may fire while the link closes) has nobody left to run it: close() fails it.
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=5.0, frame_gap=0) as master:
+            await anyio.sleep(0.05)
+            engine = master.engine
+            read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
+            assert await read_master(pty, len(REQUEST)) == REQUEST
+            assert engine._in_flight is not None
+            engine._take_over()
+            engine.close(ConnectionLost("closed"))
+            with anyio.fail_after(1), pytest.raises(ConnectionLost, match="closed"):
+                await read
