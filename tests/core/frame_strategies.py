@@ -12,7 +12,13 @@ from hypothesis import strategies as st
 from hypothesis.strategies import SearchStrategy
 
 from aiortu.core.codes import USER_DEFINED_FUNCTION_CODES, FunctionCode
-from aiortu.core.frame import encode_frame
+from aiortu.core.crc import crc16
+from aiortu.core.frame import (
+    MIN_FRAME_LENGTH,
+    encode_frame,
+    expected_request_length,
+    expected_response_length,
+)
 from aiortu.core.pdu import PDU
 from aiortu.core.pdu_serial_line import DiagnosticsRequest, DiagnosticsResponse
 
@@ -55,6 +61,22 @@ def is_predictable(pdu: PDU) -> bool:
     if isinstance(pdu, DiagnosticsRequest | DiagnosticsResponse):
         return len(pdu.data) == 2
     return True
+
+
+def has_accidental_prefix(frame: bytes) -> bool:
+    """Whether a shorter length that either layout predicts for *frame* happens to have a
+    good CRC (about one frame in 65,536 of those that can be read both ways).
+
+    A receiver that may expect both layouts (a monitor, or a slave hearing other units)
+    completes a frame at the first predicted length whose CRC checks, so it splits such a
+    frame in two: a documented limit of length-aware completion (see
+    :mod:`aiortu.core.receiver`), which tests of whole conversations leave out.
+    """
+    return any(
+        MIN_FRAME_LENGTH <= guess < len(frame) and crc16(frame[:guess]) == 0
+        for end in range(2, min(len(frame), 12) + 1)
+        for guess in (expected_request_length(frame[:end]), expected_response_length(frame[:end]))
+    )
 
 
 def _sample(pdu: PDU, unit: int, reply: bool) -> Sample:

@@ -40,7 +40,7 @@ from aiortu.core.receiver import (
 )
 from aiortu.core.timing import LineSettings
 
-from .frame_strategies import Sample, customs, requests, responses
+from .frame_strategies import Sample, customs, has_accidental_prefix, requests, responses
 
 S = ReceiverState
 E = ReceiverEvent
@@ -165,12 +165,7 @@ def false_frames(
 
 def accidental(sample: Sample) -> bool:
     """Whether a shorter predicted length of *sample* happens to have a good CRC."""
-    frame = sample.frame
-    return any(
-        MIN_FRAME_LENGTH <= g < len(frame) and crc16(frame[:g]) == 0
-        for end in range(2, min(len(frame), 12) + 1)
-        for g in guesses(frame[:end])
-    )
+    return has_accidental_prefix(sample.frame)
 
 
 # -- the transition table ------------------------------------------------------------------

@@ -22,7 +22,11 @@ Two things go beyond the timer-driven spec, as DESIGN.md explains:
   cannot be predicted. Its role says which layouts to expect: a master expects replies;
   a slave expects requests for its own units and either layout for other units, since on
   a multi-drop bus it also hears other slaves' replies (a reply and a request with the
-  same function code have different lengths, and the CRC tells which one it is).
+  same function code have different lengths, and the CRC tells which one it is). Where
+  both layouts are possible, the first predicted length whose CRC checks wins, so a frame
+  whose first bytes happen to make a good shorter frame (about one in 65,536 of the
+  frames that can be read both ways) is split in two; waiting for silence instead would
+  take the length-aware completion from every short reply.
 * It resynchronises. A buffer that fails its CRC, or outgrows the longest frame, is
   searched for a frame that starts later in it (garbage right before a good frame), and a
   frame whose CRC fails is never accepted. The search is cheap even in a flood of noise:
