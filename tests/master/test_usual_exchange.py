@@ -10,8 +10,9 @@ requests on the wire must be the same.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 
 import anyio
 import pytest
@@ -233,65 +234,67 @@ async def test_closing_the_master_fails_a_usual_exchange_in_flight() -> None:
         assert isinstance(outcome[0], ConnectionLost)
 
 
+@contextlib.asynccontextmanager
+async def _master_on_a_pty(response_timeout: float) -> AsyncIterator[tuple[Master, Pty]]:
+    """A master on one end of a pty, past its initial silence, and the other end."""
+    with open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        async with Master(stream, LINE, timeout=response_timeout, frame_gap=0) as master:
+            await anyio.sleep(0.05)
+            yield master, pty
+
+
+async def _read_on_the_wire(master: Master, pty: Pty) -> asyncio.Task[list[int]]:
+    """A read of registers 0..1 of unit 1, started as a task, its request on the wire."""
+    read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
+    assert await read_master(pty, len(REQUEST)) == REQUEST
+    assert master.engine._in_flight is not None  # its usual exchange waits
+    return read
+
+
+async def _in_the_same_pass(condition: Callable[[], bool]) -> None:
+    """Return in the loop pass in which *condition* became true. Polled, not awaited on
+    an event: this task then runs before any task that the same pass woke."""
+    with anyio.fail_after(1):
+        while not condition():  # noqa: ASYNC110
+            await asyncio.sleep(0)
+
+
 async def test_a_caller_cancelled_once_its_reply_came_leaves_it_counted() -> None:
     # The read callback has completed the caller's future, and the caller is cancelled
     # before it wakes: the transaction is over and counted, and the line is free.
-    with open_pty() as pty:
-        stream = await open_serial(pty.path, LINE)
-        async with Master(stream, LINE, timeout=1.0, frame_gap=0) as master:
-            await anyio.sleep(0.05)
-            engine = master.engine
-            read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
-            assert await read_master(pty, len(REQUEST)) == REQUEST
-            assert engine._in_flight is not None
-            pty.write(REPLY)
+    async with _master_on_a_pty(response_timeout=1.0) as (master, pty):
+        read = await _read_on_the_wire(master, pty)
+        pty.write(REPLY)
+        await _in_the_same_pass(lambda: master.engine._in_flight is None)
+        read.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await read
+        stats = master.unit_stats(1)
+        assert (stats.requests, stats.successes, stats.failures) == (1, 1, 0)
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(_play, pty, [[REPLY]])
             with anyio.fail_after(1):
-                # Polled, not awaited on an event: this task must run again in the very
-                # loop pass that the read callback completes the caller's future.
-                while engine._in_flight is not None:  # noqa: ASYNC110
-                    await asyncio.sleep(0)
-            read.cancel()
-            with pytest.raises(asyncio.CancelledError):
-                await read
-            stats = master.unit_stats(1)
-            assert (stats.requests, stats.successes, stats.failures) == (1, 1, 0)
-            async with anyio.create_task_group() as tg:
-                tg.start_soon(_play, pty, [[REPLY]])
-                with anyio.fail_after(1):
-                    assert await master.read_holding_registers(1, 0, 2) == [7, 8]
+                assert await master.read_holding_registers(1, 0, 2) == [7, 8]
 
 
 async def test_closing_the_master_fails_a_read_the_machine_took_over() -> None:
     # Another unit's frame makes the machine take the read over, in the line task; the
     # master closes at once: the caller gets ConnectionLost, not a wait forever.
-    with open_pty() as pty:
-        stream = await open_serial(pty.path, LINE)
-        async with Master(stream, LINE, timeout=5.0, frame_gap=0) as master:
-            await anyio.sleep(0.05)
-            engine = master.engine
-            read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
-            assert await read_master(pty, len(REQUEST)) == REQUEST
-            pty.write(OTHER_UNIT)
-            with anyio.fail_after(1):
-                # Polled: this task must run in the loop pass the take-over happens.
-                while engine._adopted is None:  # noqa: ASYNC110
-                    await asyncio.sleep(0)
-        with anyio.fail_after(1), pytest.raises(ConnectionLost):
-            await read
+    async with _master_on_a_pty(response_timeout=5.0) as (master, pty):
+        read = await _read_on_the_wire(master, pty)
+        pty.write(OTHER_UNIT)
+        await _in_the_same_pass(lambda: master.engine._adopted is not None)
+    with anyio.fail_after(1), pytest.raises(ConnectionLost):
+        await read
 
 
 async def test_closing_the_engine_fails_a_read_taken_over_and_not_finished() -> None:
     # The engine closes once its line task is gone. A read taken over meanwhile (its
     # timer may fire while the link closes) has nobody left to run it: close() fails it.
-    with open_pty() as pty:
-        stream = await open_serial(pty.path, LINE)
-        async with Master(stream, LINE, timeout=5.0, frame_gap=0) as master:
-            await anyio.sleep(0.05)
-            engine = master.engine
-            read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
-            assert await read_master(pty, len(REQUEST)) == REQUEST
-            assert engine._in_flight is not None
-            engine._take_over()
-            engine.close(ConnectionLost("closed"))
-            with anyio.fail_after(1), pytest.raises(ConnectionLost, match="closed"):
-                await read
+    async with _master_on_a_pty(response_timeout=5.0) as (master, pty):
+        read = await _read_on_the_wire(master, pty)
+        master.engine._take_over()
+        master.engine.close(ConnectionLost("closed"))
+        with anyio.fail_after(1), pytest.raises(ConnectionLost, match="closed"):
+            await read
