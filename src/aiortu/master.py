@@ -317,31 +317,34 @@ class Master(SerialLineFunctions):
         unit that has stopped answering sends once).
         """
         # execute(), inlined: one coroutine less per call.
-        _check_unit(unit)
         if not isinstance(pdu, Request):
             raise InvalidRequest("pdu", pdu, "a Request PDU")
         policy = self.policy
         if retries is not None and retries != policy.retries:
             policy = RetryPolicy(retries, policy.retry_on)
-        response = await self.engine.submit_request(
-            unit, pdu, self._timeout(timeout), policy, priority
-        )
+        response = await self._submit(unit, pdu, timeout, priority, policy)
         assert response is not None
         return _answer(response, pdu, unit, expected)
 
     def _submit(
-        self, unit: int, request: Request, timeout: float | None, priority: int
+        self,
+        unit: int,
+        request: Request,
+        timeout: float | None,
+        priority: int,
+        policy: RetryPolicy | None = None,
     ) -> Awaitable[Response | ExceptionPDU | None]:
-        """The engine's awaitable of *request* with the master's retry policy, the unit
-        and the timeout checked: :meth:`request` less the checks of a request made by
-        :meth:`_read_request`, for the commonest calls. An awaitable, not a coroutine: a
-        read that goes out at once is then one coroutine (the caller's) waiting on the
+        """The engine's awaitable of *request* (*policy*: the master's retry policy by
+        default), the unit and the timeout checked. An awaitable, not a coroutine: a read
+        that goes out at once is then one coroutine (the caller's) waiting on the
         engine's future."""
         # The commonest call (a unicast unit, the master's timeout) makes no further call.
         if type(unit) is not int or unit not in UNIT_RANGE:
             _check_unit(unit)  # raises, saying why
         response_timeout = self.timeout if timeout is None else self._timeout(timeout)
-        return self.engine.submit_request(unit, request, response_timeout, self.policy, priority)
+        if policy is None:
+            policy = self.policy
+        return self.engine.submit_request(unit, request, response_timeout, policy, priority)
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
         """``kind(address, count)``, made once per address and count: a poll loop reads

@@ -74,7 +74,9 @@ from aiortu.master_stats import HealthPolicy, UnitStats
 __all__ = ("HealthPolicy", "LineEngine", "UnitOffline", "UnitStats")
 
 
-_UsualExchange = tuple["asyncio.Future[Reply]", KnownRequest, int, float, RetryPolicy, int, float]
+_UsualExchange = tuple[
+    "asyncio.Future[Reply]", KnownRequest, int, float, RetryPolicy, int, float, float
+]
 
 
 class LineEngine:
@@ -114,8 +116,8 @@ class LineEngine:
         """The usual reply, handed over by the link's read callback (see Link.expect)."""
         self._in_flight: _UsualExchange | None = None
         """The usual exchange on the wire (see submit_request): the caller's future, the
-        request known, unit, response timeout, policy, priority, and when the request had
-        left the wire."""
+        request known, unit, response timeout, policy, priority, and when the request
+        began to go out and had left the wire."""
         self._timer: Any = None
         self._timer_at = math.inf
         self._adopted: Job | None = None
@@ -228,7 +230,10 @@ class LineEngine:
                     self.transactions += 1
                     deadline = end + response_timeout
                     caller = loop.create_future()
-                    self._in_flight = (caller, known, unit, response_timeout, policy, priority, end)
+                    start = end - len(frame) * link.char_time
+                    self._in_flight = (
+                        caller, known, unit, response_timeout, policy, priority, start, end
+                    )  # fmt: skip
                     self._waiter_deadline = deadline
                     if deadline < self._timer_at:
                         self._arm_timer(deadline)
@@ -242,10 +247,9 @@ class LineEngine:
         """The link's read callback found the usual reply of the usual exchange."""
         in_flight = self._in_flight
         assert in_flight is not None
-        caller, known, unit, _, _, _, sent_end = in_flight
+        caller, known, unit, _, _, _, start, _ = in_flight
         self._in_flight = None
         response = self.machine.usual_response(known, frame)
-        start = sent_end - len(known.frame) * self.link.char_time
         self.stats[unit].count_success(self.link.clock() - start)
         self._release()
         if not caller.done():  # done: cancelled, the reply is counted all the same
@@ -258,15 +262,13 @@ class LineEngine:
         in_flight = self._in_flight
         assert in_flight is not None
         self._in_flight = None
-        caller, known, unit, response_timeout, policy, priority, end = in_flight
+        caller, known, unit, response_timeout, policy, priority, start, end = in_flight
         self.link.forget_expected()
         transaction = Transaction(unit, known.request, response_timeout, policy)
-        sent = (end - len(known.frame) * self.link.char_time, end)
         self.machine.begin(transaction)
-        self.machine.sent(*sent)
+        self.machine.sent(start, end)
         job = Job(transaction, priority, next(self._sequence))
         job.caller = caller
-        job.sent = sent
         if caller.done():
             transaction.abandoned = True  # cancelled: no retries
         else:
@@ -449,50 +451,44 @@ class LineEngine:
             if not job.done:
                 job.finish(None, ConnectionLost(str(error)))
 
-    async def _exchange(self, job: Job, sent: tuple[float, float] | None = None) -> None:
+    async def _exchange(self, job: Job, on_the_wire: bool = False) -> None:
         """Run *job*'s transaction on the line; the line is the caller's meanwhile.
 
-        *sent* is for a usual exchange taken over (see :meth:`submit_request`): the
-        machine has begun the transaction and its first attempt is on the wire.
+        *on_the_wire* is for a usual exchange taken over (see :meth:`submit_request`):
+        the machine has begun the transaction and its first attempt is on the wire.
         """
         transaction = job.transaction
         machine = self.machine
         link = self.link
         stats = self.stats.get(transaction.unit) or self.unit_stats(transaction.unit)
-        if sent is None:
+        if not on_the_wire:
             stats.requests += 1
             self.transactions += 1
             machine.begin(transaction)
         try:
             while True:
-                if sent is not None:
-                    sent = None
-                    outcome = await self._wait_for_attempt(job, stats)
-                    if outcome.kind is not OutcomeKind.RETRY:
-                        break
-                    stats.count_failed_attempt(transaction)
-                    stats.retries += 1
-                    continue
-                if self._quiet_until > link.clock():
-                    await self._keep_guard()
-                frame = machine.frame
-                self._forget_arrivals()
-                wire_time = len(frame) * link.char_time
-                writes = link.writes_begun
-                # At once where the line allows it (no coroutine, nothing to cancel).
-                sent_at_once = link.send_now(frame)
-                try:
-                    end = await link.send(frame) if sent_at_once is None else sent_at_once
-                except ConnectionLost:
-                    raise
-                except BaseException:
-                    if link.writes_begun != writes:
-                        # The frame may be on its way: its reply must be waited for.
-                        start = link.last_write_start
-                        machine.sent(start, start + wire_time)
-                        self._adopt(job)
-                    raise
-                machine.sent(end - wire_time, end)
+                if not on_the_wire:
+                    if self._quiet_until > link.clock():
+                        await self._keep_guard()
+                    frame = machine.frame
+                    self._forget_arrivals()
+                    wire_time = len(frame) * link.char_time
+                    writes = link.writes_begun
+                    # At once where the line allows it (no coroutine, nothing to cancel).
+                    sent_at_once = link.send_now(frame)
+                    try:
+                        end = await link.send(frame) if sent_at_once is None else sent_at_once
+                    except ConnectionLost:
+                        raise
+                    except BaseException:
+                        if link.writes_begun != writes:
+                            # The frame may be on its way: its reply must be waited for.
+                            start = link.last_write_start
+                            machine.sent(start, start + wire_time)
+                            self._adopt(job)
+                        raise
+                    machine.sent(end - wire_time, end)
+                on_the_wire = False  # a retry sends the request again
                 outcome = await self._wait_for_attempt(job, stats)
                 if outcome.kind is not OutcomeKind.RETRY:
                     break
@@ -557,7 +553,7 @@ class LineEngine:
     async def _finish_taken_over(self, job: Job) -> None:
         """Run the rest of a usual exchange the machine took over, for its caller."""
         try:
-            await self._exchange(job, job.sent)
+            await self._exchange(job, on_the_wire=True)
         except BaseException:
             # The line task is cancelled: the master is closing.
             if not job.done:

@@ -35,7 +35,6 @@ class Job:
         "granted",
         "priority",
         "response",
-        "sent",
         "sequence",
         "transaction",
         "turn",
@@ -56,8 +55,6 @@ class Job:
         """The future of a usual exchange's caller, for a job the machine took over: the
         line task runs the job, and :meth:`finish` completes the future (see
         :meth:`~aiortu.master_engine.LineEngine.submit_request`)."""
-        self.sent: tuple[float, float] | None = None
-        """When the attempt a taken-over job begins with went out (start, end)."""
 
     def __lt__(self, other: Job) -> bool:
         return (self.priority, self.sequence) < (other.priority, other.sequence)
