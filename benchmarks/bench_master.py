@@ -50,7 +50,7 @@ import benchlib
 import aiortu
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
-from aiortu.store import Block
+from aiortu.slave._store import Block
 from aiortu.testing import VirtualBus
 
 EXPECTED = list(range(10))

@@ -89,7 +89,7 @@ async def serve_pymodbus(port: str, units: int, changing: bool = False) -> None:
 
 def _store(units: int) -> dict[int, object]:
     import aiortu
-    from aiortu.store import Block
+    from aiortu.slave._store import Block
 
     store = aiortu.MemoryStore(holding_registers=[Block(0, len(REGISTERS), REGISTERS)])
     return dict.fromkeys(range(1, units + 1), store)

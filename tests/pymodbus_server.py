@@ -1,7 +1,7 @@
 """pymodbus's RTU server with all four tables, for the interop tests.
 
 ``python pymodbus_server.py PORT`` serves unit 1 at 19200 8N2 (ptys keep no parity; see
-aiortu.testing.pty_bus) and prints ``ready`` once the port is open. Runs until killed.
+aiortu.testing._pty_bus) and prints ``ready`` once the port is open. Runs until killed.
 The initial values are :data:`COILS`, :data:`DISCRETE_INPUTS`, :data:`INPUT_REGISTERS`
 and :data:`HOLDING_REGISTERS` from protocol address 0. Tests start it with
 :func:`running`.

@@ -1,6 +1,6 @@
 """A slave for CLI tests: ``python serve_units.py PORT UNIT [UNIT ...]``.
 
-Serves each unit at 19200 8N2 (ptys keep no parity; see aiortu.testing.pty_bus): odd
+Serves each unit at 19200 8N2 (ptys keep no parity; see aiortu.testing._pty_bus): odd
 units have holding register 0 = 0x1234, even units have no holding registers, so that
 they answer the scan's probe with exception 02. Prints ``ready`` once the port is open,
 and serves until killed.

@@ -11,11 +11,11 @@ import sys
 import pytest
 
 from aiortu.cli import main
-from aiortu.cli.demo import PlainRenderer, TableRenderer, header_lines
+from aiortu.cli._demo import PlainRenderer, TableRenderer, header_lines
+from aiortu.cli._demo_devices import EnergyMeter, Reading, TemperatureController
+from aiortu.cli._demo_system import Demo
 from aiortu.core.addressing import Table
 from aiortu.core.values import Layout, decode_value
-from aiortu.testing.demo import Demo
-from aiortu.testing.demo_devices import EnergyMeter, Reading, TemperatureController
 
 pytestmark = pytest.mark.timeout(60)
 

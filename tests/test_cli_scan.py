@@ -15,7 +15,7 @@ import pytest
 
 from aiortu import MemoryStore, Slave
 from aiortu.cli import main
-from aiortu.cli.scan import (
+from aiortu.cli._scan import (
     SettingResult,
     _Progress,
     parse_units,
@@ -24,7 +24,7 @@ from aiortu.cli.scan import (
     settings_to_try,
 )
 from aiortu.core.timing import LineSettings, Parity
-from aiortu.slave_handlers import BUILTIN_HANDLERS
+from aiortu.slave._handlers import BUILTIN_HANDLERS
 from aiortu.testing import VirtualBus
 
 pytestmark = pytest.mark.timeout(60)

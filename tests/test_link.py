@@ -9,7 +9,7 @@ from aiortu.core.frame import encode_frame
 from aiortu.core.receiver import DiscardReason, FrameDiscarded, FrameReceived, Role
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost
-from aiortu.link import Link
+from aiortu.line._link import Link
 from aiortu.testing import virtual_pair
 
 H = bytes.fromhex

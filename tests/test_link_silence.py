@@ -10,13 +10,13 @@ import anyio
 import anyio.abc
 import pytest
 
-import aiortu.link
+import aiortu.line._link
 from aiortu.core.frame import encode_frame
 from aiortu.core.receiver import FrameReceived
 from aiortu.core.timing import LineSettings
-from aiortu.link import Link
+from aiortu.line._link import Link
+from aiortu.line._wake_timer import WakeTimer, _timerfd_libc
 from aiortu.testing import virtual_pair
-from aiortu.wake_timer import WakeTimer, _timerfd_libc
 
 REPLY = encode_frame(0x11, bytes.fromhex("03 06 AE 41 56 52 43 40"))
 FAST = LineSettings(115200)
@@ -128,7 +128,7 @@ async def test_a_cancelled_wait_leaves_the_timer_disarmed() -> None:
 async def test_falls_back_to_the_loop_timers_without_the_precise_timer(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(aiortu.link, "create_wake_timer", lambda on_fire: None)
+    monkeypatch.setattr(aiortu.line._link, "create_wake_timer", lambda on_fire: None)
     near, far = virtual_pair()
     async with Link(near, FAST, frame_gap=0) as link:
         await _settle()

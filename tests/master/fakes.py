@@ -68,9 +68,9 @@ from aiortu.core.pdu_serial_line import (
 from aiortu.core.receiver import FrameReceived, ReceiverState, Role
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost
-from aiortu.link import Link
-from aiortu.master import Master
-from aiortu.testing.virtual_bus import VirtualBus
+from aiortu.line._link import Link
+from aiortu.master._client import Master
+from aiortu.testing._virtual_bus import VirtualBus
 
 __all__ = (
     "FakeSlave",

@@ -16,7 +16,7 @@ from aiortu.core.codes import ExceptionCode
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request
 from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
-from aiortu.master_engine import UnitOffline
+from aiortu.master._engine import UnitOffline
 
 from .fakes import FakeSlave, answer, line, register_value, silent, standard_reply
 

@@ -11,12 +11,12 @@ import pytest
 
 import aiortu
 from aiortu import Point, Poller
-from aiortu.cli.poll import TablePrinter
+from aiortu.cli._poll import TablePrinter
 from aiortu.core.addressing import Table
 from aiortu.core.pdu_bits import ReadCoilsRequest, ReadDiscreteInputsRequest
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
 from aiortu.core.values import ValueType, decode_value
-from aiortu.poller import CycleReport, Sample, UnitSkipped
+from aiortu.master._poller import CycleReport, Sample, UnitSkipped
 
 from .fakes import coil_value, line, register_value
 

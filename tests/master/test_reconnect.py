@@ -13,8 +13,8 @@ import pytest
 
 import aiortu
 from aiortu.core.pdu import Request
-from aiortu.testing.pty_bus import make_raw
-from aiortu.transport.fd import FileDescriptorStream
+from aiortu.testing._pty_bus import make_raw
+from aiortu.transport._fd import FileDescriptorStream
 
 from .fakes import FakeSlave, answer, register_value
 

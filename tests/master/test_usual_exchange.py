@@ -21,8 +21,8 @@ import aiortu
 from aiortu.core.crc import crc16
 from aiortu.core.master_machine import MasterState
 from aiortu.errors import ConnectionLost
-from aiortu.master import Master
-from aiortu.transport.serial import open_serial
+from aiortu.master._client import Master
+from aiortu.transport._serial import open_serial
 from tests.transport.ptys import LINE, Pty, open_pty, read_master
 
 TIMEOUT = 0.15

@@ -10,9 +10,9 @@ import anyio
 
 from aiortu.core.data_model import DataStore
 from aiortu.core.frame import CANNOT_KNOW, decode_frame, encode_frame, expected_response_length
-from aiortu.slave import Slave
-from aiortu.store import Block, MemoryStore
-from aiortu.testing.virtual_bus import VirtualEndpoint, virtual_pair
+from aiortu.slave._server import Slave
+from aiortu.slave._store import Block, MemoryStore
+from aiortu.testing._virtual_bus import VirtualEndpoint, virtual_pair
 
 __all__ = ("UNIT", "RawMaster", "example_store", "slave_line")
 

@@ -21,10 +21,10 @@ import pytest
 import aiortu
 from aiortu.core.frame import CANNOT_KNOW, encode_frame, expected_response_length
 from aiortu.core.receiver import FrameReceived
-from aiortu.slave import Slave, _Taken
-from aiortu.slave_handlers import FAST_PATHS
-from aiortu.store import Table
-from aiortu.testing.virtual_bus import virtual_pair
+from aiortu.slave._handlers import FAST_PATHS
+from aiortu.slave._server import Slave, _Taken
+from aiortu.slave._store import Table
+from aiortu.testing._virtual_bus import virtual_pair
 
 from .helpers import UNIT, example_store, slave_line
 

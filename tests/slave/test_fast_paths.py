@@ -5,8 +5,8 @@ from __future__ import annotations
 import random
 
 from aiortu.core.codes import FunctionCode
-from aiortu.slave_handlers import FAST_PATHS
-from aiortu.store import Block, MemoryStore, Table
+from aiortu.slave._handlers import FAST_PATHS
+from aiortu.slave._store import Block, MemoryStore, Table
 
 from .helpers import UNIT, slave_line
 

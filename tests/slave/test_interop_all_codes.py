@@ -12,9 +12,9 @@ import anyio
 import pytest
 
 from aiortu.core.timing import LineSettings
-from aiortu.slave import Slave
-from aiortu.store import MemoryStore, ServerId, Table
-from aiortu.transport.fd import FileDescriptorStream
+from aiortu.slave._server import Slave
+from aiortu.slave._store import MemoryStore, ServerId, Table
+from aiortu.transport._fd import FileDescriptorStream
 
 pymodbus_client = pytest.importorskip("pymodbus.client")
 file_message = pytest.importorskip("pymodbus.pdu.file_message")

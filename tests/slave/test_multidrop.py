@@ -16,7 +16,7 @@ import pytest
 import aiortu
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import pack_registers, unpack_registers
-from aiortu.store import MemoryStore, Table
+from aiortu.slave._store import MemoryStore, Table
 
 from .helpers import slave_line
 

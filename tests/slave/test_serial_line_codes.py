@@ -8,7 +8,7 @@ import pytest
 
 from aiortu.core.comm_events import receive_event, send_event
 from aiortu.core.frame import encode_frame
-from aiortu.store import MemoryStore, ServerId, Table
+from aiortu.slave._store import MemoryStore, ServerId, Table
 
 from .helpers import UNIT, example_store, slave_line
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from aiortu.slave_config import ConfigError, load_config, parse_config
-from aiortu.store import Table
+from aiortu.slave._config import ConfigError, load_config, parse_config
+from aiortu.slave._store import Table
 
 EXAMPLE = Path(__file__).parents[2] / "examples" / "devices.toml"
 

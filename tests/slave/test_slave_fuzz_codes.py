@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from aiortu.core.crc import crc16
 from aiortu.core.frame import decode_frame, encode_frame
-from aiortu.store import MemoryStore, ServerId
+from aiortu.slave._store import MemoryStore, ServerId
 
 from .helpers import UNIT, slave_line
 

@@ -12,9 +12,9 @@ import pytest
 import aiortu
 from aiortu.core.frame import encode_frame
 from aiortu.core.timing import LineSettings
-from aiortu.slave import Slave
-from aiortu.store import MemoryStore, Table
-from aiortu.transport.fd import FileDescriptorStream
+from aiortu.slave._server import Slave
+from aiortu.slave._store import MemoryStore, Table
+from aiortu.transport._fd import FileDescriptorStream
 
 pymodbus_client = pytest.importorskip("pymodbus.client")
 

@@ -11,7 +11,7 @@ import serial
 
 from aiortu.core.timing import LineSettings
 from aiortu.testing import PtyBus
-from aiortu.transport.fd import FileDescriptorStream
+from aiortu.transport._fd import FileDescriptorStream
 
 pytestmark = pytest.mark.timeout(20)
 

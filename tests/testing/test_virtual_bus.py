@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from aiortu.core.timing import LineSettings
 from aiortu.errors import InvalidValue
+from aiortu.line._wake_timer import WakeTimer
 from aiortu.testing import FaultPlan, VirtualBus, virtual_pair
-from aiortu.wake_timer import WakeTimer
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -7,8 +7,8 @@ import os
 import anyio
 import pytest
 
-from aiortu.testing.pty_bus import make_raw
-from aiortu.transport.fd import FileDescriptorStream
+from aiortu.testing._pty_bus import make_raw
+from aiortu.transport._fd import FileDescriptorStream
 
 pytestmark = pytest.mark.timeout(10)
 

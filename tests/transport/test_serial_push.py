@@ -11,9 +11,9 @@ import aiortu
 from aiortu.core.crc import crc16
 from aiortu.core.receiver import DiscardReason, FrameDiscarded, FrameReceived, Role
 from aiortu.errors import ConnectionLost, ResponseTimeout
-from aiortu.link import Link
-from aiortu.master import Master
-from aiortu.transport.serial import open_serial
+from aiortu.line._link import Link
+from aiortu.master._client import Master
+from aiortu.transport._serial import open_serial
 from tests.transport.ptys import LINE, open_pty, read_master
 
 REPLY = bytes.fromhex("1103060ae10000000000")  # unit 17, FC 03, 3 registers, no CRC yet

@@ -11,7 +11,7 @@ import pytest
 from anyio.abc import SocketAttribute, SocketListener, SocketStream
 
 from aiortu.errors import InvalidValue, PortNotFound
-from aiortu.transport.tcp import format_tcp_url, open_rtu_over_tcp
+from aiortu.transport._tcp import format_tcp_url, open_rtu_over_tcp
 
 REQUEST = bytes.fromhex("1103006b00037687")
 REPLY = bytes.fromhex("1103060ae10000000000")

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import pkgutil
 import sys
 from collections.abc import Callable
 from typing import NoReturn, TypeAlias
@@ -44,12 +43,12 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+_COMMANDS = ("demo", "monitor", "poll", "read", "scan", "serve", "virtual_bus", "write")
+"""The subcommands, each a private module ``_NAME`` with a ``register(subparsers)``."""
+
+
 def _command_modules() -> list[str]:
-    return sorted(
-        f"{__name__}.{info.name}"
-        for info in pkgutil.iter_modules(__path__)
-        if not info.name.startswith("_")
-    )
+    return [f"{__name__}._{name}" for name in _COMMANDS]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -32,7 +32,7 @@ from aiortu.errors import (
     PortError,
     ResponseTimeout,
 )
-from aiortu.master import Master, open_master
+from aiortu.master._client import Master, open_master
 
 __all__ = (
     "EXIT_CODES_HELP",

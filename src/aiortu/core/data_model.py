@@ -20,7 +20,7 @@ async store, for example one that proxies another device through a master
 sync store pays nothing for that possibility.
 
 These definitions live in the core because both the slave and the stores
-(:mod:`aiortu.store`, where users import them from) depend on them.
+(:mod:`aiortu.slave._store`, where users import them from) depend on them.
 """
 
 from __future__ import annotations

@@ -302,7 +302,7 @@ class MasterMachine:
         """The first bytes and the length of the usual reply to the transaction in
         progress, where it has one (a register read's: unit, function code, byte count);
         else None. A link can spot that frame without decoding it
-        (:meth:`aiortu.link.Link.expect`) and hand it to :meth:`take_usual_reply`."""
+        (:meth:`aiortu.line._link.Link.expect`) and hand it to :meth:`take_usual_reply`."""
         return (self._entry or self._known()).reply_shape
 
     def _known(self) -> KnownRequest:
@@ -358,7 +358,7 @@ class MasterMachine:
         A poll loop reads the same block again and again and often gets the same bytes
         back. A frame equal to :attr:`KnownRequest.last_reply` holds the same response,
         so it is not decoded again (and a link need not check its CRC again: see
-        :meth:`aiortu.link.Link.expect`). Responses are immutable, so sharing one is safe.
+        :meth:`aiortu.line._link.Link.expect`). Responses are immutable, so sharing one is safe.
         """
         if frame == known.last_reply:
             response = known.last_response

@@ -3,7 +3,7 @@ unit (:class:`Transaction`), how its failed attempts are retried (:class:`RetryP
 and the machine's answer to each event (:class:`Outcome`).
 
 Sans-IO, like :mod:`aiortu.core.master_machine`, which drives these; the async master
-(:mod:`aiortu.master_engine`) makes a :class:`Transaction` per request and acts on each
+(:mod:`aiortu.master._engine`) makes a :class:`Transaction` per request and acts on each
 :class:`Outcome`.
 """
 

@@ -12,9 +12,9 @@ See ``docs/testing.md``.
 
 from __future__ import annotations
 
-from aiortu.testing.faults import FaultedChunk, FaultInjector, FaultPlan, FaultStats
-from aiortu.testing.pty_bus import PtyBus
-from aiortu.testing.virtual_bus import TraceEntry, VirtualBus, VirtualEndpoint, virtual_pair
+from aiortu.testing._faults import FaultedChunk, FaultInjector, FaultPlan, FaultStats
+from aiortu.testing._pty_bus import PtyBus
+from aiortu.testing._virtual_bus import TraceEntry, VirtualBus, VirtualEndpoint, virtual_pair
 
 __all__ = (
     "FaultInjector",

@@ -27,9 +27,9 @@ from typing import Any, Protocol
 
 import pytest
 
-from aiortu.testing.pty_bus import PtyBus
-from aiortu.testing.virtual_bus import VirtualBus, VirtualEndpoint
-from aiortu.testing.virtual_bus import virtual_pair as make_virtual_pair
+from aiortu.testing._pty_bus import PtyBus
+from aiortu.testing._virtual_bus import VirtualBus, VirtualEndpoint
+from aiortu.testing._virtual_bus import virtual_pair as make_virtual_pair
 
 __all__ = ("PtyBusFactory", "VirtualBusFactory", "pty_bus", "virtual_bus", "virtual_pair")
 

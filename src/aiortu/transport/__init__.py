@@ -2,7 +2,7 @@
 
 Every transport is an :class:`anyio.abc.ByteStream`, so the link, the master and the
 slave take any of them. :func:`open_stream` opens one from a port name as users write it:
-a serial device path, or ``rtu+tcp://host:port`` (see :mod:`aiortu.transport.url`).
+a serial device path, or ``rtu+tcp://host:port`` (see :mod:`aiortu.transport._url`).
 Opening errors are :class:`~aiortu.errors.PortError` subclasses naming the port; see
 ``docs/transports.md`` for what each means and what to do about it.
 """
@@ -14,11 +14,11 @@ from typing import Any
 from anyio.abc import ByteStream
 
 from aiortu.core.timing import LineSettings
-from aiortu.transport.echo import LocalEchoFilter
-from aiortu.transport.fd import FileDescriptorStream
-from aiortu.transport.serial import RS485Options, SerialAttribute, SerialStream, open_serial
-from aiortu.transport.tcp import open_rtu_over_tcp
-from aiortu.transport.url import (
+from aiortu.transport._echo import LocalEchoFilter
+from aiortu.transport._fd import FileDescriptorStream
+from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
+from aiortu.transport._tcp import open_rtu_over_tcp
+from aiortu.transport._url import (
     PortAddress,
     SerialAddress,
     TcpAddress,

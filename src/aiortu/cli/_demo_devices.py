@@ -1,5 +1,5 @@
-"""The simulated devices of ``aiortu demo`` (see :mod:`aiortu.testing.demo`): each a
-:class:`~aiortu.store.MemoryStore` that a :class:`~aiortu.slave.Slave` serves, the
+"""The simulated devices of ``aiortu demo`` (see :mod:`aiortu.cli._demo_system`): each a
+:class:`~aiortu.slave._store.MemoryStore` that a :class:`~aiortu.slave._server.Slave` serves, the
 :class:`Reading`\\ s a master polls from it, and a simulation step that moves its values.
 
 - :class:`EnergyMeter`: float32 readings in CDAB word order in input registers: voltage
@@ -20,8 +20,8 @@ from typing import Protocol
 
 from aiortu.core.addressing import Reference, Table, format_reference
 from aiortu.core.values import Layout, ValueType, encode_value
-from aiortu.poller import Point
-from aiortu.store import Block, Change, MemoryStore
+from aiortu.master._poller import Point
+from aiortu.slave._store import Block, Change, MemoryStore
 
 __all__ = (
     "DigitalIO",
@@ -40,7 +40,7 @@ Value = bool | int | float
 
 @dataclass(frozen=True, slots=True)
 class Reading:
-    """One value the demo polls and shows: its :class:`~aiortu.poller.Point`, a *label*,
+    """One value the demo polls and shows: its :class:`~aiortu.master._poller.Point`, a *label*,
     a unit of measure and how many *digits* after the point to show."""
 
     point: Point
@@ -65,7 +65,7 @@ class Reading:
 
 class SimulatedDevice(Protocol):
     """What the demo needs of a simulated device: its unit address, names, the store a
-    :class:`~aiortu.slave.Slave` serves, the readings to poll, and a simulation step."""
+    :class:`~aiortu.slave._server.Slave` serves, the readings to poll, and a simulation step."""
 
     unit: int
     title: str

@@ -15,7 +15,7 @@ which decides what the spec says: frames for other units are dropped and counted
 with a bad CRC never reach it (the link discards and counts them), broadcasts are
 executed by every unit and never answered, and exceptions come in the spec's order
 (01, 03, 02, 04). A request is dispatched by function code to a handler (see
-:mod:`aiortu.slave_handlers`); users register their own with :meth:`Slave.set_handler`,
+:mod:`aiortu.slave._handlers`); users register their own with :meth:`Slave.set_handler`,
 including for the user-defined codes 65-72 and 100-110, which arrive as
 :class:`~aiortu.core.pdu.RawPDU`. A handler that raises
 :class:`~aiortu.errors.ExceptionResponse` answers with its code; any other error answers
@@ -23,9 +23,9 @@ including for the user-defined codes 65-72 and 100-110, which arrive as
 silence on the line (t3.5 by default; the link keeps it).
 
 Beyond function codes: :meth:`Slave.route` serves an address range of one table with a
-function (see :mod:`aiortu.slave_routes`); :meth:`Slave.before_request` and
+function (see :mod:`aiortu.slave._routes`); :meth:`Slave.before_request` and
 :meth:`Slave.after_request` add hooks around every request; a handler or hook that
-returns a :class:`~aiortu.slave_handlers.Reply` answers late, as another unit, or not at
+returns a :class:`~aiortu.slave._handlers.Reply` answers late, as another unit, or not at
 all, to test masters. *trace* sees every frame received and sent.
 """
 
@@ -50,8 +50,8 @@ from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
 from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine, SlaveState
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue, MalformedPDU
-from aiortu.link import Link, LinkEvent
-from aiortu.slave_handlers import (
+from aiortu.line._link import Link, LinkEvent
+from aiortu.slave._handlers import (
     BUILTIN_HANDLERS,
     FAST_PATHS,
     Answer,
@@ -61,8 +61,8 @@ from aiortu.slave_handlers import (
     Reply,
     RequestContext,
 )
-from aiortu.slave_routes import RangeHandler, RoutedStore
-from aiortu.store import MemoryStore
+from aiortu.slave._routes import RangeHandler, RoutedStore
+from aiortu.slave._store import MemoryStore
 from aiortu.transport import open_stream
 
 __all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback", "serve")
@@ -71,7 +71,7 @@ _log = logging.getLogger(__name__)
 
 BeforeHook = Callable[[Any, RequestContext], Answer]
 """Called before the handler with (request, context): ``None`` goes on to the handler, a
-response or :class:`~aiortu.slave_handlers.Reply` answers instead of it, and raising
+response or :class:`~aiortu.slave._handlers.Reply` answers instead of it, and raising
 :class:`~aiortu.errors.ExceptionResponse` refuses the request. May be async."""
 
 AfterHook = Callable[[Any, RequestContext, HandlerResult], Answer]
@@ -176,7 +176,7 @@ class Slave:
 
         The handler is called as ``handler(request, context)`` with the decoded request
         (a :class:`~aiortu.core.pdu.RawPDU` for codes without a class) and a
-        :class:`~aiortu.slave_handlers.RequestContext`; it returns the response PDU, or
+        :class:`~aiortu.slave._handlers.RequestContext`; it returns the response PDU, or
         ``None`` to send nothing, and may be a coroutine function.
         """
         if function_code not in _FUNCTION_CODE_RANGE:
@@ -206,7 +206,7 @@ class Slave:
     ) -> None:
         """Serve *addresses* of *table* with *handler* on *units* (default: every unit).
 
-        See :mod:`aiortu.slave_routes`. A later route wins where routes overlap.
+        See :mod:`aiortu.slave._routes`. A later route wins where routes overlap.
         """
         table = Table(table)
         for unit in self.units if units is None else units:

@@ -1,6 +1,6 @@
 """``aiortu serve``: simulate the devices a TOML file describes on a serial port.
 
-Reads the description (see :mod:`aiortu.slave_config`), opens the port, and serves the
+Reads the description (see :mod:`aiortu.slave._config`), opens the port, and serves the
 units until SIGINT or SIGTERM (exit 0). A bad file is one line on stderr naming the file,
 the key and the problem (exit 2); a port that cannot be opened is one line (exit 1).
 ``--trace`` logs every frame on stderr, in hex, with its meaning.
@@ -20,9 +20,9 @@ from aiortu.cli import CommandFailed, Subparsers
 from aiortu.cli._arguments import seconds_or_zero
 from aiortu.core.bus_decoder import describe_frame
 from aiortu.errors import PortError
-from aiortu.slave import serve
-from aiortu.slave_config import ConfigError, load_config
-from aiortu.store import MemoryStore
+from aiortu.slave._config import ConfigError, load_config
+from aiortu.slave._server import serve
+from aiortu.slave._store import MemoryStore
 
 __all__ = ("register", "run")
 

@@ -1,6 +1,6 @@
 """``aiortu demo``: three simulated devices on an in-memory bus, polled live.
 
-Runs :class:`aiortu.testing.demo.Demo` (no ports, no hardware) and shows what the poller
+Runs :class:`aiortu.cli._demo_system.Demo` (no ports, no hardware) and shows what the poller
 reads: on a terminal, a table redrawn in place after every poll cycle; otherwise (a pipe,
 a file) plain lines, a block a second plus one line per event. Stops after ``--duration``
 seconds, or at SIGINT (Ctrl-C) or SIGTERM, and exits 0.
@@ -22,8 +22,8 @@ import anyio
 
 from aiortu.cli import Subparsers
 from aiortu.cli._arguments import positive_int, seconds
+from aiortu.cli._demo_system import Demo, DeviceView, ReadingView, Snapshot
 from aiortu.core.addressing import Table
-from aiortu.testing.demo import Demo, DeviceView, ReadingView, Snapshot
 
 __all__ = ("PlainRenderer", "TableRenderer", "header_lines", "register", "run")
 

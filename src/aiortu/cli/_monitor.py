@@ -28,7 +28,7 @@ from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
 from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, PortError
-from aiortu.link import Link
+from aiortu.line._link import Link
 from aiortu.transport import open_stream
 
 __all__ = ("FramePrinter", "register", "run")

@@ -1,9 +1,9 @@
-"""A small simulated plant on an in-memory bus, polled by a :class:`~aiortu.poller.Poller`.
+"""A small simulated plant on an in-memory bus, polled by a :class:`~aiortu.master._poller.Poller`.
 
 This is what ``aiortu demo`` shows, and a worked example of the whole stack: three
-devices, each an :class:`~aiortu.slave.Slave` over a :class:`~aiortu.store.MemoryStore`
+devices, each an :class:`~aiortu.slave.Slave` over a :class:`~aiortu.slave.MemoryStore`
 on its own drop of a four-port :class:`~aiortu.testing.VirtualBus` paced at the baud
-rate, and a :class:`~aiortu.master.Master` on the fourth drop that polls typed points
+rate, and a :class:`~aiortu.master._client.Master` on the fourth drop that polls typed points
 with a Poller and writes a new setpoint now and then::
 
     async with Demo(baudrate=19200, seed=1) as demo:
@@ -11,7 +11,7 @@ with a Poller and writes a new setpoint now and then::
             snapshot = await demo.next_snapshot()
             print(snapshot.elapsed, snapshot.value("controller.process_value"))
 
-The devices (unit address, register map; see :mod:`aiortu.testing.demo_devices`):
+The devices (unit address, register map; see :mod:`aiortu.cli._demo_devices`):
 
 - unit 1, :class:`EnergyMeter`: float32 readings in CDAB word order in input registers:
   voltage (30001), current (30007), power (30013) and energy (30343), moving as a
@@ -45,12 +45,7 @@ from typing import Self
 
 import anyio
 
-from aiortu.core.timing import LineSettings
-from aiortu.errors import InvalidValue, ModbusError
-from aiortu.master import Master, UnitStats
-from aiortu.poller import CycleReport, CycleStats, Point, Poller, UnitHealth
-from aiortu.slave import Slave
-from aiortu.testing.demo_devices import (
+from aiortu.cli._demo_devices import (
     DigitalIO,
     EnergyMeter,
     Reading,
@@ -59,7 +54,12 @@ from aiortu.testing.demo_devices import (
     Value,
     to_tenths,
 )
-from aiortu.testing.virtual_bus import VirtualBus
+from aiortu.core.timing import LineSettings
+from aiortu.errors import InvalidValue, ModbusError
+from aiortu.master._client import Master, UnitStats
+from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, UnitHealth
+from aiortu.slave._server import Slave
+from aiortu.testing._virtual_bus import VirtualBus
 
 __all__ = ("Demo", "DemoEvent", "DeviceView", "ReadingView", "Snapshot")
 

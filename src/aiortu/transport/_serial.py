@@ -7,14 +7,14 @@ slave can use like any other stream.
 
 **asyncio only.** pyserial-asyncio-fast drives the port through the asyncio event loop, so
 this transport runs on anyio's asyncio backend and nowhere else; under trio, use RTU over
-TCP or a pty :class:`~aiortu.transport.fd.FileDescriptorStream` instead.
+TCP or a pty :class:`~aiortu.transport._fd.FileDescriptorStream` instead.
 
 pyserial opens, configures (RS-485 mode included) and closes the port; the bytes go
 through the port's file descriptor directly, one non-blocking ``read`` per readiness
 event and one ``write`` per frame (pyserial's own ``read`` adds a ``select`` before and
 after each read), with the transport buffering only what the driver does not take at
 once. :meth:`SerialStream.set_receiver` hands received bytes straight from the event
-loop's read callback to a consumer (the :class:`~aiortu.link.Link` uses it), with no task
+loop's read callback to a consumer (the :class:`~aiortu.line._link.Link` uses it), with no task
 wake-up per chunk.
 
 Errors while opening are :class:`~aiortu.errors.PortError` subclasses that name the port
@@ -58,7 +58,7 @@ from aiortu.errors import (
     PortPermissionDenied,
     UnsupportedSettings,
 )
-from aiortu.transport.echo import LocalEchoFilter
+from aiortu.transport._echo import LocalEchoFilter
 
 __all__ = ("RS485Options", "SerialAttribute", "SerialStream", "open_serial")
 
@@ -340,7 +340,7 @@ class SerialStream(ByteStream):
         Bytes already kept go to *receiver* at once. *on_lost* is called once the port has
         failed or closed (at once if it already has); :meth:`receive` then raises the
         error. While a receiver is set, nothing is left for :meth:`receive` to return.
-        This is how a :class:`~aiortu.link.Link` reads the port without a task wake-up per
+        This is how a :class:`~aiortu.line._link.Link` reads the port without a task wake-up per
         chunk.
         """
         protocol = self._protocol
@@ -386,7 +386,7 @@ class SerialStream(ByteStream):
         still wait in the transport; :meth:`send` then says why or waits its turn. True
         means the transport has the bytes: the driver took them, or the few it could not
         take yet follow as soon as it can (a failure there closes the port, as for
-        :meth:`send`). A :class:`~aiortu.link.Link` writes its frames this way, in the
+        :meth:`send`). A :class:`~aiortu.line._link.Link` writes its frames this way, in the
         loop iteration that decided to send them.
         """
         protocol = self._protocol
@@ -594,7 +594,7 @@ async def open_serial(
     *exclusive* locks the port (``flock``) so that a second program using the same
     convention gets :class:`~aiortu.errors.PortBusy` instead of stealing bytes. *rs485*
     turns on the driver's RS-485 mode. *local_echo* strips the echo of our own
-    transmissions that some RS-485 adapters return (see :mod:`aiortu.transport.echo` for
+    transmissions that some RS-485 adapters return (see :mod:`aiortu.transport._echo` for
     what happens when the echo does not match).
 
     Raises :class:`~aiortu.errors.PortNotFound`, :class:`~aiortu.errors.PortBusy`,

@@ -34,7 +34,7 @@ from aiortu.core.addressing import Reference, format_reference
 from aiortu.core.poll_plan import Point
 from aiortu.core.values import Layout, ValueType
 from aiortu.errors import InvalidValue
-from aiortu.poller import CycleReport, Poller, Sample, UnitHealth
+from aiortu.master._poller import CycleReport, Poller, Sample, UnitHealth
 
 __all__ = ("TablePrinter", "parse_point", "points_from_args", "register", "run")
 

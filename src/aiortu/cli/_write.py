@@ -22,7 +22,7 @@ from aiortu.cli._master import (
     positive_int,
     run_master,
 )
-from aiortu.cli.read import print_values, target
+from aiortu.cli._read import print_values, target
 from aiortu.core.addressing import Table
 from aiortu.errors import InvalidValue
 

@@ -15,8 +15,8 @@ import anyio
 from aiortu.cli import CommandFailed, Subparsers
 from aiortu.cli._arguments import positive_int, probability, seconds_or_zero
 from aiortu.core.timing import LineSettings
-from aiortu.testing.faults import FaultPlan
-from aiortu.testing.pty_bus import PtyBus
+from aiortu.testing._faults import FaultPlan
+from aiortu.testing._pty_bus import PtyBus
 
 __all__ = ("register", "run")
 

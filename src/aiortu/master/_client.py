@@ -13,9 +13,9 @@ of coroutines.
         await master.broadcast.write_register(0x10, 7)
 
 :class:`Master` takes any :class:`anyio.abc.ByteStream`; :func:`open_master` opens one
-from a port name or URL first. The line engine lives in :mod:`aiortu.master_engine`, the
+from a port name or URL first. The line engine lives in :mod:`aiortu.master._engine`, the
 state machine in :mod:`aiortu.core.master_machine`, the per-unit and broadcast handles in
-:mod:`aiortu.master_handles`.
+:mod:`aiortu.master._handles`.
 
 Who runs a transaction. The line is owned by one transaction at a time, and that
 transaction runs in its caller's task: on an idle line a call sends its request and
@@ -63,11 +63,11 @@ from aiortu.core.pdu_registers import (
 from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
-from aiortu.link import Link
-from aiortu.master_connection import LineConnection, ReconnectPolicy, StreamOpener
-from aiortu.master_engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
-from aiortu.master_handles import BroadcastHandle, UnitHandle
-from aiortu.master_serial import SerialLineFunctions
+from aiortu.line._link import Link
+from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
+from aiortu.master._engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
+from aiortu.master._handles import BroadcastHandle, UnitHandle
+from aiortu.master._serial_line import SerialLineFunctions
 
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
 
@@ -119,7 +119,7 @@ class Master(SerialLineFunctions):
     :class:`~aiortu.errors.UnitOffline` except one probe every *probe_interval*
     seconds. *timing* is the receiver's t1.5 mode.
 
-    Reconnecting (see :mod:`aiortu.master_connection`): when the stream fails, the
+    Reconnecting (see :mod:`aiortu.master._connection`): when the stream fails, the
     request in flight and the queued ones raise :class:`~aiortu.errors.ConnectionLost`.
     A master given only a stream cannot reopen it and stays failed. Given an *opener*
     (an async function returning a new stream for the same port; :func:`open_master`
@@ -249,7 +249,7 @@ class Master(SerialLineFunctions):
 
     @property
     def statistics(self) -> Mapping[int, UnitStats]:
-        """:class:`~aiortu.master_engine.UnitStats` by unit address, for units used so far."""
+        """:class:`~aiortu.master._engine.UnitStats` by unit address, for units used so far."""
         return self.engine.stats
 
     def unit_stats(self, unit: int) -> UnitStats:

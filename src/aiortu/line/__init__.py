@@ -1,0 +1,13 @@
+"""One serial line: a byte stream pumped through the receiver with a clock.
+
+The master and the slave are built on :class:`Link`; users rarely need it directly,
+except to watch a line (``role=Role.MONITOR``). :class:`WakeTimer` ends a wait at its
+time rather than on the event loop's next whole millisecond.
+"""
+
+from __future__ import annotations
+
+from aiortu.line._link import Link, LinkEvent, LinkListener
+from aiortu.line._wake_timer import WakeTimer, create_wake_timer
+
+__all__ = ("Link", "LinkEvent", "LinkListener", "WakeTimer", "create_wake_timer")

@@ -1,0 +1,33 @@
+"""The async Modbus RTU master: one line, one transaction at a time, shared by any number
+of coroutines; handles bound to one unit; a poller that reads points in cycles.
+
+:class:`Master` takes any :class:`anyio.abc.ByteStream`; :func:`open_master` opens one
+from a port name or URL first. See ``docs/master.md``.
+"""
+
+from __future__ import annotations
+
+from aiortu.errors import UnitOffline, UnitSkipped
+from aiortu.master._client import Master, open_master
+from aiortu.master._connection import ReconnectPolicy
+from aiortu.master._handles import BroadcastHandle, UnitHandle
+from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
+from aiortu.master._stats import HealthPolicy, UnitStats
+
+__all__ = (
+    "BroadcastHandle",
+    "CycleReport",
+    "CycleStats",
+    "HealthPolicy",
+    "Master",
+    "Point",
+    "Poller",
+    "ReconnectPolicy",
+    "Sample",
+    "UnitHandle",
+    "UnitHealth",
+    "UnitOffline",
+    "UnitSkipped",
+    "UnitStats",
+    "open_master",
+)

@@ -1,0 +1,135 @@
+"""Keeping a master's line up: serve the line on a link, reopen the port when it dies.
+
+A USB serial adapter can vanish under a running program. :class:`LineConnection` runs the
+master's :class:`~aiortu.master._engine.LineEngine` on a :class:`~aiortu.line._link.Link`; when
+the link fails, the request in flight and those queued fail with
+:class:`~aiortu.errors.ConnectionLost`, and then:
+
+- without an *opener* (a :class:`~aiortu.master._client.Master` given a bare stream) or with
+  reconnecting off, the master stays failed: every later request raises ConnectionLost;
+- with one (``open_master`` passes one that opens the same port with the same settings),
+  the port is reopened with exponential backoff, from ``delay[0]`` doubling up to
+  ``delay[1]`` seconds, until it comes back. Meanwhile requests wait for it within their
+  own timeout and raise ConnectionLost if it is not back by then, or at once with
+  ``fail_fast``. Once it is back, requests go out as before; unit health and statistics
+  are kept across the reconnect.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+
+import anyio
+import anyio.abc
+
+from aiortu.errors import ConnectionLost, InvalidValue, ModbusError
+from aiortu.line._link import Link
+from aiortu.master._engine import LineEngine
+
+__all__ = ("LineConnection", "ReconnectPolicy", "StreamOpener")
+
+_log = logging.getLogger(__name__)
+
+StreamOpener = Callable[[], Awaitable[anyio.abc.ByteStream]]
+"""An async function that opens the line's byte stream again (the same port and settings)."""
+
+
+@dataclass(frozen=True, slots=True)
+class ReconnectPolicy:
+    """Whether and how a master reopens its port (see the module docstring).
+
+    *delay* is ``(first, longest)``: seconds before the first attempt to reopen, doubled
+    after each failed attempt up to *longest*. With *fail_fast*, requests made while the
+    port is down raise :class:`~aiortu.errors.ConnectionLost` at once instead of waiting.
+    """
+
+    enabled: bool = True
+    delay: tuple[float, float] = (0.1, 5.0)
+    fail_fast: bool = False
+
+    def __post_init__(self) -> None:
+        first, longest = self.delay
+        if not 0 < first <= longest:
+            raise InvalidValue(
+                "reconnect_delay", self.delay, "(first, longest), 0 < first <= longest"
+            )
+
+
+class LineConnection:
+    """Runs *engine* on *link*, and on links over streams from *opener* after it fails.
+
+    *make_link* wraps a freshly opened stream in a link with the master's settings.
+    Counters: :attr:`disconnects`, :attr:`reconnects`, :attr:`failed_attempts`.
+    """
+
+    def __init__(
+        self,
+        engine: LineEngine,
+        link: Link,
+        make_link: Callable[[anyio.abc.ByteStream], Link],
+        opener: StreamOpener | None = None,
+        policy: ReconnectPolicy | None = None,
+    ) -> None:
+        self.engine = engine
+        self.link = link
+        """The current link (a new one after each reconnect)."""
+        self.policy = policy if policy is not None else ReconnectPolicy()
+        self._make_link = make_link
+        self._opener = opener
+        self.disconnects = 0
+        """Times the line failed under the master."""
+        self.reconnects = 0
+        """Times the port was reopened."""
+        self.failed_attempts = 0
+        """Attempts to reopen the port that failed."""
+        self.last_error: ConnectionLost | None = None
+        """Why the line last failed."""
+        engine.wait_for_reconnect = self.can_reconnect
+        engine.fail_fast_reconnect = self.policy.fail_fast
+
+    @property
+    def can_reconnect(self) -> bool:
+        """Whether the port is reopened after it fails (an opener, and reconnecting on)."""
+        return self._opener is not None and self.policy.enabled
+
+    @property
+    def connected(self) -> bool:
+        """Whether the line is up now."""
+        return self.engine.connected
+
+    async def wait_connected(self) -> None:
+        """Wait until the line is up (at once if it is), or the master is closed."""
+        await self.engine.wait_connected()
+
+    async def run(self) -> None:
+        """Serve the line until cancelled, or until it fails and cannot be reopened."""
+        link = self.link
+        try:
+            while True:
+                async with link:
+                    error = await self.engine.serve(link)
+                self.disconnects += 1
+                self.last_error = error
+                if not self.can_reconnect:
+                    self.engine.close(error)
+                    return
+                _log.warning("the line failed (%s); reopening it", error)
+                link = self.link = self._make_link(await self._reopen())
+                self.reconnects += 1
+                _log.info("the line is back after %d failed attempts", self.failed_attempts)
+        finally:
+            self.engine.close(ConnectionLost("the master is closed"))
+
+    async def _reopen(self) -> anyio.abc.ByteStream:
+        assert self._opener is not None
+        delay, longest = self.policy.delay
+        while True:
+            await anyio.sleep(delay)
+            try:
+                return await self._opener()
+            except (OSError, ModbusError) as error:
+                self.failed_attempts += 1
+                _log.debug("reopening failed (%s); next attempt in %.3g s", error, delay)
+                delay = min(2 * delay, longest)

@@ -1,0 +1,506 @@
+# ruff: noqa: ASYNC109
+# ``timeout=`` here is the Modbus response timeout, counted from the end of transmission
+# by the master; a cancel scope around the call cannot express that.
+"""Handles on a :class:`~aiortu.master._client.Master`: one unit, or every unit at once (broadcast).
+
+:class:`UnitHandle` (``master.slave(17)``) has the master's methods without the unit, and
+typed values on top: 32-bit integers, floats and strings in holding or input registers,
+in any word layout (:mod:`aiortu.core.values`), and reads by reference (``"40108"``,
+:mod:`aiortu.core.addressing`).
+
+:class:`BroadcastHandle` (``master.broadcast``) has the writes the spec lets be broadcast:
+each goes to unit 0, no reply is awaited, and the line waits the turnaround delay so that
+the slaves can execute it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
+from aiortu.core import pdu_files
+from aiortu.core.addressing import Table, parse_reference
+from aiortu.core.codes import BROADCAST_UNIT, DeviceIdReadCode
+from aiortu.core.errors import InvalidRequest
+from aiortu.core.pdu import ExceptionPDU, Request, Response
+from aiortu.core.pdu_bits import WriteMultipleCoilsRequest, WriteSingleCoilRequest
+from aiortu.core.pdu_registers import (
+    MaskWriteRegisterRequest,
+    WriteMultipleRegistersRequest,
+    WriteSingleRegisterRequest,
+)
+from aiortu.core.pdu_serial_line import (
+    DiagnosticsResponse,
+    GetCommEventCounterResponse,
+    GetCommEventLogResponse,
+    ReportServerIdResponse,
+)
+from aiortu.core.values import (
+    Layout,
+    ValueType,
+    decode_value,
+    encode_value,
+    registers_to_string,
+    string_to_registers,
+)
+
+if TYPE_CHECKING:
+    from aiortu.master._client import Master
+
+__all__ = (
+    "BroadcastHandle",
+    "FileRecordLike",
+    "RecordRequestLike",
+    "UnitHandle",
+    "as_file_record",
+    "as_record_request",
+)
+
+RecordRequestLike = pdu_files.FileRecordRequest | tuple[int, int, int]
+"""A read file record sub-request: the class, or ``(file, record, length)``."""
+
+FileRecordLike = pdu_files.FileRecord | tuple[int, int, Sequence[int]]
+"""A write file record sub-record: the class, or ``(file, record, values)``."""
+
+_REGISTER_TABLES = {
+    "holding": Table.HOLDING_REGISTERS,
+    "input": Table.INPUT_REGISTERS,
+    Table.HOLDING_REGISTERS: Table.HOLDING_REGISTERS,
+    Table.INPUT_REGISTERS: Table.INPUT_REGISTERS,
+}
+
+
+def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
+    """A read file record sub-request from the class or a ``(file, record, length)`` tuple."""
+    if isinstance(sub, pdu_files.FileRecordRequest):
+        return sub
+    return pdu_files.FileRecordRequest(*sub)
+
+
+def as_file_record(record: FileRecordLike) -> pdu_files.FileRecord:
+    """A write file record sub-record from the class or a ``(file, record, values)`` tuple."""
+    if isinstance(record, pdu_files.FileRecord):
+        return record
+    file_number, record_number, values = record
+    return pdu_files.FileRecord(file_number, record_number, tuple(values))
+
+
+class BroadcastHandle:
+    """The broadcast writes of a master (see the module docstring); each returns once the
+    request is sent and the turnaround delay has passed."""
+
+    def __init__(self, master: Master) -> None:
+        self._master = master
+
+    async def write_coil(self, address: int, value: bool, *, priority: int = 0) -> None:
+        """Set the coil at *address* on every unit (05)."""
+        request = WriteSingleCoilRequest(address, value)
+        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
+
+    async def write_register(self, address: int, value: int, *, priority: int = 0) -> None:
+        """Write the holding register at *address* on every unit (06)."""
+        request = WriteSingleRegisterRequest(address, value)
+        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
+
+    async def write_coils(self, address: int, values: Sequence[bool], *, priority: int = 0) -> None:
+        """Set 1..1968 coils from *address* on every unit (0F)."""
+        request = WriteMultipleCoilsRequest(address, tuple(values))
+        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
+
+    async def write_registers(
+        self, address: int, values: Sequence[int], *, priority: int = 0
+    ) -> None:
+        """Write 1..123 registers from *address* on every unit (10)."""
+        request = WriteMultipleRegistersRequest(address, tuple(values))
+        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
+
+    async def mask_write_register(
+        self, address: int, and_mask: int, or_mask: int, *, priority: int = 0
+    ) -> None:
+        """Mask write the register at *address* on every unit (16)."""
+        request = MaskWriteRegisterRequest(address, and_mask, or_mask)
+        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
+
+    async def write_file_record(
+        self, records: Iterable[FileRecordLike], *, priority: int = 0
+    ) -> None:
+        """Write file records on every unit (15)."""
+        request = pdu_files.WriteFileRecordRequest(tuple(as_file_record(r) for r in records))
+        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
+
+
+class UnitHandle:
+    """One unit of a master: ``master.slave(unit)`` (see the module docstring).
+
+    Every method takes ``timeout=`` and ``priority=`` as the master's do.
+    """
+
+    def __init__(self, master: Master, unit: int) -> None:
+        self.master = master
+        self.unit = unit
+
+    # -- the master's methods, bound to the unit -------------------------------------
+
+    async def read_coils(
+        self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
+    ) -> list[bool]:
+        """See :meth:`Master.read_coils <aiortu.master._client.Master.read_coils>`."""
+        return await self.master.read_coils(
+            self.unit, address, count, timeout=timeout, priority=priority
+        )
+
+    async def read_discrete_inputs(
+        self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
+    ) -> list[bool]:
+        """See :meth:`aiortu.master._client.Master.read_discrete_inputs`."""
+        return await self.master.read_discrete_inputs(
+            self.unit, address, count, timeout=timeout, priority=priority
+        )
+
+    async def read_holding_registers(
+        self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
+    ) -> list[int]:
+        """See :meth:`aiortu.master._client.Master.read_holding_registers`."""
+        return await self.master.read_holding_registers(
+            self.unit, address, count, timeout=timeout, priority=priority
+        )
+
+    async def read_input_registers(
+        self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
+    ) -> list[int]:
+        """See :meth:`aiortu.master._client.Master.read_input_registers`."""
+        return await self.master.read_input_registers(
+            self.unit, address, count, timeout=timeout, priority=priority
+        )
+
+    async def write_coil(
+        self, address: int, value: bool, *, timeout: float | None = None, priority: int = 0
+    ) -> None:
+        """See :meth:`aiortu.master._client.Master.write_coil`."""
+        await self.master.write_coil(self.unit, address, value, timeout=timeout, priority=priority)
+
+    async def write_coils(
+        self,
+        address: int,
+        values: Sequence[bool],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """See :meth:`aiortu.master._client.Master.write_coils`."""
+        await self.master.write_coils(
+            self.unit, address, values, timeout=timeout, priority=priority
+        )
+
+    async def write_register(
+        self, address: int, value: int, *, timeout: float | None = None, priority: int = 0
+    ) -> None:
+        """See :meth:`aiortu.master._client.Master.write_register`."""
+        await self.master.write_register(
+            self.unit, address, value, timeout=timeout, priority=priority
+        )
+
+    async def write_registers(
+        self,
+        address: int,
+        values: Sequence[int],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """See :meth:`aiortu.master._client.Master.write_registers`."""
+        await self.master.write_registers(
+            self.unit, address, values, timeout=timeout, priority=priority
+        )
+
+    async def mask_write_register(
+        self,
+        address: int,
+        and_mask: int,
+        or_mask: int,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """See :meth:`aiortu.master._client.Master.mask_write_register`."""
+        await self.master.mask_write_register(
+            self.unit, address, and_mask, or_mask, timeout=timeout, priority=priority
+        )
+
+    async def read_write_registers(
+        self,
+        read_address: int,
+        read_count: int,
+        write_address: int,
+        values: Sequence[int],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> list[int]:
+        """See :meth:`aiortu.master._client.Master.read_write_registers`."""
+        return await self.master.read_write_registers(
+            self.unit,
+            read_address,
+            read_count,
+            write_address,
+            values,
+            timeout=timeout,
+            priority=priority,
+        )
+
+    async def read_fifo_queue(
+        self, address: int, *, timeout: float | None = None, priority: int = 0
+    ) -> list[int]:
+        """See :meth:`aiortu.master._client.Master.read_fifo_queue`."""
+        return await self.master.read_fifo_queue(
+            self.unit, address, timeout=timeout, priority=priority
+        )
+
+    async def read_file_record(
+        self,
+        sub_requests: Iterable[RecordRequestLike],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> list[list[int]]:
+        """See :meth:`aiortu.master._client.Master.read_file_record`."""
+        return await self.master.read_file_record(
+            self.unit, sub_requests, timeout=timeout, priority=priority
+        )
+
+    async def write_file_record(
+        self,
+        records: Iterable[FileRecordLike],
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """See :meth:`aiortu.master._client.Master.write_file_record`."""
+        await self.master.write_file_record(self.unit, records, timeout=timeout, priority=priority)
+
+    async def read_exception_status(
+        self, *, timeout: float | None = None, priority: int = 0
+    ) -> int:
+        """See :meth:`aiortu.master._client.Master.read_exception_status`."""
+        return await self.master.read_exception_status(
+            self.unit, timeout=timeout, priority=priority
+        )
+
+    async def diagnostics(
+        self,
+        sub_function: int,
+        data: bytes = b"\x00\x00",
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> DiagnosticsResponse | None:
+        """See :meth:`aiortu.master._client.Master.diagnostics`."""
+        return await self.master.diagnostics(
+            self.unit, sub_function, data, timeout=timeout, priority=priority
+        )
+
+    async def get_comm_event_counter(
+        self, *, timeout: float | None = None, priority: int = 0
+    ) -> GetCommEventCounterResponse:
+        """See :meth:`aiortu.master._client.Master.get_comm_event_counter`."""
+        return await self.master.get_comm_event_counter(
+            self.unit, timeout=timeout, priority=priority
+        )
+
+    async def get_comm_event_log(
+        self, *, timeout: float | None = None, priority: int = 0
+    ) -> GetCommEventLogResponse:
+        """See :meth:`aiortu.master._client.Master.get_comm_event_log`."""
+        return await self.master.get_comm_event_log(self.unit, timeout=timeout, priority=priority)
+
+    async def report_server_id(
+        self, *, timeout: float | None = None, priority: int = 0
+    ) -> ReportServerIdResponse:
+        """See :meth:`aiortu.master._client.Master.report_server_id`."""
+        return await self.master.report_server_id(self.unit, timeout=timeout, priority=priority)
+
+    async def read_device_identification(
+        self,
+        read_code: int = DeviceIdReadCode.BASIC,
+        object_id: int = 0,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> dict[int, bytes]:
+        """See :meth:`aiortu.master._client.Master.read_device_identification`."""
+        return await self.master.read_device_identification(
+            self.unit, read_code, object_id, timeout=timeout, priority=priority
+        )
+
+    async def execute(
+        self, pdu: Request, *, timeout: float | None = None, priority: int = 0
+    ) -> Response | ExceptionPDU:
+        """See :meth:`aiortu.master._client.Master.execute`."""
+        return await self.master.execute(self.unit, pdu, timeout=timeout, priority=priority)
+
+    # -- typed values ----------------------------------------------------------------
+
+    async def read_value(
+        self,
+        address: int,
+        kind: ValueType | str,
+        layout: Layout | str = Layout.ABCD,
+        *,
+        table: Table | str = "holding",
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> int | float:
+        """Read one *kind* (``"float32"``, ``"int32"``, ...) from *address* in *layout*.
+
+        *table* is ``"holding"`` (the default) or ``"input"``.
+        """
+        count = ValueType(kind).register_count
+        registers = await self._read_registers(table, address, count, timeout, priority)
+        return decode_value(registers, kind, layout)
+
+    async def write_value(
+        self,
+        address: int,
+        value: float,
+        kind: ValueType | str,
+        layout: Layout | str = Layout.ABCD,
+        *,
+        timeout: float | None = None,
+        priority: int = 0,
+    ) -> None:
+        """Write *value* as one *kind* to the holding registers from *address* in *layout*."""
+        registers = encode_value(value, kind, layout)
+        await self.write_registers(address, registers, timeout=timeout, priority=priority)
+
+    async def read_float32(
+        self,
+        address: int,
+        layout: Layout | str = Layout.ABCD,
+        *,
+        table: Table | str = "holding",
+        timeout: float | None = None,
+    ) -> float:
+        """Read a float32 from two registers at *address* in *layout*."""
+        value = await self.read_value(
+            address, ValueType.FLOAT32, layout, table=table, timeout=timeout
+        )
+        return float(value)
+
+    async def read_int32(
+        self,
+        address: int,
+        layout: Layout | str = Layout.ABCD,
+        *,
+        table: Table | str = "holding",
+        timeout: float | None = None,
+    ) -> int:
+        """Read a signed 32-bit integer from two registers at *address* in *layout*."""
+        return int(
+            await self.read_value(address, ValueType.INT32, layout, table=table, timeout=timeout)
+        )
+
+    async def read_uint32(
+        self,
+        address: int,
+        layout: Layout | str = Layout.ABCD,
+        *,
+        table: Table | str = "holding",
+        timeout: float | None = None,
+    ) -> int:
+        """Read an unsigned 32-bit integer from two registers at *address* in *layout*."""
+        return int(
+            await self.read_value(address, ValueType.UINT32, layout, table=table, timeout=timeout)
+        )
+
+    async def write_float32(
+        self,
+        address: int,
+        value: float,
+        layout: Layout | str = Layout.ABCD,
+        *,
+        timeout: float | None = None,
+    ) -> None:
+        """Write *value* as a float32 to two holding registers at *address*."""
+        await self.write_value(address, value, ValueType.FLOAT32, layout, timeout=timeout)
+
+    async def write_int32(
+        self,
+        address: int,
+        value: int,
+        layout: Layout | str = Layout.ABCD,
+        *,
+        timeout: float | None = None,
+    ) -> None:
+        """Write *value* as a signed 32-bit integer to two holding registers at *address*."""
+        await self.write_value(address, value, ValueType.INT32, layout, timeout=timeout)
+
+    async def write_uint32(
+        self,
+        address: int,
+        value: int,
+        layout: Layout | str = Layout.ABCD,
+        *,
+        timeout: float | None = None,
+    ) -> None:
+        """Write *value* as an unsigned 32-bit integer to two holding registers at *address*."""
+        await self.write_value(address, value, ValueType.UINT32, layout, timeout=timeout)
+
+    async def read_string(
+        self,
+        address: int,
+        register_count: int,
+        *,
+        encoding: str = "ascii",
+        byte_swap: bool = False,
+        table: Table | str = "holding",
+        timeout: float | None = None,
+    ) -> str:
+        """Read text from *register_count* registers, two bytes each, padding stripped."""
+        registers = await self._read_registers(table, address, register_count, timeout, 0)
+        return registers_to_string(registers, encoding, byte_swap)
+
+    async def write_string(
+        self,
+        address: int,
+        text: str,
+        register_count: int | None = None,
+        *,
+        encoding: str = "ascii",
+        byte_swap: bool = False,
+        timeout: float | None = None,
+    ) -> None:
+        """Write *text* to holding registers from *address*, NUL-padded to *register_count*."""
+        registers = string_to_registers(text, register_count, encoding, byte_swap)
+        await self.write_registers(address, registers, timeout=timeout)
+
+    async def read_reference(
+        self, reference: str, count: int = 1, *, timeout: float | None = None
+    ) -> list[bool] | list[int]:
+        """Read *count* elements from a reference such as ``"40108"`` (holding register
+        address 107) or ``"100001"`` (discrete input address 0)."""
+        parsed = parse_reference(reference)
+        table = parsed.table
+        if table is Table.COILS:
+            return await self.read_coils(parsed.address, count, timeout=timeout)
+        if table is Table.DISCRETE_INPUTS:
+            return await self.read_discrete_inputs(parsed.address, count, timeout=timeout)
+        return await self._read_registers(table, parsed.address, count, timeout, 0)
+
+    async def _read_registers(
+        self,
+        table: Table | str,
+        address: int,
+        count: int,
+        timeout: float | None,
+        priority: int,
+    ) -> list[int]:
+        resolved = _REGISTER_TABLES.get(table)
+        if resolved is Table.INPUT_REGISTERS:
+            return await self.read_input_registers(
+                address, count, timeout=timeout, priority=priority
+            )
+        if resolved is Table.HOLDING_REGISTERS:
+            return await self.read_holding_registers(
+                address, count, timeout=timeout, priority=priority
+            )
+        raise InvalidRequest("table", table, "'holding' or 'input'")

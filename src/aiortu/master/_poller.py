@@ -1,0 +1,487 @@
+"""Polling many points on many units at given intervals, over one master.
+
+::
+
+    points = [
+        aiortu.Point.of("temperature", 1, "30001", "int16", scale=0.1),
+        aiortu.Point.of("flow", 1, "40108", "float32", layout="CDAB"),
+        aiortu.Point("pump", 2, "coils", 0),
+    ]
+    async with aiortu.Poller(master, points, interval=1.0) as poller:
+        async for sample in poller:
+            print(sample.name, sample.value)
+
+The points are planned once (:func:`aiortu.core.poll_plan.plan_reads`): neighbours on the
+same unit and table share one read when the gap between them is at most *max_gap*
+elements, within the spec's limits. Points with their own ``interval`` are polled on
+their own schedule; each interval has its own cycle.
+
+A cycle runs its reads one after the other (the line carries one transaction at a time
+anyway) and delivers one :class:`Sample` per point: a value, or the error that kept it
+from being read. Samples go to the callbacks given as *on_sample* (and *on_cycle*, once
+per cycle with all its samples) and to ``async for sample in poller``; when an iterating
+consumer falls more than *max_pending* samples behind, the oldest are dropped and counted
+in :attr:`Poller.dropped`.
+
+Dead devices: the master marks a unit offline after ``offline_after`` consecutive
+failures (see :class:`~aiortu.master._client.Master`). The poller then skips the unit's reads,
+delivering samples with :class:`UnitSkipped`, except for one probe read every
+*offline_probe_interval* seconds; a probe that succeeds brings the unit back (the
+master marks it online) and its other reads go on in the same cycle. Within a cycle, a
+read that fails and leaves the unit offline skips the unit's remaining reads, so one
+dead device costs at most one timeout per cycle, and none between probes. The poller
+does not wait for the master's ``offline_after``: a unit whose read failed (no reply, a
+garbled one; not an exception response, which is an answer) is treated as down from the
+next read on, and probes are sent once, without the master's retries. And at most
+*max_probes_per_cycle* offline units (1 by default; ``None`` for no limit) are probed
+in one cycle, the one waiting longest first: with many dead devices on a bus, a cycle
+pays for one probe, not for one per dead device, and they take turns.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from collections.abc import AsyncIterator, Callable, Iterable, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Self, TypeVar
+
+import anyio
+import anyio.abc
+from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
+
+from aiortu.core.addressing import Table
+from aiortu.core.pdu import Response
+from aiortu.core.pdu_bits import (
+    ReadCoilsRequest,
+    ReadCoilsResponse,
+    ReadDiscreteInputsRequest,
+    ReadDiscreteInputsResponse,
+)
+from aiortu.core.pdu_registers import (
+    ReadHoldingRegistersRequest,
+    ReadHoldingRegistersResponse,
+    ReadInputRegistersRequest,
+    ReadInputRegistersResponse,
+)
+from aiortu.core.poll_plan import (
+    MAX_READ_BITS,
+    MAX_READ_REGISTERS,
+    PlannedRead,
+    Point,
+    plan_reads,
+)
+from aiortu.errors import (
+    ConnectionLost,
+    ExceptionResponse,
+    InvalidValue,
+    ModbusError,
+    UnitSkipped,
+)
+from aiortu.master._client import Master
+
+__all__ = ("CycleReport", "CycleStats", "Point", "Poller", "Sample", "UnitHealth", "UnitSkipped")
+
+Value = bool | int | float
+"""A decoded point value: a bool for bits, an int or a float for registers."""
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One point's result in one cycle: its *value*, or the *error* that kept it unread.
+
+    *time* is when the read finished, on the master's clock; *cycle* counts the cycles
+    of the point's interval from 0.
+    """
+
+    point: Point
+    value: Value | None
+    time: float
+    cycle: int
+    error: Exception | None = None
+
+    @property
+    def name(self) -> str:
+        """The point's name."""
+        return self.point.name
+
+    @property
+    def unit(self) -> int:
+        """The point's unit."""
+        return self.point.unit
+
+    @property
+    def ok(self) -> bool:
+        """Whether the point was read."""
+        return self.error is None
+
+
+@dataclass(frozen=True, slots=True)
+class CycleReport:
+    """One finished cycle of one interval: its index, duration (s) and samples."""
+
+    interval: float
+    index: int
+    duration: float
+    samples: tuple[Sample, ...]
+
+
+@dataclass(slots=True)
+class CycleStats:
+    """The cycle times of one interval, in seconds (the reads only, not the waits)."""
+
+    interval: float
+    cycles: int = 0
+    last: float | None = None
+    mean: float | None = None
+    longest: float | None = None
+
+    def _record(self, duration: float) -> None:
+        self.cycles += 1
+        self.last = duration
+        previous = self.mean if self.mean is not None else 0.0
+        self.mean = previous + (duration - previous) / self.cycles
+        self.longest = duration if self.longest is None else max(self.longest, duration)
+
+
+@dataclass(frozen=True, slots=True)
+class UnitHealth:
+    """What the poller knows of a unit: the master's health and its own probing."""
+
+    unit: int
+    online: bool
+    consecutive_failures: int
+    last_latency: float | None
+    skipped: int
+    """Reads of the unit skipped while it was offline."""
+    next_probe: float | None
+    """When the next probe may go (master clock), or None while online."""
+
+
+SampleCallback = Callable[[Sample], object]
+CycleCallback = Callable[[CycleReport], object]
+_C = TypeVar("_C", SampleCallback, CycleCallback)
+
+
+@dataclass
+class _Group:
+    interval: float
+    reads: list[PlannedRead]
+    stats: CycleStats
+    cycle: int = 0
+
+
+class Poller:
+    """Polls *points* through *master* (see the module docstring); an async context manager.
+
+    *interval* is the default seconds from the start of one cycle to the start of the
+    next (a cycle that takes longer is followed at once by the next). *max_gap*,
+    *max_bit_gap*, *max_registers* and *max_bits* go to the planner. *timeout* is the
+    response timeout of the poller's reads (None: the master's). *on_sample* and
+    *on_cycle* are callbacks (plain or async functions, or iterables of them).
+
+    Raises :class:`~aiortu.errors.InvalidValue` for an empty point list, duplicate names
+    or limits outside the spec.
+    """
+
+    def __init__(
+        self,
+        master: Master,
+        points: Iterable[Point],
+        *,
+        interval: float = 1.0,
+        max_gap: int = 10,
+        max_bit_gap: int | None = None,
+        max_registers: int = MAX_READ_REGISTERS,
+        max_bits: int = MAX_READ_BITS,
+        offline_probe_interval: float = 5.0,
+        max_probes_per_cycle: int | None = 1,
+        timeout: float | None = None,
+        on_sample: SampleCallback | Iterable[SampleCallback] | None = None,
+        on_cycle: CycleCallback | Iterable[CycleCallback] | None = None,
+        max_pending: int = 1024,
+    ) -> None:
+        self.master = master
+        self.points: tuple[Point, ...] = tuple(points)
+        """The points polled."""
+        if not self.points:
+            raise InvalidValue("points", self.points, "at least one point")
+        names = [p.name for p in self.points]
+        if len(set(names)) != len(names):
+            duplicate = next(n for n in names if names.count(n) > 1)
+            raise InvalidValue("points", duplicate, "unique names", "a name is used twice")
+        if not interval > 0:
+            raise InvalidValue("interval", interval, "seconds > 0")
+        if not offline_probe_interval >= 0:
+            raise InvalidValue("offline_probe_interval", offline_probe_interval, "seconds >= 0")
+        if max_probes_per_cycle is not None and max_probes_per_cycle < 1:
+            raise InvalidValue("max_probes_per_cycle", max_probes_per_cycle, "None or >= 1")
+        self.interval = interval
+        self.offline_probe_interval = offline_probe_interval
+        self.max_probes_per_cycle = max_probes_per_cycle
+        self.timeout = timeout
+        by_interval: dict[float, list[Point]] = {}
+        for point in self.points:
+            by_interval.setdefault(point.interval or interval, []).append(point)
+        self._groups = [
+            _Group(
+                every,
+                plan_reads(
+                    members,
+                    max_gap=max_gap,
+                    max_bit_gap=max_bit_gap,
+                    max_registers=max_registers,
+                    max_bits=max_bits,
+                ),
+                CycleStats(every),
+            )
+            for every, members in sorted(by_interval.items())
+        ]
+        self._sample_callbacks = _as_list(on_sample)
+        self._cycle_callbacks = _as_list(on_cycle)
+        self._last_probe: dict[int, float] = {}
+        self._suspect: set[int] = set()
+        self._probe_slots: set[int] | None = None
+        self._skipped: dict[int, int] = {}
+        self._send: MemoryObjectSendStream[Sample]
+        self._receive: MemoryObjectReceiveStream[Sample]
+        self._send, self._receive = anyio.create_memory_object_stream[Sample](max_pending)
+        self._task_group: anyio.abc.TaskGroup | None = None
+        self.dropped = 0
+        """Samples dropped because the iterating consumer fell behind."""
+
+    # -- what is polled, and how it goes ----------------------------------------------
+
+    @property
+    def reads(self) -> list[PlannedRead]:
+        """Every planned read, by interval, then unit, table and address."""
+        return [read for group in self._groups for read in group.reads]
+
+    @property
+    def cycle_stats(self) -> dict[float, CycleStats]:
+        """The cycle times, by interval."""
+        return {group.interval: group.stats for group in self._groups}
+
+    @property
+    def cycle_time(self) -> CycleStats:
+        """The cycle times of the shortest interval (the only one unless points set theirs)."""
+        return self._groups[0].stats
+
+    def health(self) -> dict[int, UnitHealth]:
+        """Each polled unit's health, by unit address."""
+        report: dict[int, UnitHealth] = {}
+        for unit in sorted({p.unit for p in self.points}):
+            stats = self.master.unit_stats(unit)
+            last = self._last_probe.get(unit)
+            report[unit] = UnitHealth(
+                unit,
+                stats.online,
+                stats.consecutive_failures,
+                stats.last_latency,
+                self._skipped.get(unit, 0),
+                None if stats.online or last is None else last + self.offline_probe_interval,
+            )
+        return report
+
+    def on_sample(self, callback: SampleCallback) -> Callable[[], None]:
+        """Call *callback* with every sample from now on; return a function that stops it."""
+        self._sample_callbacks.append(callback)
+        return lambda: self._sample_callbacks.remove(callback)
+
+    def on_cycle(self, callback: CycleCallback) -> Callable[[], None]:
+        """Call *callback* after every cycle; return a function that stops it."""
+        self._cycle_callbacks.append(callback)
+        return lambda: self._cycle_callbacks.remove(callback)
+
+    # -- running ---------------------------------------------------------------------
+
+    async def run(self, *, cycles: int | None = None, duration: float | None = None) -> None:
+        """Poll in the current task until cancelled, or until *cycles* cycles of the
+        shortest interval have run, or *duration* seconds have passed. Ends the sample
+        stream when it returns."""
+        try:
+            with anyio.move_on_after(math.inf if duration is None else duration):
+                async with anyio.create_task_group() as tasks:
+                    for group in self._groups[1:]:
+                        tasks.start_soon(self._loop, group, None)
+                    await self._loop(self._groups[0], cycles)
+                    tasks.cancel_scope.cancel()
+        finally:
+            self._send.close()
+
+    async def poll_once(self) -> list[Sample]:
+        """Run one cycle of every interval now, and return its samples (also delivered)."""
+        samples: list[Sample] = []
+        for group in self._groups:
+            samples.extend(await self._cycle(group))
+        return samples
+
+    async def __aenter__(self) -> Self:
+        self._task_group = anyio.create_task_group()
+        await self._task_group.__aenter__()
+        self._task_group.start_soon(self.run, name="aiortu poller")
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> bool | None:
+        task_group, self._task_group = self._task_group, None
+        if task_group is None:
+            return None
+        task_group.cancel_scope.cancel()
+        return await task_group.__aexit__(exc_type, exc, traceback)
+
+    def __aiter__(self) -> AsyncIterator[Sample]:
+        return self
+
+    async def __anext__(self) -> Sample:
+        try:
+            return await self._receive.receive()
+        except (anyio.EndOfStream, anyio.ClosedResourceError):
+            raise StopAsyncIteration from None
+
+    # -- the cycles ------------------------------------------------------------------
+
+    async def _loop(self, group: _Group, cycles: int | None) -> None:
+        clock = self.master.link.clock
+        next_start = clock()
+        while cycles is None or group.cycle < cycles:
+            await self._cycle(group)
+            next_start += group.interval
+            # After an overrun the next cycle starts at once; missed cycles are not
+            # made up in a burst.
+            next_start = max(next_start, clock())
+            if cycles is not None and group.cycle >= cycles:
+                return
+            await anyio.sleep(max(0.0, next_start - clock()))
+
+    async def _cycle(self, group: _Group) -> list[Sample]:
+        clock = self.master.link.clock
+        start = clock()
+        index = group.cycle
+        samples: list[Sample] = []
+        skip: dict[int, Exception] = {}
+        self._probe_slots = self._units_to_probe(group, start)
+        for read in group.reads:
+            error = skip.get(read.unit) or self._gate(read.unit)
+            if error is not None:
+                skip[read.unit] = error
+                if isinstance(error, UnitSkipped):
+                    self._skipped[read.unit] = self._skipped.get(read.unit, 0) + 1
+                samples += await self._deliver_error(read, error, index)
+                continue
+            try:
+                # A probe of a unit that stopped answering is sent once: its retries
+                # would stall the cycle for every other unit.
+                elements = await self._read(read, 0 if self._is_down(read.unit) else None)
+            except ModbusError as failure:
+                samples += await self._deliver_error(read, failure, index)
+                if isinstance(failure, ConnectionLost):
+                    # The line is down: every other unit would fail the same way.
+                    for other in group.reads:
+                        skip.setdefault(other.unit, failure)
+                elif not isinstance(failure, ExceptionResponse):
+                    self._suspect.add(read.unit)
+                    self._last_probe[read.unit] = clock()
+                    skip[read.unit] = failure
+                continue
+            self._suspect.discard(read.unit)
+            now = clock()
+            for point, value in read.decode(elements):
+                sample = Sample(point, value, now, index)
+                samples.append(sample)
+                await self._deliver(sample)
+        group.cycle += 1
+        duration = clock() - start
+        group.stats._record(duration)
+        report = CycleReport(group.interval, index, duration, tuple(samples))
+        for callback in list(self._cycle_callbacks):
+            await _call(callback, report)
+        return samples
+
+    def _is_down(self, unit: int) -> bool:
+        return unit in self._suspect or not self.master.is_online(unit)
+
+    def _units_to_probe(self, group: _Group, now: float) -> set[int] | None:
+        """The offline units this cycle may probe: those due, longest waiting first."""
+        if self.max_probes_per_cycle is None:
+            return None
+        due = sorted(
+            (self._last_probe.get(unit, -math.inf), unit)
+            for unit in {read.unit for read in group.reads}
+            if self._is_down(unit)
+            and now - self._last_probe.get(unit, -math.inf) >= self.offline_probe_interval
+        )
+        return {unit for _, unit in due[: self.max_probes_per_cycle]}
+
+    def _gate(self, unit: int) -> UnitSkipped | None:
+        """None if a read of *unit* may go now (online, or due for a probe), else why not."""
+        if not self._is_down(unit):
+            return None
+        now = self.master.link.clock()
+        last = self._last_probe.get(unit, -math.inf)
+        if now - last < self.offline_probe_interval:
+            return UnitSkipped(unit, last + self.offline_probe_interval - now)
+        if self._probe_slots is not None and unit not in self._probe_slots:
+            return UnitSkipped(unit, 0.0)  # due, waiting for its turn among the dead
+        self._last_probe[unit] = now
+        return None
+
+    async def _read(self, read: PlannedRead, retries: int | None) -> Sequence[int | bool]:
+        request_class, response_class = _READS[read.table]
+        request = request_class(read.address, read.count)
+        reply = await self.master.request(
+            read.unit, request, response_class, timeout=self.timeout, retries=retries
+        )
+        if isinstance(request, ReadCoilsRequest):
+            assert isinstance(reply, ReadCoilsResponse)
+            return request.bits_of(reply)
+        assert isinstance(reply, ReadHoldingRegistersResponse)
+        return reply.values
+
+    async def _deliver_error(self, read: PlannedRead, error: Exception, index: int) -> list[Sample]:
+        now = self.master.link.clock()
+        samples = [Sample(point, None, now, index, error) for point in read.points]
+        for sample in samples:
+            await self._deliver(sample)
+        return samples
+
+    async def _deliver(self, sample: Sample) -> None:
+        for callback in list(self._sample_callbacks):
+            await _call(callback, sample)
+        try:
+            self._send.send_nowait(sample)
+        except anyio.WouldBlock:
+            # Drop the oldest: a consumer that catches up wants the newest values.
+            self._receive.receive_nowait()
+            self.dropped += 1
+            self._send.send_nowait(sample)
+        except anyio.ClosedResourceError:
+            pass
+
+
+_READS: dict[Table, tuple[type[ReadCoilsRequest | ReadHoldingRegistersRequest], type[Response]]] = {
+    Table.COILS: (ReadCoilsRequest, ReadCoilsResponse),
+    Table.DISCRETE_INPUTS: (ReadDiscreteInputsRequest, ReadDiscreteInputsResponse),
+    Table.HOLDING_REGISTERS: (ReadHoldingRegistersRequest, ReadHoldingRegistersResponse),
+    Table.INPUT_REGISTERS: (ReadInputRegistersRequest, ReadInputRegistersResponse),
+}
+"""The request and reply classes of a read of each table."""
+
+
+def _as_list(callbacks: _C | Iterable[_C] | None) -> list[_C]:
+    if callbacks is None:
+        return []
+    if callable(callbacks):
+        return [callbacks]
+    return list(callbacks)
+
+
+async def _call(callback: Callable[..., object], argument: object) -> None:
+    result = callback(argument)
+    if inspect.isawaitable(result):
+        await result

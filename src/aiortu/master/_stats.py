@@ -1,0 +1,101 @@
+"""What happened between a master and each unit, and when a unit counts as offline.
+
+:class:`UnitStats` holds the counters of one unit and updates them as transactions end
+(the engine, :class:`~aiortu.master._engine.LineEngine`, calls its ``count_*`` methods);
+:class:`HealthPolicy` says when a unit counts as offline and what calls to it do then.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from aiortu.core.errors import CRCError
+from aiortu.core.master_transaction import Failure, Transaction
+
+__all__ = ("HealthPolicy", "UnitStats")
+
+
+@dataclass(frozen=True, slots=True)
+class HealthPolicy:
+    """When a unit counts as offline, and what calls to it do then.
+
+    *offline_after* consecutive failed transactions (timeouts, frame errors) mark a unit
+    offline; a success marks it online. With *fail_fast_offline*, calls to an offline
+    unit raise :class:`~aiortu.errors.UnitOffline` without sending, except one probe every
+    *probe_interval* seconds.
+    """
+
+    offline_after: int = 3
+    fail_fast_offline: bool = False
+    probe_interval: float = 5.0
+
+
+@dataclass(slots=True)
+class UnitStats:
+    """What happened between the master and one unit.
+
+    Counters count transactions, except ``timeouts``, ``crc_errors`` and ``frame_errors``,
+    which count failed attempts (a retried transaction may add several).
+    """
+
+    requests: int = 0
+    """Transactions sent to the unit (a broadcast counts for unit 0)."""
+    successes: int = 0
+    """Transactions that got their reply (an exception response counts: the unit answered)."""
+    failures: int = 0
+    """Transactions that ended without a usable reply (timeouts, frame errors)."""
+    timeouts: int = 0
+    """Attempts that got no reply in time."""
+    crc_errors: int = 0
+    """Attempts that ended with a CRC error."""
+    frame_errors: int = 0
+    """Attempts that ended with any other frame error (framing, malformed reply)."""
+    exceptions: int = 0
+    """Exception responses received."""
+    retries: int = 0
+    """Attempts repeated."""
+    skipped_frames: int = 0
+    """Frames skipped while waiting for this unit (stale, other units, not matching)."""
+    last_latency: float | None = None
+    """Seconds from the start of the request to the end of the reply, last success."""
+    mean_latency: float | None = None
+    """The mean of that latency over every success."""
+    consecutive_failures: int = 0
+    """Failed transactions since the last success."""
+    online: bool = True
+    """False after ``offline_after`` consecutive failures, until a success."""
+    last_probe: float = -math.inf
+    """When a request was last let through to the unit while offline (fail fast)."""
+
+    def count_success(self, latency: float, *, exception: bool = False) -> None:
+        """A transaction got its reply, *latency* seconds after its request began to go
+        out (*exception*: an exception response, which counts: the unit answered)."""
+        self.successes += 1
+        self.consecutive_failures = 0
+        self.online = True
+        if exception:
+            self.exceptions += 1
+        self.last_latency = latency
+        mean = self.mean_latency
+        self.mean_latency = latency if mean is None else mean + (latency - mean) / self.successes
+
+    def count_failed_attempt(self, transaction: Transaction) -> None:
+        """An attempt of *transaction* failed: count it by its cause."""
+        error = transaction.frame_error
+        if isinstance(error, CRCError):
+            self.crc_errors += 1
+        elif error is not None:
+            self.frame_errors += 1
+        elif transaction.failures and transaction.failures[-1] is Failure.TIMEOUT:
+            self.timeouts += 1
+
+    def count_failure(self, health: HealthPolicy, now: float) -> None:
+        """A transaction ended without a usable reply at *now*: the unit goes offline after
+        ``health.offline_after`` of them in a row."""
+        self.failures += 1
+        self.consecutive_failures += 1
+        if self.online and self.consecutive_failures >= health.offline_after:
+            self.online = False
+            # The first probe comes a whole interval after the unit went offline.
+            self.last_probe = now

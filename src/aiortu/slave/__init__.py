@@ -1,0 +1,60 @@
+"""The Modbus RTU slave: one or many unit addresses on one line, served from data stores
+by handlers per function code, with routes, hooks and a device description file.
+
+:class:`Slave` takes any :class:`anyio.abc.ByteStream`; :func:`serve` opens a port or a
+URL first. See ``docs/slave.md``.
+"""
+
+from __future__ import annotations
+
+from aiortu.slave._config import ConfigError, DeviceConfig, load_config, parse_config
+from aiortu.slave._handlers import Handler, HandlerResult, Reply, RequestContext
+from aiortu.slave._routes import RangeAccess, RangeHandler, RoutedStore
+from aiortu.slave._server import AfterHook, BeforeHook, Slave, TraceCallback, serve
+from aiortu.slave._store import (
+    AsyncDataStore,
+    Block,
+    Change,
+    ChangeFeed,
+    DataStore,
+    MemoryStore,
+    ServerId,
+    SupportsDeviceIdentification,
+    SupportsExceptionStatus,
+    SupportsFifoQueues,
+    SupportsFileRecords,
+    SupportsServerId,
+    Table,
+)
+
+__all__ = (
+    "AfterHook",
+    "AsyncDataStore",
+    "BeforeHook",
+    "Block",
+    "Change",
+    "ChangeFeed",
+    "ConfigError",
+    "DataStore",
+    "DeviceConfig",
+    "Handler",
+    "HandlerResult",
+    "MemoryStore",
+    "RangeAccess",
+    "RangeHandler",
+    "Reply",
+    "RequestContext",
+    "RoutedStore",
+    "ServerId",
+    "Slave",
+    "SupportsDeviceIdentification",
+    "SupportsExceptionStatus",
+    "SupportsFifoQueues",
+    "SupportsFileRecords",
+    "SupportsServerId",
+    "Table",
+    "TraceCallback",
+    "load_config",
+    "parse_config",
+    "serve",
+)
