@@ -149,7 +149,15 @@ class _PortTransport(SerialTransport):
     """pyserial-asyncio-fast's transport, with the port's descriptor read and written
     directly: one ``read`` system call per readiness event (pyserial's ``read`` selects
     before and after it) and one ``write`` per frame. pyserial still opens, configures
-    and closes the port; its errors are reported as pyserial reports them."""
+    and closes the port; its errors are reported as pyserial reports them.
+
+    The write path is ours from end to end: what the driver does not take at once waits
+    in :attr:`_pending`, and a writer callback of our own is on the descriptor exactly
+    while something waits, taken off in the same call that writes the last byte. (The
+    dependency's own writer stays registered once its buffer is empty, and then fails on
+    every pass of the event loop.) The protocol is paused while anything waits, so that
+    :meth:`SerialStream.send` returns once its bytes are with the driver.
+    """
 
     def __init__(
         self, loop: asyncio.AbstractEventLoop, protocol: _PortProtocol, serial_instance: Any
@@ -157,6 +165,10 @@ class _PortTransport(SerialTransport):
         super().__init__(loop, protocol, serial_instance)
         self._fd: int = serial_instance.fileno()
         self._port_protocol = protocol
+        self._pending = bytearray()
+        """Bytes the driver has not taken yet, oldest first."""
+        self._watching_writable = False
+        """Whether :meth:`_on_writable` is registered on the descriptor."""
 
     def _read_ready(self) -> None:
         try:
@@ -177,16 +189,39 @@ class _PortTransport(SerialTransport):
 
     def can_write_now(self) -> bool:
         """Whether :meth:`write_now` would take data: open, and nothing queued before it."""
-        return not self._write_buffer and not self._closing
+        return not self._pending and not self._closing
 
     def write_now(self, data: bytes) -> bool:
         """``write()`` straight to the descriptor, where :meth:`can_write_now` says yes
         (the rest is queued if the driver takes only part of it); else nothing is
         written. Returns whether *data* was taken."""
-        if self._write_buffer or self._closing:
+        if self._pending or self._closing:
             return False
         self._write_data(data)
         return True
+
+    def write(self, data: bytes | bytearray | memoryview) -> None:
+        """Write *data* now, or after the bytes still queued; ignored once closing."""
+        if self._closing or not data:
+            return
+        if self._pending:
+            self._pending += data
+            return
+        self._write_data(data)
+
+    def get_write_buffer_size(self) -> int:
+        """Bytes queued that the driver has not taken yet."""
+        return len(self._pending)
+
+    def flush(self) -> None:
+        """Drop the bytes still queued."""
+        self._pending.clear()
+        self._stop_watching_writable()
+
+    def abort(self) -> None:
+        """Close at once, dropping the bytes still queued."""
+        self.flush()
+        super().abort()
 
     def _write_data(self, data: bytes | bytearray | memoryview) -> None:
         try:
@@ -194,16 +229,44 @@ class _PortTransport(SerialTransport):
         except (BlockingIOError, InterruptedError):
             written = 0
         except OSError as exc:
-            error = serial.SerialException(f"write failed: {exc}")
-            self._fatal_error(error, "Fatal write error on serial transport")
+            self._write_failed(exc)
             return
-        if written == len(data):
-            if self._closing:
-                self._close()
+        if written < len(data):
+            self._pending += data[written:]  # the rest when the port can take it
+            self._watch_writable()
+
+    def _on_writable(self) -> None:
+        """The descriptor can take bytes: write what waits; stop watching once all went."""
+        try:
+            written = os.write(self._fd, self._pending)
+        except (BlockingIOError, InterruptedError):
             return
-        self._write_buffer.append(data[written:])  # the rest when the port can take it
-        self._maybe_pause_protocol()
-        self._ensure_writer()
+        except OSError as exc:
+            self._write_failed(exc)
+            return
+        del self._pending[:written]
+        if self._pending:
+            return
+        self._stop_watching_writable()
+        if self._closing:
+            self._close()  # close() waited for the queued bytes: now it can finish
+
+    def _watch_writable(self) -> None:
+        if not self._watching_writable:
+            self._loop.add_writer(self._fd, self._on_writable)
+            self._watching_writable = True
+            self._port_protocol.pause_writing()
+
+    def _stop_watching_writable(self) -> None:
+        if self._watching_writable:
+            self._loop.remove_writer(self._fd)
+            self._watching_writable = False
+            self._port_protocol.resume_writing()
+
+    def _write_failed(self, exc: OSError) -> None:
+        self.flush()
+        error = serial.SerialException(f"write failed: {exc}")
+        self._fatal_error(error, "Fatal write error on serial transport")
 
 
 class _PortProtocol(asyncio.Protocol):
@@ -616,6 +679,4 @@ async def open_serial(
     except (serial.SerialException, OSError, ValueError, _TERMIOS_ERROR) as exc:
         instance.close()
         raise _open_error(port, exc, what) from exc
-    # Nothing buffered in user space: send() returns once its bytes are with the driver.
-    transport.set_write_buffer_limits(high=0, low=0)
     return SerialStream(port, settings, transport, protocol, instance)
