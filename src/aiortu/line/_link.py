@@ -5,13 +5,14 @@ server, a virtual line). It timestamps every chunk with the link's clock, runs t
 sans-IO :class:`~aiortu.core.receiver.Receiver`, wakes it at its deadlines, and queues
 what it yields: frames, and the bytes it discarded with the reason.
 
-Two ways in. A stream that pushes its bytes (it has ``set_receiver(receiver, on_lost)``,
-as the serial port's :class:`~aiortu.transport._serial.SerialStream` does) hands each chunk
-to the link from the event loop's read callback, and the receiver's silence deadline is
-one event loop timer, armed and cancelled by the link; the reader task then only waits
-for the stream's end, so a chunk costs no task wake-up. Any other byte stream (virtual
-lines, TCP, file descriptors) is read by the reader task, with the deadline as a cancel
-scope around ``receive()``.
+Two ways in. A stream that pushes its bytes (a :class:`~aiortu.transport.PushStream`,
+as the serial port's :class:`~aiortu.transport.SerialStream` is), on an event loop with
+``call_at`` timers (asyncio), hands each chunk to the link from the loop's read callback,
+and the receiver's silence deadline is one event loop timer, armed and cancelled by the
+link; the reader task then only waits for the stream's end, so a chunk costs no task
+wake-up. Any other byte stream (virtual
+lines, TCP, file descriptors), and any stream under trio, is read by the reader task, with
+the deadline as a cancel scope around ``receive()``.
 
 :meth:`Link.send` keeps the spec's silence: it first waits until the line has been quiet,
 in both directions, for ``frame_gap`` (t3.5 of the line settings by default; 0 is allowed
@@ -20,7 +21,7 @@ and returns when, by the clock, its last byte will have left the wire. The maste
 its response timeout from that time, not from when ``write()`` returned. Under asyncio
 on Linux the wait ends on a :class:`~aiortu.line._wake_timer.WakeTimer`, at the time itself
 rather than on the loop's next whole millisecond. :meth:`Link.send_now` sends without a
-wait or a yield when the line allows it (a stream with ``send_nowait``, the gap kept):
+wait or a yield when the line allows it (a push stream's ``send_nowait``, the gap kept):
 a slave answers from the read callback that way.
 
 On the push path a master can also tell the link the exact shape of the reply it waits
@@ -66,6 +67,7 @@ from aiortu.core.receiver import (
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost
 from aiortu.line._wake_timer import WakeTimer, create_wake_timer
+from aiortu.transport import PushStream
 
 __all__ = ("Link", "LinkEvent", "LinkListener")
 
@@ -170,8 +172,15 @@ class Link:
         """The event loop, where the link reads a stream that pushes its bytes (see
         :meth:`_push`); ``None`` otherwise. Its futures and :meth:`call_at` timers are the
         cheapest way to wait for the link there."""
-        self._send_nowait: Callable[[bytes], bool] | None = getattr(stream, "send_nowait", None)
-        """A stream's write without a yield (the serial port's), tried before ``send``."""
+        # Checked once here (an isinstance against a runtime protocol takes microseconds):
+        # the chunk and send paths use the bound methods kept.
+        self._set_receiver: Callable[..., None] | None = None
+        """A push stream's ``set_receiver``, used where the event loop has ``call_at``."""
+        self._send_nowait: Callable[[bytes], bool] | None = None
+        """A push stream's write without a yield (the serial port's), tried before ``send``."""
+        if isinstance(stream, PushStream):
+            self._set_receiver = stream.set_receiver
+            self._send_nowait = stream.send_nowait
         self._timer: Any = None
         self._timer_deadline = -math.inf
         self._expected: tuple[bytes, int, Callable[[bytes, float], None], bytes | None] | None = (
@@ -202,9 +211,10 @@ class Link:
         self.receiver.reset(self.clock())
         self._task_group = anyio.create_task_group()
         await self._task_group.__aenter__()
-        set_receiver = getattr(self.stream, "set_receiver", None)
+        set_receiver = self._set_receiver
         native = token.native_token
-        if callable(set_receiver) and callable(getattr(native, "call_at", None)):
+        # Push only where the loop has call_at timers for the receiver's deadline (asyncio).
+        if set_receiver is not None and callable(getattr(native, "call_at", None)):
             self.loop = native
             self._task_group.start_soon(self._push, set_receiver, name="aiortu link reader")
         else:
@@ -328,10 +338,10 @@ class Link:
             if self._listener is not None:
                 self._listener(None)
 
-    # The push path: a stream that offers ``set_receiver(receiver, on_lost)`` (the serial
-    # port) calls :meth:`_on_chunk` from the event loop's read callback, and the
-    # receiver's silence deadline is one loop timer (:meth:`_arm_timer`). The reader task
-    # only waits for the stream's end, so a chunk costs no task wake-up.
+    # The push path: a PushStream (the serial port) calls :meth:`_on_chunk` from the event
+    # loop's read callback, and the receiver's silence deadline is one loop timer
+    # (:meth:`_arm_timer`). The reader task only waits for the stream's end, so a chunk
+    # costs no task wake-up.
 
     async def _push(self, set_receiver: Callable[..., None]) -> None:
         backend = self.backend

@@ -1,8 +1,10 @@
 """Byte streams that carry RTU frames: serial ports, RTU over TCP, pty file descriptors.
 
 Every transport is an :class:`anyio.abc.ByteStream`, so the link, the master and the
-slave take any of them. :func:`open_stream` opens one from a port name as users write it:
-a serial device path, or ``rtu+tcp://host:port`` (see :mod:`aiortu.transport._url`).
+slave take any of them. A stream that also implements :class:`PushStream` (the serial
+port does) saves the link a task wake-up per chunk read and per frame sent.
+:func:`open_stream` opens one from a port name as users write it: a serial device path,
+or ``rtu+tcp://host:port`` (see :mod:`aiortu.transport._url`).
 Opening errors are :class:`~aiortu.errors.PortError` subclasses naming the port; see
 ``docs/transports.md`` for what each means and what to do about it.
 """
@@ -16,6 +18,7 @@ from anyio.abc import ByteStream
 from aiortu.core.timing import LineSettings
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
+from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
 from aiortu.transport._tcp import open_rtu_over_tcp
 from aiortu.transport._url import (
@@ -29,6 +32,7 @@ __all__ = (
     "FileDescriptorStream",
     "LocalEchoFilter",
     "PortAddress",
+    "PushStream",
     "RS485Options",
     "SerialAddress",
     "SerialAttribute",

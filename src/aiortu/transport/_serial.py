@@ -59,6 +59,7 @@ from aiortu.errors import (
     UnsupportedSettings,
 )
 from aiortu.transport._echo import LocalEchoFilter
+from aiortu.transport._push import PushStream
 
 __all__ = ("RS485Options", "SerialAttribute", "SerialStream", "open_serial")
 
@@ -334,7 +335,7 @@ class _PortProtocol(asyncio.Protocol):
             self.on_lost()
 
 
-class SerialStream(ByteStream):
+class SerialStream(ByteStream, PushStream):
     """An open serial port as a byte stream. Made by :func:`open_serial`.
 
     :meth:`receive` returns the bytes as the port delivers them (with the local echo

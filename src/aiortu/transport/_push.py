@@ -1,0 +1,69 @@
+"""The push extension: a byte stream that hands over received bytes and writes without a yield.
+
+Any :class:`anyio.abc.ByteStream` carries a line; a stream that also has the two methods
+of :class:`PushStream` lets the :class:`~aiortu.line.Link` skip a task wake-up per chunk
+read and per frame sent. The serial port's :class:`~aiortu.transport.SerialStream`
+implements it. The extension is structural: a stream needs no base class, only both
+methods with these signatures.
+
+The link checks for it once, when it is made (``isinstance(stream, PushStream)``), and
+keeps the bound methods, so the check costs nothing per chunk. It reads a push stream
+through :meth:`PushStream.set_receiver` only where the running event loop offers
+``call_at`` timers (asyncio); elsewhere (trio) it reads it through ``receive()`` like any
+other stream, so a push stream must keep ``receive()`` and ``send()`` working as well.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Protocol, runtime_checkable
+
+__all__ = ("PushStream",)
+
+
+@runtime_checkable
+class PushStream(Protocol):
+    """The methods a byte stream adds to push its bytes and to write without a yield.
+
+    Both are called from the event loop's thread, never from another thread, and both
+    must return without blocking or yielding: they are plain functions, not coroutines.
+    """
+
+    def set_receiver(
+        self,
+        receiver: Callable[[bytes], None] | None,
+        on_lost: Callable[[], None] | None = None,
+    ) -> None:
+        """Hand every chunk received from now on to *receiver*, instead of keeping it
+        for ``receive()``; ``None`` keeps chunks for ``receive()`` again.
+
+        Called by the link's reader task when it starts (with its chunk callback) and
+        when it stops (with ``None``). The stream must:
+
+        - call *receiver* with each non-empty chunk, in order, from an event loop
+          callback (the port's read callback); bytes already kept go to *receiver*
+          at once, before this method returns;
+        - call *on_lost* once when the stream fails or is closed, also at once if it
+          already has; ``receive()`` then raises what ended the stream
+          (:class:`anyio.BrokenResourceError`, :class:`anyio.EndOfStream` or
+          :class:`anyio.ClosedResourceError`);
+        - keep nothing for ``receive()`` while a receiver is set.
+
+        *receiver* may call :meth:`send_nowait` (a slave answers from there), and may
+        raise only on a bug: the link catches everything in it and ends its reader.
+        """
+        ...
+
+    def send_nowait(self, item: bytes) -> bool:
+        """Write *item* now, without a yield, if the stream can take it; return whether
+        it did.
+
+        Called by the link (:meth:`~aiortu.line.Link.send` and
+        :meth:`~aiortu.line.Link.send_now`), from a task or from a *receiver* callback,
+        before it falls back to ``await send(item)``. True means the stream has all of
+        *item*: written, or queued behind nothing and going out as soon as the port can
+        take it, in order. False means nothing was written (closed, failed, or earlier
+        bytes still queued); the caller then uses ``send()``, which waits its turn or
+        raises why.
+        """
+        ...
