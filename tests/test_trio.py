@@ -76,6 +76,7 @@ REUSED = {
         "test_trace_is_paced_and_non_overlapping",
         "test_closing_the_bus_wakes_receivers",
     ),
+    "tests.testing.test_pty_bus": ("test_async_with_in_the_test_loop",),
     "tests.transport.test_fd": ("test_other_side_closed_is_end_of_stream",),
     "tests.transport.test_tcp": (
         "test_frames_travel_both_ways",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import subprocess
 import sys
 import textwrap
@@ -66,13 +67,26 @@ def test_strict_mode_and_without_pytest_asyncio(tmp_path):
     # their time is pytest starting up.
     runs = {
         "strict": start_suite(
-            tmp_path / "strict", "@pytest.mark.asyncio", "-o", "asyncio_mode=strict"
+            tmp_path / "strict", "@pytest.mark.asyncio", "-o", "asyncio_mode=strict", "-rA"
         ),
         "no pytest-asyncio": start_suite(
-            tmp_path / "plain", "@pytest.mark.anyio", "-p", "no:asyncio"
+            tmp_path / "plain", "@pytest.mark.anyio", "-p", "no:asyncio", "-rA"
         ),
     }
+    # anyio's plugin runs each anyio test once per installed backend: with trio installed
+    # (a test extra), the fixtures are checked under trio too.
+    anyio_backends = ["asyncio"] + (["trio"] if importlib.util.find_spec("trio") else [])
+    expected = {
+        "strict": ["test_pair", "test_bus_factory", "test_pty_sync"],
+        "no pytest-asyncio": [
+            *(f"{test}[{backend}]" for test in ("test_pair", "test_bus_factory")
+              for backend in anyio_backends),
+            "test_pty_sync",
+        ],
+    }  # fmt: skip
     for name, process in runs.items():
         output, _ = process.communicate(timeout=50)
         assert process.returncode == 0, f"{name}: {output}"
-        assert "3 passed" in output, f"{name}: {output}"
+        for test in expected[name]:
+            assert f"PASSED test_suite.py::{test}\n" in output, f"{name}: {output}"
+        assert f"{len(expected[name])} passed" in output, f"{name}: {output}"
