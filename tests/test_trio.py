@@ -33,8 +33,9 @@ from aiortu.core.pdu import Request
 from aiortu.core.timing import LineSettings
 from aiortu.testing import VirtualBus, virtual_pair
 from aiortu.testing._pty_bus import make_raw
-from aiortu.transport import FileDescriptorStream, open_rtu_over_tcp
+from aiortu.transport import FileDescriptorStream, open_serial
 from tests.master.fakes import FakeSlave, answer, line, register_value, silent
+from tests.transport.ptys import open_pty
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -196,12 +197,25 @@ def test_master_over_tcp_to_a_slave(anyio_backend: str) -> None:
         async with listener, anyio.create_task_group() as tg:
             tg.start_soon(listener.serve, serve)
             port = listener.extra(SocketAttribute.local_port)
-            stream = await open_rtu_over_tcp("127.0.0.1", port)
-            async with aiortu.Master(stream, frame_gap=0, retries=0) as master:
+            # open_master: the URL, the transport and the reconnecting connection.
+            url = f"rtu+tcp://127.0.0.1:{port}"
+            async with aiortu.open_master(url, frame_gap=0, retries=0) as master:
                 await _exercise(master, store)
             tg.cancel_scope.cancel()
 
     run(anyio_backend, scenario)
+
+
+def test_the_serial_port_says_it_runs_on_asyncio_only_under_trio() -> None:
+    async def scenario() -> None:
+        with open_pty() as pty:
+            with pytest.raises(RuntimeError, match="asyncio only"):
+                await open_serial(pty.path)
+            with pytest.raises(RuntimeError, match="asyncio only"):
+                async with aiortu.open_master(pty.path):
+                    pass
+
+    run("trio", scenario)
 
 
 def test_a_retry_after_a_silent_attempt_gets_the_reply(anyio_backend: str) -> None:
