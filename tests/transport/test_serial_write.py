@@ -105,3 +105,30 @@ async def test_closing_with_output_queued_sends_it_all_then_releases_the_port() 
         async with await open_serial(pty.path, LINE):
             pass
         assert loop_exceptions == []
+
+
+async def test_a_hangup_with_output_queued_breaks_the_send_and_stops_watching() -> None:
+    with recorded_loop_exceptions() as loop_exceptions, open_pty() as pty:
+        stream = await open_serial(pty.path, LINE)
+        try:
+            fill(stream)
+            failed: list[BaseException] = []
+
+            async def send_tail() -> None:
+                try:
+                    await stream.send(block(0))
+                except anyio.BrokenResourceError as error:
+                    failed.append(error)
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(send_tail)
+                await anyio.sleep(0.05)
+                pty.close_master()  # the adapter is unplugged: the queued bytes cannot go
+            assert len(failed) == 1
+            assert not stream._transport._watching_writable
+            assert stream._transport.get_write_buffer_size() == 0
+            with anyio.fail_after(2):
+                await stream._protocol.done.wait()
+            assert loop_exceptions == []  # reported by the stream, not logged by the loop
+        finally:
+            await stream.aclose()

@@ -265,9 +265,11 @@ class _PortTransport(SerialTransport):
             self._port_protocol.resume_writing()
 
     def _write_failed(self, exc: OSError) -> None:
+        """The port failed under a write: drop what waits and close with the error, as a
+        failed read does. The stream reports it (``BrokenResourceError`` chained to it);
+        an unplugged adapter is no event loop error."""
         self.flush()
-        error = serial.SerialException(f"write failed: {exc}")
-        self._fatal_error(error, "Fatal write error on serial transport")
+        self._abort(serial.SerialException(f"write failed: {exc}"))
 
 
 class _PortProtocol(asyncio.Protocol):
