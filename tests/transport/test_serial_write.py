@@ -74,10 +74,13 @@ async def test_a_full_output_buffer_drains_in_order_and_then_idles() -> None:
             assert stream._transport.get_write_buffer_size() == 0
             assert stream.send_nowait(block(0))  # the fast path is open again
             received += await drain(pty, 256)
-            # Idle: an event loop with nothing to do sleeps in epoll. A writer left on
-            # the descriptor would run on every loop pass instead and use all of a core
-            # (with one exception per pass); 0.2 s of CPU in 0.5 s is far above the
-            # near-zero an idle loop uses, and far below a spin, even on a busy machine.
+            # Idle: an event loop with nothing to do sleeps in epoll and uses well under a
+            # millisecond of CPU here. A writer left on the writable descriptor runs on
+            # every pass of the loop instead: the dependency's raises each time (the
+            # exception list catches that, however loaded the machine), and one that
+            # finds nothing to write spins silently, using all the CPU the process gets
+            # (0.5 s in 0.5 s on an idle machine). 0.2 s catches any spin that gets 40 %
+            # of a core, with ample room for noise (a collection, page faults).
             cpu_before = time.process_time()
             await anyio.sleep(0.5)
             idle_cpu = time.process_time() - cpu_before
