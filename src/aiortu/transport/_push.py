@@ -40,9 +40,11 @@ class PushStream(Protocol):
         Called by the link's reader task when it starts (with its chunk callback) and
         when it stops (with ``None``). The stream must:
 
-        - call *receiver* with each non-empty chunk, in order, from an event loop
-          callback (the port's read callback); bytes already kept go to *receiver*
-          at once, before this method returns;
+        - call *receiver* with each non-empty chunk, in order, in the event loop's
+          thread: from a callback (the serial port's read callback) or from the task
+          that wrote the bytes (an in-memory line), never from inside this stream's
+          own :meth:`send_nowait`; bytes already kept go to *receiver* at once, before
+          this method returns;
         - call *on_lost* once when the stream fails or is closed, also at once if it
           already has; ``receive()`` then raises what ended the stream
           (:class:`anyio.BrokenResourceError`, :class:`anyio.EndOfStream` or
