@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import os
 import tty
 from typing import Any
@@ -142,3 +143,46 @@ async def test_a_request_under_way_is_never_dropped_when_the_queue_overflows() -
     assert queue[0] is taken
     assert len(queue) == size
     assert slave.link.events_dropped == 6
+
+
+@contextlib.asynccontextmanager
+async def _slave_on_pty(store: aiortu.MemoryStore) -> Any:
+    """A slave serving *store* as UNIT on a pty (the push path), and the device's fd."""
+    master_fd, port_fd = os.openpty()
+    tty.setraw(port_fd)
+    os.set_blocking(master_fd, False)
+    try:
+        async with aiortu.serve(
+            os.ttyname(port_fd), {UNIT: store}, parity="N", stopbits=2, frame_gap=0
+        ) as slave:
+            await anyio.sleep(0.05)  # the receiver first waits for silence
+            yield master_fd, slave
+    finally:
+        for fd in (master_fd, port_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+async def test_listen_only_on_the_push_path_neither_executes_nor_answers() -> None:
+    # Reads and single writes are whole 8-byte requests the read callback takes: in
+    # listen-only mode they must be monitored only, as on any other line.
+    store = example_store()
+    async with _slave_on_pty(store) as (master_fd, slave):
+        ask = functools.partial(_exchange_on_pty, master_fd)
+        assert await ask(encode_frame(UNIT, bytes.fromhex("08 00 04 00 00"))) == b""
+        assert slave.listen_only
+        before = dataclasses.asdict(slave.counters)
+        monitored = ["03 00 6B 00 03", "06 00 01 00 07", "01 00 13 00 13"]
+        monitored.append("10 00 01 00 01 02 00 09")
+        for pdu in monitored:
+            assert await ask(encode_frame(UNIT, bytes.fromhex(pdu))) == b"", pdu
+        assert store.get(Table.HOLDING_REGISTERS, 0, 2) == [0, 0]
+        counters = dataclasses.asdict(slave.counters)
+        assert counters["server_no_response_count"] == before["server_no_response_count"] + 4
+        assert counters["server_message_count"] == before["server_message_count"] + 4
+        # Restart communications leaves the mode (itself unanswered); then reads are served.
+        assert await ask(encode_frame(UNIT, bytes.fromhex("08 00 01 00 00"))) == b""
+        assert not slave.listen_only
+        reply = await ask(encode_frame(UNIT, bytes.fromhex("03 00 6B 00 01")))
+        assert reply == encode_frame(UNIT, bytes.fromhex("03 02 AE 41"))
+        assert slave.connection_error is None
