@@ -22,8 +22,8 @@ import pytest
 import aiortu
 from aiortu.core.frame import CANNOT_KNOW, encode_frame, expected_response_length
 from aiortu.core.receiver import FrameReceived
-from aiortu.slave._handlers import FAST_PATHS
-from aiortu.slave._server import Slave, _Taken
+from aiortu.slave._answer_at_once import FAST_PATHS, Taken
+from aiortu.slave._server import Slave
 from aiortu.slave._store import Table
 from aiortu.testing._virtual_bus import virtual_pair
 
@@ -134,7 +134,7 @@ async def test_a_request_under_way_is_never_dropped_when_the_queue_overflows() -
     _, slave_end = virtual_pair()
     slave = Slave(slave_end, {UNIT: example_store()}, frame_gap=0)
     queue = slave._queue
-    taken = _Taken(encode_frame(UNIT, bytes.fromhex("07")), None)
+    taken = Taken(encode_frame(UNIT, bytes.fromhex("07")), bytes.fromhex("07 6D"))
     queue.append(taken)
     other = FrameReceived(encode_frame(9, bytes.fromhex("07")), 0.0, 0.0)
     size = slave.link.queue_size
