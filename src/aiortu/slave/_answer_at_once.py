@@ -87,6 +87,7 @@ class AnswerAtOnce:
         "_serve_later",
         "_stores",
         "_to_listener",
+        "answered",
         "enabled",
         "trace_set",
     )
@@ -115,6 +116,8 @@ class AnswerAtOnce:
         """Off, every request takes the general route (set it before serving)."""
         self.trace_set = False
         """Whether the slave has a trace callback."""
+        self.answered = 0
+        """How many requests were answered at once."""
 
     def may_answer(self, frame: bytes) -> bool:
         """Whether *frame*, a request with a good CRC, may be answered at once.
@@ -184,10 +187,12 @@ class AnswerAtOnce:
         try:
             reply = self._fast_paths[frame[1]](self._stores[frame[0]], frame[1:-2])
         except ExceptionResponse as error:
+            self.answered += 1
             self._reply_failed(frame, error.code)
             return True
         if reply is None:
             return False
+        self.answered += 1
         machine = self._machine
         if self._link.send_now(encode_frame(frame[0], reply)) is not None:
             machine.answered_at_once(frame[0], frame[1])
