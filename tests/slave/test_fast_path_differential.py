@@ -86,9 +86,7 @@ def _pdu(rng: random.Random) -> str:
         lambda: _write_registers(rng, address),
         lambda: _write_coils(rng, address),
         lambda: "07",
-        lambda: (
-            f"08{rng.choice(('0000', '0002', '0003', '000A', '000B', '000C', '000D', '000E', '000F', '0010', '0011', '0012', '0014', '0099'))}{_h(values)}"
-        ),
+        lambda: f"08{_h(rng.choice(_DIAGNOSTICS))}{_h(values)}",
         lambda: "0B",
         lambda: "0C",
         lambda: "11",
@@ -208,13 +206,13 @@ def _seen(slave: Slave) -> int:
 async def _settle(slave: Slave, seen_before: int) -> None:
     """Wait until the slave has taken the item and finished with it."""
     with anyio.fail_after(5):
-        while not (
+        while not (  # noqa: ASYNC110 - polls the slave's state: no event tells it
             _seen(slave) > seen_before
             and slave.link.receiver.state is ReceiverState.IDLE
             and slave.machine.state is SlaveState.IDLE
             and not slave._queue
         ):
-            await anyio.sleep(0.001)  # noqa: ASYNC110 - polls the slave's state, no event
+            await anyio.sleep(0.001)
 
 
 async def _reply(read: Any, sent: int) -> bytes:
