@@ -309,7 +309,7 @@ class MemoryStore:
         """Call *callback* with a :class:`Change` after every write a master makes.
 
         Returns a function that removes the callback. A callback that raises is logged
-        and does not affect the write or the reply.
+        and detached; the write and the reply go on as if it were not there.
         """
         self._observers.append(callback)
 
@@ -348,7 +348,10 @@ class MemoryStore:
             try:
                 callback(change)
             except Exception:
-                _log.exception("a store observer failed on %r", change)
+                # Logged once, not on every later write: a broken observer is dropped.
+                _log.exception("a store observer failed on %r; it is detached", change)
+                if callback in self._observers:
+                    self._observers.remove(callback)
 
 
 class ChangeFeed:
