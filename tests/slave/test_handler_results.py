@@ -139,3 +139,20 @@ async def test_a_raising_store_observer_is_logged_and_detached(
     assert store.get(Table.HOLDING_REGISTERS, 1, 2) == [7, 8]
     with caplog.at_level(logging.ERROR):
         assert _logged(caplog, "observer failed")
+
+
+class _Broken(RawPDU):
+    """A response whose encoding fails, as a user's Response subclass might."""
+
+    def encode(self) -> bytes:
+        raise RuntimeError("cannot encode")
+
+
+async def test_a_response_that_fails_to_encode_gets_04(caplog: pytest.LogCaptureFixture) -> None:
+    async with slave_line(_units()) as (master, slave):
+        slave.set_handler(0x48, lambda request, context: _Broken(0x48))
+        slave.set_handler(0x49, lambda request, context: Reply(_Broken(0x49), delay=0.01))
+        assert await master.request(UNIT, "48") == "C8 04"
+        assert await master.request(UNIT, "49") == "C9 04"
+        assert await master.request(OTHER_UNIT, "03 00 00 00 01") == "03 02 00 2A"
+    assert len(_logged(caplog, "the handler of function")) == 2

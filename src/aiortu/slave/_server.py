@@ -19,14 +19,22 @@ executed by every unit and never answered, and exceptions come in the spec's ord
 including for the user-defined codes 65-72 and 100-110, which arrive as
 :class:`~aiortu.core.pdu.RawPDU`. A handler that raises
 :class:`~aiortu.errors.ExceptionResponse` answers with its code; any other error answers
-04, is logged, and the slave goes on serving. The reply goes out after ``frame_gap`` of
-silence on the line (t3.5 by default; the link keeps it).
+04, is logged, and the slave goes on serving. What a handler or hook returns is checked
+here: a response, an :class:`~aiortu.core.pdu.ExceptionPDU`, a valid
+:class:`~aiortu.slave._handlers.Reply` or ``None``; anything else answers 04 and is
+logged once for that handler or hook. The reply goes out after ``frame_gap`` of silence
+on the line (t3.5 by default; the link keeps it).
+
+That is the general route, through the serve loop. The commonest requests may instead be
+answered at once where they arrive, without a task wake-up: every condition for that is
+in :meth:`~aiortu.slave._answer_at_once.AnswerAtOnce.may_answer`.
 
 Beyond function codes: :meth:`Slave.route` serves an address range of one table with a
 function (see :mod:`aiortu.slave._routes`); :meth:`Slave.before_request` and
 :meth:`Slave.after_request` add hooks around every request; a handler or hook that
 returns a :class:`~aiortu.slave._handlers.Reply` answers late, as another unit, or not at
-all, to test masters. *trace* sees every frame received and sent.
+all, to test masters. *trace* sees every frame received and sent; a trace callback that
+raises is logged and detached.
 """
 
 from __future__ import annotations
@@ -155,8 +163,9 @@ class Slave:
         self._build_contexts()
         for function_code, handler in (handlers or {}).items():
             self.set_handler(function_code, handler)
-        self._misbehaved: set[int] = set()
-        self._keep_alive: list[object] = []
+        self._misbehaved: dict[int, object] = {}
+        """Handlers and hooks logged for returning what is not an answer, by id (kept, so
+        that no other object takes their id)."""
         self._task_group: anyio.abc.TaskGroup | None = None
         self._stopped = anyio.Event()
         self._served = frozenset((BROADCAST_UNIT, *self.units))
@@ -494,6 +503,7 @@ class Slave:
         failure: int = ExceptionCode.SERVER_DEVICE_FAILURE
         try:
             result = await self._execute(handler, request, unit)
+            reply = _encoded(result)
         except ExceptionResponse as error:
             failure = error.code
         except _NotAnAnswer as error:
@@ -502,12 +512,10 @@ class Slave:
             _log.exception("unit %d: the handler of function 0x%02X failed", unit, function_code)
         else:
             if isinstance(result, ExceptionPDU):
-                failure = result.exception_code
+                machine.processing_failed(result.exception_code)
             else:
                 machine.processed()
-                if isinstance(result, Reply):
-                    return None if result.response is None else result
-                return None if result is None else result.encode()
+            return reply
         machine.processing_failed(failure)
         return exception_pdu(function_code, failure)
 
@@ -541,8 +549,7 @@ class Slave:
         source = error.source
         if id(source) in self._misbehaved:
             return
-        self._misbehaved.add(id(source))
-        self._keep_alive.append(source)  # so that its id is never another's
+        self._misbehaved[id(source)] = source
         name = getattr(source, "__qualname__", type(source).__name__)
         _log.error(
             "unit %d, function 0x%02X: %s returned %s, not a response, an exception PDU, "
@@ -580,6 +587,20 @@ def _checked(value: object, source: object) -> HandlerResult:
             return value
         return _fail(source, "a Reply with a bad response, delay or unit")
     return _fail(source, f"a {type(value).__name__}")
+
+
+def _encoded(result: HandlerResult) -> bytes | Reply | None:
+    """What to send for *result*, a checked answer: the PDU's bytes, the Reply (its
+    response encoded once here, so that a broken ``encode`` fails now, not after the
+    delay), or None for nothing."""
+    if result is None:
+        return None
+    if isinstance(result, Reply):
+        if result.response is None:
+            return None
+        result.response.encode()
+        return result
+    return result.encode()
 
 
 def _fail(source: object, what: str) -> HandlerResult:
