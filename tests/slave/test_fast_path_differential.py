@@ -148,20 +148,23 @@ class _Run:
     stores: dict[int, Any]
 
 
-def _contents(store: MemoryStore) -> Any:
+def _contents(store: Any) -> Any:
     tables = {table.value: [list(b.values) for b in store.blocks(table)] for table in Table}
     return tables, {n: list(q) for n, q in store.fifo_queues.items()}, store.files
 
 
 @contextlib.asynccontextmanager
-async def _pty_line(fast: bool) -> AsyncIterator[tuple[Slave, Callable[[bytes], object], Any]]:
+async def _pty_line(
+    fast: bool, frame_gap: float = 0.0
+) -> AsyncIterator[tuple[Slave, Callable[[bytes], object], Any]]:
     master_fd, port_fd = os.openpty()
     tty.setraw(port_fd)
     os.set_blocking(master_fd, False)
     settings = LineSettings(19200, 8, "N", 2)
     try:
         stream = await open_stream(os.ttyname(port_fd), settings)
-        slave = Slave(stream, {FAST: _store(), SLOW: _store(_SlowStore)}, settings, frame_gap=0)
+        units = {FAST: _store(), SLOW: _store(_SlowStore)}
+        slave = Slave(stream, units, settings, frame_gap=frame_gap)
         slave._at_once.enabled = fast
 
         async def read() -> bytes:
@@ -177,6 +180,10 @@ async def _pty_line(fast: bool) -> AsyncIterator[tuple[Slave, Callable[[bytes], 
         for fd in (master_fd, port_fd):
             with contextlib.suppress(OSError):
                 os.close(fd)
+
+
+def _gapped_pty_line(fast: bool) -> Any:
+    return _pty_line(fast, frame_gap=0.002)
 
 
 @contextlib.asynccontextmanager
@@ -248,7 +255,7 @@ async def _run(line: Any, fast: bool, items: list[bytes]) -> _Run:
             machine.event_log.events(),
             machine.event_log.event_count,
             machine.listen_only,
-            {unit: _contents(store) for unit, store in slave.units.items()},  # type: ignore[arg-type]
+            {unit: _contents(store) for unit, store in slave.units.items()},
         )
 
 
@@ -277,6 +284,8 @@ async def test_the_shortcut_on_and_off_on_a_pty_and_a_virtual_line(seed: int) ->
     runs = {
         "pty, shortcut on": await _run(_pty_line, True, items),
         "pty, shortcut off": await _run(_pty_line, False, items),
+        # With a frame gap to keep, a reply computed at once waits in the serve loop.
+        "pty with a frame gap, shortcut on": await _run(_gapped_pty_line, True, items),
         "virtual line, shortcut on": await _run(_virtual_line, True, items),
         "virtual line, shortcut off": await _run(_virtual_line, False, items),
     }
@@ -287,5 +296,6 @@ async def test_the_shortcut_on_and_off_on_a_pty_and_a_virtual_line(seed: int) ->
     # The shortcut ran where it was on, and only there.
     assert runs["pty, shortcut on"].answered_at_once > STEPS // 10, f"seed {seed}"
     assert runs["virtual line, shortcut on"].answered_at_once > STEPS // 10, f"seed {seed}"
+    assert runs["pty with a frame gap, shortcut on"].answered_at_once > STEPS // 10
     assert runs["pty, shortcut off"].answered_at_once == 0
     assert runs["virtual line, shortcut off"].answered_at_once == 0
