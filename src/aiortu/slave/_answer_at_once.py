@@ -113,7 +113,7 @@ class AnswerAtOnce:
         self._fast_paths: dict[int, FastPath] = {}
         self._stores: dict[int, MemoryStore] = {}
         self.enabled = True
-        """Off, every request takes the general route (set it before serving)."""
+        """Off, every request takes the general route (the differential test compares)."""
         self.trace_set = False
         """Whether the slave has a trace callback."""
         self.answered = 0
