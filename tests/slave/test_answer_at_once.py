@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import os
 import tty
 from typing import Any
@@ -20,9 +21,12 @@ import pytest
 
 import aiortu
 from aiortu.core.frame import CANNOT_KNOW, encode_frame, expected_response_length
+from aiortu.core.pdu import RawPDU
+from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
 from aiortu.core.receiver import FrameReceived
-from aiortu.slave._handlers import FAST_PATHS
-from aiortu.slave._server import Slave, _Taken
+from aiortu.core.slave_machine import SlaveState
+from aiortu.slave._answer_at_once import FAST_PATHS, Taken
+from aiortu.slave._server import Slave
 from aiortu.slave._store import Table
 from aiortu.testing._virtual_bus import virtual_pair
 
@@ -133,7 +137,7 @@ async def test_a_request_under_way_is_never_dropped_when_the_queue_overflows() -
     _, slave_end = virtual_pair()
     slave = Slave(slave_end, {UNIT: example_store()}, frame_gap=0)
     queue = slave._queue
-    taken = _Taken(encode_frame(UNIT, bytes.fromhex("07")), None)
+    taken = Taken(encode_frame(UNIT, bytes.fromhex("07")), bytes.fromhex("07 6D"))
     queue.append(taken)
     other = FrameReceived(encode_frame(9, bytes.fromhex("07")), 0.0, 0.0)
     size = slave.link.queue_size
@@ -142,3 +146,168 @@ async def test_a_request_under_way_is_never_dropped_when_the_queue_overflows() -
     assert queue[0] is taken
     assert len(queue) == size
     assert slave.link.events_dropped == 6
+
+
+@contextlib.asynccontextmanager
+async def _slave_on_pty(store: aiortu.MemoryStore) -> Any:
+    """A slave serving *store* as UNIT on a pty (the push path), and the device's fd."""
+    master_fd, port_fd = os.openpty()
+    tty.setraw(port_fd)
+    os.set_blocking(master_fd, False)
+    try:
+        async with aiortu.serve(
+            os.ttyname(port_fd), {UNIT: store}, parity="N", stopbits=2, frame_gap=0
+        ) as slave:
+            await anyio.sleep(0.05)  # the receiver first waits for silence
+            yield master_fd, slave
+    finally:
+        for fd in (master_fd, port_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+async def test_listen_only_on_the_push_path_neither_executes_nor_answers() -> None:
+    # Reads and single writes are whole 8-byte requests the read callback takes: in
+    # listen-only mode they must be monitored only, as on any other line.
+    store = example_store()
+    async with _slave_on_pty(store) as (master_fd, slave):
+        ask = functools.partial(_exchange_on_pty, master_fd)
+        assert await ask(encode_frame(UNIT, bytes.fromhex("08 00 04 00 00"))) == b""
+        assert slave.listen_only
+        before = dataclasses.asdict(slave.counters)
+        monitored = ["03 00 6B 00 03", "06 00 01 00 07", "01 00 13 00 13"]
+        monitored.append("10 00 01 00 01 02 00 09")
+        for pdu in monitored:
+            assert await ask(encode_frame(UNIT, bytes.fromhex(pdu))) == b"", pdu
+        assert store.get(Table.HOLDING_REGISTERS, 0, 2) == [0, 0]
+        counters = dataclasses.asdict(slave.counters)
+        assert counters["server_no_response_count"] == before["server_no_response_count"] + 4
+        assert counters["server_message_count"] == before["server_message_count"] + 4
+        # Restart communications leaves the mode (itself unanswered); then reads are served.
+        assert await ask(encode_frame(UNIT, bytes.fromhex("08 00 01 00 00"))) == b""
+        assert not slave.listen_only
+        reply = await ask(encode_frame(UNIT, bytes.fromhex("03 00 6B 00 01")))
+        assert reply == encode_frame(UNIT, bytes.fromhex("03 02 AE 41"))
+        assert slave.connection_error is None
+
+
+class _DoublingStore(aiortu.MemoryStore):
+    """Not the built-in class: its own read must be called."""
+
+    def read(self, table: Table, address: int, count: int) -> list[int]:
+        return [2 * value for value in super().read(table, address, count)]
+
+
+READ = encode_frame(UNIT, bytes.fromhex("03 00 6B 00 01"))
+"""A whole 8-byte request the read callback takes on the push path."""
+
+
+async def _read_on_pty(configure: Any, store: aiortu.MemoryStore | None = None) -> bytes:
+    """Configure a slave on a pty, have it read one register, return the reply frame."""
+    async with _slave_on_pty(store or example_store()) as (master_fd, slave):
+        configure(slave)
+        reply = await _exchange_on_pty(master_fd, READ)
+        assert slave.connection_error is None
+        return reply
+
+
+def _answer(pdu_hex: str) -> bytes:
+    return encode_frame(UNIT, bytes.fromhex(pdu_hex))
+
+
+async def test_the_push_path_shows_a_traced_slave_every_frame() -> None:
+    seen: list[tuple[str, bytes]] = []
+    reply = await _read_on_pty(lambda slave: setattr(slave, "trace", _record(seen)))
+    assert reply == _answer("03 02 AE 41")
+    assert seen == [("received", READ), ("sent", reply)]
+
+
+async def test_the_push_path_runs_the_hooks() -> None:
+    seen: list[int] = []
+    reply = await _read_on_pty(
+        lambda slave: slave.before_request(lambda request, context: seen.append(context.unit))
+    )
+    assert reply == _answer("03 02 AE 41")
+    assert seen == [UNIT]
+
+
+async def test_the_push_path_leaves_a_code_to_the_users_handler() -> None:
+    response = ReadHoldingRegistersResponse((7,))
+    reply = await _read_on_pty(lambda slave: slave.set_handler(0x03, lambda r, c: response))
+    assert reply == _answer("03 02 00 07")
+
+
+async def test_the_push_path_leaves_other_stores_and_routes_to_them() -> None:
+    assert await _read_on_pty(
+        lambda slave: None, _DoublingStore(holding_registers={0x6B: [4]})
+    ) == _answer("03 02 00 08")
+    routed = await _read_on_pty(
+        lambda slave: slave.route(Table.HOLDING_REGISTERS, range(0x6B, 0x6C), lambda a: [9])
+    )
+    assert routed == _answer("03 02 00 09")
+
+
+def _record(seen: list[tuple[str, bytes]]) -> Any:
+    return lambda kind, data: seen.append((kind, data))
+
+
+def _fresh_slave() -> Slave:
+    _, slave_end = virtual_pair()
+    units = {UNIT: example_store(), 18: _DoublingStore(holding_registers={0: 1})}
+    return Slave(slave_end, units, frame_gap=0)
+
+
+REFUSALS: dict[str, Any] = {
+    "a request queued for the serve loop": lambda s: s._queue.append(Taken(READ, b"\x07\x00")),
+    "a request under way": lambda s: s.machine.frame_received(UNIT, 0x03),
+    "listen-only mode": lambda s: setattr(s, "listen_only", True),
+    "a trace callback": lambda s: setattr(s, "trace", lambda kind, data: None),
+    "a before hook": lambda s: s.before_request(lambda request, context: None),
+    "an after hook": lambda s: s.after_request(lambda request, context, result: None),
+    "the user's handler for the code": lambda s: s.set_handler(0x03, lambda r, c: None),
+    "a route on the unit": lambda s: s.route("coils", range(1), lambda access: None),
+    "switched off": lambda s: setattr(s._at_once, "enabled", False),
+}
+
+
+@pytest.mark.parametrize("refusal", sorted(REFUSALS))
+def test_each_condition_of_the_predicate_refuses_on_its_own(refusal: str) -> None:
+    slave = _fresh_slave()
+    assert slave._at_once.may_answer(READ)
+    REFUSALS[refusal](slave)
+    assert not slave._at_once.may_answer(READ)
+
+
+@pytest.mark.parametrize(
+    "frame",
+    [
+        encode_frame(18, bytes.fromhex("03 00 00 00 01")),  # not the built-in store
+        encode_frame(0, bytes.fromhex("03 00 00 00 01")),  # a broadcast
+        encode_frame(5, bytes.fromhex("03 00 00 00 01")),  # not our unit
+        encode_frame(UNIT, bytes.fromhex("05 00 13 FF 00")),  # no fast path for the code
+    ],
+)
+def test_the_predicate_refuses_other_stores_units_and_codes(frame: bytes) -> None:
+    assert not _fresh_slave()._at_once.may_answer(frame)
+
+
+async def test_a_request_arriving_while_a_handler_awaits_is_answered_after_it() -> None:
+    async def slow(request: Any, context: Any) -> Any:
+        await anyio.sleep(0.05)
+        return RawPDU(0x41, b"\x01")
+
+    async with _slave_on_pty(example_store()) as (master_fd, slave):
+        slave.set_handler(0x41, slow)
+        os.write(master_fd, encode_frame(UNIT, bytes.fromhex("41")))
+        with anyio.fail_after(1):  # 41 has no known length: it ends with silence
+            while slave.machine.state is not SlaveState.PROCESSING:  # noqa: ASYNC110
+                await anyio.sleep(0.002)
+        os.write(master_fd, READ)  # while the handler awaits
+        replies = b""
+        with anyio.move_on_after(1):
+            while len(replies) < 6 + 7:
+                await anyio.wait_readable(master_fd)
+                with contextlib.suppress(BlockingIOError):
+                    replies += os.read(master_fd, 64)
+        assert replies == _answer("41 01") + _answer("03 02 AE 41")
+        assert slave.connection_error is None

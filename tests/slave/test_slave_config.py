@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from aiortu.errors import ExceptionResponse, InvalidValue
 from aiortu.slave._config import ConfigError, load_config, parse_config
-from aiortu.slave._store import Table
+from aiortu.slave._store import MemoryStore, Table
 
 EXAMPLE = Path(__file__).parents[2] / "examples" / "devices.toml"
 
@@ -108,6 +109,41 @@ BAD = [
     ("[[slave]]\nunit = 1\n[slave.server_id]\nid = 'a'\nrun = 1", "slave[0].server_id.run", "true"),
     ("[[slave]]\nunit = 1\nexception_status = 256", "slave[0].exception_status", "0..255"),
     ("[[slave]\nunit = 1", "(syntax)", ""),
+    (
+        "[[slave]]\nunit = 1\n[[slave.fifo]]\naddress = 5\n[[slave.fifo]]\naddress = 5",
+        "slave[0].fifo[1].address",
+        "FIFO queue 5 is described twice",
+    ),
+    (
+        "[[slave]]\nunit = 1\n[[slave.files]]\nfile = 3\nrecords = 4\n"
+        "[[slave.files]]\nfile = 3\nvalues = [1]",
+        "slave[0].files[1].file",
+        "file 3 is described twice",
+    ),
+    (
+        "[[slave]]\nunit = 1\n[[slave.holding_registers]]\nstart = 10\ncount = 5\n"
+        "[[slave.read_only]]\ntable = 'holding_registers'\nstart = 100\ncount = 2",
+        "slave[0].read_only[0]",
+        "address 100 of the range is outside every holding_registers block",
+    ),
+    (
+        "[[slave]]\nunit = 1\n[[slave.holding_registers]]\nstart = 10\ncount = 5\n"
+        "[[slave.read_only]]\ntable = 'holding_registers'\nstart = 12\ncount = 5",
+        "slave[0].read_only[0]",
+        "address 15 of the range is outside",
+    ),
+    (
+        "[[slave]]\nunit = 1\n[[slave.holding_registers]]\nstart = 0\ncount = 5\n"
+        "[slave.aliases]\ninput_registers = 'holding_registers'\n"
+        "[[slave.read_only]]\ntable = 'input_registers'\nstart = 5\ncount = 1",
+        "slave[0].read_only[0]",
+        "address 5 of the range is outside every input_registers block",
+    ),
+    (
+        "[[slave]]\nunit = 1\nread_only_exception = 99",
+        "slave[0].read_only_exception",
+        "must be one of the spec's exception codes (1, 2, 3, 4, 5, 6, 8, 10, 11), not 99",
+    ),
 ]
 
 
@@ -147,3 +183,25 @@ def test_serve_with_a_missing_file_exits_2(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1
     assert "cannot read it" in result.stderr
+
+
+def test_read_only_ranges_may_span_adjacent_blocks_and_aliases() -> None:
+    text = (
+        "[[slave]]\nunit = 1\nread_only_exception = 4\n"
+        "[[slave.holding_registers]]\nstart = 10\ncount = 5\n"
+        "[[slave.holding_registers]]\nstart = 15\ncount = 5\n"
+        "[slave.aliases]\ninput_registers = 'holding_registers'\n"
+        "[[slave.read_only]]\ntable = 'holding_registers'\nstart = 12\ncount = 8\n"
+        "[[slave.read_only]]\ntable = 'input_registers'\nstart = 10\ncount = 1"
+    )
+    store = parse_config(text).units[1]
+    with pytest.raises(ExceptionResponse) as refused:
+        store.write(Table.HOLDING_REGISTERS, 19, [1])
+    assert refused.value.code == 4
+    store.write(Table.HOLDING_REGISTERS, 11, [1])
+
+
+def test_a_memory_store_refuses_an_exception_code_the_spec_lacks() -> None:
+    with pytest.raises(InvalidValue) as caught:
+        MemoryStore(read_only_exception=99)  # type: ignore[arg-type]
+    assert "read_only_exception = 99" in str(caught.value)

@@ -65,6 +65,7 @@ from aiortu.slave._store import Block, MemoryStore
 __all__ = ("ConfigError", "DeviceConfig", "load_config", "parse_config")
 
 _TABLES = tuple(table.value for table in Table)
+_EXCEPTION_CODES = tuple(sorted(int(code) for code in ExceptionCode))
 _SLAVE_KEYS = frozenset(
     {
         "unit",
@@ -217,6 +218,27 @@ def _store(reader: _Reader, entry: dict[str, Any], key: str) -> MemoryStore:
         if tables[name]:
             raise reader.fail(f"{key}.aliases.{name}", "the table has blocks of its own")
         tables[name] = Table(target)
+    for table, ranges in _read_only_ranges(reader, entry, key, tables).items():
+        read_only[table].extend(ranges)
+    options = _options(reader, entry, key)
+    try:
+        return MemoryStore(
+            **tables,
+            read_only=read_only,
+            fifo_queues=_fifo_queues(reader, entry, key),
+            files=_files(reader, entry, key),
+            **options,
+        )
+    except InvalidValue as error:
+        raise reader.fail(key, str(error)) from None
+
+
+def _read_only_ranges(
+    reader: _Reader, entry: dict[str, Any], key: str, tables: Mapping[str, Any]
+) -> dict[Table, list[range]]:
+    """The ``[[slave.read_only]]`` ranges by table; each must lie inside the table's blocks
+    (elsewhere every address answers 02 anyway: such a range is a mistake)."""
+    found: dict[Table, list[range]] = {table: [] for table in Table}
     for index, item in enumerate(reader.tables(entry.get("read_only", []), f"{key}.read_only")):
         item_key = f"{key}.read_only[{index}]"
         reader.known(item, frozenset({"table", "start", "count"}), item_key)
@@ -224,30 +246,77 @@ def _store(reader: _Reader, entry: dict[str, Any], key: str) -> MemoryStore:
             raise reader.fail(f"{item_key}.table", f"must name a table ({', '.join(_TABLES)})")
         start = reader.integer(item, "start", item_key, range(0x10000))
         count = reader.integer(item, "count", item_key, range(1, 0x10001 - start))
-        read_only[Table(item["table"])].append(range(start, start + count))
-    fifo = {}
+        blocks = tables[item["table"]]
+        for _ in _TABLES:  # an alias: the other table's blocks
+            if isinstance(blocks, Table):
+                blocks = tables[blocks.value]
+        outside = _first_outside(range(start, start + count), blocks)
+        if outside is not None:
+            raise reader.fail(
+                item_key,
+                f"address {outside} of the range is outside every {item['table']} block; "
+                "a read-only range must lie inside the table's blocks",
+            )
+        found[Table(item["table"])].append(range(start, start + count))
+    return found
+
+
+def _first_outside(addresses: range, blocks: list[Block] | Table) -> int | None:
+    """The first of *addresses* that no block covers, or None."""
+    address = addresses.start
+    if isinstance(blocks, Table):
+        return address  # a circle of aliases: MemoryStore says what is wrong
+    for block in sorted(blocks, key=lambda block: block.start):
+        if block.start <= address < block.stop:
+            address = block.stop
+        if address >= addresses.stop:
+            return None
+    return address
+
+
+def _fifo_queues(reader: _Reader, entry: dict[str, Any], key: str) -> dict[int, list[int]]:
+    fifo: dict[int, list[int]] = {}
     for index, item in enumerate(reader.tables(entry.get("fifo", []), f"{key}.fifo")):
         item_key = f"{key}.fifo[{index}]"
         reader.known(item, frozenset({"address", "values"}), item_key)
         address = reader.integer(item, "address", item_key, range(0x10000))
+        if address in fifo:
+            raise reader.fail(
+                f"{item_key}.address", f"FIFO queue {address} is described twice in this slave"
+            )
         fifo[address] = reader.ints(item.get("values", []), f"{item_key}.values", range(0x10000))
+    return fifo
+
+
+def _files(reader: _Reader, entry: dict[str, Any], key: str) -> dict[int, int | list[int]]:
     files: dict[int, int | list[int]] = {}
     for index, item in enumerate(reader.tables(entry.get("files", []), f"{key}.files")):
-        files.update(_file(reader, item, f"{key}.files[{index}]"))
+        item_key = f"{key}.files[{index}]"
+        number, records = _file(reader, item, item_key)
+        if number in files:
+            raise reader.fail(f"{item_key}.file", f"file {number} is described twice in this slave")
+        files[number] = records
+    return files
+
+
+def _options(reader: _Reader, entry: dict[str, Any], key: str) -> dict[str, Any]:
     options: dict[str, Any] = {}
     if "exception_status" in entry:
         options["exception_status"] = reader.integer(entry, "exception_status", key, range(0x100))
     if "read_only_exception" in entry:
-        code = reader.integer(entry, "read_only_exception", key, range(1, 0x100))
-        options["read_only_exception"] = ExceptionCode(code) if code in (1, 2, 3, 4) else code
+        code = reader.integer(entry, "read_only_exception", key, range(0x100))
+        if code not in _EXCEPTION_CODES:
+            allowed = ", ".join(map(str, _EXCEPTION_CODES))
+            raise reader.fail(
+                f"{key}.read_only_exception",
+                f"must be one of the spec's exception codes ({allowed}), not {code}",
+            )
+        options["read_only_exception"] = ExceptionCode(code)
     if "device_identification" in entry:
         options["device_identification"] = _objects(reader, entry["device_identification"], key)
     if "server_id" in entry:
         options["server_id"] = _server_id(reader, entry["server_id"], f"{key}.server_id")
-    try:
-        return MemoryStore(**tables, read_only=read_only, fifo_queues=fifo, files=files, **options)
-    except InvalidValue as error:
-        raise reader.fail(key, str(error)) from None
+    return options
 
 
 def _block(reader: _Reader, entry: dict[str, Any], key: str, table: Table) -> Block:
@@ -272,15 +341,16 @@ def _block(reader: _Reader, entry: dict[str, Any], key: str, table: Table) -> Bl
     return Block(start, count, values)
 
 
-def _file(reader: _Reader, item: dict[str, Any], key: str) -> dict[int, int | list[int]]:
+def _file(reader: _Reader, item: dict[str, Any], key: str) -> tuple[int, int | list[int]]:
+    """The file number and its records (a count, or the values)."""
     reader.known(item, frozenset({"file", "records", "values"}), key)
     number = reader.integer(item, "file", key, range(1, 0x10000))
     if "values" in item:
         values = reader.ints(item["values"], f"{key}.values", range(0x10000))
         if not 1 <= len(values) <= 10000:
             raise reader.fail(f"{key}.values", "must hold 1..10000 records")
-        return {number: values}
-    return {number: reader.integer(item, "records", key, range(1, 10001))}
+        return number, values
+    return number, reader.integer(item, "records", key, range(1, 10001))
 
 
 def _objects(reader: _Reader, value: object, key: str) -> dict[int, bytes]:

@@ -12,19 +12,14 @@ A store's methods may return awaitables (an async store): the built-in handlers 
 return an awaitable themselves, which the slave awaits; with a sync store they stay
 plain calls.
 
-:data:`FAST_PATHS` serve the commonest requests (reading coils, inputs and registers,
-writing registers) straight from the bytes of the request to the bytes of the reply,
-for the built-in :class:`~aiortu.slave._store.MemoryStore` only: no request or response object
-is built. The slave takes them only while the built-in handler serves the function code
-and no hook is set; a fast path gives up (returns ``None``) on anything but a
-well-formed request and a store that answers, and the handler then runs as usual, so
-the answers are the same either way.
+The commonest requests may instead be answered at once, straight from the bytes of the
+request to the bytes of the reply, while these handlers serve their function codes:
+see :mod:`aiortu.slave._answer_at_once`.
 """
 
 from __future__ import annotations
 
 import inspect
-import struct
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final, TypeVar
@@ -32,9 +27,8 @@ from typing import Any, Final, TypeVar
 from aiortu.core.codes import DiagnosticSubFunction, ExceptionCode, FunctionCode
 from aiortu.core.data_model import AsyncDataStore, DataStore, ServerId, Table
 from aiortu.core.device_identity import answer_device_identification
-from aiortu.core.pdu import Response, pack_bits
+from aiortu.core.pdu import ExceptionPDU, Response
 from aiortu.core.pdu_bits import (
-    MAX_READ_BITS,
     ReadCoilsRequest,
     ReadCoilsResponse,
     ReadDiscreteInputsRequest,
@@ -53,8 +47,6 @@ from aiortu.core.pdu_files import (
 )
 from aiortu.core.pdu_registers import (
     MAX_FIFO_COUNT,
-    MAX_READ_REGISTERS,
-    MAX_WRITE_REGISTERS,
     MaskWriteRegisterRequest,
     MaskWriteRegisterResponse,
     ReadFifoQueueRequest,
@@ -85,12 +77,9 @@ from aiortu.core.pdu_serial_line import (
 )
 from aiortu.core.slave_machine import SlaveMachine
 from aiortu.errors import ExceptionResponse
-from aiortu.slave._store import MemoryStore
 
 __all__ = (
     "BUILTIN_HANDLERS",
-    "FAST_PATHS",
-    "FastPath",
     "Answer",
     "Handler",
     "HandlerResult",
@@ -146,8 +135,9 @@ class Reply:
     unit: int | None = None
 
 
-HandlerResult = Response | Reply | None
-"""A handler's answer: the response PDU, a :class:`Reply`, or ``None`` to send nothing."""
+HandlerResult = Response | ExceptionPDU | Reply | None
+"""A handler's answer: the response PDU, an exception PDU, a :class:`Reply`, or ``None``
+to send nothing. Anything else is answered with exception 04 (and logged)."""
 
 Answer = HandlerResult | Awaitable[HandlerResult]
 """What a handler returns: its answer, or an awaitable of it."""
@@ -456,100 +446,3 @@ BUILTIN_HANDLERS: Final[Mapping[int, Handler]] = {
     FunctionCode.ENCAPSULATED_INTERFACE_TRANSPORT: _as_handler(read_device_identification),
 }
 """The handlers served without registration, by function code."""
-
-
-# -- fast paths for the built-in MemoryStore ----------------------------------------------
-
-FastPath = Callable[[MemoryStore, bytes], bytes | None]
-"""``fast(store, pdu)``: the reply PDU, or ``None`` to leave the request to its handler.
-
-It raises :class:`~aiortu.errors.ExceptionResponse` only where the store does (an
-unmapped address, a read-only range), before anything is written."""
-
-_ADDRESS_SPACE = 0x10000
-_HEADER = struct.Struct(">HH")
-_WRITE_HEADER = struct.Struct(">HHB")
-_WORDS = [struct.Struct(f">{count}H") for count in range(MAX_READ_REGISTERS + 1)]
-
-
-def _fast_read_registers(table: Table) -> FastPath:
-    def read(store: MemoryStore, pdu: bytes) -> bytes | None:
-        if len(pdu) != 5:
-            return None
-        address, count = _HEADER.unpack_from(pdu, 1)
-        if not 0 < count <= MAX_READ_REGISTERS or address + count > _ADDRESS_SPACE:
-            return None
-        values = store.read(table, address, count)
-        try:
-            packed: bytes = _WORDS[count].pack(*values)
-        except struct.error:
-            return None  # a value the application put out of range: the handler answers 04
-        return bytes((pdu[0], 2 * count)) + packed
-
-    return read
-
-
-def _fast_read_bits(table: Table) -> FastPath:
-    def read(store: MemoryStore, pdu: bytes) -> bytes | None:
-        if len(pdu) != 5:
-            return None
-        address, count = _HEADER.unpack_from(pdu, 1)
-        if not 0 < count <= MAX_READ_BITS or address + count > _ADDRESS_SPACE:
-            return None
-        packed = pack_bits(map(bool, store.read(table, address, count)))
-        return bytes((pdu[0], len(packed))) + packed
-
-    return read
-
-
-def _fast_write_register(store: MemoryStore, pdu: bytes) -> bytes | None:
-    if len(pdu) != 5:
-        return None
-    address, value = _HEADER.unpack_from(pdu, 1)
-    store.write(Table.HOLDING_REGISTERS, address, (value,))
-    return pdu  # the reply echoes the request
-
-
-def _fast_write_registers(store: MemoryStore, pdu: bytes) -> bytes | None:
-    if len(pdu) < 8:
-        return None
-    address, count, byte_count = _WRITE_HEADER.unpack_from(pdu, 1)
-    if (
-        not 0 < count <= MAX_WRITE_REGISTERS
-        or byte_count != 2 * count
-        or len(pdu) != 6 + byte_count
-        or address + count > _ADDRESS_SPACE
-    ):
-        return None
-    store.write(Table.HOLDING_REGISTERS, address, _WORDS[count].unpack_from(pdu, 6))
-    return pdu[:5]
-
-
-FAST_PATHS: Final[Mapping[int, tuple[Handler, FastPath]]] = {
-    FunctionCode.READ_COILS: (
-        BUILTIN_HANDLERS[FunctionCode.READ_COILS],
-        _fast_read_bits(Table.COILS),
-    ),
-    FunctionCode.READ_DISCRETE_INPUTS: (
-        BUILTIN_HANDLERS[FunctionCode.READ_DISCRETE_INPUTS],
-        _fast_read_bits(Table.DISCRETE_INPUTS),
-    ),
-    FunctionCode.READ_HOLDING_REGISTERS: (
-        BUILTIN_HANDLERS[FunctionCode.READ_HOLDING_REGISTERS],
-        _fast_read_registers(Table.HOLDING_REGISTERS),
-    ),
-    FunctionCode.READ_INPUT_REGISTERS: (
-        BUILTIN_HANDLERS[FunctionCode.READ_INPUT_REGISTERS],
-        _fast_read_registers(Table.INPUT_REGISTERS),
-    ),
-    FunctionCode.WRITE_SINGLE_REGISTER: (
-        BUILTIN_HANDLERS[FunctionCode.WRITE_SINGLE_REGISTER],
-        _fast_write_register,
-    ),
-    FunctionCode.WRITE_MULTIPLE_REGISTERS: (
-        BUILTIN_HANDLERS[FunctionCode.WRITE_MULTIPLE_REGISTERS],
-        _fast_write_registers,
-    ),
-}
-"""The fast path of each function code that has one, with the built-in handler it stands
-in for (by function code)."""

@@ -19,25 +19,34 @@ executed by every unit and never answered, and exceptions come in the spec's ord
 including for the user-defined codes 65-72 and 100-110, which arrive as
 :class:`~aiortu.core.pdu.RawPDU`. A handler that raises
 :class:`~aiortu.errors.ExceptionResponse` answers with its code; any other error answers
-04, is logged, and the slave goes on serving. The reply goes out after ``frame_gap`` of
-silence on the line (t3.5 by default; the link keeps it).
+04, is logged, and the slave goes on serving. What a handler or hook returns is checked
+here: a response, an :class:`~aiortu.core.pdu.ExceptionPDU`, a valid
+:class:`~aiortu.slave._handlers.Reply` or ``None``; anything else answers 04 and is
+logged once for that handler or hook. The reply goes out after ``frame_gap`` of silence
+on the line (t3.5 by default; the link keeps it).
+
+That is the general route, through the serve loop. The commonest requests may instead be
+answered at once where they arrive, without a task wake-up: every condition for that is
+in :meth:`~aiortu.slave._answer_at_once.AnswerAtOnce.may_answer`.
 
 Beyond function codes: :meth:`Slave.route` serves an address range of one table with a
 function (see :mod:`aiortu.slave._routes`); :meth:`Slave.before_request` and
 :meth:`Slave.after_request` add hooks around every request; a handler or hook that
 returns a :class:`~aiortu.slave._handlers.Reply` answers late, as another unit, or not at
-all, to test masters. *trace* sees every frame received and sent.
+all, to test masters. *trace* sees every frame received and sent; a trace callback that
+raises is logged and detached.
 """
 
 from __future__ import annotations
 
 import inspect
 import logging
+import math
 from collections import deque
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from contextlib import asynccontextmanager
 from types import TracebackType
-from typing import Any, Final, Self
+from typing import Any, Self
 
 import anyio
 import anyio.abc
@@ -45,24 +54,22 @@ import anyio.abc
 from aiortu.core.codes import BROADCAST_UNIT, EXCEPTION_BIT, ExceptionCode
 from aiortu.core.data_model import AsyncDataStore, DataStore, Table
 from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import Request, decode_request
+from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_request
 from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
 from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine, SlaveState
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue, MalformedPDU
 from aiortu.line._link import Link, LinkEvent
+from aiortu.slave._answer_at_once import AnswerAtOnce, Taken, exception_pdu
 from aiortu.slave._handlers import (
     BUILTIN_HANDLERS,
-    FAST_PATHS,
     Answer,
-    FastPath,
     Handler,
     HandlerResult,
     Reply,
     RequestContext,
 )
 from aiortu.slave._routes import RangeHandler, RoutedStore
-from aiortu.slave._store import MemoryStore
 from aiortu.transport import open_stream
 
 __all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback", "serve")
@@ -84,17 +91,6 @@ unit), ``("sent", frame)`` for every reply, ``("discarded", data)`` for bytes dr
 
 _UNIT_RANGE = range(1, 248)
 _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
-
-
-class _Taken:
-    """A request the read callback took (counted, the machine CHECKING) and left to the
-    serve loop: to answer (*reply* None), or with its *reply* PDU to send."""
-
-    __slots__ = ("frame", "reply")
-
-    def __init__(self, frame: bytes, reply: bytes | None) -> None:
-        self.frame = frame
-        self.reply = reply
 
 
 class Slave:
@@ -146,24 +142,33 @@ class Slave:
         """The state machine that decides what to answer."""
         self.connection_error: ConnectionLost | None = None
         """Why the background serve loop ended, when it ended because the line failed."""
-        self._handlers: dict[int, Handler] = dict(BUILTIN_HANDLERS)
-        for function_code, handler in (handlers or {}).items():
-            self.set_handler(function_code, handler)
-        self.trace = trace
-        """The trace callback, or ``None``."""
-        self._routed: dict[int, RoutedStore] = {}
+        self._queue: deque[LinkEvent | Taken] = deque()
         self._before: list[BeforeHook] = []
         self._after: list[AfterHook] = []
+        self._at_once = AnswerAtOnce(
+            self.machine,
+            self.link,
+            self._queue,
+            before=self._before,
+            after=self._after,
+            serve_later=self._leave,
+            to_listener=self._on_link_event,
+        )
+        self._trace: TraceCallback | None = None
+        self.trace = trace
+        self._handlers: dict[int, Handler] = dict(BUILTIN_HANDLERS)
+        self._routed: dict[int, RoutedStore] = {}
         self._contexts: dict[int, RequestContext] = {}
         self._broadcast_contexts: list[RequestContext] = []
-        self._fast_stores: dict[int, MemoryStore] = {}
-        self._fast_paths: dict[int, FastPath] = {}
         self._build_contexts()
-        self._build_fast_paths()
+        for function_code, handler in (handlers or {}).items():
+            self.set_handler(function_code, handler)
+        self._misbehaved: dict[int, object] = {}
+        """Handlers and hooks logged for returning what is not an answer, by id (kept, so
+        that no other object takes their id)."""
         self._task_group: anyio.abc.TaskGroup | None = None
         self._stopped = anyio.Event()
         self._served = frozenset((BROADCAST_UNIT, *self.units))
-        self._queue: deque[LinkEvent | _Taken] = deque()
         self._wake: anyio.Event | None = None
         self._waiter: Any = None
         """The event loop future the serve loop waits on, where the link has a loop."""
@@ -185,7 +190,7 @@ class Slave:
             self._handlers.pop(function_code, None)
         else:
             self._handlers[function_code] = handler
-        self._build_fast_paths()
+        self._at_once.configure(self._handlers, self._stores())
 
     def handler(self, function_code: int) -> Callable[[Handler], Handler]:
         """Decorator form of :meth:`set_handler`."""
@@ -234,18 +239,17 @@ class Slave:
         self._after.append(hook)
         return lambda: self._after.remove(hook) if hook in self._after else None
 
+    def _stores(self) -> dict[int, DataStore | AsyncDataStore]:
+        """The store of each unit, with its routes."""
+        return {unit: self._routed.get(unit, store) for unit, store in self.units.items()}
+
     def _build_contexts(self) -> None:
         machine = self.machine
-        stores: dict[int, DataStore | AsyncDataStore] = {
-            unit: self._routed.get(unit, store) for unit, store in self.units.items()
-        }
+        stores = self._stores()
         self._contexts = {
             unit: RequestContext(unit, store, machine=machine) for unit, store in stores.items()
         }
-        # The built-in MemoryStore (not a subclass, not routed) takes the fast paths.
-        self._fast_stores = {
-            unit: store for unit, store in stores.items() if type(store) is MemoryStore
-        }
+        self._at_once.configure(self._handlers, stores)
         # A broadcast runs once per store: units that share one store run it once.
         seen: set[int] = set()
         self._broadcast_contexts = []
@@ -256,15 +260,27 @@ class Slave:
                     RequestContext(unit, store, broadcast=True, machine=machine)
                 )
 
-    def _build_fast_paths(self) -> None:
-        # A fast path stands in for a built-in handler only while that handler serves
-        # its function code (hooks are checked per request).
-        handlers = self._handlers
-        self._fast_paths = {
-            code: fast
-            for code, (handler, fast) in FAST_PATHS.items()
-            if handlers.get(code) is handler
-        }
+    @property
+    def trace(self) -> TraceCallback | None:
+        """The trace callback, or ``None`` (see :data:`TraceCallback`). One that raises is
+        logged and detached."""
+        return self._trace
+
+    @trace.setter
+    def trace(self, callback: TraceCallback | None) -> None:
+        self._trace = callback
+        self._at_once.trace_set = callback is not None
+
+    def _traced(self, kind: str, data: bytes) -> None:
+        """Show *data* to the trace callback; one that raises is logged and detached."""
+        trace = self._trace
+        if trace is None:
+            return
+        try:
+            trace(kind, data)
+        except Exception:
+            _log.exception("the trace callback failed; it is detached")
+            self.trace = None
 
     @property
     def function_codes(self) -> frozenset[int]:
@@ -333,11 +349,13 @@ class Slave:
     async def _serve_frames(self) -> None:
         """Take the link's events and answer the requests, until the link closes.
 
-        The link hands its events to :meth:`_on_link_event` in its reader task. Discards
-        and frames for other units are dealt with there at once when nothing is pending
-        (they only count), so they never wake this task; a frame for one of our units is
-        queued, and this task answers it. It drains the queue before it waits again, so a
-        flood of events costs one wake-up per batch, not one per event.
+        The link hands its events to :meth:`_on_link_event` (from its reader task, or
+        its read callback). Discards and frames for other units are dealt with there at
+        once when nothing is pending (they only count), and a request may be answered
+        there at once (see :mod:`aiortu.slave._answer_at_once`), so they never wake this
+        task; any other request for one of our units is queued, and this task answers it
+        through the machine, the handler and the hooks. It drains the queue before it
+        waits again, so a flood of events costs one wake-up per batch, not one per event.
         """
         link = self.link
         backend = link.backend
@@ -350,7 +368,7 @@ class Slave:
         except ConnectionLost:
             self._link_closed = True
         link.listen(self._on_link_event)
-        link.expect_requests(_EIGHT_BYTE_FAST_PATHS, 8, self._on_whole_request)
+        self._at_once.attach()
         try:
             while True:
                 if not queue:
@@ -369,40 +387,38 @@ class Slave:
                 if type(event) is FrameReceived:
                     if self._take_frame(event):
                         await self._serve_request(event.frame)
-                elif type(event) is _Taken:
-                    if event.reply is None:
-                        await self._serve_request(event.frame)
-                    else:
-                        await self._send_reply(event.frame[0], event.reply)
+                elif type(event) is Taken:
+                    await self._send_reply(event.frame[0], event.reply)
                 else:
                     self._take_discard(event)  # type: ignore[arg-type]
         finally:
             self._wake = self._waiter = None
-            link.expect_requests((), 8, None)
+            self._at_once.detach()
             link.listen(None)
 
     def _on_link_event(self, event: LinkEvent | None) -> None:
-        """The link's listener (in its reader task): count at once, or queue for the serve loop."""
+        """The link's listener: count at once, answer at once, or queue for the serve loop."""
         queue = self._queue
         if event is None:
             self._link_closed = True
         elif not queue and self.machine.state is SlaveState.IDLE:
             # Nothing pending and no request under way: a discard, or a frame for another
-            # unit, only counts, and a request the store answers at once is answered
-            # here, with no task wake-up; only the rest wakes the serve loop.
+            # unit, only counts, and a request may be answered at once; only the rest
+            # wakes the serve loop.
             if type(event) is not FrameReceived:
                 self._take_discard(event)
                 return
             if event.frame[0] not in self._served:
                 self._take_frame(event)
                 return
-            self._answer_at_once(event)
-            return
+            if self._at_once.answer(event.frame):
+                return
+            queue.append(event)
         else:
             if len(queue) >= self.link.queue_size:
                 # A reader that falls behind never stalls the line; a request already
-                # taken (only ever first in the queue) is never dropped: it is under way.
-                drop = 1 if type(queue[0]) is _Taken else 0
+                # answered (only ever first in the queue) is never dropped: it is counted.
+                drop = 1 if type(queue[0]) is Taken else 0
                 if drop < len(queue):
                     del queue[drop]
                     self.link.events_dropped += 1
@@ -420,58 +436,13 @@ class Slave:
             self._wake = None
             wake.set()
 
-    def _leave(self, taken: _Taken) -> None:
-        """The serve loop finishes *taken*, in order."""
+    def _leave(self, taken: Taken) -> None:
+        """The serve loop sends *taken*'s reply, in order."""
         self._queue.append(taken)
         self._wake_serve_loop()
 
-    def _on_whole_request(self, frame: bytes, end: float) -> None:
-        """The link's read callback got *frame*, a whole 8-byte request with a good CRC
-        (see Link.expect_requests): answer it here when a fast path does, counted in one
-        step when the reply goes out at once (SlaveMachine.answered_at_once); otherwise
-        it is the FrameReceived the receiver would have made, and goes the usual way."""
-        machine = self.machine
-        answer = None
-        if (
-            not self._queue
-            and self.trace is None
-            and machine.state is SlaveState.IDLE
-            and not machine.listen_only
-        ):
-            answer = self._fast_answer(frame)
-        if answer is None:
-            start = end - (len(frame) - 1) * self.link.char_time
-            self._on_link_event(FrameReceived(frame, start, end))
-            return
-        # Counted step by step unless a normal reply goes out at once.
-        if isinstance(answer, bytes):
-            if self.link.send_now(encode_frame(frame[0], answer)) is not None:
-                machine.answered_at_once(frame[0], frame[1])
-                return
-            machine.frame_received(frame[0], frame[1])
-            self._count_fast(answer)
-            self._leave(_Taken(frame, answer))  # the serve loop sends it after the gap
-            return
-        machine.frame_received(frame[0], frame[1])
-        self._count_fast(answer)
-        self._reply_at_once(frame, _exception_pdu(frame[1], answer))
-
-    def _reply_at_once(self, frame: bytes, reply: bytes) -> None:
-        """Send *reply*, the PDU answering *frame*, now if the line allows it, else leave
-        it to the serve loop (the machine is FORMATTING_REPLY or FORMATTING_ERROR)."""
-        out = encode_frame(frame[0], reply)
-        if self.link.send_now(out) is None:
-            self._leave(_Taken(frame, reply))
-            return
-        trace = self.trace
-        if trace is not None:
-            trace("sent", out)
-        self.machine.reply_sent()
-
     def _take_discard(self, event: LinkEvent) -> None:
-        trace = self.trace
-        if trace is not None:
-            trace("discarded", event.data)  # type: ignore[union-attr]
+        self._traced("discarded", event.data)  # type: ignore[union-attr]
         reason = event.reason  # type: ignore[union-attr]
         if reason is DiscardReason.CRC:
             self.machine.frame_corrupt()
@@ -481,9 +452,7 @@ class Slave:
     def _take_frame(self, event: FrameReceived) -> bool:
         """Count a frame; tell whether it is a request for this slave to serve."""
         frame = event.frame
-        trace = self.trace
-        if trace is not None:
-            trace("received", frame)
+        self._traced("received", frame)
         machine = self.machine
         if not machine.frame_received(frame[0], frame[1]):
             return False
@@ -492,65 +461,10 @@ class Slave:
             return False
         return True
 
-    def _answer_at_once(self, event: FrameReceived) -> None:
-        """Serve a request for one of our units from the link's read callback, as far as
-        that goes without a wait, and leave the rest to the serve loop.
-
-        The request is counted (the machine is CHECKING). Without hooks, a built-in
-        MemoryStore answers the common reads and writes at once (the fast paths); the
-        reply then goes out at once too when the line allows it (frame gap 0, or already
-        kept). Whatever needs a wait is left to the serve loop, in order.
-        """
-        frame = event.frame
-        if not self._take_frame(event):
-            return
-        reply = self._fast_reply(frame)
-        if reply is None:
-            self._leave(_Taken(frame, None))
-        elif self.machine.should_reply:
-            self._reply_at_once(frame, reply)
-        else:
-            self.machine.no_reply()
-
-    def _fast_answer(self, frame: bytes) -> bytes | int | None:
-        """What a fast path (see slave_handlers) answers to *frame*: the reply PDU, or the
-        exception code it raised (before changing anything); None where none applies
-        (hooks, another store, or a request it leaves to the handler). Counts nothing."""
-        fast = self._fast_paths.get(frame[1])
-        if fast is None or self._before or self._after:
-            return None
-        store = self._fast_stores.get(frame[0])
-        if store is None:
-            return None
-        try:
-            return fast(store, frame[1:-2])
-        except ExceptionResponse as error:
-            return error.code
-
-    def _count_fast(self, answer: bytes | int) -> None:
-        """Count a fast path's *answer* (the machine is CHECKING)."""
-        self.machine.check_request(supported=True)
-        if isinstance(answer, bytes):
-            self.machine.processed()
-        else:
-            self.machine.processing_failed(answer)
-
-    def _fast_reply(self, frame: bytes) -> bytes | None:
-        """The reply PDU from a fast path, counted by the machine; None where none
-        applies (see _fast_answer)."""
-        answer = self._fast_answer(frame)
-        if answer is None:
-            return None
-        self._count_fast(answer)
-        return answer if isinstance(answer, bytes) else _exception_pdu(frame[1], answer)
-
     async def _serve_request(self, frame: bytes) -> None:
         """Answer a request for one of our units (counted by the machine, now CHECKING)."""
         unit = frame[0]
-        reply: bytes | Reply | None = self._fast_reply(frame)
-        if reply is None:
-            reply = await self._answer(unit, frame[1:-2])
-        await self._send_reply(unit, reply)
+        await self._send_reply(unit, await self._answer(unit, frame[1:-2]))
 
     async def _send_reply(self, unit: int, reply: bytes | Reply | None) -> None:
         """Send *reply* (a PDU or a Reply) for *unit*, unless there is none to send."""
@@ -566,9 +480,7 @@ class Slave:
                 answer_unit = unit if reply.unit is None else reply.unit
                 out = encode_frame(answer_unit, reply.response.encode())
             await self.link.send(out)
-            trace = self.trace
-            if trace is not None:
-                trace("sent", out)
+            self._traced("sent", out)
             machine.reply_sent()
         else:
             machine.no_reply()
@@ -586,73 +498,127 @@ class Slave:
             except MalformedPDU as error:
                 violation = error.exception_code
         if not machine.check_request(supported=handler is not None, violation=violation):
-            return _exception_pdu(function_code, machine.exception_code)
+            return exception_pdu(function_code, machine.exception_code)
         assert handler is not None
+        failure: int = ExceptionCode.SERVER_DEVICE_FAILURE
         try:
-            if machine.broadcast:
-                for context in self._broadcast_contexts:
-                    await self._run(handler, request, context)
-                result: HandlerResult = None
-            else:
-                result = await self._run(handler, request, self._contexts[unit])
+            result = await self._execute(handler, request, unit)
+            reply = _encoded(result)
         except ExceptionResponse as error:
-            machine.processing_failed(error.code)
-            return _exception_pdu(function_code, error.code)
+            failure = error.code
+        except _NotAnAnswer as error:
+            self._log_not_an_answer(unit, function_code, error)
         except Exception:
             _log.exception("unit %d: the handler of function 0x%02X failed", unit, function_code)
-            machine.processing_failed(ExceptionCode.SERVER_DEVICE_FAILURE)
-            return _exception_pdu(function_code, ExceptionCode.SERVER_DEVICE_FAILURE)
-        machine.processed()
-        if result is None:
+        else:
+            if isinstance(result, ExceptionPDU):
+                machine.processing_failed(result.exception_code)
+            else:
+                machine.processed()
+            return reply
+        machine.processing_failed(failure)
+        return exception_pdu(function_code, failure)
+
+    async def _execute(self, handler: Handler, request: Request | None, unit: int) -> HandlerResult:
+        """Run *handler* for *unit*, or once per store for a broadcast (no answer then)."""
+        if self.machine.broadcast:
+            for context in self._broadcast_contexts:
+                await self._run(handler, request, context)
             return None
-        if isinstance(result, Reply):
-            return None if result.response is None else result
-        return result.encode()
+        return await self._run(handler, request, self._contexts[unit])
 
     async def _run(
         self, handler: Handler, request: Request | None, context: RequestContext
     ) -> HandlerResult:
-        """The handler's answer, with the hooks around it."""
+        """The handler's answer, with the hooks around it, each checked (see _checked)."""
         if not (self._before or self._after):
-            return await _call(handler, request, context)
+            return _checked(await _resolved(handler(request, context)), handler)
         for before in tuple(self._before):
-            early = before(request, context)
-            if inspect.isawaitable(early):
-                early = await early
+            early = _checked(await _resolved(before(request, context)), before)
             if early is not None:
                 return early
-        result = await _call(handler, request, context)
+        result = _checked(await _resolved(handler(request, context)), handler)
         for after in tuple(self._after):
-            replaced = after(request, context, result)
-            if inspect.isawaitable(replaced):
-                replaced = await replaced
+            replaced = _checked(await _resolved(after(request, context, result)), after)
             if replaced is not None:
                 result = replaced
         return result
 
+    def _log_not_an_answer(self, unit: int, function_code: int, error: _NotAnAnswer) -> None:
+        """Log a handler or hook that returned what is not an answer, once for each."""
+        source = error.source
+        if id(source) in self._misbehaved:
+            return
+        self._misbehaved[id(source)] = source
+        name = getattr(source, "__qualname__", type(source).__name__)
+        _log.error(
+            "unit %d, function 0x%02X: %s returned %s, not a response, an exception PDU, "
+            "a Reply or None; answered with exception 04 (logged once for it)",
+            unit,
+            function_code,
+            name,
+            error.what,
+        )
 
-async def _call(
-    handler: Handler, request: Request | None, context: RequestContext
-) -> HandlerResult:
-    result = handler(request, context)
-    if inspect.isawaitable(result):
-        awaited: HandlerResult = await result
-        return awaited
-    return result
+
+class _NotAnAnswer(Exception):
+    """A handler or hook (*source*) returned something that is not an answer (*what*)."""
+
+    def __init__(self, source: object, what: str) -> None:
+        super().__init__(what)
+        self.source = source
+        self.what = what
+
+
+async def _resolved(value: Any) -> Any:
+    """*value*, awaited first if it is awaitable (handlers and hooks may be async)."""
+    if inspect.isawaitable(value):
+        return await value
+    return value
+
+
+def _checked(value: object, source: object) -> HandlerResult:
+    """*value*, returned by *source*, if it is an answer: a Response, an ExceptionPDU,
+    a valid Reply or None; else :class:`_NotAnAnswer` (the request then gets 04)."""
+    if value is None or isinstance(value, (Response, ExceptionPDU)):
+        return value
+    if isinstance(value, Reply):
+        if _valid_reply(value):
+            return value
+        return _fail(source, "a Reply with a bad response, delay or unit")
+    return _fail(source, f"a {type(value).__name__}")
+
+
+def _encoded(result: HandlerResult) -> bytes | Reply | None:
+    """What to send for *result*, a checked answer: the PDU's bytes, the Reply (its
+    response encoded once here, so that a broken ``encode`` fails now, not after the
+    delay), or None for nothing."""
+    if result is None:
+        return None
+    if isinstance(result, Reply):
+        if result.response is None:
+            return None
+        result.response.encode()
+        return result
+    return result.encode()
+
+
+def _fail(source: object, what: str) -> HandlerResult:
+    raise _NotAnAnswer(source, what)
+
+
+def _valid_reply(reply: Reply) -> bool:
+    response, delay, unit = reply.response, reply.delay, reply.unit
+    return (
+        (response is None or isinstance(response, (Response, ExceptionPDU)))
+        and type(delay) in (int, float)
+        and 0 <= delay < math.inf
+        and (unit is None or (type(unit) is int and 0 <= unit <= 0xFF))
+    )
 
 
 _RESTART_COMMUNICATIONS = bytes((0x08, 0x00, 0x01))
 """Diagnostics, restart communications: the one request served in listen-only mode."""
-
-
-_EIGHT_BYTE_FAST_PATHS: Final = frozenset(FAST_PATHS) & frozenset(range(0x01, 0x07))
-"""Fast paths whose requests are always 8 bytes: 01 to 06."""
-
-
-def _exception_pdu(function_code: int, exception_code: int | None) -> bytes:
-    # Raw bytes, not ExceptionPDU: a request with code 0 must still get its 01 answer.
-    code = ExceptionCode.SERVER_DEVICE_FAILURE if exception_code is None else exception_code
-    return bytes((function_code | EXCEPTION_BIT, code & 0xFF))
 
 
 @asynccontextmanager

@@ -80,6 +80,7 @@ __all__ = (
 _log = logging.getLogger(__name__)
 
 _ADDRESS_SPACE: Final = 0x10000
+_EXCEPTION_CODES: Final = tuple(sorted(int(code) for code in ExceptionCode))
 _REGISTER_VALUES = range(0x10000)
 _BIT_VALUES = range(2)
 _FILE_NUMBERS = range(1, 0x10000)
@@ -195,6 +196,8 @@ class MemoryStore:
         self._read_only: dict[Table, tuple[range, ...]] = dict.fromkeys(Table, ())
         for name, ranges in (read_only or {}).items():
             self._read_only[Table(name)] = tuple(ranges)
+        if read_only_exception not in _EXCEPTION_CODES:
+            raise InvalidValue("read_only_exception", read_only_exception, _EXCEPTION_CODES)
         self.read_only_exception = read_only_exception
         """The exception a master's write into a read-only range gets."""
         self.fifo_queues: dict[int, deque[int]] = {
@@ -309,7 +312,7 @@ class MemoryStore:
         """Call *callback* with a :class:`Change` after every write a master makes.
 
         Returns a function that removes the callback. A callback that raises is logged
-        and does not affect the write or the reply.
+        and detached; the write and the reply go on as if it were not there.
         """
         self._observers.append(callback)
 
@@ -348,7 +351,10 @@ class MemoryStore:
             try:
                 callback(change)
             except Exception:
-                _log.exception("a store observer failed on %r", change)
+                # Logged once, not on every later write: a broken observer is dropped.
+                _log.exception("a store observer failed on %r; it is detached", change)
+                if callback in self._observers:
+                    self._observers.remove(callback)
 
 
 class ChangeFeed:
