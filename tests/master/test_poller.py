@@ -13,11 +13,11 @@ import aiortu
 from aiortu import Point, Poller
 from aiortu.cli._poll import TablePrinter
 from aiortu.core.addressing import Table
+from aiortu.core.frame import encode_frame
+from aiortu.core.pdu import Request
 from aiortu.core.pdu_bits import ReadCoilsRequest, ReadDiscreteInputsRequest
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
 from aiortu.core.values import ValueType, decode_value
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import Request
 from aiortu.master._poller import CycleReport, Sample, UnitHealth, UnitSkipped
 from aiortu.master._stats import UnitState
 
@@ -258,7 +258,8 @@ async def test_a_dead_unit_is_suspect_then_offline_and_then_only_probed() -> Non
     assert len(alive) > 20
     # The poller's health and the master's statistics tell the same story.
     assert health.state is stats.state is UnitState.OFFLINE
-    assert health.next_probe is not None and health.next_probe >= probes[-1] - 1e-9
+    assert health.next_probe is not None
+    assert health.next_probe >= probes[-1] - 1e-9
     assert poller.health()[1].state is UnitState.ONLINE
 
 
@@ -284,7 +285,8 @@ async def test_one_crc_error_costs_one_sample_not_seconds() -> None:
         poller.on_cycle(lambda _: suspect.append(poller.health()[1]))
         await poller.run(cycles=5)
     assert isinstance(samples[0].error, aiortu.CRCError)
-    assert suspect[0].state is UnitState.SUSPECT and suspect[0].next_probe is None
+    assert suspect[0].state is UnitState.SUSPECT
+    assert suspect[0].next_probe is None
     # The next cycle reads the unit again, and it is online once it answers.
     assert [s.ok for s in samples] == [False, True, True, True, True]
     assert suspect[1].state is UnitState.ONLINE

@@ -20,7 +20,7 @@ from typing import TextIO
 
 import anyio
 
-from aiortu.cli import Subparsers
+from aiortu.cli import SUMMARIES, Subparsers
 from aiortu.cli._arguments import positive_int, seconds
 from aiortu.cli._demo_system import Demo, DeviceView, ReadingView, Snapshot
 from aiortu.core.addressing import Table
@@ -57,7 +57,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``demo`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "demo",
-        help="watch three simulated devices being polled on a virtual bus (no hardware)",
+        help=SUMMARIES["demo"],
         description=(
             "Start an in-memory RS-485 bus paced at the baud rate, with three simulated "
             "devices served by aiortu slaves (an energy meter, a temperature controller "

@@ -22,7 +22,7 @@ from typing import TextIO
 
 import anyio
 
-from aiortu.cli import CommandFailed, Subparsers
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import positive_int
 from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
 from aiortu.core.receiver import Role, TimingMode
@@ -65,7 +65,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``monitor`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "monitor",
-        help="watch a bus: print every frame with its meaning, never send",
+        help=SUMMARIES["monitor"],
         description=(
             "Listen to a Modbus RTU bus without ever transmitting, and print each frame "
             "on one line: when it arrived, whether it is a request, a reply, an exception "

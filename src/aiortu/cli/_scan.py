@@ -30,7 +30,7 @@ from typing import TextIO
 import anyio
 import anyio.abc
 
-from aiortu.cli import CommandFailed, Subparsers
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import ExceptionPDU, decode_response
@@ -199,7 +199,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``scan`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "scan",
-        help="find the units that answer on a port, and their line settings",
+        help=SUMMARIES["scan"],
         description=(
             "Probe every unit at every line setting given, with a read of one holding "
             "register at address 0, and list the units that answer. Any reply counts, an "

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 
 import anyio
 
-from aiortu.cli import CommandFailed, Subparsers
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import seconds_or_zero
 from aiortu.core.bus_decoder import describe_frame
 from aiortu.errors import PortError
@@ -50,7 +50,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``serve`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "serve",
-        help="simulate Modbus RTU devices described in a TOML file",
+        help=SUMMARIES["serve"],
         description=(
             "Serve the units a TOML device description defines (tables, read-only ranges, "
             "FIFOs, files, device identification, server id) on a serial port or an "

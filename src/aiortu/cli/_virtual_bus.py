@@ -12,7 +12,7 @@ import sys
 
 import anyio
 
-from aiortu.cli import CommandFailed, Subparsers
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import positive_int, probability, seconds_or_zero
 from aiortu.core.timing import LineSettings
 from aiortu.testing._faults import FaultPlan
@@ -43,7 +43,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``virtual-bus`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "virtual-bus",
-        help="a virtual RS-485 bus of pseudo-terminals that any program can open",
+        help=SUMMARIES["virtual-bus"],
         description=(
             "Create a virtual multi-drop serial bus of pseudo-terminals. What a program "
             "writes to one port reaches the programs on all the other ports, at the "
