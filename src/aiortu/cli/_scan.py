@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TextIO
 
@@ -31,6 +32,8 @@ import anyio
 import anyio.abc
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
+from aiortu.cli._arguments import is_pty
+from aiortu.cli._messages import line_failure, port_failure
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import ExceptionPDU, decode_response
@@ -221,9 +224,9 @@ def register(subparsers: Subparsers) -> None:
     parser.add_argument(
         "--parities",
         type=_parities,
-        default=list(DEFAULT_PARITIES),
+        default=None,
         metavar="P,P,...",
-        help="parities to try, N, E and O (E,N,O)",
+        help="parities to try, N, E and O (E,N,O; only N on a pseudo-terminal)",
     )
     parser.add_argument(
         "--stopbits",
@@ -407,6 +410,12 @@ class _Progress:
         self.err.write(text + "\x1b[K")
         self.err.flush()
 
+    def interrupted(self) -> None:
+        if self.bar:
+            self.err.write("\r\x1b[K")
+        self.err.write("aiortu scan: interrupted; the units found so far:\n")
+        self.err.flush()
+
     def result(self, result: SettingResult, units: int) -> None:
         if result.skipped is not None:
             # The probes of a refused setting count as done.
@@ -461,7 +470,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _scan(args: argparse.Namespace) -> int:
-    settings = settings_to_try(args.baudrates, args.parities, args.stopbits)
+    parities = args.parities
+    if parities is None:
+        # A pty keeps no parity bit: E and O would only be refused.
+        parities = [Parity.NONE] if is_pty(args.port) else list(DEFAULT_PARITIES)
+    settings = settings_to_try(args.baudrates, parities, args.stopbits)
     units: list[int] = args.units
     progress = _Progress(sys.stderr, len(settings) * len(units), quiet=args.quiet)
     if not args.quiet:
@@ -472,25 +485,56 @@ async def _scan(args: argparse.Namespace) -> int:
             f" at most {_duration(worst)}\n"
         )
     options = {"local_echo": True} if args.local_echo else {}
-    try:
-        results = await scan(
-            args.port,
-            settings,
-            units,
-            timeout=args.timeout,
-            first=args.first,
-            on_setting=progress.setting,
-            on_probe=progress.probe,
-            on_result=lambda result: progress.result(result, len(units)),
-            **options,
-        )
-    except PortError as error:
-        raise CommandFailed(f"cannot open the port: {error}") from error
-    except ConnectionLost as error:
-        raise CommandFailed(f"{args.port}: {error}") from error
+    # What was found so far, so that Ctrl-C still reports it.
+    results: list[SettingResult] = []
+    current: list[SettingResult] = []
+
+    def on_result(result: SettingResult) -> None:
+        results.append(result)
+        current.clear()
+        progress.result(result, len(units))
+
+    def on_probe(unit: int, result: SettingResult) -> None:
+        current[:] = [result]
+        progress.probe(unit, result)
+
+    interrupted: list[signal.Signals] = []
+    failure: str | None = None
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async with anyio.create_task_group() as group:
+            group.start_soon(_cancel_on_signal, signals, group.cancel_scope, interrupted)
+            try:
+                await scan(
+                    args.port, settings, units, timeout=args.timeout, first=args.first,
+                    on_setting=progress.setting, on_probe=on_probe, on_result=on_result,
+                    **options,
+                )  # fmt: skip
+            except PortError as error:
+                failure = f"cannot open the port: {port_failure(error)}"
+            except ConnectionLost as error:
+                failure = f"{args.port}: {line_failure(error)}"
+            group.cancel_scope.cancel()
+    # Raised out here, not wrapped in the task group's ExceptionGroup.
+    if failure is not None:
+        raise CommandFailed(failure)
+    if interrupted:
+        progress.interrupted()
+        report(results + current, sys.stdout)
+        return 128 + interrupted[0]  # 130 for Ctrl-C, as a shell reports it
     if all(result.skipped is not None for result in results):
         raise CommandFailed(f"{args.port}: the port refused every line setting tried")
     return 0 if report(results, sys.stdout) else 1
+
+
+async def _cancel_on_signal(
+    signals: AsyncIterator[signal.Signals],
+    scope: anyio.CancelScope,
+    caught: list[signal.Signals],
+) -> None:
+    async for signum in signals:
+        caught.append(signum)
+        scope.cancel()
+        return
 
 
 def _duration(seconds: float) -> str:
