@@ -142,6 +142,7 @@ class Tracer:
 
 async def _serve(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> int:
     # The handlers go in before the port opens: a supervisor may signal at once.
+    failure: CommandFailed | None = None
     with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
         async with anyio.create_task_group() as group:
 
@@ -151,8 +152,14 @@ async def _serve(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> 
                 group.cancel_scope.cancel()
 
             group.start_soon(stop_on_signal)
-            await _serve_until_stopped(args, units)
+            try:
+                await _serve_until_stopped(args, units)
+            except CommandFailed as error:
+                failure = error
             group.cancel_scope.cancel()
+    # Raised out here, not wrapped in the task group's ExceptionGroup.
+    if failure is not None:
+        raise failure
     return 0
 
 
