@@ -61,7 +61,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         """An argument parser whose errors are one line on stderr and exit code 2."""
 
         def error(self, message: str) -> NoReturn:
-            self.exit(2, f"{self.prog}: error: {message}\n")
+            self.exit(2, f"{self.prog}: error: {_plain_choices(message)}\n")
 
     parser = Parser(
         prog="aiortu",
@@ -79,6 +79,17 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         else:
             subparsers.add_parser(name, help=summary)
     return parser
+
+
+def _plain_choices(message: str) -> str:
+    """argparse's ``invalid choice: 'x' (choose from 'a', 'b')`` in the command's words."""
+    import re
+
+    found = re.fullmatch(r"(argument \S+: )invalid choice: '?(.*?)'? \(choose from (.*)\)", message)
+    if found is None:
+        return message
+    choices = found.group(3).replace("'", "")
+    return f"{found.group(1)}must be one of {choices}, not {found.group(2)}"
 
 
 def _command_in(argv: list[str]) -> str | None:

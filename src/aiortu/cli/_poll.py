@@ -141,6 +141,8 @@ def parse_point(text: str) -> Point:
 
 
 def _unit(text: str) -> int:
+    if not text.strip():
+        raise UsageError("--unit must be unit addresses 1..247, comma-separated, without gaps")
     try:
         return unit_address(text)
     except argparse.ArgumentTypeError as error:
@@ -173,6 +175,10 @@ def points_from_args(args: argparse.Namespace) -> list[Point]:
                 )
     if not found:
         raise UsageError("give --ref (with --unit) or at least one --point")
+    names = [point.name for point in found]
+    for name in names:
+        if names.count(name) > 1:
+            raise UsageError(f"--point {name} is given twice: each point needs a name of its own")
     return found
 
 

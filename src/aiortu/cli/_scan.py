@@ -140,9 +140,13 @@ def parse_units(text: str) -> list[int]:
             low = int(first)
             high = int(last) if dash else low
         except ValueError:
-            raise argparse.ArgumentTypeError(f"not a unit or a range of units: {part!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"must be units 1-247 and ranges such as 1,2,10-12, not {text}"
+            ) from None
         if not 1 <= low <= high <= 247:
-            raise argparse.ArgumentTypeError(f"units are 1-247, low to high: {part!r}")
+            raise argparse.ArgumentTypeError(
+                f"must be units 1-247, a range low to high, not {part.strip()}"
+            )
         units.update(range(low, high + 1))
     return sorted(units)
 
@@ -153,9 +157,9 @@ def _baudrates(text: str) -> list[int]:
         try:
             rate = int(part)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"not a baud rate: {part!r}") from None
+            rate = 0
         if rate < 1:
-            raise argparse.ArgumentTypeError(f"not a baud rate: {part!r}")
+            raise argparse.ArgumentTypeError(f"must be baud rates such as 9600,19200, not {part}")
         if rate not in rates:
             rates.append(rate)
     return rates
@@ -166,7 +170,9 @@ def _parities(text: str) -> list[Parity]:
     for part in text.split(","):
         name = _PARITY_NAMES.get(part.strip().upper())
         if name is None:
-            raise argparse.ArgumentTypeError(f"parity is N, E or O: {part!r}")
+            raise argparse.ArgumentTypeError(
+                f"must be parities N, E or O (or none, even, odd), not {part}"
+            )
         if Parity(name) not in parities:
             parities.append(Parity(name))
     return parities
@@ -176,9 +182,11 @@ def _timeout(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+        value = math.nan
     if not 0 < value <= 60:
-        raise argparse.ArgumentTypeError(f"must be seconds, more than 0 and at most 60: {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"must be a number of seconds, more than 0 and at most 60, not {text}"
+        )
     return value
 
 

@@ -11,6 +11,7 @@ and reopens it, with the same stores, until it is back; with ``--no-reconnect`` 
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
@@ -20,7 +21,7 @@ import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import add_line_settings, resolve_line_settings, seconds_or_zero
-from aiortu.cli._messages import line_failure, port_failure
+from aiortu.cli._messages import config_problem, line_failure, port_failure
 from aiortu.core.bus_decoder import describe_frame
 from aiortu.core.pdu import Request, decode_request
 from aiortu.core.receiver import TimingMode
@@ -106,10 +107,14 @@ def register(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT or SIGTERM; return the exit code."""
+    if not os.path.isfile(args.config):
+        print(f"aiortu serve: error: {args.config}: no such file", file=sys.stderr)
+        return 2
     try:
         config = load_config(args.config)
     except ConfigError as error:
-        print(f"aiortu serve: error: {error}", file=sys.stderr)
+        problem = config_problem(error.problem)
+        print(f"aiortu serve: error: {error.source}: {error.key}: {problem}", file=sys.stderr)
         return 2
     resolve_line_settings(args)
     return anyio.run(_serve, args, config.units)
