@@ -15,6 +15,7 @@ __all__ = (
     "address",
     "is_pty",
     "parity",
+    "plural",
     "positive_int",
     "probability",
     "resolve_line_settings",
@@ -28,6 +29,11 @@ PTY_LINE = "--parity N --stopbits 2"
 character time (11 bits) as the spec's 8E1."""
 
 _PARITIES = {"n": "N", "none": "N", "e": "E", "even": "E", "o": "O", "odd": "O"}
+
+
+def plural(count: int, noun: str, nouns: str | None = None) -> str:
+    """``1 cycle``, ``2 cycles``: *count* and the noun that goes with it."""
+    return f"{count} {noun if count == 1 else nouns or noun + 's'}"
 
 
 def address(text: str) -> int:

@@ -21,7 +21,7 @@ from typing import TextIO
 import anyio
 
 from aiortu.cli import SUMMARIES, Subparsers
-from aiortu.cli._arguments import positive_int, seconds
+from aiortu.cli._arguments import plural, positive_int, seconds
 from aiortu.cli._demo_system import Demo, DeviceView, ReadingView, Snapshot
 from aiortu.core.addressing import Table
 
@@ -165,7 +165,7 @@ def _cycle_text(snapshot: Snapshot) -> str:
     return (
         f"poll cycle {stats.last * 1000:.1f} ms (mean {stats.mean * 1000:.1f},"
         f" longest {stats.longest * 1000:.1f}) for {snapshot.reads_per_cycle} reads;"
-        f" {snapshot.cycle} cycles"
+        f" {plural(snapshot.cycle, 'cycle')}"
     )
 
 
@@ -349,8 +349,8 @@ async def _demo(args: argparse.Namespace) -> int:
             transactions = sum(device.stats.requests for device in final.devices)
             failures = sum(device.stats.failures for device in final.devices)
             out.write(
-                f"demo stopped after {final.elapsed:.1f} s: {final.cycle} poll cycles,"
-                f" {transactions} transactions, {failures} failed\n"
+                f"demo stopped after {final.elapsed:.1f} s: {plural(final.cycle, 'poll cycle')},"
+                f" {plural(transactions, 'transaction')}, {failures} failed\n"
             )
             out.flush()
         except BrokenPipeError:

@@ -22,6 +22,7 @@ from typing import TextIO
 import anyio
 
 from aiortu.cli import SUMMARIES, Subparsers
+from aiortu.cli._arguments import plural
 from aiortu.cli._arguments import unit as unit_address
 from aiortu.cli._master import (
     EXIT_CODES_HELP,
@@ -257,11 +258,6 @@ def health_line(health: UnitHealth, now: float) -> str:
     elif health.last_latency is not None:
         parts.append(f"latency {health.last_latency * 1000:.1f} ms")
     return ", ".join(parts)
-
-
-def plural(count: int, noun: str) -> str:
-    """``1 failure``, ``2 failures``."""
-    return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
 
 
 def _fail_on_lost_line(report: CycleReport) -> None:

@@ -32,7 +32,7 @@ import anyio
 import anyio.abc
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
-from aiortu.cli._arguments import is_pty
+from aiortu.cli._arguments import is_pty, plural
 from aiortu.cli._messages import line_failure, port_failure
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
 from aiortu.core.frame import encode_frame
@@ -462,12 +462,11 @@ def report(results: Sequence[SettingResult], out: TextIO) -> bool:
     units = sorted({answer.unit for answer in answers})
     if units:
         where = ", ".join(sorted({str(answer.settings) for answer in answers}))
-        plural = "s" if len(units) != 1 else ""
-        out.write(f"found {len(units)} unit{plural} ({', '.join(map(str, units))}) at {where}\n")
+        found = plural(len(units), "unit")
+        out.write(f"found {found} ({', '.join(map(str, units))}) at {where}\n")
     else:
         tried = [r for r in results if r.skipped is None]
-        plural = "s" if len(tried) != 1 else ""
-        out.write(f"no unit answered at {len(tried)} line setting{plural}\n")
+        out.write(f"no unit answered at {plural(len(tried), 'line setting')}\n")
     out.flush()
     return bool(units)
 
@@ -489,7 +488,8 @@ async def _scan(args: argparse.Namespace) -> int:
         # The slowest case: every probe waits its whole timeout.
         worst = len(settings) * len(units) * (args.timeout + 0.01)
         sys.stderr.write(
-            f"aiortu scan: {len(units)} units at {len(settings)} line settings on {args.port};"
+            f"aiortu scan: {plural(len(units), 'unit')} at"
+            f" {plural(len(settings), 'line setting')} on {args.port};"
             f" at most {_duration(worst)}\n"
         )
     options = {"local_echo": True} if args.local_echo else {}

@@ -206,7 +206,8 @@ async def _serve_once(
     ) as slave:
         listing = ", ".join(str(unit) for unit in sorted(units))
         settings = f"{args.baudrate} 8{args.parity}{args.stopbits}"
-        _say(f"units {listing} on {args.port} at {settings}; Ctrl-C to stop")
+        which = "unit" if len(units) == 1 else "units"
+        _say(f"{which} {listing} on {args.port} at {settings}; Ctrl-C to stop")
         await slave.wait_stopped()
     return slave.connection_error or ConnectionLost("the line closed")
 
