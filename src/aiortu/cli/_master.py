@@ -19,8 +19,7 @@ import argparse
 import sys
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
-
-import anyio
+from typing import TYPE_CHECKING
 
 from aiortu.cli._arguments import (
     add_line_settings,
@@ -40,7 +39,9 @@ from aiortu.errors import (
     PortError,
     ResponseTimeout,
 )
-from aiortu.master._client import Master, open_master
+
+if TYPE_CHECKING:
+    from aiortu.master._client import Master
 
 __all__ = (
     "EXIT_CODES_HELP",
@@ -126,6 +127,9 @@ async def open_from_args(
 
     With *reconnect* the master reopens the port after it disappears; without, a lost
     line fails the command (exit 1)."""
+    # Imported here, not above: ``--help`` and bad arguments need none of the master.
+    from aiortu.master._client import open_master
+
     resolve_line_settings(args)
     async with open_master(
         args.port,
@@ -162,6 +166,8 @@ def run_master(args: argparse.Namespace, body: Callable[[], Awaitable[int]]) -> 
     """Run *body* in an event loop; print a failure as one line on stderr, return the code."""
     prog = f"aiortu {args.command}"
     try:
+        import anyio
+
         return anyio.run(body)
     except* (UsageError, InvalidValue, PortError, ConnectionLost, ResponseTimeout) as group:
         code, message = _describe(_first(group))
