@@ -148,8 +148,9 @@ def _health_text(device: DeviceView, separator: str) -> tuple[str, bool]:
     """A short health summary of *device*, parts joined by *separator*, and whether it is
     online."""
     health, stats = device.health, device.stats
-    state = "online" if health.online else "OFFLINE"
-    parts = [state]
+    # The poller's states: online, suspect (a read failed lately), OFFLINE (probed only).
+    state = health.state.value
+    parts = [state if health.online else state.upper()]
     if health.last_latency is not None:
         parts.append(f"{health.last_latency * 1000:.1f} ms")
     parts.append(f"{stats.successes} ok")
