@@ -175,3 +175,24 @@ async def test_serve_after_its_port_is_lost(tmp_path: Path, reconnect: bool) -> 
         assert code == 0, err.text
     wire.unplug()
     assert "Traceback" not in err.text
+
+
+async def test_monitor_fails_with_one_line_when_its_port_is_lost(tmp_path: Path) -> None:
+    async with anyio.create_task_group() as tasks:
+        device = Device(tmp_path / "ttyRTU", tasks)
+        await device.plug()
+        async with aiortu_process("monitor", str(device.link)) as process:
+            assert process.stderr is not None
+            err = Output(process.stderr)
+            seen = await err.wait_for("Ctrl-C to stop\n")
+            await device.unplug()
+            with anyio.fail_after(10):
+                assert await process.wait() == 1
+            with contextlib.suppress(anyio.EndOfStream):
+                while True:
+                    err.text += (await process.stderr.receive()).decode()
+        tasks.cancel_scope.cancel()
+    failure = err.text[seen:]
+    assert failure.startswith("aiortu monitor: the line failed: the port is gone (")
+    assert failure.count("\n") == 1
+    assert "Error(" not in failure

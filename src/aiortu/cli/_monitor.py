@@ -204,7 +204,7 @@ async def _monitor(args: argparse.Namespace) -> int:
                         group.cancel_scope.cancel()
                         break
     if failure is not None:
-        raise CommandFailed(f"{args.port}: {failure}")
+        raise CommandFailed(failure)
     return 0
 
 

@@ -520,7 +520,7 @@ async def _scan(args: argparse.Namespace) -> int:
             except PortError as error:
                 failure = f"cannot open the port: {port_failure(error)}"
             except ConnectionLost as error:
-                failure = f"{args.port}: {line_failure(error)}"
+                failure = line_failure(error)
             group.cancel_scope.cancel()
     # Raised out here, not wrapped in the task group's ExceptionGroup.
     if failure is not None:
