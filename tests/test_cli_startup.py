@@ -114,3 +114,22 @@ def test_an_interrupted_scan_reports_the_units_found_and_exits_130(served_bus: s
     assert "interrupted" in err
     assert "   5  19200 8N2" in out
     assert out.splitlines()[-1].startswith("found 3 units (5, 6, 17) at 19200 8N2")
+
+
+def test_ctrl_c_during_a_read_exits_130_quietly() -> None:
+    with PtyBus(2, settings=LineSettings(19200, parity="N", stopbits=2)).running_in_thread() as bus:
+        read = subprocess.Popen(
+            [sys.executable, "-m", "aiortu", "read", bus.paths[0], "--unit", "1",
+             "--ref", "40001", "--timeout", "20"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        # Wait until the request is on the wire, so that the read is waiting for its reply.
+        deadline = time.monotonic() + 20
+        while not bus.trace and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert bus.trace
+        read.send_signal(signal.SIGINT)
+        out, err = read.communicate(timeout=10)
+    assert (read.returncode, out, err) == (130, "", "")
