@@ -108,7 +108,7 @@ def register(subparsers: Subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT or SIGTERM; return the exit code."""
     if not os.path.isfile(args.config):
-        print(f"aiortu serve: error: {args.config}: no such file", file=sys.stderr)
+        print(f"aiortu serve: error: {args.config}: cannot read it: no such file", file=sys.stderr)
         return 2
     try:
         config = load_config(args.config)
