@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import re
 from collections.abc import AsyncIterator
 from typing import Any
@@ -10,7 +11,7 @@ from typing import Any
 import pytest
 
 from aiortu.cli import _serve, build_parser
-from aiortu.cli._poll import _format_value
+from aiortu.cli._poll import _format_value, _json_sample
 from aiortu.core.frame import encode_frame
 from aiortu.core.poll_plan import Point
 from aiortu.errors import ConnectionLost, ExceptionResponse
@@ -69,3 +70,15 @@ def test_a_point_refused_by_the_device_shows_the_exception_code() -> None:
     point = Point.of("a", 1, "40001")
     refused = Sample(point, None, 0.0, 0, ExceptionResponse(2, 3, 1))
     assert _format_value(refused) == "-- ExceptionResponse 02"
+
+
+def test_a_json_sample_names_a_lost_line_in_words() -> None:
+    point = Point.of("a", 1, "40001")
+    lost = Sample(point, None, 0.0, 4, ConnectionLost("the line failed: EndOfStream()"))
+    assert json.loads(_json_sample(lost)) == {
+        "cycle": 5,
+        "name": "a",
+        "unit": 1,
+        "value": None,
+        "error": "the line failed: the port closed",
+    }
