@@ -45,10 +45,11 @@ def stop(process: subprocess.Popen[str]) -> tuple[str, str]:
 
 @pytest.fixture(scope="module")
 def bus() -> Iterator[list[str]]:
-    """A default ``aiortu virtual-bus`` with a default ``aiortu serve`` on its second port."""
-    relay = start("virtual-bus")
+    """A default ``aiortu virtual-bus`` (three ports) with a default ``aiortu serve`` on its
+    second port; the third is free for a monitor."""
+    relay = start("virtual-bus", "--ports", "3")
     assert relay.stdout is not None
-    paths = [relay.stdout.readline().strip() for _ in range(2)]
+    paths = [relay.stdout.readline().strip() for _ in range(3)]
     slave = start("serve", paths[1], "--config", DEVICES)
     assert slave.stderr is not None
     banner = slave.stderr.readline()
@@ -84,3 +85,21 @@ def test_a_parity_on_a_pty_is_refused_with_the_flags_to_use(bus: list[str]) -> N
         f"aiortu read: {bus[0]}: the driver kept 8N1 instead of 8E1; a pseudo-terminal keeps "
         "no parity: use --parity N --stopbits 2, or leave both out\n"
     )
+
+
+def test_scan_with_its_defaults(bus: list[str]) -> None:
+    result = aiortu("scan", bus[0], "--baudrates", "19200", "--units", "16-18", "-q")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[-1] == "found 1 unit (17) at 19200 8N2"
+
+
+def test_monitor_with_its_defaults(bus: list[str]) -> None:
+    monitor = start("monitor", bus[2])
+    assert monitor.stderr is not None
+    assert monitor.stderr.readline().startswith(
+        f"aiortu monitor: listening on {bus[2]} at 19200 8N2"
+    )
+    assert aiortu("read", bus[0], "--unit", "17", "--ref", "40108").returncode == 0
+    out, _ = stop(monitor)
+    assert "request   ok        unit 17 read holding registers 107 (1)\n" in out
+    assert "reply     ok        unit 17 reply holding 107 = [44609]\n" in out
