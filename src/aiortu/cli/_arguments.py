@@ -118,6 +118,7 @@ def add_line_settings(group: argparse._ArgumentGroup) -> None:
         "--parity",
         type=parity,
         default=None,
+        metavar="N|E|O",
         help="N, E or O, or none, even, odd (E; N on a pseudo-terminal, which keeps no parity)",
     )
     group.add_argument(

@@ -63,6 +63,7 @@ def register(subparsers: Subparsers) -> None:
         "--parity",
         type=parity,
         default="N",
+        metavar="N|E|O",
         help=f"N, E or O, or none, even, odd (N: ptys keep no parity; use {PTY_LINE})",
     )
     line.add_argument(
