@@ -74,8 +74,8 @@ async def main() -> None:
         assert stats.mean is not None
         print(f"cycle time: last {stats.last * 1000:.1f} ms, mean {stats.mean * 1000:.1f} ms")
         for unit, health in poller.health().items():
-            state = "online" if health.online else "offline"
-            print(f"unit {unit}: {state}, {health.skipped} reads skipped")
+            # online, suspect (a read failed lately) or offline (probed only)
+            print(f"unit {unit}: {health.state.value}, {health.skipped} reads skipped")
 
 
 if __name__ == "__main__":

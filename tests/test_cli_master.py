@@ -115,7 +115,7 @@ def test_poll_prints_plain_cycles_when_piped(port: str) -> None:
             "40002               1  43981",
             "40003               1  7",
         ]
-        assert lines[5].startswith("unit 1: online, 0 failures in a row, latency ")
+        assert lines[5].startswith("unit 1: online, latency ")
 
 
 def test_poll_json_with_named_typed_points(port: str) -> None:
@@ -125,9 +125,9 @@ def test_poll_json_with_named_typed_points(port: str) -> None:
     assert result.returncode == 0, result.stderr
     samples = [json.loads(line) for line in result.stdout.splitlines()]
     assert samples == [
-        {"cycle": 0, "name": "a", "unit": 1, "value": 0x1234, "error": None},
-        {"cycle": 0, "name": "w", "unit": 1, "value": 0xABCD1234, "error": None},
-        {"cycle": 0, "name": "b", "unit": 1, "value": 0xABCD - 0x10000, "error": None},
+        {"cycle": 1, "name": "a", "unit": 1, "value": 0x1234, "error": None},
+        {"cycle": 1, "name": "w", "unit": 1, "value": 0xABCD1234, "error": None},
+        {"cycle": 1, "name": "b", "unit": 1, "value": 0xABCD - 0x10000, "error": None},
     ]
     assert HOLDING_REGISTERS[:2] == [0x1234, 0xABCD]
 
@@ -140,12 +140,12 @@ def test_poll_json_with_named_typed_points(port: str) -> None:
         (["read", "--unit", "1", "--table", "holding"], 2,
          "aiortu read: error: read needs --table and --address, or --ref"),
         (["read", "--unit", "1", "--table", "holding", "--address", "0", "--count", "126"], 2,
-         "aiortu read: error: count = 126 is outside the allowed range 1..125"),
+         "aiortu read: error: --count must be 1..125, not 126"),
         (["write", "--unit", "1", "--table", "coils", "--address", "0", "--values", "maybe"], 2,
-         "aiortu write: error: --values = 'maybe' is outside the allowed range "
-         "1, 0, true, false, on or off"),
+         "aiortu write: error: --values must be 1, 0, true, false, on or off, not maybe"),
         (["write", "--unit", "1", "--ref", "30001", "--values", "1"], 2,
-         "aiortu write: error: cannot write input_registers: only coils and holding registers"),
+         "aiortu write: error: cannot write input registers: only coils and holding registers "
+         "are writable"),
     ],
 )  # fmt: skip
 def test_failures_exit_non_zero_with_one_line(
@@ -161,7 +161,7 @@ def test_no_reply_and_no_port(silent_port: str, tmp_path: Path) -> None:
                      *LINE)  # fmt: skip
     assert timeout.returncode == 3
     assert timeout.stdout == ""
-    assert timeout.stderr.startswith("aiortu read: no reply: ")
+    assert timeout.stderr == "aiortu read: no reply from unit 1 to function 0x03 within 0.2 s\n"
     assert timeout.stderr.count("\n") == 1
     missing = aiortu("write", str(tmp_path / "ttyNONE"), "--unit", "1", "--ref", "40001",
                      "--values", "1", *LINE)  # fmt: skip
@@ -176,8 +176,10 @@ def test_poll_shows_an_offline_unit(silent_port: str) -> None:
     assert result.returncode == 0, result.stderr
     blocks = [block.splitlines() for block in result.stdout.strip("\n").split("\n\n")]
     assert blocks[0][2] == "40001               5  -- ResponseTimeout"
-    # The poller backs off after the first failed read (the master still counts the unit
-    # online until its offline_after): the next cycles skip it until a probe is due.
-    assert blocks[1][2] == "40001               5  -- UnitSkipped"
-    assert blocks[1][3] == "unit 5: online, 1 failures in a row"
+    # Suspect after one failed read, and still read; offline after three in a row (the
+    # master's offline_after), then skipped until a probe is due.
+    assert blocks[0][3] == "unit 5: suspect, 1 failure in a row"
+    assert blocks[1][2] == "40001               5  -- ResponseTimeout"
+    assert blocks[1][3] == "unit 5: suspect, 2 failures in a row"
+    assert blocks[2][3].startswith("unit 5: OFFLINE, 3 failures in a row, next probe in ")
     assert blocks[3][2] == "40001               5  -- UnitSkipped"

@@ -7,48 +7,97 @@ The packages :mod:`aiortu.master`, :mod:`aiortu.slave`, :mod:`aiortu.testing`,
 
 from __future__ import annotations
 
-from aiortu.core.codes import ExceptionCode, FunctionCode
-from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response
-from aiortu.core.timing import LineSettings
-from aiortu.errors import (
-    ConfigError,
-    ConnectionLost,
-    CRCError,
-    ExceptionResponse,
-    FrameError,
-    InvalidRequest,
-    InvalidValue,
-    MalformedPDU,
-    ModbusError,
-    PortError,
-    ResponseTimeout,
-    UnitOffline,
-    UnitSkipped,
-)
-from aiortu.master import (
-    BroadcastHandle,
-    HealthPolicy,
-    Master,
-    Point,
-    Poller,
-    ReconnectPolicy,
-    Sample,
-    UnitHandle,
-    UnitStats,
-    open_master,
-)
-from aiortu.slave import (
-    AsyncDataStore,
-    Block,
-    Change,
-    DataStore,
-    MemoryStore,
-    Reply,
-    RequestContext,
-    Slave,
-    load_config,
-    serve,
-)
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from aiortu.core.codes import ExceptionCode, FunctionCode
+    from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response
+    from aiortu.core.timing import LineSettings
+    from aiortu.errors import (
+        ConfigError,
+        ConnectionLost,
+        CRCError,
+        ExceptionResponse,
+        FrameError,
+        InvalidRequest,
+        InvalidValue,
+        MalformedPDU,
+        ModbusError,
+        PortError,
+        ResponseTimeout,
+        UnitOffline,
+        UnitSkipped,
+    )
+    from aiortu.master import (
+        BroadcastHandle,
+        HealthPolicy,
+        Master,
+        Point,
+        Poller,
+        ReconnectPolicy,
+        Sample,
+        UnitHandle,
+        UnitStats,
+        open_master,
+    )
+    from aiortu.slave import (
+        AsyncDataStore,
+        Block,
+        Change,
+        DataStore,
+        MemoryStore,
+        Reply,
+        RequestContext,
+        Slave,
+        load_config,
+        serve,
+    )
+
+_LAZY: dict[str, str] = {
+    "AsyncDataStore": "aiortu.slave",
+    "Block": "aiortu.slave",
+    "BroadcastHandle": "aiortu.master",
+    "CRCError": "aiortu.errors",
+    "Change": "aiortu.slave",
+    "ConfigError": "aiortu.errors",
+    "ConnectionLost": "aiortu.errors",
+    "DataStore": "aiortu.slave",
+    "ExceptionCode": "aiortu.core.codes",
+    "ExceptionPDU": "aiortu.core.pdu",
+    "ExceptionResponse": "aiortu.errors",
+    "FrameError": "aiortu.errors",
+    "FunctionCode": "aiortu.core.codes",
+    "HealthPolicy": "aiortu.master",
+    "InvalidRequest": "aiortu.errors",
+    "InvalidValue": "aiortu.errors",
+    "LineSettings": "aiortu.core.timing",
+    "MalformedPDU": "aiortu.errors",
+    "Master": "aiortu.master",
+    "MemoryStore": "aiortu.slave",
+    "ModbusError": "aiortu.errors",
+    "Point": "aiortu.master",
+    "Poller": "aiortu.master",
+    "PortError": "aiortu.errors",
+    "RawPDU": "aiortu.core.pdu",
+    "ReconnectPolicy": "aiortu.master",
+    "Reply": "aiortu.slave",
+    "Request": "aiortu.core.pdu",
+    "RequestContext": "aiortu.slave",
+    "Response": "aiortu.core.pdu",
+    "ResponseTimeout": "aiortu.errors",
+    "Sample": "aiortu.master",
+    "Slave": "aiortu.slave",
+    "UnitHandle": "aiortu.master",
+    "UnitOffline": "aiortu.errors",
+    "UnitSkipped": "aiortu.errors",
+    "UnitStats": "aiortu.master",
+    "load_config": "aiortu.slave",
+    "open_master": "aiortu.master",
+    "serve": "aiortu.slave",
+}
+"""Where each public name lives: imported on first use, so that ``import aiortu`` (and
+the ``aiortu`` command's ``--help``) does not pay for the whole package."""
 
 __version__ = "0.1.0"
 
@@ -95,3 +144,16 @@ __all__ = (
     "open_master",
     "serve",
 )
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'aiortu' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

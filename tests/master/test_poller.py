@@ -13,12 +13,15 @@ import aiortu
 from aiortu import Point, Poller
 from aiortu.cli._poll import TablePrinter
 from aiortu.core.addressing import Table
+from aiortu.core.frame import encode_frame
+from aiortu.core.pdu import Request
 from aiortu.core.pdu_bits import ReadCoilsRequest, ReadDiscreteInputsRequest
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
 from aiortu.core.values import ValueType, decode_value
-from aiortu.master._poller import CycleReport, Sample, UnitSkipped
+from aiortu.master._poller import CycleReport, Sample, UnitHealth, UnitSkipped
+from aiortu.master._stats import UnitState
 
-from .fakes import coil_value, line, register_value
+from .fakes import FakeSlave, answer, coil_value, line, register_value, standard_reply
 
 POINTS = [
     Point.of("a", 1, "40001"),
@@ -231,18 +234,59 @@ async def test_max_probes_per_cycle_none_probes_every_due_unit() -> None:
         Poller(master, points, max_probes_per_cycle=0)
 
 
-async def test_the_poller_backs_off_after_one_failure_and_probes_without_retries() -> None:
+async def test_a_dead_unit_is_suspect_then_offline_and_then_only_probed() -> None:
     # The master keeps its defaults: 2 retries, offline after 3 failed transactions.
     async with line(units=frozenset({1}), timeout=0.05) as (master, slave, _):
         points = [Point.of("alive", 1, "40001"), Point.of("dead", 2, "40001")]
+        states: list[UnitState] = []
         poller = Poller(master, points, interval=0.001, offline_probe_interval=0.2)
+        poller.on_cycle(lambda _: states.append(poller.health()[2].state))
         await poller.run(duration=0.9)
         attempts = [seen.time for seen in slave.seen if seen.unit == 2]
         alive = [seen for seen in slave.seen if seen.unit == 1]
-    # The first read tries three times (the master's retries); the probes that follow,
-    # one per 0.2 s at most, are single attempts.
-    first, probes = attempts[:3], attempts[3:]
+        health = poller.health()[2]
+        stats = master.unit_stats(2)
+    # Cycle 1 tries three times (the master's retries); cycles 2 and 3 read the suspect
+    # unit once each; then it is offline and probed once per 0.2 s.
+    assert states[:3] == [UnitState.SUSPECT, UnitState.SUSPECT, UnitState.OFFLINE], states
+    first, suspect, probes = attempts[:3], attempts[3:5], attempts[5:]
     assert max(first) - min(first) < 0.2
+    assert suspect[1] - suspect[0] < 0.2, attempts
     assert 1 <= len(probes) <= 4, attempts
+    assert probes[0] - suspect[1] >= 0.2
     assert all(b - a >= 0.2 for a, b in itertools.pairwise(probes)), attempts
     assert len(alive) > 20
+    # The poller's health and the master's statistics tell the same story.
+    assert health.state is stats.state is UnitState.OFFLINE
+    assert health.next_probe is not None
+    assert health.next_probe >= probes[-1] - 1e-9
+    assert poller.health()[1].state is UnitState.ONLINE
+
+
+async def test_one_crc_error_costs_one_sample_not_seconds() -> None:
+    garbled = {"done": False}
+
+    async def garble_once(slave: FakeSlave, unit: int, request: Request) -> None:
+        if garbled["done"]:
+            await answer(slave, unit, request)
+            return
+        garbled["done"] = True
+        frame = bytearray(encode_frame(unit, standard_reply(unit, request)))
+        frame[-1] ^= 0xFF
+        await slave.send_raw(bytes(frame))
+
+    # The CLI's default: no retries.
+    async with line(default=garble_once, retries=0, timeout=0.05) as (master, _, _):
+        samples: list[Sample] = []
+        poller = Poller(
+            master, [Point.of("a", 1, "40001")], interval=0.001, on_sample=samples.append
+        )
+        suspect: list[UnitHealth] = []
+        poller.on_cycle(lambda _: suspect.append(poller.health()[1]))
+        await poller.run(cycles=5)
+    assert isinstance(samples[0].error, aiortu.CRCError)
+    assert suspect[0].state is UnitState.SUSPECT
+    assert suspect[0].next_probe is None
+    # The next cycle reads the unit again, and it is online once it answers.
+    assert [s.ok for s in samples] == [False, True, True, True, True]
+    assert suspect[1].state is UnitState.ONLINE

@@ -79,7 +79,7 @@ def bus(tmp_path: Path) -> Iterator[tuple[str, Path, Path, list[subprocess.Popen
                     )
                 )
         for log, process in zip(logs, processes[1:], strict=True):
-            _wait_for(log, "aiortu serve: units", process)
+            _wait_for(log, "aiortu serve: unit", process)
         yield ports[0], logs[0], logs[1], processes
     finally:
         for process in reversed(processes):

@@ -12,20 +12,33 @@ install its own signal handling.
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import sys
-from collections.abc import Callable
-from typing import NoReturn, TypeAlias
+from typing import TYPE_CHECKING, NoReturn, TypeAlias
 
-from aiortu.errors import InvalidValue
+if TYPE_CHECKING:
+    import argparse
+    from collections.abc import Callable
 
-__all__ = ("CommandFailed", "Subparsers", "build_parser", "main")
+__all__ = ("SUMMARIES", "CommandFailed", "Subparsers", "build_parser", "main")
 
 Subparsers: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
 """The type of the object a command module's ``register`` receives."""
 
-Runner = Callable[[argparse.Namespace], int]
+Runner: TypeAlias = "Callable[[argparse.Namespace], int]"
+
+SUMMARIES: dict[str, str] = {
+    "demo": "watch three simulated devices being polled on a virtual bus (no hardware)",
+    "monitor": "watch a bus: print every frame with its meaning, never send",
+    "poll": "poll points on one or more units and show them as a live table",
+    "read": "read coils, discrete inputs or registers from a device once",
+    "scan": "find the units that answer on a port, and their line settings",
+    "serve": "simulate Modbus RTU devices described in a TOML file",
+    "virtual-bus": "a virtual RS-485 bus of pseudo-terminals that any program can open",
+    "write": "write coils or holding registers of a device once",
+}
+"""Each subcommand's one-line help. Each lives in a private module ``_NAME`` (dashes as
+underscores) with a ``register(subparsers)``; only the command run is imported, so that
+``aiortu --help`` and each command start fast."""
 
 
 class CommandFailed(Exception):
@@ -36,50 +49,83 @@ class CommandFailed(Exception):
     """
 
 
-class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line on stderr and exit code 2."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Return the parser of the ``aiortu`` command: *command* registered in full (every
+    command when None), the others by name and summary only."""
+    import argparse
+    import importlib
 
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message}\n")
-
-
-_COMMANDS = ("demo", "monitor", "poll", "read", "scan", "serve", "virtual_bus", "write")
-"""The subcommands, each a private module ``_NAME`` with a ``register(subparsers)``."""
-
-
-def _command_modules() -> list[str]:
-    return [f"{__name__}._{name}" for name in _COMMANDS]
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """Return the parser of the ``aiortu`` command, with every subcommand registered."""
     from aiortu import __version__
 
-    parser = _Parser(
+    class Parser(argparse.ArgumentParser):
+        """An argument parser whose errors are one line on stderr and exit code 2."""
+
+        def error(self, message: str) -> NoReturn:
+            self.exit(2, f"{self.prog}: error: {_plain_choices(message)}\n")
+
+    parser = Parser(
         prog="aiortu",
         description="Modbus RTU tools: a master, a slave simulator and virtual serial lines.",
         epilog="Run 'aiortu COMMAND --help' for the options and examples of a command.",
     )
     parser.add_argument("--version", action="version", version=f"aiortu {__version__}")
-    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in _command_modules():
-        importlib.import_module(name).register(subparsers)
+    subparsers = parser.add_subparsers(
+        dest="command", metavar="COMMAND", required=True, parser_class=Parser
+    )
+    for name, summary in SUMMARIES.items():
+        if command is None or name == command:
+            module = importlib.import_module(f"{__name__}._{name.replace('-', '_')}")
+            module.register(subparsers)
+        else:
+            subparsers.add_parser(name, help=summary)
     return parser
 
 
+def _plain_choices(message: str) -> str:
+    """argparse's ``invalid choice: 'x' (choose from 'a', 'b')`` in the command's words."""
+    import re
+
+    found = re.fullmatch(r"(argument \S+: )invalid choice: '?(.*?)'? \(choose from (.*)\)", message)
+    if found is None:
+        return message
+    choices = found.group(3).replace("'", "")
+    return f"{found.group(1)}must be one of {choices}, not {found.group(2)}"
+
+
+def _command_in(argv: list[str]) -> str | None:
+    """The subcommand *argv* names: its first word that is not an option."""
+    return next((word for word in argv if not word.startswith("-")), None)
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the ``aiortu`` command with *argv* (default: ``sys.argv[1:]``); return the exit code."""
-    parser = build_parser()
+    """Run the ``aiortu`` command with *argv* (default: ``sys.argv[1:]``); return the exit code.
+
+    Exit codes: 0 success, 1 a runtime failure (reported on one line), 2 bad arguments
+    (one line on stderr, as ``aiortu COMMAND: error: ...``), 130 interrupted by Ctrl-C
+    before a command installed its own handling (while starting, for instance), without
+    a traceback.
+    """
+    try:
+        return _main(sys.argv[1:] if argv is None else argv)
+    except KeyboardInterrupt:
+        return 130
+
+
+def _main(argv: list[str]) -> int:
+    command = _command_in(argv)
+    # Only the command run is imported; "" registers none in full (``aiortu --help``).
+    parser = build_parser(command if command in SUMMARIES else "")
     args = parser.parse_args(argv)
     run: Runner = args.run
     prog = f"aiortu {args.command}"
+    from aiortu.cli._messages import invalid_value
+    from aiortu.errors import InvalidValue
+
     try:
         return run(args)
     except InvalidValue as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {invalid_value(exc)}", file=sys.stderr)
         return 2
     except CommandFailed as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        return 130

@@ -5,34 +5,75 @@ with the option's name before exiting with code 2."""
 from __future__ import annotations
 
 import argparse
+import math
+import os
+import stat
 
-__all__ = ("address", "positive_int", "probability", "seconds", "seconds_or_zero")
+__all__ = (
+    "PTY_LINE",
+    "add_line_settings",
+    "address",
+    "is_pty",
+    "parity",
+    "plural",
+    "positive_int",
+    "probability",
+    "resolve_line_settings",
+    "seconds",
+    "seconds_or_zero",
+    "unit",
+)
+
+PTY_LINE = "--parity N --stopbits 2"
+"""What to use on a pseudo-terminal: ptys keep no parity bit, and 8N2 has the same
+character time (11 bits) as the spec's 8E1."""
+
+_PARITIES = {"n": "N", "none": "N", "e": "E", "even": "E", "o": "O", "odd": "O"}
+
+
+def plural(count: int, noun: str, nouns: str | None = None) -> str:
+    """``1 cycle``, ``2 cycles``: *count* and the noun that goes with it."""
+    return f"{count} {noun if count == 1 else nouns or noun + 's'}"
 
 
 def address(text: str) -> int:
     """An address or a count: decimal or ``0x`` hex."""
-    try:
-        value = int(text, 16) if text.lower().startswith("0x") else int(text, 10)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a decimal or 0x hex number: {text!r}") from None
+    value = _integer(text)
     if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0: {text!r}")
+        raise argparse.ArgumentTypeError(f"must be 0 or more, not {text}")
     return value
 
 
 def positive_int(text: str) -> int:
     """An integer >= 1, decimal or ``0x`` hex."""
-    value = address(text)
+    value = _integer(text)
     if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")
+        raise argparse.ArgumentTypeError(f"must be 1 or more, not {text}")
     return value
+
+
+def unit(text: str) -> int:
+    """A unit address for a request that gets a reply: 1..247."""
+    value = _integer(text)
+    if not 1 <= value <= 247:
+        hint = " (0 is the broadcast address, which gets no reply)" if value == 0 else ""
+        raise argparse.ArgumentTypeError(f"must be a unit address 1..247, not {text}{hint}")
+    return value
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text, 16) if text.lower().lstrip("+-").startswith("0x") else int(text, 10)
+    except ValueError:
+        message = f"must be a decimal or 0x hex number, not {text}"
+        raise argparse.ArgumentTypeError(message) from None
 
 
 def seconds(text: str) -> float:
     """A number of seconds > 0."""
     value = _number_of_seconds(text)
     if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0: {text!r}")
+        raise argparse.ArgumentTypeError(f"must be a number of seconds more than 0, not {text}")
     return value
 
 
@@ -40,7 +81,7 @@ def seconds_or_zero(text: str) -> float:
     """A number of seconds >= 0."""
     value = _number_of_seconds(text)
     if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number of seconds >= 0: {text!r}")
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, 0 or more, not {text}")
     return value
 
 
@@ -49,9 +90,9 @@ def probability(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"not a probability: {text!r}") from None
+        value = math.nan
     if not 0 <= value <= 1:
-        raise argparse.ArgumentTypeError(f"must be a probability from 0 to 1: {text!r}")
+        raise argparse.ArgumentTypeError(f"must be a probability from 0 to 1, not {text}")
     return value
 
 
@@ -59,4 +100,56 @@ def _number_of_seconds(text: str) -> float:
     try:
         return float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, not {text}") from None
+
+
+def parity(text: str) -> str:
+    """A parity: ``N``, ``E`` or ``O``, or ``none``, ``even``, ``odd``, in any case."""
+    found = _PARITIES.get(text.strip().lower())
+    if found is None:
+        raise argparse.ArgumentTypeError(f"must be N, E or O (or none, even, odd), not {text}")
+    return found
+
+
+def add_line_settings(group: argparse._ArgumentGroup) -> None:
+    """Add ``--baudrate``, ``--parity`` and ``--stopbits``; see :func:`resolve_line_settings`."""
+    group.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
+    group.add_argument(
+        "--parity",
+        type=parity,
+        default=None,
+        metavar="N|E|O",
+        help="N, E or O, or none, even, odd (E; N on a pseudo-terminal, which keeps no parity)",
+    )
+    group.add_argument(
+        "--stopbits",
+        type=int,
+        choices=(1, 2),
+        default=None,
+        help="stop bits (2 with parity N, else 1, as the spec says)",
+    )
+
+
+def resolve_line_settings(args: argparse.Namespace) -> None:
+    """Fill in the parity and stop bits *args* leave out: the spec's 8E1 on a serial port,
+    8N2 on a pseudo-terminal (such as ``aiortu virtual-bus`` makes), and 2 stop bits
+    whenever the parity is N, as the spec says."""
+    if args.parity is None:
+        args.parity = "N" if is_pty(args.port) else "E"
+    if args.stopbits is None:
+        args.stopbits = 2 if args.parity == "N" else 1
+
+
+def is_pty(port: str) -> bool:
+    """Whether *port* is the device path of a pseudo-terminal (links followed)."""
+    try:
+        device = os.stat(port).st_rdev if stat.S_ISCHR(os.stat(port).st_mode) else None
+    except (OSError, ValueError):
+        return False
+    if device is None:
+        return False
+    # Linux numbers Unix98 pty slaves 136..143; elsewhere, go by the name.
+    if os.major(device) in range(136, 144):
+        return True
+    name = os.path.realpath(port)
+    return name.startswith(("/dev/pts/", "/dev/ttys", "/dev/pty"))

@@ -20,8 +20,8 @@ from typing import TextIO
 
 import anyio
 
-from aiortu.cli import Subparsers
-from aiortu.cli._arguments import positive_int, seconds
+from aiortu.cli import SUMMARIES, Subparsers
+from aiortu.cli._arguments import plural, positive_int, seconds
 from aiortu.cli._demo_system import Demo, DeviceView, ReadingView, Snapshot
 from aiortu.core.addressing import Table
 
@@ -57,7 +57,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``demo`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "demo",
-        help="watch three simulated devices being polled on a virtual bus (no hardware)",
+        help=SUMMARIES["demo"],
         description=(
             "Start an in-memory RS-485 bus paced at the baud rate, with three simulated "
             "devices served by aiortu slaves (an energy meter, a temperature controller "
@@ -148,8 +148,9 @@ def _health_text(device: DeviceView, separator: str) -> tuple[str, bool]:
     """A short health summary of *device*, parts joined by *separator*, and whether it is
     online."""
     health, stats = device.health, device.stats
-    state = "online" if health.online else "OFFLINE"
-    parts = [state]
+    # The poller's states: online, suspect (a read failed lately), OFFLINE (probed only).
+    state = health.state.value
+    parts = [state if health.online else state.upper()]
     if health.last_latency is not None:
         parts.append(f"{health.last_latency * 1000:.1f} ms")
     parts.append(f"{stats.successes} ok")
@@ -165,7 +166,7 @@ def _cycle_text(snapshot: Snapshot) -> str:
     return (
         f"poll cycle {stats.last * 1000:.1f} ms (mean {stats.mean * 1000:.1f},"
         f" longest {stats.longest * 1000:.1f}) for {snapshot.reads_per_cycle} reads;"
-        f" {snapshot.cycle} cycles"
+        f" {plural(snapshot.cycle, 'cycle')}"
     )
 
 
@@ -349,8 +350,8 @@ async def _demo(args: argparse.Namespace) -> int:
             transactions = sum(device.stats.requests for device in final.devices)
             failures = sum(device.stats.failures for device in final.devices)
             out.write(
-                f"demo stopped after {final.elapsed:.1f} s: {final.cycle} poll cycles,"
-                f" {transactions} transactions, {failures} failed\n"
+                f"demo stopped after {final.elapsed:.1f} s: {plural(final.cycle, 'poll cycle')},"
+                f" {plural(transactions, 'transaction')}, {failures} failed\n"
             )
             out.flush()
         except BrokenPipeError:

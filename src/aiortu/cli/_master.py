@@ -19,11 +19,18 @@ import argparse
 import sys
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
+from typing import TYPE_CHECKING
 
-import anyio
-
-from aiortu.cli._arguments import address, positive_int, seconds
-from aiortu.core.addressing import Table
+from aiortu.cli._arguments import (
+    add_line_settings,
+    address,
+    positive_int,
+    resolve_line_settings,
+    seconds,
+    unit,
+)
+from aiortu.cli._messages import invalid_value, line_failure, no_reply, port_failure
+from aiortu.core.addressing import Reference, Table, parse_reference
 from aiortu.errors import (
     ConnectionLost,
     ExceptionResponse,
@@ -32,7 +39,9 @@ from aiortu.errors import (
     PortError,
     ResponseTimeout,
 )
-from aiortu.master._client import Master, open_master
+
+if TYPE_CHECKING:
+    from aiortu.master._client import Master
 
 __all__ = (
     "EXIT_CODES_HELP",
@@ -43,8 +52,10 @@ __all__ = (
     "address",
     "open_from_args",
     "positive_int",
+    "reference",
     "run_master",
     "seconds",
+    "unit",
 )
 
 EXIT_CODES_HELP = """\
@@ -61,7 +72,7 @@ LINE_FLAGS_HELP = """\
 aiortu and mbpoll side by side (mbpoll -m rtu ...):
   --unit 17                mbpoll -a 17
   --baudrate 9600          mbpoll -b 9600
-  --parity E|O|N           mbpoll -P even|odd|none
+  --parity E|O|N           mbpoll -P even|odd|none (none, even, odd work too)
   --stopbits 2             mbpoll -s 2
   --timeout 0.5            mbpoll -o 0.5
 """
@@ -86,9 +97,7 @@ def add_line_options(parser: argparse.ArgumentParser) -> None:
     """Add the port argument and ``--baudrate --parity --stopbits --timeout --retries``."""
     parser.add_argument("port", metavar="PORT", help="a serial device path or rtu+tcp://host:port")
     line = parser.add_argument_group("line settings")
-    line.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
-    line.add_argument("--parity", choices=("N", "E", "O"), default="E", help="parity (E)")
-    line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
+    add_line_settings(line)
     line.add_argument(
         "--timeout", type=seconds, default=1.0, help="response timeout in seconds (1.0)"
     )
@@ -97,9 +106,31 @@ def add_line_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def reference(text: str) -> Reference:
+    """The reference ``--ref`` gives; a 4-digit one that reads as a register is refused."""
+    digits = text.strip()
+    if len(digits) == 4 and digits.isdigit() and digits[0] in "134":
+        kind = {"1": "discrete input", "3": "input register", "4": "holding register"}
+        number = int(digits[1:])
+        raise UsageError(
+            f"--ref {digits} is ambiguous: write {digits[0]}{number:04d} for "
+            f"{kind[digits[0]]} {number}, or 0{digits} for coil {int(digits)}"
+        )
+    return parse_reference(text)
+
+
 @asynccontextmanager
-async def open_from_args(args: argparse.Namespace, **options: object) -> AsyncIterator[Master]:
-    """Open a master on ``args.port`` with the line options of *args*; no reconnecting."""
+async def open_from_args(
+    args: argparse.Namespace, *, reconnect: bool = False, **options: object
+) -> AsyncIterator[Master]:
+    """Open a master on ``args.port`` with the line options of *args*.
+
+    With *reconnect* the master reopens the port after it disappears; without, a lost
+    line fails the command (exit 1)."""
+    # Imported here, not above: ``--help`` and bad arguments need none of the master.
+    from aiortu.master._client import open_master
+
+    resolve_line_settings(args)
     async with open_master(
         args.port,
         baudrate=args.baudrate,
@@ -107,21 +138,23 @@ async def open_from_args(args: argparse.Namespace, **options: object) -> AsyncIt
         stopbits=args.stopbits,
         timeout=args.timeout,
         retries=args.retries,
-        reconnect=False,
+        reconnect=reconnect,
         **options,  # type: ignore[arg-type]
     ) as master:
         yield master
 
 
 def _describe(error: BaseException) -> tuple[int, str]:
-    if isinstance(error, InvalidValue | UsageError):
+    if isinstance(error, InvalidValue):
+        return 2, f"error: {invalid_value(error)}"
+    if isinstance(error, UsageError):
         return 2, f"error: {error}"
     if isinstance(error, PortError):
-        return 1, str(error)
+        return 1, port_failure(error)
     if isinstance(error, ConnectionLost):
-        return 1, f"the line failed: {error}"
+        return 1, line_failure(error)
     if isinstance(error, ResponseTimeout):
-        return 3, f"no reply: {error}"
+        return 3, no_reply(error)
     if isinstance(error, ExceptionResponse):
         return 4, str(error)
     if isinstance(error, FrameError):
@@ -133,6 +166,8 @@ def run_master(args: argparse.Namespace, body: Callable[[], Awaitable[int]]) -> 
     """Run *body* in an event loop; print a failure as one line on stderr, return the code."""
     prog = f"aiortu {args.command}"
     try:
+        import anyio
+
         return anyio.run(body)
     except* (UsageError, InvalidValue, PortError, ConnectionLost, ResponseTimeout) as group:
         code, message = _describe(_first(group))

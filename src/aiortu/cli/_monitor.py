@@ -22,8 +22,9 @@ from typing import TextIO
 
 import anyio
 
-from aiortu.cli import CommandFailed, Subparsers
-from aiortu.cli._arguments import positive_int
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
+from aiortu.cli._arguments import add_line_settings, resolve_line_settings
+from aiortu.cli._messages import line_failure, port_failure
 from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
 from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
@@ -65,7 +66,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``monitor`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "monitor",
-        help="watch a bus: print every frame with its meaning, never send",
+        help=SUMMARIES["monitor"],
         description=(
             "Listen to a Modbus RTU bus without ever transmitting, and print each frame "
             "on one line: when it arrived, whether it is a request, a reply, an exception "
@@ -78,9 +79,7 @@ def register(subparsers: Subparsers) -> None:
     )
     parser.add_argument("port", metavar="PORT", help="a serial device path or rtu+tcp://host:port")
     line = parser.add_argument_group("line settings")
-    line.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
-    line.add_argument("--parity", choices=("N", "E", "O"), default="E", help="parity (E)")
-    line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
+    add_line_settings(line)
     line.add_argument(
         "--timing",
         choices=[mode.value for mode in TimingMode],
@@ -162,13 +161,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _monitor(args: argparse.Namespace) -> int:
+    resolve_line_settings(args)
     settings = LineSettings(args.baudrate, parity=args.parity, stopbits=args.stopbits)
     # The handlers go in first, so that a signal while the port opens still ends cleanly.
     with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
         try:
             stream = await open_stream(args.port, settings)
         except PortError as exc:
-            raise CommandFailed(f"cannot open the port: {exc}") from exc
+            raise CommandFailed(f"cannot open the port: {port_failure(exc)}") from exc
         failure: str | None = None
         async with Link(stream, settings, role=Role.MONITOR, timing=args.timing) as link:
             printer = FramePrinter(
@@ -192,7 +192,7 @@ async def _monitor(args: argparse.Namespace) -> int:
                     try:
                         event = await link.receive()
                     except ConnectionLost as exc:
-                        failure = str(exc)
+                        failure = line_failure(exc)
                         group.cancel_scope.cancel()
                         break
                     try:
@@ -204,7 +204,7 @@ async def _monitor(args: argparse.Namespace) -> int:
                         group.cancel_scope.cancel()
                         break
     if failure is not None:
-        raise CommandFailed(f"{args.port}: {failure}")
+        raise CommandFailed(failure)
     return 0
 
 

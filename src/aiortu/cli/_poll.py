@@ -5,8 +5,10 @@ reference, on every ``--unit``) or from repeated ``--point NAME=UNIT:REF[:TYPE[:
 On a terminal the table is redrawn in place after each cycle (ANSI cursor movement);
 when stdout is not a terminal each cycle is printed as plain lines followed by a blank
 line, and with ``--json`` each sample is one JSON object per line. Each unit's health
-(online or offline, failures in a row, latency) is shown under the points. Runs until
-``--cycles`` or ``--duration`` is reached, or SIGINT/SIGTERM (exit 0).
+(online, suspect or offline, failures in a row, latency, the next probe) is shown under the
+points. Runs until ``--cycles`` or ``--duration`` is reached, or SIGINT/SIGTERM (exit 0).
+When the port disappears the master reopens it, and the table says ``line down,
+reopening`` meanwhile; with ``--no-reconnect`` a lost line ends the command (exit 1).
 """
 
 from __future__ import annotations
@@ -19,7 +21,9 @@ from typing import TextIO
 
 import anyio
 
-from aiortu.cli import Subparsers
+from aiortu.cli import SUMMARIES, Subparsers
+from aiortu.cli._arguments import plural
+from aiortu.cli._arguments import unit as unit_address
 from aiortu.cli._master import (
     EXIT_CODES_HELP,
     LINE_FLAGS_HELP,
@@ -27,14 +31,17 @@ from aiortu.cli._master import (
     add_line_options,
     open_from_args,
     positive_int,
+    reference,
     run_master,
     seconds,
 )
+from aiortu.cli._messages import line_failure
 from aiortu.core.addressing import Reference, format_reference
 from aiortu.core.poll_plan import Point
 from aiortu.core.values import Layout, ValueType
-from aiortu.errors import InvalidValue
+from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue
 from aiortu.master._poller import CycleReport, Poller, Sample, UnitHealth
+from aiortu.master._stats import UnitState
 
 __all__ = ("TablePrinter", "parse_point", "points_from_args", "register", "run")
 
@@ -66,7 +73,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``poll`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "poll",
-        help="poll points on one or more units and show them as a live table",
+        help=SUMMARIES["poll"],
         description=(
             "Poll points at an interval and show their values with each unit's health. "
             "Neighbouring points of a unit are read together. The table refreshes in place "
@@ -113,6 +120,12 @@ def register(subparsers: Subparsers) -> None:
         help="seconds between probes of an offline unit (5.0)",
     )
     parser.add_argument("--json", action="store_true", help="one JSON object per sample")
+    parser.add_argument(
+        "--no-reconnect",
+        dest="reconnect",
+        action="store_false",
+        help="exit 1 when the port is lost, instead of reopening it",
+    )
     parser.set_defaults(run=run)
 
 
@@ -125,14 +138,17 @@ def parse_point(text: str) -> Point:
     unit = _unit(fields[0])
     kind = fields[2] if len(fields) > 2 else ValueType.UINT16.value
     layout = fields[3] if len(fields) > 3 else Layout.ABCD.value
+    reference(fields[1])
     return Point.of(name, unit, fields[1], kind, layout=layout)
 
 
 def _unit(text: str) -> int:
+    if not text.strip():
+        raise UsageError("--unit must be unit addresses 1..247, comma-separated, without gaps")
     try:
-        return int(text)
-    except ValueError:
-        raise InvalidValue("unit", text, "1..247") from None
+        return unit_address(text)
+    except argparse.ArgumentTypeError as error:
+        raise UsageError(f"--unit {error}") from None
 
 
 def points_from_args(args: argparse.Namespace) -> list[Point]:
@@ -142,6 +158,7 @@ def points_from_args(args: argparse.Namespace) -> list[Point]:
         if args.unit is None:
             raise UsageError("--ref needs --unit")
         units = [_unit(item) for item in args.unit.split(",")]
+        reference(args.ref)
         first = Point.of("first", units[0], args.ref, args.type, layout=args.layout)
         for unit in units:
             for index in range(args.count):
@@ -160,6 +177,10 @@ def points_from_args(args: argparse.Namespace) -> list[Point]:
                 )
     if not found:
         raise UsageError("give --ref (with --unit) or at least one --point")
+    names = [point.name for point in found]
+    for name in names:
+        if names.count(name) > 1:
+            raise UsageError(f"--point {name} is given twice: each point needs a name of its own")
     return found
 
 
@@ -168,8 +189,11 @@ def _reference_name(reference: Reference) -> str:
 
 
 def _format_value(sample: Sample) -> str:
-    if sample.error is not None:
-        return f"-- {type(sample.error).__name__}"
+    error = sample.error
+    if isinstance(error, ExceptionResponse):
+        return f"-- ExceptionResponse {int(error.code):02X}"
+    if error is not None:
+        return f"-- {type(error).__name__}"
     value = sample.value
     if isinstance(value, bool):
         return "1" if value else "0"
@@ -202,7 +226,11 @@ class TablePrinter:
             latest = self._latest.get(point.name)
             shown = _format_value(latest) if latest is not None else "--"
             lines.append(f"{point.name:<16}{point.unit:>5}  {shown}")
-        lines.extend(_health_line(health) for health in self.poller.health().values())
+        if self.poller.master.connected:
+            now = self.poller.master.link.clock()
+            lines.extend(health_line(health, now) for health in self.poller.health().values())
+        else:
+            lines.append("line down, reopening")
         return lines
 
     def show(self, report: CycleReport) -> None:
@@ -218,21 +246,41 @@ class TablePrinter:
         self.out.flush()
 
 
-def _health_line(health: UnitHealth) -> str:
-    state = "online" if health.online else "OFFLINE"
-    latency = (
-        f", latency {health.last_latency * 1000:.1f} ms" if health.last_latency is not None else ""
-    )
-    return f"unit {health.unit}: {state}, {health.consecutive_failures} failures in a row{latency}"
+def health_line(health: UnitHealth, now: float) -> str:
+    """One unit's health as the table shows it, at *now* on the master's clock."""
+    parts = [f"unit {health.unit}: {health.state.value}"]
+    if health.state is UnitState.OFFLINE:
+        parts[0] = f"unit {health.unit}: OFFLINE"
+    failures = health.consecutive_failures
+    if failures:
+        parts.append(f"{plural(failures, 'failure')} in a row")
+    if health.next_probe is not None:
+        parts.append(f"next probe in {max(0.0, health.next_probe - now):.1f} s")
+    elif health.last_latency is not None:
+        parts.append(f"latency {health.last_latency * 1000:.1f} ms")
+    return ", ".join(parts)
+
+
+def _fail_on_lost_line(report: CycleReport) -> None:
+    """Without reconnecting, a lost line ends the command once its cycle is shown."""
+    for sample in report.samples:
+        if isinstance(sample.error, ConnectionLost):
+            raise sample.error
+
+
+def _error_text(error: Exception) -> str:
+    """What kept a point unread, in words (a lost line without the stream's repr)."""
+    return line_failure(error) if isinstance(error, ConnectionLost) else str(error)
 
 
 def _json_sample(sample: Sample) -> str:
+    # Cycles are numbered from 1, as in the table.
     document = {
-        "cycle": sample.cycle,
+        "cycle": sample.cycle + 1,
         "name": sample.name,
         "unit": sample.unit,
         "value": sample.value,
-        "error": None if sample.error is None else str(sample.error),
+        "error": None if sample.error is None else _error_text(sample.error),
     }
     return json.dumps(document)
 
@@ -242,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
 
     async def body() -> int:
         points = points_from_args(args)
-        async with open_from_args(args) as master:
+        async with open_from_args(args, reconnect=args.reconnect) as master:
             poller = Poller(
                 master,
                 points,
@@ -254,6 +302,8 @@ def run(args: argparse.Namespace) -> int:
             else:
                 printer = TablePrinter(sys.stdout, poller, ansi=sys.stdout.isatty())
                 poller.on_cycle(printer.show)
+            if not args.reconnect:
+                poller.on_cycle(_fail_on_lost_line)
             with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
                 async with anyio.create_task_group() as tasks:
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from aiortu.cli import Subparsers
+from aiortu.cli import SUMMARIES, Subparsers
 from aiortu.cli._master import (
     EXIT_CODES_HELP,
     LINE_FLAGS_HELP,
@@ -22,9 +22,11 @@ from aiortu.cli._master import (
     address,
     open_from_args,
     positive_int,
+    reference,
     run_master,
+    unit,
 )
-from aiortu.core.addressing import Table, parse_reference
+from aiortu.core.addressing import Table
 
 __all__ = ("print_values", "register", "run", "target")
 
@@ -55,7 +57,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``read`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "read",
-        help="read coils, discrete inputs or registers from a device once",
+        help=SUMMARIES["read"],
         description=(
             "Read COUNT elements of one table of one unit, from a protocol address "
             "(--table and --address, decimal or 0x hex) or a reference such as 40108 "
@@ -67,7 +69,7 @@ def register(subparsers: Subparsers) -> None:
     )
     add_line_options(parser)
     what = parser.add_argument_group("what to read")
-    what.add_argument("--unit", type=positive_int, required=True, help="unit address 1..247")
+    what.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
     what.add_argument("--table", choices=tuple(TABLES), help="the table (with --address)")
     what.add_argument("--address", type=address, help="the first protocol address (0-based)")
     what.add_argument("--ref", help="a 5- or 6-digit reference instead, e.g. 40108 or 100001")
@@ -81,8 +83,8 @@ def target(args: argparse.Namespace, parser_name: str) -> tuple[Table, int]:
     if args.ref is not None:
         if args.table is not None or args.address is not None:
             raise UsageError("give either --ref, or --table and --address, not both")
-        reference = parse_reference(args.ref)
-        return reference.table, reference.address
+        found = reference(args.ref)
+        return found.table, found.address
     if args.table is None or args.address is None:
         raise UsageError(f"{parser_name} needs --table and --address, or --ref")
     return TABLES[args.table], args.address

@@ -22,15 +22,18 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TextIO
 
 import anyio
 import anyio.abc
 
-from aiortu.cli import CommandFailed, Subparsers
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
+from aiortu.cli._arguments import is_pty, plural
+from aiortu.cli._messages import line_failure, port_failure
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import ExceptionPDU, decode_response
@@ -137,9 +140,13 @@ def parse_units(text: str) -> list[int]:
             low = int(first)
             high = int(last) if dash else low
         except ValueError:
-            raise argparse.ArgumentTypeError(f"not a unit or a range of units: {part!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"must be units 1-247 and ranges such as 1,2,10-12, not {text}"
+            ) from None
         if not 1 <= low <= high <= 247:
-            raise argparse.ArgumentTypeError(f"units are 1-247, low to high: {part!r}")
+            raise argparse.ArgumentTypeError(
+                f"must be units 1-247, a range low to high, not {part.strip()}"
+            )
         units.update(range(low, high + 1))
     return sorted(units)
 
@@ -150,9 +157,9 @@ def _baudrates(text: str) -> list[int]:
         try:
             rate = int(part)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"not a baud rate: {part!r}") from None
+            rate = 0
         if rate < 1:
-            raise argparse.ArgumentTypeError(f"not a baud rate: {part!r}")
+            raise argparse.ArgumentTypeError(f"must be baud rates such as 9600,19200, not {part}")
         if rate not in rates:
             rates.append(rate)
     return rates
@@ -163,7 +170,9 @@ def _parities(text: str) -> list[Parity]:
     for part in text.split(","):
         name = _PARITY_NAMES.get(part.strip().upper())
         if name is None:
-            raise argparse.ArgumentTypeError(f"parity is N, E or O: {part!r}")
+            raise argparse.ArgumentTypeError(
+                f"must be parities N, E or O (or none, even, odd), not {part}"
+            )
         if Parity(name) not in parities:
             parities.append(Parity(name))
     return parities
@@ -173,9 +182,11 @@ def _timeout(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+        value = math.nan
     if not 0 < value <= 60:
-        raise argparse.ArgumentTypeError(f"must be seconds, more than 0 and at most 60: {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"must be a number of seconds, more than 0 and at most 60, not {text}"
+        )
     return value
 
 
@@ -199,7 +210,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``scan`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "scan",
-        help="find the units that answer on a port, and their line settings",
+        help=SUMMARIES["scan"],
         description=(
             "Probe every unit at every line setting given, with a read of one holding "
             "register at address 0, and list the units that answer. Any reply counts, an "
@@ -221,9 +232,9 @@ def register(subparsers: Subparsers) -> None:
     parser.add_argument(
         "--parities",
         type=_parities,
-        default=list(DEFAULT_PARITIES),
+        default=None,
         metavar="P,P,...",
-        help="parities to try, N, E and O (E,N,O)",
+        help="parities to try, N, E and O (E,N,O; only N on a pseudo-terminal)",
     )
     parser.add_argument(
         "--stopbits",
@@ -407,6 +418,12 @@ class _Progress:
         self.err.write(text + "\x1b[K")
         self.err.flush()
 
+    def interrupted(self) -> None:
+        if self.bar:
+            self.err.write("\r\x1b[K")
+        self.err.write("aiortu scan: interrupted; the units found so far:\n")
+        self.err.flush()
+
     def result(self, result: SettingResult, units: int) -> None:
         if result.skipped is not None:
             # The probes of a refused setting count as done.
@@ -445,12 +462,11 @@ def report(results: Sequence[SettingResult], out: TextIO) -> bool:
     units = sorted({answer.unit for answer in answers})
     if units:
         where = ", ".join(sorted({str(answer.settings) for answer in answers}))
-        plural = "s" if len(units) != 1 else ""
-        out.write(f"found {len(units)} unit{plural} ({', '.join(map(str, units))}) at {where}\n")
+        found = plural(len(units), "unit")
+        out.write(f"found {found} ({', '.join(map(str, units))}) at {where}\n")
     else:
         tried = [r for r in results if r.skipped is None]
-        plural = "s" if len(tried) != 1 else ""
-        out.write(f"no unit answered at {len(tried)} line setting{plural}\n")
+        out.write(f"no unit answered at {plural(len(tried), 'line setting')}\n")
     out.flush()
     return bool(units)
 
@@ -461,36 +477,72 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _scan(args: argparse.Namespace) -> int:
-    settings = settings_to_try(args.baudrates, args.parities, args.stopbits)
+    parities = args.parities
+    if parities is None:
+        # A pty keeps no parity bit: E and O would only be refused.
+        parities = [Parity.NONE] if is_pty(args.port) else list(DEFAULT_PARITIES)
+    settings = settings_to_try(args.baudrates, parities, args.stopbits)
     units: list[int] = args.units
     progress = _Progress(sys.stderr, len(settings) * len(units), quiet=args.quiet)
     if not args.quiet:
         # The slowest case: every probe waits its whole timeout.
         worst = len(settings) * len(units) * (args.timeout + 0.01)
         sys.stderr.write(
-            f"aiortu scan: {len(units)} units at {len(settings)} line settings on {args.port};"
+            f"aiortu scan: {plural(len(units), 'unit')} at"
+            f" {plural(len(settings), 'line setting')} on {args.port};"
             f" at most {_duration(worst)}\n"
         )
     options = {"local_echo": True} if args.local_echo else {}
-    try:
-        results = await scan(
-            args.port,
-            settings,
-            units,
-            timeout=args.timeout,
-            first=args.first,
-            on_setting=progress.setting,
-            on_probe=progress.probe,
-            on_result=lambda result: progress.result(result, len(units)),
-            **options,
-        )
-    except PortError as error:
-        raise CommandFailed(f"cannot open the port: {error}") from error
-    except ConnectionLost as error:
-        raise CommandFailed(f"{args.port}: {error}") from error
+    # What was found so far, so that Ctrl-C still reports it.
+    results: list[SettingResult] = []
+    current: list[SettingResult] = []
+
+    def on_result(result: SettingResult) -> None:
+        results.append(result)
+        current.clear()
+        progress.result(result, len(units))
+
+    def on_probe(unit: int, result: SettingResult) -> None:
+        current[:] = [result]
+        progress.probe(unit, result)
+
+    interrupted: list[signal.Signals] = []
+    failure: str | None = None
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async with anyio.create_task_group() as group:
+            group.start_soon(_cancel_on_signal, signals, group.cancel_scope, interrupted)
+            try:
+                await scan(
+                    args.port, settings, units, timeout=args.timeout, first=args.first,
+                    on_setting=progress.setting, on_probe=on_probe, on_result=on_result,
+                    **options,
+                )  # fmt: skip
+            except PortError as error:
+                failure = f"cannot open the port: {port_failure(error)}"
+            except ConnectionLost as error:
+                failure = line_failure(error)
+            group.cancel_scope.cancel()
+    # Raised out here, not wrapped in the task group's ExceptionGroup.
+    if failure is not None:
+        raise CommandFailed(failure)
+    if interrupted:
+        progress.interrupted()
+        report(results + current, sys.stdout)
+        return 128 + interrupted[0]  # 130 for Ctrl-C, as a shell reports it
     if all(result.skipped is not None for result in results):
         raise CommandFailed(f"{args.port}: the port refused every line setting tried")
     return 0 if report(results, sys.stdout) else 1
+
+
+async def _cancel_on_signal(
+    signals: AsyncIterator[signal.Signals],
+    scope: anyio.CancelScope,
+    caught: list[signal.Signals],
+) -> None:
+    async for signum in signals:
+        caught.append(signum)
+        scope.cancel()
+        return
 
 
 def _duration(seconds: float) -> str:

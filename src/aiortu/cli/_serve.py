@@ -3,12 +3,15 @@
 Reads the description (see :mod:`aiortu.slave._config`), opens the port, and serves the
 units until SIGINT or SIGTERM (exit 0). A bad file is one line on stderr naming the file,
 the key and the problem (exit 2); a port that cannot be opened is one line (exit 1).
+When the port disappears under it (a USB adapter unplugged), ``serve`` says so on stderr
+and reopens it, with the same stores, until it is back; with ``--no-reconnect`` it exits 1.
 ``--trace`` logs every frame on stderr, in hex, with its meaning.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
@@ -16,10 +19,13 @@ from collections.abc import Mapping
 
 import anyio
 
-from aiortu.cli import CommandFailed, Subparsers
-from aiortu.cli._arguments import seconds_or_zero
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
+from aiortu.cli._arguments import add_line_settings, resolve_line_settings, seconds_or_zero
+from aiortu.cli._messages import config_problem, line_failure, port_failure
 from aiortu.core.bus_decoder import describe_frame
-from aiortu.errors import PortError
+from aiortu.core.pdu import Request, decode_request
+from aiortu.core.receiver import TimingMode
+from aiortu.errors import ConnectionLost, ModbusError, PortError
 from aiortu.slave._config import ConfigError, load_config
 from aiortu.slave._server import serve
 from aiortu.slave._store import MemoryStore
@@ -41,8 +47,12 @@ several processes can share one bus, each with its own units:
   aiortu serve /dev/pts/7 --config valves.toml --parity N --stopbits 2
   mbpoll -m rtu -a 17 -b 19200 -P none -s 2 -t 4 -r 1 -c 3 -1 /dev/pts/5
 
-exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the port cannot be opened or
-failed; 2 bad arguments or a bad configuration file (one line naming file, key, problem)
+on a pseudo-terminal (such as aiortu virtual-bus makes) the line is 8N2 unless
+--parity says otherwise: ptys keep no parity bit
+
+exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the port cannot be opened, or it
+failed with --no-reconnect; 2 bad arguments or a bad configuration file (one line naming
+file, key, problem)
 """
 
 
@@ -50,7 +60,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``serve`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "serve",
-        help="simulate Modbus RTU devices described in a TOML file",
+        help=SUMMARIES["serve"],
         description=(
             "Serve the units a TOML device description defines (tables, read-only ranges, "
             "FIFOs, files, device identification, server id) on a serial port or an "
@@ -64,9 +74,7 @@ def register(subparsers: Subparsers) -> None:
         "--config", required=True, metavar="FILE.toml", help="the device description"
     )
     line = parser.add_argument_group("line settings")
-    line.add_argument("--baudrate", type=int, default=19200, help="baud rate (19200)")
-    line.add_argument("--parity", choices=("N", "E", "O"), default="E", help="parity (E)")
-    line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
+    add_line_settings(line)
     line.add_argument(
         "--frame-gap",
         type=seconds_or_zero,
@@ -74,65 +82,150 @@ def register(subparsers: Subparsers) -> None:
         metavar="SECONDS",
         help="silence kept before each reply (t3.5 of the line settings)",
     )
+    line.add_argument(
+        "--timing",
+        choices=[mode.value for mode in TimingMode],
+        default=TimingMode.TOLERANT.value,
+        help=(
+            "strict: a gap over t1.5 inside a frame breaks it, and a request whose length "
+            "the function code does not tell ends after t3.5; tolerant: only a silence of "
+            "t3.5 or 20 ms, whichever is longer, ends a frame, for USB adapters and virtual "
+            "lines (tolerant)"
+        ),
+    )
     parser.add_argument(
         "--trace", action="store_true", help="log every frame on stderr, in hex, with its meaning"
+    )
+    parser.add_argument(
+        "--no-reconnect",
+        dest="reconnect",
+        action="store_false",
+        help="exit 1 when the port is lost, instead of reopening it",
     )
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT or SIGTERM; return the exit code."""
+    if not os.path.isfile(args.config):
+        print(f"aiortu serve: error: {args.config}: cannot read it: no such file", file=sys.stderr)
+        return 2
     try:
         config = load_config(args.config)
     except ConfigError as error:
-        print(f"aiortu serve: error: {error}", file=sys.stderr)
+        problem = config_problem(error.problem)
+        print(f"aiortu serve: error: {error.source}: {error.key}: {problem}", file=sys.stderr)
         return 2
+    resolve_line_settings(args)
     return anyio.run(_serve, args, config.units)
 
 
-def _trace(kind: str, data: bytes) -> None:
-    stamp = time.strftime("%H:%M:%S")
-    if kind == "discarded":
-        meaning = f"discarded {len(data)} bytes"
-    else:
-        direction = "reply" if kind == "sent" else None
-        meaning = describe_frame(data, direction=direction)
-    arrow = {"received": "<-", "sent": "->"}.get(kind, "xx")
-    sys.stderr.write(f"{stamp} {arrow} {data.hex(' ')}  {meaning}\n")
-    sys.stderr.flush()
+class Tracer:
+    """Writes each frame the slave sees or sends on stderr, a reply described with the
+    request it answers (so that a read of 3 coils shows 3, not the 8 of its byte)."""
+
+    def __init__(self) -> None:
+        self.request: Request | None = None
+
+    def __call__(self, kind: str, data: bytes) -> None:
+        now = time.time()
+        stamp = time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now * 1000) % 1000:03d}"
+        if kind == "discarded":
+            meaning = f"discarded {len(data)} bytes"
+        elif kind == "sent":
+            meaning = describe_frame(data, direction="reply", request=self.request)
+        else:
+            meaning = describe_frame(data, direction="request")
+            try:
+                self.request = decode_request(data[1:-2])
+            except ModbusError:
+                self.request = None
+        arrow = {"received": "<-", "sent": "->"}.get(kind, "xx")
+        sys.stderr.write(f"{stamp} {arrow} {data.hex(' ')}  {meaning}\n")
+        sys.stderr.flush()
 
 
 async def _serve(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> int:
     # The handlers go in before the port opens: a supervisor may signal at once.
+    failure: CommandFailed | None = None
     with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
-        try:
-            async with serve(
-                args.port,
-                units,
-                baudrate=args.baudrate,
-                parity=args.parity,
-                stopbits=args.stopbits,
-                frame_gap=args.frame_gap,
-                trace=_trace if args.trace else None,
-            ) as slave:
-                listing = ", ".join(str(unit) for unit in sorted(units))
-                sys.stderr.write(f"aiortu serve: units {listing} on {args.port}\n")
-                sys.stderr.flush()
-                async with anyio.create_task_group() as group:
+        async with anyio.create_task_group() as group:
 
-                    async def stop_on_signal() -> None:
-                        async for _ in signals:
-                            break
-                        group.cancel_scope.cancel()
+            async def stop_on_signal() -> None:
+                async for _ in signals:
+                    break
+                group.cancel_scope.cancel()
 
-                    async def stop_on_failure() -> None:
-                        await slave.wait_stopped()
-                        group.cancel_scope.cancel()
-
-                    group.start_soon(stop_on_signal)
-                    group.start_soon(stop_on_failure)
-                if slave.connection_error is not None:
-                    raise CommandFailed(f"the line failed: {slave.connection_error}")
-        except PortError as error:
-            raise CommandFailed(str(error)) from error
+            group.start_soon(stop_on_signal)
+            try:
+                await _serve_until_stopped(args, units)
+            except CommandFailed as error:
+                failure = error
+            group.cancel_scope.cancel()
+    # Raised out here, not wrapped in the task group's ExceptionGroup.
+    if failure is not None:
+        raise failure
     return 0
+
+
+async def _serve_until_stopped(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> None:
+    """Serve; after the line fails, reopen the port (backing off) unless told not to."""
+    tracer = Tracer() if args.trace else None
+    backoff = _Backoff()
+    opened = False
+    while True:
+        try:
+            error = await _serve_once(args, units, tracer)
+        except PortError as failure:
+            # The port must open the first time; once served, it may be gone a while.
+            if not opened:
+                raise CommandFailed(port_failure(failure)) from failure
+            await backoff.wait()
+            continue
+        opened = True
+        if not args.reconnect:
+            raise CommandFailed(line_failure(error))
+        _say(f"{line_failure(error)}; reopening {args.port}")
+        backoff.reset()
+        await backoff.wait()
+
+
+async def _serve_once(
+    args: argparse.Namespace, units: Mapping[int, MemoryStore], tracer: Tracer | None
+) -> ConnectionLost:
+    """Open the port and serve on it until the line fails; return why it failed."""
+    async with serve(
+        args.port,
+        units,
+        baudrate=args.baudrate,
+        parity=args.parity,
+        stopbits=args.stopbits,
+        frame_gap=args.frame_gap,
+        timing=args.timing,
+        trace=tracer,
+    ) as slave:
+        listing = ", ".join(str(unit) for unit in sorted(units))
+        settings = f"{args.baudrate} 8{args.parity}{args.stopbits}"
+        which = "unit" if len(units) == 1 else "units"
+        _say(f"{which} {listing} on {args.port} at {settings}; Ctrl-C to stop")
+        await slave.wait_stopped()
+    return slave.connection_error or ConnectionLost("the line closed")
+
+
+def _say(message: str) -> None:
+    sys.stderr.write(f"aiortu serve: {message}\n")
+    sys.stderr.flush()
+
+
+class _Backoff:
+    """Seconds to wait before reopening the port: 0.1 doubling up to 5."""
+
+    def __init__(self) -> None:
+        self.delay = 0.1
+
+    def reset(self) -> None:
+        self.delay = 0.1
+
+    async def wait(self) -> None:
+        await anyio.sleep(self.delay)
+        self.delay = min(2 * self.delay, 5.0)

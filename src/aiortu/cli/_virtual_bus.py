@@ -12,8 +12,8 @@ import sys
 
 import anyio
 
-from aiortu.cli import CommandFailed, Subparsers
-from aiortu.cli._arguments import positive_int, probability, seconds_or_zero
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
+from aiortu.cli._arguments import PTY_LINE, parity, positive_int, probability, seconds_or_zero
 from aiortu.core.timing import LineSettings
 from aiortu.testing._faults import FaultPlan
 from aiortu.testing._pty_bus import PtyBus
@@ -23,15 +23,18 @@ __all__ = ("register", "run")
 _EXAMPLES = """\
 examples:
   aiortu virtual-bus --ports 2
-      two ports at 19200 8E1; prints e.g. /dev/pts/5 and /dev/pts/6
-  aiortu virtual-bus --ports 3 --baudrate 9600 --parity N --stopbits 2 --link-dir /tmp/rtu
+      two ports at 19200 8N2; prints e.g. /dev/pts/5 and /dev/pts/6
+  aiortu virtual-bus --ports 3 --baudrate 9600 --link-dir /tmp/rtu
       a three-drop bus at 9600 8N2 with stable names /tmp/rtu/port0 .. port2
   aiortu virtual-bus --no-pacing --chunk-size 62 --latency 0.016
       no baud-rate pacing, delivery in chunks as through a USB adapter
   aiortu virtual-bus --bit-error-rate 1e-4 --gap-rate 0.001 --gap 0.01 --seed 7
       a noisy line, the same noise on every run with the same seed
 
-then, in another shell, for example (ptys keep no parity on Linux: use N and 2 stop bits):
+ptys keep no parity bit, so the bus is 8N2 (the same 11 bits a character as the spec's
+8E1), and aiortu's commands use 8N2 on a pty by default; other programs need it said:
+  aiortu serve /dev/pts/6 --config examples/devices.toml
+  aiortu read /dev/pts/5 --unit 1 --ref 40001 --count 3
   mbpoll -m rtu -a 1 -b 19200 -P none -s 2 -t 4 -r 1 -c 3 -1 /dev/pts/5
 
 exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the ptys cannot be created;
@@ -43,7 +46,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``virtual-bus`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "virtual-bus",
-        help="a virtual RS-485 bus of pseudo-terminals that any program can open",
+        help=SUMMARIES["virtual-bus"],
         description=(
             "Create a virtual multi-drop serial bus of pseudo-terminals. What a program "
             "writes to one port reaches the programs on all the other ports, at the "
@@ -56,8 +59,20 @@ def register(subparsers: Subparsers) -> None:
     parser.add_argument("--ports", type=positive_int, default=2, help="number of ports (2)")
     line = parser.add_argument_group("line settings (for pacing)")
     line.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
-    line.add_argument("--parity", choices=("N", "E", "O"), default="E", help="parity (E)")
-    line.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="stop bits (1)")
+    line.add_argument(
+        "--parity",
+        type=parity,
+        default="N",
+        metavar="N|E|O",
+        help=f"N, E or O, or none, even, odd (N: ptys keep no parity; use {PTY_LINE})",
+    )
+    line.add_argument(
+        "--stopbits",
+        type=int,
+        choices=(1, 2),
+        default=None,
+        help="stop bits (2 with parity N, else 1)",
+    )
     line.add_argument(
         "--no-pacing", action="store_true", help="deliver at once, not at the character rate"
     )
@@ -89,7 +104,11 @@ def run(args: argparse.Namespace) -> int:
     settings = (
         None
         if args.no_pacing
-        else LineSettings(args.baudrate, parity=args.parity, stopbits=args.stopbits)
+        else LineSettings(
+            args.baudrate,
+            parity=args.parity,
+            stopbits=args.stopbits or (2 if args.parity == "N" else 1),
+        )
     )
     plan = FaultPlan(
         bit_error_rate=args.bit_error_rate,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from aiortu.cli import Subparsers
+from aiortu.cli import SUMMARIES, Subparsers
 from aiortu.cli._master import (
     EXIT_CODES_HELP,
     LINE_FLAGS_HELP,
@@ -19,8 +19,8 @@ from aiortu.cli._master import (
     add_line_options,
     address,
     open_from_args,
-    positive_int,
     run_master,
+    unit,
 )
 from aiortu.cli._read import print_values, target
 from aiortu.core.addressing import Table
@@ -52,7 +52,7 @@ def register(subparsers: Subparsers) -> None:
     """Add the ``write`` subcommand to *subparsers*."""
     parser = subparsers.add_parser(
         "write",
-        help="write coils or holding registers of a device once",
+        help=SUMMARIES["write"],
         description=(
             "Write VALUES to coils or holding registers of one unit, from a protocol "
             "address (--table and --address, decimal or 0x hex) or a reference such as "
@@ -63,7 +63,7 @@ def register(subparsers: Subparsers) -> None:
     )
     add_line_options(parser)
     what = parser.add_argument_group("what to write")
-    what.add_argument("--unit", type=positive_int, required=True, help="unit address 1..247")
+    what.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
     what.add_argument("--table", choices=("coils", "holding"), help="the table (with --address)")
     what.add_argument("--address", type=address, help="the first protocol address (0-based)")
     what.add_argument("--ref", help="a 5- or 6-digit reference instead, e.g. 40017 or 00001")
@@ -110,7 +110,8 @@ def run(args: argparse.Namespace) -> int:
     async def body() -> int:
         table, start = target(args, "write")
         if not table.writable:
-            raise UsageError(f"cannot write {table.value}: only coils and holding registers")
+            kind = table.value.replace("_", " ")
+            raise UsageError(f"cannot write {kind}: only coils and holding registers are writable")
         values = parse_values(args.values, table)
         async with open_from_args(args) as master:
             unit = args.unit

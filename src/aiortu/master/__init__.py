@@ -12,7 +12,7 @@ from aiortu.master._client import Master, open_master
 from aiortu.master._connection import ReconnectPolicy
 from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
-from aiortu.master._stats import HealthPolicy, UnitStats
+from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
 
 __all__ = (
     "BroadcastHandle",
@@ -28,6 +28,7 @@ __all__ = (
     "UnitHealth",
     "UnitOffline",
     "UnitSkipped",
+    "UnitState",
     "UnitStats",
     "open_master",
 )

@@ -23,16 +23,16 @@ per cycle with all its samples) and to ``async for sample in poller``; when an i
 consumer falls more than *max_pending* samples behind, the oldest are dropped and counted
 in :attr:`Poller.dropped`.
 
-Dead devices: the master marks a unit offline after ``offline_after`` consecutive
-failures (see :class:`~aiortu.master._client.Master`). The poller then skips the unit's reads,
+Dead devices: the poller uses the master's notion of a unit's state
+(:class:`~aiortu.master._stats.UnitState`). A read that fails (no reply, a garbled one;
+not an exception response, which is an answer) makes the unit *suspect*: its other
+reads in that cycle are skipped, so one dead device costs at most one timeout per
+cycle, but it is read again in the next cycle, once, without the master's retries: one
+CRC error on a noisy line costs one sample, not seconds of them. After the master's
+``offline_after`` failures in a row the unit is *offline*: its reads are skipped,
 delivering samples with :class:`UnitSkipped`, except for one probe read every
-*offline_probe_interval* seconds; a probe that succeeds brings the unit back (the
-master marks it online) and its other reads go on in the same cycle. Within a cycle, a
-read that fails and leaves the unit offline skips the unit's remaining reads, so one
-dead device costs at most one timeout per cycle, and none between probes. The poller
-does not wait for the master's ``offline_after``: a unit whose read failed (no reply, a
-garbled one; not an exception response, which is an answer) is treated as down from the
-next read on, and probes are sent once, without the master's retries. And at most
+*offline_probe_interval* seconds, sent once; a probe that succeeds brings the unit back
+(the master marks it online) and its other reads go on in the same cycle. At most
 *max_probes_per_cycle* offline units (1 by default; ``None`` for no limit) are probed
 in one cycle, the one waiting longest first: with many dead devices on a bus, a cycle
 pays for one probe, not for one per dead device, and they take turns.
@@ -80,6 +80,7 @@ from aiortu.errors import (
     UnitSkipped,
 )
 from aiortu.master._client import Master
+from aiortu.master._stats import UnitState, UnitStats
 
 __all__ = ("CycleReport", "CycleStats", "Point", "Poller", "Sample", "UnitHealth", "UnitSkipped")
 
@@ -150,13 +151,19 @@ class UnitHealth:
     """What the poller knows of a unit: the master's health and its own probing."""
 
     unit: int
-    online: bool
+    state: UnitState
+    """Online, suspect (failed lately, still read every cycle) or offline (probed only)."""
     consecutive_failures: int
     last_latency: float | None
     skipped: int
     """Reads of the unit skipped while it was offline."""
     next_probe: float | None
-    """When the next probe may go (master clock), or None while online."""
+    """When the next probe may go (master clock), or None unless offline."""
+
+    @property
+    def online(self) -> bool:
+        """Whether the unit is read every cycle (online or suspect)."""
+        return self.state is not UnitState.OFFLINE
 
 
 SampleCallback = Callable[[Sample], object]
@@ -241,7 +248,6 @@ class Poller:
         self._sample_callbacks = _as_list(on_sample)
         self._cycle_callbacks = _as_list(on_cycle)
         self._last_probe: dict[int, float] = {}
-        self._suspect: set[int] = set()
         self._probe_slots: set[int] | None = None
         self._skipped: dict[int, int] = {}
         self._send: MemoryObjectSendStream[Sample]
@@ -273,16 +279,23 @@ class Poller:
         report: dict[int, UnitHealth] = {}
         for unit in sorted({p.unit for p in self.points}):
             stats = self.master.unit_stats(unit)
-            last = self._last_probe.get(unit)
             report[unit] = UnitHealth(
                 unit,
-                stats.online,
+                stats.state,
                 stats.consecutive_failures,
                 stats.last_latency,
                 self._skipped.get(unit, 0),
-                None if stats.online or last is None else last + self.offline_probe_interval,
+                self._next_probe(unit, stats),
             )
         return report
+
+    def _next_probe(self, unit: int, stats: UnitStats) -> float | None:
+        """When *unit* may be probed next: an interval after it went offline or after
+        its last probe; None unless offline."""
+        if stats.online:
+            return None
+        last = max(stats.last_probe, self._last_probe.get(unit, -math.inf))
+        return last + self.offline_probe_interval
 
     def on_sample(self, callback: SampleCallback) -> Callable[[], None]:
         """Call *callback* with every sample from now on; return a function that stops it."""
@@ -375,9 +388,9 @@ class Poller:
                 samples += await self._deliver_error(read, error, index)
                 continue
             try:
-                # A probe of a unit that stopped answering is sent once: its retries
+                # A read of a unit that stopped answering is sent once: its retries
                 # would stall the cycle for every other unit.
-                elements = await self._read(read, 0 if self._is_down(read.unit) else None)
+                elements = await self._read(read, 0 if self._failing(read.unit) else None)
             except ModbusError as failure:
                 samples += await self._deliver_error(read, failure, index)
                 if isinstance(failure, ConnectionLost):
@@ -385,11 +398,8 @@ class Poller:
                     for other in group.reads:
                         skip.setdefault(other.unit, failure)
                 elif not isinstance(failure, ExceptionResponse):
-                    self._suspect.add(read.unit)
-                    self._last_probe[read.unit] = clock()
                     skip[read.unit] = failure
                 continue
-            self._suspect.discard(read.unit)
             now = clock()
             for point, value in read.decode(elements):
                 sample = Sample(point, value, now, index)
@@ -403,29 +413,29 @@ class Poller:
             await _call(callback, report)
         return samples
 
-    def _is_down(self, unit: int) -> bool:
-        return unit in self._suspect or not self.master.is_online(unit)
+    def _failing(self, unit: int) -> bool:
+        return self.master.unit_stats(unit).state is not UnitState.ONLINE
 
     def _units_to_probe(self, group: _Group, now: float) -> set[int] | None:
         """The offline units this cycle may probe: those due, longest waiting first."""
         if self.max_probes_per_cycle is None:
             return None
         due = sorted(
-            (self._last_probe.get(unit, -math.inf), unit)
+            (next_probe, unit)
             for unit in {read.unit for read in group.reads}
-            if self._is_down(unit)
-            and now - self._last_probe.get(unit, -math.inf) >= self.offline_probe_interval
+            if (next_probe := self._next_probe(unit, self.master.unit_stats(unit))) is not None
+            and now >= next_probe
         )
         return {unit for _, unit in due[: self.max_probes_per_cycle]}
 
     def _gate(self, unit: int) -> UnitSkipped | None:
         """None if a read of *unit* may go now (online, or due for a probe), else why not."""
-        if not self._is_down(unit):
+        next_probe = self._next_probe(unit, self.master.unit_stats(unit))
+        if next_probe is None:
             return None
         now = self.master.link.clock()
-        last = self._last_probe.get(unit, -math.inf)
-        if now - last < self.offline_probe_interval:
-            return UnitSkipped(unit, last + self.offline_probe_interval - now)
+        if now < next_probe:
+            return UnitSkipped(unit, next_probe - now)
         if self._probe_slots is not None and unit not in self._probe_slots:
             return UnitSkipped(unit, 0.0)  # due, waiting for its turn among the dead
         self._last_probe[unit] = now

@@ -3,17 +3,35 @@
 :class:`UnitStats` holds the counters of one unit and updates them as transactions end
 (the engine, :class:`~aiortu.master._engine.LineEngine`, calls its ``count_*`` methods);
 :class:`HealthPolicy` says when a unit counts as offline and what calls to it do then.
+
+A unit is in one of three states (:class:`UnitState`), the same for the master, the poller
+(:meth:`aiortu.Poller.health`) and the ``aiortu poll`` command:
+
+- ``ONLINE``: its last transaction got a reply;
+- ``SUSPECT``: its last transactions failed, fewer than ``offline_after`` of them; it is
+  still asked every time, so one CRC error on a noisy line costs one reading, not seconds;
+- ``OFFLINE``: ``offline_after`` transactions failed in a row; it is only probed, one
+  request every probe interval, from :attr:`UnitStats.last_probe` on.
 """
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 
 from aiortu.core.errors import CRCError
 from aiortu.core.master_transaction import Failure, Transaction
 
-__all__ = ("HealthPolicy", "UnitStats")
+__all__ = ("HealthPolicy", "UnitState", "UnitStats")
+
+
+class UnitState(enum.Enum):
+    """Whether a unit answers: see the module docstring."""
+
+    ONLINE = "online"
+    SUSPECT = "suspect"
+    OFFLINE = "offline"
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,7 +84,19 @@ class UnitStats:
     online: bool = True
     """False after ``offline_after`` consecutive failures, until a success."""
     last_probe: float = -math.inf
-    """When a request was last let through to the unit while offline (fail fast)."""
+    """When the unit went offline, or a probe was last let through to it since (by the
+    master failing fast, or by a poller)."""
+
+    @property
+    def state(self) -> UnitState:
+        """The unit's state: online, suspect after a failure, offline after enough of them."""
+        if not self.online:
+            return UnitState.OFFLINE
+        return UnitState.SUSPECT if self.consecutive_failures else UnitState.ONLINE
+
+    def next_probe(self, probe_interval: float) -> float | None:
+        """When an offline unit may be probed next, on the master's clock; None unless offline."""
+        return None if self.online else self.last_probe + probe_interval
 
     def count_success(self, latency: float, *, exception: bool = False) -> None:
         """A transaction got its reply, *latency* seconds after its request began to go

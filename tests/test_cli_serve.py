@@ -1,0 +1,84 @@
+"""``aiortu serve``'s trace and timing options, and how ``poll`` shows a failed point."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import re
+from collections.abc import AsyncIterator
+from typing import Any
+
+import pytest
+
+from aiortu.cli import _serve, build_parser
+from aiortu.cli._poll import _format_value, _json_sample
+from aiortu.core.frame import encode_frame
+from aiortu.core.poll_plan import Point
+from aiortu.errors import ConnectionLost, ExceptionResponse
+from aiortu.master._poller import Sample
+
+STAMP = r"\d\d:\d\d:\d\d\.\d{3}"
+
+
+def test_the_trace_stamps_milliseconds_and_shows_the_coils_asked_for(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    trace = _serve.Tracer()
+    trace("received", encode_frame(17, bytes([0x01, 0x00, 0x13, 0x00, 0x03])))
+    trace("sent", encode_frame(17, bytes([0x01, 0x01, 0b101])))
+    trace("discarded", b"\x01\x02")
+    lines = capsys.readouterr().err.splitlines()
+    assert re.fullmatch(
+        f"{STAMP} <- 11 01 00 13 00 03 8f 5e  unit 17 read coils 19..21 \\(3\\)", lines[0]
+    )
+    # Three coils, as asked, not the eight bits of the reply's byte.
+    assert re.fullmatch(
+        f"{STAMP} -> 11 01 01 05 95 4b  unit 17 reply coils 19..21 = \\[1, 0, 1\\]", lines[1]
+    )
+    assert re.fullmatch(f"{STAMP} xx 01 02  discarded 2 bytes", lines[2])
+
+
+@pytest.mark.parametrize("timing", ["strict", "tolerant"])
+async def test_serve_passes_its_timing_to_the_slave(
+    timing: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen: dict[str, Any] = {}
+
+    class Stopped:
+        connection_error = ConnectionLost("the line failed: EndOfStream()")
+
+        async def wait_stopped(self) -> None:
+            pass
+
+    @contextlib.asynccontextmanager
+    async def fake_serve(port: str, units: object, **options: Any) -> AsyncIterator[Stopped]:
+        seen.update(options)
+        yield Stopped()
+
+    monkeypatch.setattr(_serve, "serve", fake_serve)
+    args = build_parser("serve").parse_args(
+        ["serve", "/dev/null", "--config", "x.toml", "--timing", timing, "--parity", "even"]
+    )
+    _serve.resolve_line_settings(args)
+    error = await _serve._serve_once(args, {}, None)
+    assert seen["timing"] == timing
+    assert (seen["parity"], seen["stopbits"]) == ("E", 1)
+    assert _serve.line_failure(error) == "the line failed: the port closed"
+
+
+def test_a_point_refused_by_the_device_shows_the_exception_code() -> None:
+    point = Point.of("a", 1, "40001")
+    refused = Sample(point, None, 0.0, 0, ExceptionResponse(2, 3, 1))
+    assert _format_value(refused) == "-- ExceptionResponse 02"
+
+
+def test_a_json_sample_names_a_lost_line_in_words() -> None:
+    point = Point.of("a", 1, "40001")
+    lost = Sample(point, None, 0.0, 4, ConnectionLost("the line failed: EndOfStream()"))
+    assert json.loads(_json_sample(lost)) == {
+        "cycle": 5,
+        "name": "a",
+        "unit": 1,
+        "value": None,
+        "error": "the line failed: the port closed",
+    }
