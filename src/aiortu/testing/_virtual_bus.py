@@ -153,6 +153,9 @@ class VirtualEndpoint(anyio.abc.ByteStream):
         """Wait for bytes from the other endpoints and return up to *max_bytes* of them."""
         with self._receive_guard:
             bus = self.bus
+            # A cancellation (a reader's deadline) may only end the call before it takes
+            # bytes: once taken out of the buffer they must reach the caller.
+            await anyio.lowlevel.checkpoint_if_cancelled()
             while True:
                 if self._closed:
                     raise anyio.ClosedResourceError
@@ -161,7 +164,7 @@ class VirtualEndpoint(anyio.abc.ByteStream):
                 if self._buffer:
                     data = bytes(self._buffer[:max_bytes])
                     del self._buffer[:max_bytes]
-                    await anyio.lowlevel.checkpoint()
+                    await anyio.lowlevel.cancel_shielded_checkpoint()
                     return data
                 if bus._exhausted_for(self.index):
                     raise anyio.EndOfStream
