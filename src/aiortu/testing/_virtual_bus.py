@@ -45,6 +45,20 @@ There is no background task: the wire is a schedule computed when bytes are sent
 deliveries happen when a receiver (or sender) looks at the clock. The endpoints therefore
 work with or without ``async with``, under asyncio and trio alike; ``async with`` (or
 :meth:`VirtualBus.aclose`) closes every endpoint at the end.
+
+The push extension: on a bus where nothing is ever held on the wire (unpaced, no adapter
+model, no faults: :attr:`VirtualBus.pushes`), the endpoints also have the serial port's
+``set_receiver(receiver, on_lost)`` and ``send_nowait(data)``. The master's and the
+slave's link then take their push path, as on a serial port: a transmission reaches the
+receiving link from one event loop callback in the loop pass after it was sent (never
+inside the sender's call, so no consumer is re-entered), and a link writes without a
+yield; no task wakes up per frame. Paced, chunked and faulted buses keep the plain byte
+stream, which the link reads from a task. Reads through :meth:`VirtualEndpoint.receive`
+work on both.
+
+Cancellation: :meth:`VirtualEndpoint.receive` is cancelled only before it takes bytes
+off the bus. A reader whose deadline comes due in the loop pass that delivered a frame
+gets the frame on its next call; the bytes are never taken and dropped.
 """
 
 from __future__ import annotations
@@ -115,7 +129,9 @@ class VirtualEndpoint(anyio.abc.ByteStream):
 
     :meth:`receive` returns whatever has arrived, up to *max_bytes*; it raises
     :class:`anyio.EndOfStream` once every other endpoint is closed and everything they sent
-    was received, and :class:`anyio.ClosedResourceError` after :meth:`aclose`.
+    was received, and :class:`anyio.ClosedResourceError` after :meth:`aclose`. On a bus
+    whose :attr:`~VirtualBus.pushes` is true the endpoints also have ``set_receiver`` and
+    ``send_nowait``, the serial port's push extension (see the module docs).
     """
 
     def __init__(self, bus: VirtualBus, index: int, buffer_size: int) -> None:
