@@ -32,9 +32,12 @@ class Bench:
     slave: aiortu.Slave
 
 
-async def read_as_callers(bench: Bench, callers: int, before: Callable[[], None] | None = None):
+async def read_as_callers(
+    bench: Bench, callers: int, hold_up: Callable[[], None] | None = None
+) -> None:
     """*callers* tasks each read 10 registers ROUNDS times at their own address; check
-    each result. *before* runs as one more task started after them."""
+    each result. *hold_up*, a blocking call, runs in one more task started after them:
+    it holds up the loop pass that runs their first steps."""
     wrong: list[int] = []
 
     async def caller(number: int) -> None:
@@ -47,8 +50,8 @@ async def read_as_callers(bench: Bench, callers: int, before: Callable[[], None]
     async with anyio.create_task_group() as group:
         for number in range(callers):
             group.start_soon(caller, number)
-        if before is not None:
-            group.start_soon(_run_sync, before)
+        if hold_up is not None:
+            group.start_soon(_run_sync, hold_up)
     assert wrong == []
 
 
