@@ -60,6 +60,22 @@ async def test_a_transmission_reaches_the_receiver_in_a_later_loop_pass() -> Non
     )
 
 
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_the_hand_over_runs_on_either_event_loop(backend: str) -> None:
+    pytest.importorskip(backend)
+
+    async def main() -> list[bytes]:
+        a, b = virtual_pair()
+        chunks: list[bytes] = []
+        b.set_receiver(chunks.append)
+        a.send_nowait(b"frame")
+        assert chunks == []
+        await anyio.sleep(0.01)
+        return chunks
+
+    assert anyio.run(main, backend=backend) == [b"frame"]
+
+
 async def test_bytes_kept_before_go_at_once_and_receive_gets_them_again_without() -> None:
     a, b = virtual_pair()
     await a.send(b"kept")
