@@ -1,7 +1,7 @@
 """Many concurrent callers on one master and one slave: every attempt reaches the slave.
 
-On every kind of test bench line (an unpaced VirtualBus, virtual_pair, the pty bus), a
-thousand callers each read three times; nothing times out, nothing is retried, the slave
+On every kind of test bench line (an unpaced VirtualBus, pushing or read as a plain
+stream, virtual_pair, the pty bus), a thousand callers each read three times; nothing times out, nothing is retried, the slave
 counts one message per request and every caller gets its own registers.
 """
 
@@ -11,6 +11,7 @@ import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import anyio
 import pytest
@@ -79,11 +80,16 @@ async def on_streams(master_stream, slave_stream) -> AsyncIterator[Bench]:
 
 
 @asynccontextmanager
-async def on_virtual_bus() -> AsyncIterator[Bench]:
-    bus = VirtualBus(2)
+async def on_virtual_bus(**options: Any) -> AsyncIterator[Bench]:
+    bus = VirtualBus(2, **options)
     async with on_streams(bus[0], bus[1]) as bench:
         yield bench
     assert bus[0].overrun_bytes == bus[1].overrun_bytes == 0
+
+
+STREAMED = {"chunk_size": 256}
+"""An unpaced bus whose endpoints do not push: the master's and the slave's links read
+it from a task through ``receive()``, as any plain byte stream."""
 
 
 @asynccontextmanager
@@ -104,6 +110,7 @@ async def on_pty_bus() -> AsyncIterator[Bench]:
 
 BENCHES: dict[str, Callable[[], AbstractAsyncContextManager[Bench]]] = {
     "VirtualBus": on_virtual_bus,
+    "VirtualBus streamed": lambda: on_virtual_bus(**STREAMED),
     "virtual_pair": on_virtual_pair,
     "PtyBus": on_pty_bus,
 }
@@ -117,13 +124,17 @@ async def test_every_caller_is_served_once(line: str, callers: int) -> None:
         assert_every_attempt_served(bench, callers * ROUNDS)
 
 
-async def test_no_request_lost_when_the_first_one_meets_the_slaves_first_deadline() -> None:
+@pytest.mark.parametrize("options", [{}, STREAMED], ids=["pushed", "streamed"])
+async def test_no_request_lost_when_the_first_one_meets_the_slaves_first_deadline(
+    options: dict[str, Any],
+) -> None:
     # A slave's receiver starts with a t3.5 deadline. When a thousand callers start, one
     # pass of the event loop runs all their first steps and can outlast that deadline
     # (here a step that blocks for it makes sure it does): the first request then arrives
     # in the loop pass that also ends the deadline, and the slave's read of the line was
-    # cancelled after it had taken the request off the bus. It must keep it.
-    bus = VirtualBus(2)
+    # cancelled after it had taken the request off the bus. It must keep it. (A pushing
+    # bus has no such read; the streamed one is read as any byte stream is.)
+    bus = VirtualBus(2, **options)
     async with aiortu.Master(bus[0], frame_gap=0, timeout=5) as master:
         await anyio.sleep(0.01)  # the master's line task is up and waiting for work
         async with aiortu.Slave(bus[1], {1: store()}, frame_gap=0) as slave:
