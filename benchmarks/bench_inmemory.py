@@ -21,9 +21,10 @@ Sections (each a function ``section_*``; ``--section`` picks some):
     Then the memory per waiting caller: callers started against a slave that does not
     answer (all but one wait for their turn in the master's queue), ``tracemalloc``'s
     traced memory before and after, divided by the callers.
-(c) scale: 10,000 callers each read 3 times on an unpaced ``VirtualBus``, on
-    ``virtual_pair`` and on a ``PtyBus`` (master, slave and relay in this process): the
-    checks of (b), and the wall time.
+(c) scale: 10,000 callers each read 3 times on an unpaced ``VirtualBus`` (pushing, and
+    with ``chunk_size=256``, which the links read as a plain stream), on ``virtual_pair``
+    and on a ``PtyBus`` (master, slave and relay in this process): the checks of (b),
+    the wall time and the CPU per read.
 """
 
 from __future__ import annotations
@@ -296,6 +297,9 @@ BENCHES: dict[
     str, Callable[[], AbstractAsyncContextManager[tuple[aiortu.Master, aiortu.Slave]]]
 ] = {
     "VirtualBus(2)": in_memory,
+    "VirtualBus(2, chunk_size=256), read as a stream": lambda: in_memory(
+        lambda: tuple(VirtualBus(2, chunk_size=256))
+    ),
     "virtual_pair()": lambda: in_memory(virtual_pair),
     "PtyBus(2), one process": on_pty_bus,
 }
