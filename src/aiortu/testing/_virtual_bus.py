@@ -354,14 +354,11 @@ class VirtualBus:
         """Transmissions that started while another endpoint's bytes were on the wire."""
         self.trace: deque[TraceEntry] = deque(maxlen=trace_size)
         """The last bursts on the wire, oldest first."""
-        self.pushes = (
+        # The one predicate of the shortcut: every condition under which it may run.
+        self._pushes = (
             settings is None and self.injector is None and chunk_size is None and latency == 0
         )
-        """Whether nothing is ever held on the wire (unpaced, no adapter model, no faults):
-        then every byte sent is delivered before the send returns, and the endpoints also
-        offer the serial port's push extension (``set_receiver``, ``send_nowait``), which
-        the master and the slave read and write without a task wake-up per frame."""
-        endpoint_class = _PushingEndpoint if self.pushes else VirtualEndpoint
+        endpoint_class = _PushingEndpoint if self._pushes else VirtualEndpoint
         self.endpoints: tuple[VirtualEndpoint, ...] = tuple(
             endpoint_class(self, index, receive_buffer_size) for index in range(ports)
         )
@@ -377,6 +374,14 @@ class VirtualBus:
         self._event: anyio.Event | None = None
         self._closed = False
         self._timer: WakeTimer | bool | None = False  # False: not made yet; None: none
+
+    @property
+    def pushes(self) -> bool:
+        """Whether nothing is ever held on the wire (unpaced, no adapter model, no faults):
+        then every byte sent is delivered before the send returns, and the endpoints also
+        offer the serial port's push extension (``set_receiver``, ``send_nowait``), which
+        the master and the slave read and write without a task wake-up per frame."""
+        return self._pushes
 
     @property
     def char_time(self) -> float:
@@ -494,7 +499,7 @@ class VirtualBus:
         On an unpaced bus without adapter model or faults, everything is delivered to the
         other endpoints' receive buffers before this returns.
         """
-        if self.pushes:
+        if self._pushes:
             # Nothing is ever held on such a wire (no pacing, adapter or faults), so the
             # schedule below would deliver the bytes at once: do it without building it.
             index = sender.index
