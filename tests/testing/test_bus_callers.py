@@ -1,8 +1,9 @@
 """Many concurrent callers on one master and one slave: every attempt reaches the slave.
 
 On every kind of test bench line (an unpaced VirtualBus, pushing or read as a plain
-stream, virtual_pair, the pty bus), a thousand callers each read three times; nothing times out, nothing is retried, the slave
-counts one message per request and every caller gets its own registers.
+stream, virtual_pair, the pty bus), a thousand callers each read three times; nothing
+times out, nothing is retried, the slave counts one message per request and every caller
+gets its own registers.
 """
 
 from __future__ import annotations

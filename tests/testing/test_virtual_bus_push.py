@@ -116,6 +116,9 @@ async def test_closing_the_endpoint_itself_reports_the_end_at_once() -> None:
     already: list[str] = []
     b.set_receiver(lambda chunk: None, lambda: already.append("lost"))
     assert already == ["lost"]
+    (alone,) = VirtualBus(1)  # nobody else on the bus: receive() would end at once
+    alone.set_receiver(lambda chunk: None, lambda: already.append("alone"))
+    assert already == ["lost", "alone"]
 
 
 @pytest.mark.parametrize(

@@ -217,6 +217,7 @@ class VirtualEndpoint(anyio.abc.ByteStream):
             return
         self._closed = True
         self._buffer.clear()
+        self.bus._closing = True
         self.bus._notify()
         for endpoint in self.bus.endpoints:
             endpoint._check_lost()
@@ -309,7 +310,8 @@ class _PushingEndpoint(VirtualEndpoint):
             return
         if self._buffer:
             receiver(self._take(len(self._buffer)))
-        self._check_lost()
+        if self.bus._closing:  # the end waits for the bytes sent before it
+            self._check_lost()
 
 
 class VirtualBus:
@@ -373,6 +375,7 @@ class VirtualBus:
         self._pending_since = 0.0
         self._event: anyio.Event | None = None
         self._closed = False
+        self._closing = False  # an endpoint was closed: pushing ones look for their end
         self._timer: WakeTimer | bool | None = False  # False: not made yet; None: none
 
     @property
