@@ -45,6 +45,20 @@ There is no background task: the wire is a schedule computed when bytes are sent
 deliveries happen when a receiver (or sender) looks at the clock. The endpoints therefore
 work with or without ``async with``, under asyncio and trio alike; ``async with`` (or
 :meth:`VirtualBus.aclose`) closes every endpoint at the end.
+
+The push extension: on a bus where nothing is ever held on the wire (unpaced, no adapter
+model, no faults: :attr:`VirtualBus.pushes`), the endpoints also have the serial port's
+``set_receiver(receiver, on_lost)`` and ``send_nowait(data)``. The master's and the
+slave's link then take their push path, as on a serial port: a transmission reaches the
+receiving link from one event loop callback in the loop pass after it was sent (never
+inside the sender's call, so no consumer is re-entered), and a link writes without a
+yield; no task wakes up per frame. Paced, chunked and faulted buses keep the plain byte
+stream, which the link reads from a task. Reads through :meth:`VirtualEndpoint.receive`
+work on both.
+
+Cancellation: :meth:`VirtualEndpoint.receive` is cancelled only before it takes bytes
+off the bus. A reader whose deadline comes due in the loop pass that delivered a frame
+gets the frame on its next call; the bytes are never taken and dropped.
 """
 
 from __future__ import annotations
@@ -52,7 +66,7 @@ from __future__ import annotations
 import asyncio
 import math
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -115,7 +129,9 @@ class VirtualEndpoint(anyio.abc.ByteStream):
 
     :meth:`receive` returns whatever has arrived, up to *max_bytes*; it raises
     :class:`anyio.EndOfStream` once every other endpoint is closed and everything they sent
-    was received, and :class:`anyio.ClosedResourceError` after :meth:`aclose`.
+    was received, and :class:`anyio.ClosedResourceError` after :meth:`aclose`. On a bus
+    whose :attr:`~VirtualBus.pushes` is true the endpoints also have ``set_receiver`` and
+    ``send_nowait``, the serial port's push extension (see the module docs).
     """
 
     def __init__(self, bus: VirtualBus, index: int, buffer_size: int) -> None:
@@ -129,6 +145,7 @@ class VirtualEndpoint(anyio.abc.ByteStream):
         self._buffer_size = buffer_size
         self._closed = False
         self._receive_guard = anyio.ResourceGuard("reading from")
+        self._on_lost: Callable[[], None] | None = None
 
     @property
     def closed(self) -> bool:
@@ -153,6 +170,9 @@ class VirtualEndpoint(anyio.abc.ByteStream):
         """Wait for bytes from the other endpoints and return up to *max_bytes* of them."""
         with self._receive_guard:
             bus = self.bus
+            # A cancellation (a reader's deadline) may only end the call before it takes
+            # bytes: once taken out of the buffer they must reach the caller.
+            await anyio.lowlevel.checkpoint_if_cancelled()
             while True:
                 if self._closed:
                     raise anyio.ClosedResourceError
@@ -161,7 +181,7 @@ class VirtualEndpoint(anyio.abc.ByteStream):
                 if self._buffer:
                     data = bytes(self._buffer[:max_bytes])
                     del self._buffer[:max_bytes]
-                    await anyio.lowlevel.checkpoint()
+                    await anyio.lowlevel.cancel_shielded_checkpoint()
                     return data
                 if bus._exhausted_for(self.index):
                     raise anyio.EndOfStream
@@ -197,12 +217,101 @@ class VirtualEndpoint(anyio.abc.ByteStream):
             return
         self._closed = True
         self._buffer.clear()
+        self.bus._closing = True
         self.bus._notify()
+        for endpoint in self.bus.endpoints:
+            endpoint._check_lost()
+
+    def _check_lost(self) -> None:
+        """Tell a pushing endpoint's consumer, once, that :meth:`receive` would now raise."""
+        on_lost = self._on_lost
+        if on_lost is None:
+            return
+        if self._closed or (not self._buffer and self.bus._exhausted_for(self.index)):
+            self._on_lost = None
+            on_lost()
 
     async def aclose(self) -> None:
         """Close this endpoint (see :meth:`close`)."""
         self.close()
         await anyio.lowlevel.checkpoint()
+
+
+def _loop_callbacks() -> tuple[Callable[[Callable[[], None]], object], Callable[[], float]]:
+    """The running event loop's "call this soon" and its clock (asyncio's own, else
+    trio's, read through anyio for the backend's time)."""
+    try:
+        loop = asyncio.get_running_loop()
+    except RuntimeError:
+        native = anyio.lowlevel.current_token().native_token
+        run_sync_soon: Callable[[Callable[[], None]], object] = native.run_sync_soon  # type: ignore[attr-defined]  # trio's token
+        return run_sync_soon, anyio.current_time
+    return loop.call_soon, loop.time
+
+
+class _PushingEndpoint(VirtualEndpoint):
+    """An endpoint of a bus where nothing is ever held on the wire (see
+    :attr:`VirtualBus.pushes`): besides the byte stream, the push extension of the serial
+    port (:meth:`set_receiver`, :meth:`send_nowait`), so that a link reads and writes it
+    without a task wake-up per frame."""
+
+    def __init__(self, bus: VirtualBus, index: int, buffer_size: int) -> None:
+        super().__init__(bus, index, buffer_size)
+        self._receiver: Callable[[bytes], None] | None = None
+        self._call_soon: Callable[[Callable[[], None]], object] | None = None
+        self._clock: Callable[[], float] = anyio.current_time
+        self._handing_over = False
+
+    def set_receiver(
+        self,
+        receiver: Callable[[bytes], None] | None,
+        on_lost: Callable[[], None] | None = None,
+    ) -> None:
+        """Hand what arrives to *receiver* from an event loop callback, instead of keeping
+        it for :meth:`receive` (``None`` keeps it again). Call it in the event loop.
+
+        The callback runs in the loop pass after the bytes were sent, never inside the
+        sender's call, and hands over everything that arrived meanwhile in one chunk: a
+        whole transmission, as a serial port's read would. Bytes already kept go to
+        *receiver* at once. *on_lost* is called once :meth:`receive` would raise (this
+        endpoint closed, or every other one closed and everything they sent handed
+        over), at once if it already would.
+        """
+        self._receiver = receiver
+        self._on_lost = on_lost if receiver is not None else None
+        if receiver is None:
+            return
+        self._call_soon, self._clock = _loop_callbacks()
+        if self._buffer:
+            receiver(self._take(len(self._buffer)))
+        self._check_lost()
+
+    def send_nowait(self, item: bytes) -> bool:
+        """Put *item* on the wire now, without a yield; return False (nothing sent) once
+        this endpoint is closed. The other endpoints have it when this returns."""
+        if self._closed:
+            return False
+        if item:
+            self.bus._transmit_now(self, bytes(item), self._clock())
+        return True
+
+    def _push(self, data: bytes) -> None:
+        super()._push(data)
+        # One callback per loop pass, whatever arrived meanwhile: what a port's read does.
+        if self._receiver is not None and not self._handing_over and not self._closed:
+            assert self._call_soon is not None
+            self._handing_over = True
+            self._call_soon(self._hand_over)
+
+    def _hand_over(self) -> None:
+        self._handing_over = False
+        receiver = self._receiver
+        if receiver is None or self._closed:
+            return
+        if self._buffer:
+            receiver(self._take(len(self._buffer)))
+        if self.bus._closing:  # the end waits for the bytes sent before it
+            self._check_lost()
 
 
 class VirtualBus:
@@ -247,8 +356,13 @@ class VirtualBus:
         """Transmissions that started while another endpoint's bytes were on the wire."""
         self.trace: deque[TraceEntry] = deque(maxlen=trace_size)
         """The last bursts on the wire, oldest first."""
+        # The one predicate of the shortcut: every condition under which it may run.
+        self._pushes = (
+            settings is None and self.injector is None and chunk_size is None and latency == 0
+        )
+        endpoint_class = _PushingEndpoint if self._pushes else VirtualEndpoint
         self.endpoints: tuple[VirtualEndpoint, ...] = tuple(
-            VirtualEndpoint(self, index, receive_buffer_size) for index in range(ports)
+            endpoint_class(self, index, receive_buffer_size) for index in range(ports)
         )
         """The endpoints, by index."""
         self._char_time = settings.char_time if settings is not None else 0.0
@@ -261,10 +375,16 @@ class VirtualBus:
         self._pending_since = 0.0
         self._event: anyio.Event | None = None
         self._closed = False
+        self._closing = False  # an endpoint was closed: pushing ones look for their end
         self._timer: WakeTimer | bool | None = False  # False: not made yet; None: none
-        self._immediate = (
-            self._char_time == 0 and self.injector is None and chunk_size is None and latency == 0
-        )
+
+    @property
+    def pushes(self) -> bool:
+        """Whether nothing is ever held on the wire (unpaced, no adapter model, no faults):
+        then every byte sent is delivered before the send returns, and the endpoints also
+        offer the serial port's push extension (``set_receiver``, ``send_nowait``), which
+        the master and the slave read and write without a task wake-up per frame."""
+        return self._pushes
 
     @property
     def char_time(self) -> float:
@@ -382,7 +502,7 @@ class VirtualBus:
         On an unpaced bus without adapter model or faults, everything is delivered to the
         other endpoints' receive buffers before this returns.
         """
-        if self._immediate:
+        if self._pushes:
             # Nothing is ever held on such a wire (no pacing, adapter or faults), so the
             # schedule below would deliver the bytes at once: do it without building it.
             index = sender.index
