@@ -20,12 +20,14 @@ from aiortu.core.pdu import REGISTER_RANGE
 
 __all__ = (
     "UNIT_RANGE",
+    "check_at_least",
     "check_bool",
     "check_coil",
     "check_coils",
     "check_delays",
     "check_function_codes",
     "check_int",
+    "check_master_settings",
     "check_priority",
     "check_registers",
     "check_retry_on",
@@ -75,8 +77,8 @@ def check_priority(priority: object) -> int:
     Priorities are compared with each other inside the master's queue, in other callers'
     tasks: one that is not an int must never get there.
     """
-    if type(priority) is int or is_int(priority):
-        return int(priority)  # type: ignore[call-overload]  # an int, checked above
+    if isinstance(priority, int) and not isinstance(priority, bool):
+        return priority
     raise InvalidRequest("priority", priority, "an int (lower goes first)")
 
 
@@ -173,13 +175,54 @@ def check_function_codes(name: str, codes: object) -> frozenset[int] | None:
     return frozenset(check_int(name, code, range(1, 128), InvalidValue) for code in codes)
 
 
+def check_at_least(name: str, value: object, minimum: int) -> int:
+    """Return *value* if it is an int >= *minimum*, else raise InvalidValue."""
+    if not is_int(value) or value < minimum:  # type: ignore[operator]  # an int by then
+        raise InvalidValue(name, value, f"an int >= {minimum}")
+    return value  # type: ignore[return-value]  # checked above
+
+
 def check_delays(name: str, delays: object) -> tuple[float, float]:
-    """A ``(first, longest)`` pair of finite delays >= 0, the first not above the longest."""
-    allowed = "(first, longest): two finite numbers of seconds >= 0, first <= longest"
+    """A ``(first, longest)`` pair of finite delays, 0 < first <= longest."""
+    allowed = "(first, longest): two finite numbers of seconds, 0 < first <= longest"
     if not isinstance(delays, Sequence) or isinstance(delays, _TEXT_TYPES) or len(delays) != 2:
         raise InvalidValue(name, delays, allowed)
-    first = check_seconds(name, delays[0], zero=True)
-    longest = check_seconds(name, delays[1], zero=True)
+    first = check_seconds(name, delays[0])
+    longest = check_seconds(name, delays[1])
     if first > longest:
         raise InvalidValue(name, delays, allowed)
     return first, longest
+
+
+def check_master_settings(
+    *,
+    timeout: object,
+    retries: object,
+    retry_on: object,
+    repeatable: object,
+    frame_gap: object,
+    turnaround_delay: object,
+    late_reply_guard: object,
+    offline_after: object,
+    fail_fast_offline: object,
+    probe_interval: object,
+    reconnect: object,
+    reconnect_delay: object,
+    reconnect_fail_fast: object,
+) -> None:
+    """Raise InvalidValue, naming the setting, for the first of a master's settings that is
+    out of its range (see :class:`~aiortu.master._client.Master`)."""
+    check_seconds("timeout", timeout)
+    check_at_least("retries", retries, 0)
+    check_retry_on(retry_on)
+    check_function_codes("repeatable", repeatable)
+    if frame_gap is not None:
+        check_seconds("frame_gap", frame_gap, zero=True)
+    check_seconds("turnaround_delay", turnaround_delay, zero=True)
+    check_seconds("late_reply_guard", late_reply_guard, zero=True)
+    check_at_least("offline_after", offline_after, 1)
+    check_bool("fail_fast_offline", fail_fast_offline)
+    check_seconds("probe_interval", probe_interval, zero=True)
+    check_bool("reconnect", reconnect)
+    check_delays("reconnect_delay", reconnect_delay)
+    check_bool("reconnect_fail_fast", reconnect_fail_fast)
