@@ -27,6 +27,7 @@ __all__ = (
     "check_delays",
     "check_function_codes",
     "check_int",
+    "check_items",
     "check_master_settings",
     "check_priority",
     "check_registers",
@@ -123,7 +124,7 @@ def check_coil(value: object) -> bool:
 
 def check_coils(values: object) -> tuple[bool, ...]:
     """Coil states for write multiple coils: each a bool, 0 or 1."""
-    items = _sequence("values", values, "a sequence of bools (or 0 and 1)")
+    items = check_items("values", values, "a sequence of bools (or 0 and 1)")
     coils: list[bool] = []
     for index, value in enumerate(items):
         if type(value) is bool:
@@ -137,14 +138,14 @@ def check_coils(values: object) -> tuple[bool, ...]:
 
 def check_registers(name: str, values: object) -> tuple[int, ...]:
     """Register values: a sequence of ints 0..65535 (not bools, not bytes)."""
-    items = _sequence(name, values, "a sequence of ints 0..65535")
+    items = check_items(name, values, "a sequence of ints 0..65535")
     for index, value in enumerate(items):
         if type(value) is not int or value not in REGISTER_RANGE:
             check_int(f"{name}[{index}]", value, REGISTER_RANGE, InvalidRequest)
     return items  # type: ignore[return-value]  # every item checked above
 
 
-def _sequence(name: str, values: object, allowed: str) -> tuple[object, ...]:
+def check_items(name: str, values: object, allowed: str) -> tuple[object, ...]:
     """*values* as a tuple, if it is a sequence (or another iterable) that is not text."""
     if isinstance(values, _TEXT_TYPES) or not isinstance(values, Iterable):
         raise InvalidRequest(name, values, allowed)

@@ -43,6 +43,7 @@ from aiortu.core.values import (
     registers_to_string,
     string_to_registers,
 )
+from aiortu.master._arguments import check_int, check_items, check_registers
 
 if TYPE_CHECKING:
     from aiortu.master._client import Master
@@ -54,6 +55,8 @@ __all__ = (
     "UnitHandle",
     "as_file_record",
     "as_record_request",
+    "file_records",
+    "record_requests",
 )
 
 RecordRequestLike = pdu_files.FileRecordRequest | tuple[int, int, int]
@@ -70,8 +73,21 @@ _REGISTER_TABLES = {
 }
 
 
+def _fields(name: str, item: object, kind: type, names: tuple[str, str, str]) -> tuple[object, ...]:
+    """The three fields of *item*, an instance of *kind* or a tuple of three."""
+    if isinstance(item, kind):
+        return tuple(getattr(item, field) for field in names)
+    if not isinstance(item, tuple | list) or len(item) != 3:
+        raise InvalidRequest(name, item, f"a {kind.__name__} or ({', '.join(names)})")
+    return tuple(item)
+
+
 def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
     """A read file record sub-request from the class or a ``(file, record, length)`` tuple."""
+    names = ("file_number", "record_number", "record_length")
+    fields = _fields("sub_request", sub, pdu_files.FileRecordRequest, names)
+    for name, value in zip(names, fields, strict=True):
+        check_int(name, value, range(0x10000), InvalidRequest)
     if isinstance(sub, pdu_files.FileRecordRequest):
         return sub
     return pdu_files.FileRecordRequest(*sub)
@@ -79,10 +95,27 @@ def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
 
 def as_file_record(record: FileRecordLike) -> pdu_files.FileRecord:
     """A write file record sub-record from the class or a ``(file, record, values)`` tuple."""
-    if isinstance(record, pdu_files.FileRecord):
-        return record
-    file_number, record_number, values = record
-    return pdu_files.FileRecord(file_number, record_number, tuple(values))
+    names = ("file_number", "record_number", "values")
+    file_number, record_number, values = _fields("record", record, pdu_files.FileRecord, names)
+    check_int("file_number", file_number, range(0x10000), InvalidRequest)
+    check_int("record_number", record_number, range(0x10000), InvalidRequest)
+    return pdu_files.FileRecord(
+        file_number,  # type: ignore[arg-type]  # checked above
+        record_number,  # type: ignore[arg-type]
+        check_registers("values", values),
+    )
+
+
+def record_requests(sub_requests: object) -> tuple[pdu_files.FileRecordRequest, ...]:
+    """The sub-requests of a read file record (14), each checked."""
+    items = check_items("sub_requests", sub_requests, "an iterable of sub-requests")
+    return tuple(as_record_request(sub) for sub in items)  # type: ignore[arg-type]
+
+
+def file_records(records: object) -> tuple[pdu_files.FileRecord, ...]:
+    """The sub-records of a write file record (15), each checked."""
+    items = check_items("records", records, "an iterable of records")
+    return tuple(as_file_record(record) for record in items)  # type: ignore[arg-type]
 
 
 class BroadcastHandle:
@@ -125,7 +158,7 @@ class BroadcastHandle:
         self, records: Iterable[FileRecordLike], *, priority: int = 0
     ) -> None:
         """Write file records on every unit (15)."""
-        request = pdu_files.WriteFileRecordRequest(tuple(as_file_record(r) for r in records))
+        request = pdu_files.WriteFileRecordRequest(file_records(records))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
 

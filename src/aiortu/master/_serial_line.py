@@ -21,8 +21,8 @@ from aiortu.errors import MalformedPDU
 from aiortu.master._handles import (
     FileRecordLike,
     RecordRequestLike,
-    as_file_record,
-    as_record_request,
+    file_records,
+    record_requests,
 )
 
 __all__ = ("SerialLineFunctions",)
@@ -71,9 +71,7 @@ class SerialLineFunctions:
         Each sub-request is a :class:`~aiortu.core.pdu_files.FileRecordRequest` or a
         ``(file_number, record_number, record_length)`` tuple.
         """
-        request = pdu_files.ReadFileRecordRequest(
-            tuple(as_record_request(sub) for sub in sub_requests)
-        )
+        request = pdu_files.ReadFileRecordRequest(record_requests(sub_requests))
         reply = await self.request(
             unit,
             request,
@@ -96,7 +94,7 @@ class SerialLineFunctions:
         Each record is a :class:`~aiortu.core.pdu_files.FileRecord` or a
         ``(file_number, record_number, values)`` tuple.
         """
-        request = pdu_files.WriteFileRecordRequest(tuple(as_file_record(r) for r in records))
+        request = pdu_files.WriteFileRecordRequest(file_records(records))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
     # -- serial line functions -------------------------------------------------------
