@@ -16,7 +16,6 @@ the slaves can execute it.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING
 
 from aiortu.core import pdu_files
 from aiortu.core.addressing import Table, parse_reference
@@ -38,15 +37,16 @@ from aiortu.core.pdu_serial_line import (
 from aiortu.core.values import (
     Layout,
     ValueType,
+    as_layout,
+    as_value_type,
+    check_encoding,
     decode_value,
     encode_value,
     registers_to_string,
     string_to_registers,
 )
 from aiortu.master._arguments import check_int, check_items, check_registers
-
-if TYPE_CHECKING:
-    from aiortu.master._client import Master
+from aiortu.master._calls import FileRecordLike, MasterCalls, RecordRequestLike, Requester
 
 __all__ = (
     "BroadcastHandle",
@@ -58,12 +58,6 @@ __all__ = (
     "file_records",
     "record_requests",
 )
-
-RecordRequestLike = pdu_files.FileRecordRequest | tuple[int, int, int]
-"""A read file record sub-request: the class, or ``(file, record, length)``."""
-
-FileRecordLike = pdu_files.FileRecord | tuple[int, int, Sequence[int]]
-"""A write file record sub-record: the class, or ``(file, record, values)``."""
 
 _REGISTER_TABLES = {
     "holding": Table.HOLDING_REGISTERS,
@@ -122,7 +116,7 @@ class BroadcastHandle:
     """The broadcast writes of a master (see the module docstring); each returns once the
     request is sent and the turnaround delay has passed."""
 
-    def __init__(self, master: Master) -> None:
+    def __init__(self, master: Requester) -> None:
         self._master = master
 
     async def write_coil(self, address: int, value: bool, *, priority: int = 0) -> None:
@@ -168,7 +162,7 @@ class UnitHandle:
     Every method takes ``timeout=`` and ``priority=`` as the master's do.
     """
 
-    def __init__(self, master: Master, unit: int) -> None:
+    def __init__(self, master: MasterCalls, unit: int) -> None:
         self.master = master
         self.unit = unit
 
@@ -387,8 +381,12 @@ class UnitHandle:
 
         *table* is ``"holding"`` (the default) or ``"input"``.
         """
-        count = ValueType(kind).register_count
-        registers = await self._read_registers(table, address, count, timeout, priority)
+        # Checked before the request goes out: a bad layout must not cost a read.
+        kind = as_value_type(kind)
+        layout = as_layout(layout)
+        registers = await self._read_registers(
+            table, address, kind.register_count, timeout, priority
+        )
         return decode_value(registers, kind, layout)
 
     async def write_value(
@@ -489,6 +487,7 @@ class UnitHandle:
         timeout: float | None = None,
     ) -> str:
         """Read text from *register_count* registers, two bytes each, padding stripped."""
+        check_encoding(encoding)
         registers = await self._read_registers(table, address, register_count, timeout, 0)
         return registers_to_string(registers, encoding, byte_swap)
 
@@ -527,7 +526,7 @@ class UnitHandle:
         timeout: float | None,
         priority: int,
     ) -> list[int]:
-        resolved = _REGISTER_TABLES.get(table)
+        resolved = _REGISTER_TABLES.get(table) if isinstance(table, str) else None
         if resolved is Table.INPUT_REGISTERS:
             return await self.read_input_registers(
                 address, count, timeout=timeout, priority=priority

@@ -6,24 +6,22 @@
 :class:`SerialLineFunctions` is a base class of :class:`~aiortu.master._client.Master`; it holds
 the function codes beyond the four tables (14, 15, 07, 08, 0B, 0C, 11, 2B/0E), written
 on top of the master's :meth:`~aiortu.master._client.Master.request`, so that ``master.py`` stays
-about the tables, the lifetime and the core of every call.
+about the tables, the lifetime and the core of every call. Its methods need of ``self``
+only what :class:`~aiortu.master._calls.Requester` names, so this module never imports the
+class built on it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, TypeVar
+from typing import TypeVar
 
 from aiortu.core import pdu_device_id, pdu_files, pdu_serial_line
 from aiortu.core.codes import DeviceIdReadCode, DiagnosticSubFunction
-from aiortu.core.pdu import Request, Response
+from aiortu.core.pdu import Response
 from aiortu.errors import MalformedPDU
-from aiortu.master._handles import (
-    FileRecordLike,
-    RecordRequestLike,
-    file_records,
-    record_requests,
-)
+from aiortu.master._calls import FileRecordLike, RecordRequestLike, Requester
+from aiortu.master._handles import file_records, record_requests
 
 __all__ = ("SerialLineFunctions",)
 
@@ -40,26 +38,10 @@ class SerialLineFunctions:
     master's other methods do.
     """
 
-    if TYPE_CHECKING:
-
-        async def request(
-            self,
-            unit: int,
-            pdu: Request,
-            expected: type[_ResponseT],
-            *,
-            timeout: float | None = None,
-            priority: int = 0,
-        ) -> _ResponseT: ...
-
-        async def send_without_reply(
-            self, unit: int, pdu: Request, *, priority: int = 0
-        ) -> None: ...
-
     # -- file records ----------------------------------------------------------------
 
     async def read_file_record(
-        self,
+        self: Requester,
         unit: int,
         sub_requests: Iterable[RecordRequestLike],
         *,
@@ -82,7 +64,7 @@ class SerialLineFunctions:
         return [list(values) for values in reply.records]
 
     async def write_file_record(
-        self,
+        self: Requester,
         unit: int,
         records: Iterable[FileRecordLike],
         *,
@@ -100,7 +82,7 @@ class SerialLineFunctions:
     # -- serial line functions -------------------------------------------------------
 
     async def read_exception_status(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
+        self: Requester, unit: int, *, timeout: float | None = None, priority: int = 0
     ) -> int:
         """Read the eight exception status bits of the device as one byte (07)."""
         reply = await self.request(
@@ -113,7 +95,7 @@ class SerialLineFunctions:
         return reply.status
 
     async def diagnostics(
-        self,
+        self: Requester,
         unit: int,
         sub_function: int,
         data: bytes = b"\x00\x00",
@@ -139,7 +121,7 @@ class SerialLineFunctions:
         )
 
     async def get_comm_event_counter(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
+        self: Requester, unit: int, *, timeout: float | None = None, priority: int = 0
     ) -> pdu_serial_line.GetCommEventCounterResponse:
         """Read the status word and the event counter of the device (0B)."""
         return await self.request(
@@ -151,7 +133,7 @@ class SerialLineFunctions:
         )
 
     async def get_comm_event_log(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
+        self: Requester, unit: int, *, timeout: float | None = None, priority: int = 0
     ) -> pdu_serial_line.GetCommEventLogResponse:
         """Read the status, the counters and the event log of the device (0C)."""
         return await self.request(
@@ -163,7 +145,7 @@ class SerialLineFunctions:
         )
 
     async def report_server_id(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
+        self: Requester, unit: int, *, timeout: float | None = None, priority: int = 0
     ) -> pdu_serial_line.ReportServerIdResponse:
         """Read the device's server id, run indicator and additional data (11)."""
         return await self.request(
@@ -175,7 +157,7 @@ class SerialLineFunctions:
         )
 
     async def read_device_identification(
-        self,
+        self: Requester,
         unit: int,
         read_code: int = DeviceIdReadCode.BASIC,
         object_id: int = 0,
