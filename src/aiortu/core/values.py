@@ -335,9 +335,9 @@ def string_to_registers(
     if not isinstance(text, str):
         raise InvalidValue("text", text, "a str")
     try:
-        data = text.encode(encoding)
-    except LookupError:
-        raise InvalidValue("encoding", encoding, "a codec Python knows") from None
+        data = text.encode(check_encoding(encoding))
+    except LookupError:  # a codec, but not a text encoding (base64, ...)
+        raise InvalidValue("encoding", encoding, "a text encoding Python knows") from None
     except UnicodeEncodeError as error:
         raise InvalidValue(
             "text", text, f"characters {encoding} can encode", str(error.reason)
@@ -378,13 +378,14 @@ def registers_to_string(
     trailing NULs and spaces (the usual padding) are removed.
     """
     checked = _check_registers(registers, None)
+    check_encoding(encoding)
     data = struct.pack(f">{len(checked)}H", *checked)
     if byte_swap:
         data = _swap_bytes(data)
     try:
         text = data.decode(encoding)
-    except LookupError:
-        raise InvalidValue("encoding", encoding, "a codec Python knows") from None
+    except LookupError:  # a codec, but not a text encoding (base64, ...)
+        raise InvalidValue("encoding", encoding, "a text encoding Python knows") from None
     except UnicodeDecodeError as error:
         raise InvalidValue(
             "registers", checked, f"bytes {encoding} can decode", str(error.reason)

@@ -69,6 +69,7 @@ from aiortu.master._arguments import (
     check_at_least,
     check_coil,
     check_coils,
+    check_int,
     check_master_settings,
     check_priority,
     check_registers,
@@ -90,6 +91,9 @@ _ReadT = TypeVar(
     ReadHoldingRegistersRequest,
     ReadInputRegistersRequest,
 )
+
+_STATS_UNITS = range(248)
+"""The units a master keeps statistics of: unit 0 counts the broadcasts."""
 
 _READ_CACHE_SIZE = 256
 """Read requests a master keeps made (see :meth:`Master._read_request`)."""
@@ -281,12 +285,12 @@ class Master(SerialLineFunctions):
         return self.engine.stats
 
     def unit_stats(self, unit: int) -> UnitStats:
-        """The statistics and health of *unit*."""
-        return self.engine.unit_stats(unit)
+        """The statistics and health of *unit* (0..247: 0 counts the broadcasts)."""
+        return self.engine.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
         """False once *unit* failed ``offline_after`` times in a row, until a success."""
-        return self.engine.unit_stats(unit).online
+        return self.unit_stats(unit).online
 
     def slave(self, unit: int) -> UnitHandle:
         """A handle on one unit: the same methods without the unit, plus typed values."""
@@ -354,6 +358,8 @@ class Master(SerialLineFunctions):
         # execute(), inlined: one coroutine less per call.
         if type(pdu) is RawPDU or not isinstance(pdu, Request):
             pdu = _known_form(pdu)
+        if not isinstance(expected, type) or not issubclass(expected, Response):
+            raise InvalidRequest("expected", expected, "a Response class")
         policy = self.policy
         if retries is not None:
             policy = policy.with_retries(check_at_least("retries", retries, 0))

@@ -502,7 +502,7 @@ class UnitHandle:
         timeout: float | None = None,
     ) -> None:
         """Write *text* to holding registers from *address*, NUL-padded to *register_count*."""
-        registers = string_to_registers(text, register_count, encoding, byte_swap)
+        registers = string_to_registers(text, register_count, encoding, byte_swap)  # checks all
         await self.write_registers(address, registers, timeout=timeout)
 
     async def read_reference(

@@ -19,7 +19,7 @@ from typing import TypeVar
 from aiortu.core import pdu_device_id, pdu_files, pdu_serial_line
 from aiortu.core.codes import DeviceIdReadCode, DiagnosticSubFunction
 from aiortu.core.pdu import Response
-from aiortu.errors import MalformedPDU
+from aiortu.errors import InvalidRequest, MalformedPDU
 from aiortu.master._calls import FileRecordLike, RecordRequestLike, Requester
 from aiortu.master._handles import file_records, record_requests
 
@@ -108,6 +108,8 @@ class SerialLineFunctions:
         Force listen-only mode (04) gets no reply: it is sent, followed by the turnaround
         delay, and ``None`` is returned.
         """
+        if not isinstance(data, bytes | bytearray | memoryview):
+            raise InvalidRequest("data", data, "bytes")
         request = pdu_serial_line.DiagnosticsRequest(sub_function, data)
         if request.sub_function == DiagnosticSubFunction.FORCE_LISTEN_ONLY_MODE:
             await self.send_without_reply(unit, request, priority=priority)
