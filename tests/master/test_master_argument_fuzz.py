@@ -112,6 +112,8 @@ def check_error(error: ModbusError) -> None:
     message = str(error)
     assert message, f"{type(error).__name__} without a message"
     assert "\n" not in message, message
+    assert " at 0x" not in message, message  # no object's repr
+    assert len(message) < 400, message
     if isinstance(error, InvalidValue):
         assert message.startswith(f"{error.field} = "), message
 
