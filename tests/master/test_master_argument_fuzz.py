@@ -14,13 +14,12 @@ import anyio
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aiortu.core.codes import FunctionCode
 from aiortu.core.pdu import RawPDU
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
 from aiortu.core.timing import LineSettings
 from aiortu.errors import InvalidValue, ModbusError, ResponseTimeout
 from aiortu.master._client import Master
-from aiortu.master._handles import UnitHandle
+from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.slave._server import Slave
 from aiortu.slave._store import Block, MemoryStore
 from aiortu.testing import VirtualBus
@@ -72,8 +71,12 @@ def public_methods(cls: type) -> list[str]:
     )
 
 
-MASTER_METHODS = public_methods(Master)
-HANDLE_METHODS = public_methods(UnitHandle)
+TARGETS: dict[str, type] = {
+    "master": Master,
+    "handle": UnitHandle,
+    "broadcast": BroadcastHandle,
+}
+METHODS = {on: public_methods(cls) for on, cls in TARGETS.items()}
 
 
 def short(value: object) -> bool:
@@ -92,9 +95,9 @@ def argument(name: str) -> st.SearchStrategy[Any]:
 @st.composite
 def calls(draw: st.DrawFn) -> tuple[str, str, list[Any], dict[str, Any]]:
     """A method of the master or of a handle, and arguments for it."""
-    on = draw(st.sampled_from(["master", "handle"]))
-    name = draw(st.sampled_from(MASTER_METHODS if on == "master" else HANDLE_METHODS))
-    method = getattr(Master if on == "master" else UnitHandle, name)
+    on = draw(st.sampled_from(sorted(TARGETS)))
+    name = draw(st.sampled_from(METHODS[on]))
+    method = getattr(TARGETS[on], name)
     args: list[Any] = []
     kwargs: dict[str, Any] = {}
     for parameter in list(inspect.signature(method).parameters.values())[1:]:
@@ -136,8 +139,9 @@ async def exercise(sequence: list[tuple[str, str, list[Any], dict[str, Any]]]) -
     ):
         await anyio.sleep(0.02)  # both receivers past their first silence
         handle = master.slave(UNIT)
+        targets = {"master": master, "handle": handle, "broadcast": master.broadcast}
         for on, name, args, kwargs in sequence:
-            method: Callable[..., Any] = getattr(master if on == "master" else handle, name)
+            method: Callable[..., Any] = getattr(targets[on], name)
             try:
                 with anyio.fail_after(5):
                     result = method(*args, **kwargs)
@@ -165,7 +169,7 @@ def test_any_arguments_give_a_result_or_a_modbus_error(
 
 def test_every_public_method_is_exercised() -> None:
     assert {"read_holding_registers", "execute", "request", "send_without_reply"} <= set(
-        MASTER_METHODS
+        METHODS["master"]
     )
-    assert {"read_float32", "read_reference", "write_string"} <= set(HANDLE_METHODS)
-    assert FunctionCode.READ_COILS == 1
+    assert {"read_float32", "read_reference", "write_string"} <= set(METHODS["handle"])
+    assert {"write_coil", "write_file_record"} <= set(METHODS["broadcast"])

@@ -237,3 +237,24 @@ async def test_the_first_crc_failure_after_opening_is_a_crc_error() -> None:
             stats = master.unit_stats(3)
             assert (stats.crc_errors, stats.frame_errors) == (3, 0)
         tasks.cancel_scope.cancel()
+
+
+async def test_broadcast_values_are_checked_too() -> None:
+    async with line() as (master, _, bus):
+        with pytest.raises(InvalidRequest):
+            await master.broadcast.write_coil(1, "off")  # type: ignore[arg-type]
+        with pytest.raises(InvalidRequest):
+            await master.broadcast.write_coils(1, ["no"])  # type: ignore[list-item]
+        with pytest.raises(InvalidRequest):
+            await master.broadcast.write_registers(1, b"\x01\x02")  # type: ignore[arg-type]
+        with pytest.raises(InvalidRequest):
+            await master.broadcast.write_register(1, 1, priority="x")  # type: ignore[arg-type]
+        await anyio.sleep(0.01)
+        assert not bus.trace
+
+
+async def test_open_master_checks_its_settings_before_opening_the_port() -> None:
+    # The port does not exist: the setting is refused before it is looked for.
+    with pytest.raises(InvalidValue, match=r"^late_reply_guard = "):
+        async with aiortu.open_master("/dev/aiortu-no-such-port", late_reply_guard=-1):
+            pass

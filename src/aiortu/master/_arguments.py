@@ -17,6 +17,8 @@ from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import InvalidRequest, InvalidValue
 from aiortu.core.master_transaction import Failure
 from aiortu.core.pdu import REGISTER_RANGE
+from aiortu.core.receiver import TimingMode
+from aiortu.core.timing import LineSettings
 
 __all__ = (
     "UNIT_RANGE",
@@ -210,6 +212,8 @@ def check_master_settings(
     reconnect: object,
     reconnect_delay: object,
     reconnect_fail_fast: object,
+    timing: object,
+    settings: object = None,
 ) -> None:
     """Raise InvalidValue, naming the setting, for the first of a master's settings that is
     out of its range (see :class:`~aiortu.master._client.Master`)."""
@@ -227,3 +231,7 @@ def check_master_settings(
     check_bool("reconnect", reconnect)
     check_delays("reconnect_delay", reconnect_delay)
     check_bool("reconnect_fail_fast", reconnect_fail_fast)
+    if not isinstance(timing, str) or timing not in set(TimingMode):
+        raise InvalidValue("timing", timing, ", ".join(TimingMode))
+    if settings is not None and not isinstance(settings, LineSettings):
+        raise InvalidValue("settings", settings, "a LineSettings or None")

@@ -62,7 +62,7 @@ from aiortu.core.pdu_registers import (
 )
 from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
-from aiortu.errors import ExceptionResponse, InvalidRequest, InvalidValue, MalformedPDU
+from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
 from aiortu.line._link import Link
 from aiortu.master._arguments import (
     UNIT_RANGE,
@@ -208,14 +208,8 @@ class Master(SerialLineFunctions):
             late_reply_guard=late_reply_guard, offline_after=offline_after,
             fail_fast_offline=fail_fast_offline, probe_interval=probe_interval,
             reconnect=reconnect, reconnect_delay=reconnect_delay,
-            reconnect_fail_fast=reconnect_fail_fast,
+            reconnect_fail_fast=reconnect_fail_fast, timing=timing, settings=settings,
         )  # fmt: skip
-        if settings is not None and not isinstance(settings, LineSettings):
-            raise InvalidValue("settings", settings, "a LineSettings or None")
-        try:
-            timing = TimingMode(timing)
-        except ValueError:
-            raise InvalidValue("timing", timing, ", ".join(TimingMode)) from None
         self.settings = settings if settings is not None else LineSettings()
         self.timeout = float(timeout)
         self.turnaround_delay = turnaround_delay
@@ -612,6 +606,15 @@ async def open_master(
     """
     from aiortu.transport import open_stream
 
+    # Before the port is opened: a bad setting must not leave it open.
+    check_master_settings(
+        timeout=timeout, retries=retries, retry_on=retry_on, repeatable=repeatable,
+        frame_gap=frame_gap, turnaround_delay=turnaround_delay,
+        late_reply_guard=late_reply_guard, offline_after=offline_after,
+        fail_fast_offline=fail_fast_offline, probe_interval=probe_interval,
+        reconnect=reconnect, reconnect_delay=reconnect_delay,
+        reconnect_fail_fast=reconnect_fail_fast, timing=timing,
+    )  # fmt: skip
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     stream = await open_stream(port_or_url, settings, **transport_options)
     master = Master(

@@ -45,7 +45,13 @@ from aiortu.core.values import (
     registers_to_string,
     string_to_registers,
 )
-from aiortu.master._arguments import check_int, check_items, check_registers
+from aiortu.master._arguments import (
+    check_coil,
+    check_coils,
+    check_int,
+    check_items,
+    check_registers,
+)
 from aiortu.master._calls import FileRecordLike, MasterCalls, RecordRequestLike, Requester
 
 __all__ = (
@@ -121,7 +127,7 @@ class BroadcastHandle:
 
     async def write_coil(self, address: int, value: bool, *, priority: int = 0) -> None:
         """Set the coil at *address* on every unit (05)."""
-        request = WriteSingleCoilRequest(address, value)
+        request = WriteSingleCoilRequest(address, check_coil(value))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def write_register(self, address: int, value: int, *, priority: int = 0) -> None:
@@ -131,14 +137,14 @@ class BroadcastHandle:
 
     async def write_coils(self, address: int, values: Sequence[bool], *, priority: int = 0) -> None:
         """Set 1..1968 coils from *address* on every unit (0F)."""
-        request = WriteMultipleCoilsRequest(address, tuple(values))
+        request = WriteMultipleCoilsRequest(address, check_coils(values))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def write_registers(
         self, address: int, values: Sequence[int], *, priority: int = 0
     ) -> None:
         """Write 1..123 registers from *address* on every unit (10)."""
-        request = WriteMultipleRegistersRequest(address, tuple(values))
+        request = WriteMultipleRegistersRequest(address, check_registers("values", values))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def mask_write_register(
