@@ -13,7 +13,7 @@ import aiortu
 from aiortu.core.codes import FunctionCode
 from aiortu.core.frame import encode_frame
 from aiortu.core.master_transaction import SAFE_TO_REPEAT, Failure
-from aiortu.core.pdu import RawPDU, Request
+from aiortu.core.pdu import RawPDU, Request, Response
 from aiortu.core.pdu_registers import WriteSingleRegisterResponse
 from aiortu.errors import InvalidRequest, InvalidValue, ModbusError
 from aiortu.master._client import Master
@@ -258,3 +258,31 @@ async def test_open_master_checks_its_settings_before_opening_the_port() -> None
     with pytest.raises(InvalidValue, match=r"^late_reply_guard = "):
         async with aiortu.open_master("/dev/aiortu-no-such-port", late_reply_guard=-1):
             pass
+
+
+async def test_reads_follow_the_repeatable_codes_too() -> None:
+    async def silent(slave: FakeSlave, unit: int, request: Request) -> None:
+        pass
+
+    async with line(default=silent, retries=2, timeout=0.05, repeatable=[]) as (master, slave, _):
+        with pytest.raises(aiortu.ResponseTimeout):
+            await master.read_holding_registers(17, 0, 1)
+        assert len(slave.seen) == 1
+        with pytest.raises(InvalidRequest, match=r"^retries = "):
+            await master.request(17, slave.seen[0].request, Response, retries=-1)
+
+
+async def test_a_typed_value_is_refused_before_the_read_goes_out() -> None:
+    async with line() as (master, slave, bus):
+        handle = master.slave(17)
+        with pytest.raises(InvalidValue, match=r"^layout = 'XYZW' "):
+            await handle.read_float32(0, layout="XYZW")
+        with pytest.raises(InvalidValue, match=r"^kind = 'float16' "):
+            await handle.read_value(0, "float16")
+        with pytest.raises(InvalidValue, match=r"^encoding = "):
+            await handle.read_string(0, 2, encoding="no-such-codec")
+        with pytest.raises(InvalidRequest, match=r"^table = "):
+            await handle.read_float32(0, table="coils")
+        await anyio.sleep(0.01)
+        assert not bus.trace
+        assert not slave.seen

@@ -178,10 +178,12 @@ def check_function_codes(name: str, codes: object) -> frozenset[int] | None:
     return frozenset(check_int(name, code, range(1, 128), InvalidValue) for code in codes)
 
 
-def check_at_least(name: str, value: object, minimum: int) -> int:
-    """Return *value* if it is an int >= *minimum*, else raise InvalidValue."""
+def check_at_least(
+    name: str, value: object, minimum: int, error: type[InvalidValue] = InvalidValue
+) -> int:
+    """Return *value* if it is an int >= *minimum*, else raise *error*."""
     if not is_int(value) or value < minimum:  # type: ignore[operator]  # an int by then
-        raise InvalidValue(name, value, f"an int >= {minimum}")
+        raise error(name, value, f"an int >= {minimum}")
     return value  # type: ignore[return-value]  # checked above
 
 

@@ -356,7 +356,7 @@ class Master(SerialLineFunctions):
             raise InvalidRequest("expected", expected, "a Response class")
         policy = self.policy
         if retries is not None:
-            policy = policy.with_retries(check_at_least("retries", retries, 0))
+            policy = policy.with_retries(check_at_least("retries", retries, 0, InvalidRequest))
         policy = policy.for_function(pdu.function_code)
         response = await self._submit(unit, pdu, timeout, priority, policy)
         assert response is not None
@@ -382,6 +382,8 @@ class Master(SerialLineFunctions):
         response_timeout = self.timeout if timeout is None else check_timeout(timeout)
         if policy is None:
             policy = self.policy
+            if request.function_code not in policy.repeatable:
+                policy = policy.for_function(request.function_code)
         return self.engine.submit_request(unit, request, response_timeout, policy, priority)
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
@@ -606,35 +608,22 @@ async def open_master(
     """
     from aiortu.transport import open_stream
 
-    # Before the port is opened: a bad setting must not leave it open.
-    check_master_settings(
-        timeout=timeout, retries=retries, retry_on=retry_on, repeatable=repeatable,
-        frame_gap=frame_gap, turnaround_delay=turnaround_delay,
-        late_reply_guard=late_reply_guard, offline_after=offline_after,
-        fail_fast_offline=fail_fast_offline, probe_interval=probe_interval,
-        reconnect=reconnect, reconnect_delay=reconnect_delay,
-        reconnect_fail_fast=reconnect_fail_fast, timing=timing,
-    )  # fmt: skip
+    options: dict[str, Any] = {
+        "timeout": timeout, "retries": retries, "retry_on": retry_on, "repeatable": repeatable,
+        "frame_gap": frame_gap, "turnaround_delay": turnaround_delay,
+        "late_reply_guard": late_reply_guard, "offline_after": offline_after,
+        "fail_fast_offline": fail_fast_offline, "probe_interval": probe_interval,
+        "timing": timing, "reconnect": reconnect, "reconnect_delay": reconnect_delay,
+        "reconnect_fail_fast": reconnect_fail_fast,
+    }  # fmt: skip
+    check_master_settings(**options)  # before the port is opened: a bad one leaves it shut
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     stream = await open_stream(port_or_url, settings, **transport_options)
     master = Master(
         stream,
         settings,
-        timeout=timeout,
-        retries=retries,
-        retry_on=retry_on,
-        repeatable=repeatable,
-        frame_gap=frame_gap,
-        turnaround_delay=turnaround_delay,
-        late_reply_guard=late_reply_guard,
-        offline_after=offline_after,
-        fail_fast_offline=fail_fast_offline,
-        probe_interval=probe_interval,
-        timing=timing,
         opener=lambda: open_stream(port_or_url, settings, **transport_options),
-        reconnect=reconnect,
-        reconnect_delay=reconnect_delay,
-        reconnect_fail_fast=reconnect_fail_fast,
+        **options,
     )
     try:
         async with master:
