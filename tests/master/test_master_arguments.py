@@ -132,6 +132,8 @@ async def test_coil_values_the_spec_and_python_agree_on() -> None:
         ("reconnect_delay", 5),
         ("timing", "loose"),
         ("settings", 19200),
+        ("clock", 5.0),
+        ("opener", "/dev/ttyUSB0"),
     ],
 )
 def test_a_bad_setting_is_refused_when_the_master_is_made(setting: str, value: object) -> None:

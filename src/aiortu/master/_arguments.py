@@ -216,6 +216,8 @@ def check_master_settings(
     reconnect_fail_fast: object,
     timing: object,
     settings: object = None,
+    clock: object = float,
+    opener: object = None,
 ) -> None:
     """Raise InvalidValue, naming the setting, for the first of a master's settings that is
     out of its range (see :class:`~aiortu.master._client.Master`)."""
@@ -237,3 +239,7 @@ def check_master_settings(
         raise InvalidValue("timing", timing, ", ".join(TimingMode))
     if settings is not None and not isinstance(settings, LineSettings):
         raise InvalidValue("settings", settings, "a LineSettings or None")
+    if not callable(clock):
+        raise InvalidValue("clock", clock, "a function returning the time in seconds")
+    if opener is not None and not callable(opener):
+        raise InvalidValue("opener", opener, "None or an async function returning a stream")

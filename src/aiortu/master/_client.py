@@ -209,6 +209,7 @@ class Master(SerialLineFunctions):
             fail_fast_offline=fail_fast_offline, probe_interval=probe_interval,
             reconnect=reconnect, reconnect_delay=reconnect_delay,
             reconnect_fail_fast=reconnect_fail_fast, timing=timing, settings=settings,
+            clock=clock, opener=opener,
         )  # fmt: skip
         self.settings = settings if settings is not None else LineSettings()
         self.timeout = float(timeout)
