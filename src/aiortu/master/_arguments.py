@@ -43,9 +43,6 @@ __all__ = (
 UNIT_RANGE: Final = range(1, 248)
 """The unit addresses a unicast request may go to."""
 
-_COIL_WORDS: Final = {0xFF00: True, 0x0000: False}
-"""The spec's encoding of a single coil (05) on the wire."""
-
 _TEXT_TYPES: Final = (str, bytes, bytearray, memoryview)
 """Iterables that are never a sequence of values: text, and bytes (each byte an int)."""
 
