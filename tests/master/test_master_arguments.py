@@ -48,6 +48,11 @@ async def test_bad_priorities_fail_at_once_and_leave_the_queue_to_the_others() -
         for good in (0, 1, 2):
             assert results[good] == [register_value(9, 0), register_value(9, 1)]
         assert len(slave.seen) == 3
+        # At once: in the call's first step, before it ever waits for the line.
+        for bad in ("x", None, 1.5):
+            call_step = master.read_holding_registers(9, 0, 2, priority=bad)  # type: ignore[arg-type]
+            with pytest.raises(InvalidRequest):
+                call_step.send(None)
         # The queue is sound for later callers too.
         assert await master.read_holding_registers(9, 1, 1, priority=5) == [register_value(9, 1)]
 
