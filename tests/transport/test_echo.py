@@ -63,3 +63,18 @@ def test_reset_forgets_the_expected_echo() -> None:
     echo.reset()
     assert echo.pending == 0
     assert echo.feed(b"\x02\x03") == b"\x02\x03"
+
+
+def test_an_echo_that_never_comes_is_not_expected_for_ever() -> None:
+    # An adapter that drops the echo, and a device that answers nothing, 500 times.
+    echo = LocalEchoFilter()
+    request = bytes.fromhex("11 03 00 6b 00 03 76 87")
+    for _ in range(500):
+        echo.expect(request)
+    assert echo.pending <= 256
+    assert echo.missing == 500 * len(request) - echo.pending
+    # What is still expected is the latest requests' echo, whole frames of it.
+    assert echo.pending % len(request) == 0
+    backlog = request * (echo.pending // len(request))
+    assert echo.feed(backlog + b"\x11\x03\x06") == b"\x11\x03\x06"
+    assert (echo.pending, echo.mismatches) == (0, 0)

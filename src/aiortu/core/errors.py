@@ -43,6 +43,27 @@ def _describe_range(allowed: object) -> str:
     return str(allowed)
 
 
+_SHOWN_LENGTH = 60
+"""How much of a value a message shows."""
+
+
+def _show(value: object) -> str:
+    """*value* as a message shows it: the literal of a short plain value, else its type
+    (never an object's repr with its address, never a whole long list)."""
+    if isinstance(value, enum.Enum):
+        return f"{type(value).__name__}.{value.name}"
+    if value is None or isinstance(value, int | float | str | bytes | bytearray | list | tuple):
+        shown = repr(value)
+        if len(shown) <= _SHOWN_LENGTH:
+            return shown
+        if isinstance(value, str | bytes | bytearray):
+            return f"{shown[: _SHOWN_LENGTH - 4]}...{shown[-1]}"
+        if isinstance(value, list | tuple):
+            return f"a {type(value).__name__} of {len(value)} items"
+    name = type(value).__name__
+    return f"{'an' if name[0] in 'AEIOUaeiou' else 'a'} {name}"
+
+
 class InvalidValue(ModbusError, ValueError):
     """A field or a setting is outside its allowed range. Caused by the caller.
 
@@ -55,7 +76,8 @@ class InvalidValue(ModbusError, ValueError):
         self.field = field
         self.value = value
         self.allowed = allowed
-        message = f"{field} = {value!r} is outside the allowed range {_describe_range(allowed)}"
+        shown = _show(value)
+        message = f"{field} = {shown} is outside the allowed range {_describe_range(allowed)}"
         if detail:
             message = f"{message}: {detail}"
         super().__init__(message)

@@ -14,13 +14,15 @@ from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Final
 
+from aiortu.core.codes import FunctionCode
 from aiortu.core.crc import crc16
-from aiortu.core.errors import CRCError, FrameError
+from aiortu.core.errors import CRCError, FrameError, InvalidValue
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import ExceptionPDU, Request, Response
 
 __all__ = (
     "DEFAULT_RETRY_ON",
+    "SAFE_TO_REPEAT",
     "Failure",
     "Outcome",
     "OutcomeKind",
@@ -45,28 +47,85 @@ DEFAULT_RETRY_ON: Final[frozenset[Failure | int]] = frozenset(
 )
 """Retry on timeouts and frame errors, never on exception responses."""
 
+SAFE_TO_REPEAT: Final[frozenset[int]] = frozenset(
+    (
+        # Reads: 01-04, 07, 0B, 0C, 11, 14, 18, 2B.
+        FunctionCode.READ_COILS,
+        FunctionCode.READ_DISCRETE_INPUTS,
+        FunctionCode.READ_HOLDING_REGISTERS,
+        FunctionCode.READ_INPUT_REGISTERS,
+        FunctionCode.READ_EXCEPTION_STATUS,
+        FunctionCode.GET_COMM_EVENT_COUNTER,
+        FunctionCode.GET_COMM_EVENT_LOG,
+        FunctionCode.REPORT_SERVER_ID,
+        FunctionCode.READ_FILE_RECORD,
+        FunctionCode.READ_FIFO_QUEUE,
+        FunctionCode.ENCAPSULATED_INTERFACE_TRANSPORT,
+        # Writes that leave the same state however often they run: 05, 06, 0F, 10, 15, 16.
+        FunctionCode.WRITE_SINGLE_COIL,
+        FunctionCode.WRITE_SINGLE_REGISTER,
+        FunctionCode.WRITE_MULTIPLE_COILS,
+        FunctionCode.WRITE_MULTIPLE_REGISTERS,
+        FunctionCode.WRITE_FILE_RECORD,
+        FunctionCode.MASK_WRITE_REGISTER,
+    )
+)
+"""The function codes whose requests a failed attempt may send again by default.
+
+Not among them: 17 (read/write multiple registers, whose write may change what it
+reads), 08 (diagnostics: some sub-functions clear counters or restart the device) and
+every code aiortu has no class for (user-defined, vendor codes): what they do is unknown.
+"""
+
 
 @dataclass(frozen=True, slots=True)
 class RetryPolicy:
-    """How often a failed attempt is repeated, and after which failures.
+    """How often a failed attempt is repeated, after which failures, and for which requests.
 
     *retries* is the number of extra attempts (0 sends once). *retry_on* holds
     :class:`Failure` members and, to retry exception responses too, exception codes
-    (``ExceptionCode.SERVER_DEVICE_BUSY``, for instance).
+    (``ExceptionCode.SERVER_DEVICE_BUSY``, for instance). *repeatable* holds the function
+    codes whose requests may be sent again (:data:`SAFE_TO_REPEAT` by default: a timed-out
+    write may have been done, and only an idempotent one can safely be done twice); a
+    request of any other code is sent once.
     """
 
     retries: int = 2
     retry_on: frozenset[Failure | int] = DEFAULT_RETRY_ON
+    repeatable: frozenset[int] = SAFE_TO_REPEAT
 
     def __post_init__(self) -> None:
         if isinstance(self.retries, bool) or not isinstance(self.retries, int) or self.retries < 0:
-            raise ValueError(f"retries must be an int >= 0, not {self.retries!r}")
+            raise InvalidValue("retries", self.retries, "an int >= 0")
         object.__setattr__(self, "retry_on", frozenset(self.retry_on))
+        object.__setattr__(self, "repeatable", frozenset(self.repeatable))
 
     @classmethod
-    def of(cls, retries: int, retry_on: Collection[Failure | int] | None = None) -> RetryPolicy:
-        """A policy from the usual arguments; *retry_on* ``None`` means the default."""
-        return cls(retries, DEFAULT_RETRY_ON if retry_on is None else frozenset(retry_on))
+    def of(
+        cls,
+        retries: int,
+        retry_on: Collection[Failure | int] | None = None,
+        repeatable: Collection[int] | None = None,
+    ) -> RetryPolicy:
+        """A policy from the usual arguments; ``None`` means the default."""
+        return cls(
+            retries,
+            DEFAULT_RETRY_ON if retry_on is None else frozenset(retry_on),
+            SAFE_TO_REPEAT if repeatable is None else frozenset(repeatable),
+        )
+
+    def for_function(self, function_code: int) -> RetryPolicy:
+        """This policy for a request of *function_code*: without retries unless the
+        code is :attr:`repeatable`."""
+        if self.retries == 0 or function_code in self.repeatable:
+            return self
+        return RetryPolicy(0, self.retry_on, self.repeatable)
+
+    def with_retries(self, retries: int) -> RetryPolicy:
+        """This policy with *retries* extra attempts."""
+        if retries == self.retries:
+            return self
+        return RetryPolicy(retries, self.retry_on, self.repeatable)
 
 
 class SkipReason(enum.StrEnum):
@@ -141,10 +200,19 @@ class Transaction:
         return encode_frame(self.unit, self.request.encode())
 
 
+_CRC_REASONS: Final = frozenset(("crc", "noise"))
+
+
 def frame_error_from_discard(data: bytes, reason: str) -> FrameError:
     """The error that discarded bytes stand for: :class:`CRCError` when a CRC is there to
-    compare, else :class:`FrameError` with *reason*."""
-    if reason == "crc" and len(data) >= 4:
+    compare, else :class:`FrameError` with *reason*.
+
+    Bytes discarded as noise (they came while the receiver still waited for the line's
+    first silence, as a reply does right after the port was opened) hold no frame whose
+    CRC checks, or the receiver would have handed it on: four or more of them are a CRC
+    error as much as a frame closed by silence is.
+    """
+    if reason in _CRC_REASONS and len(data) >= 4:
         return CRCError(data[-2] | data[-1] << 8, crc16(data[:-2]))
     return FrameError(
         f"{len(data)} bytes discarded ({reason}): {data[:16].hex(' ')}", reason=reason

@@ -92,8 +92,12 @@ class PDU:
     # range in received bytes becomes MalformedPDU, the peer's fault, not the caller's.
 
     def _check(self, field: str, value: int, allowed: range) -> None:
-        if value not in allowed:
-            raise self._invalid(field, value, allowed)
+        # ``2.0 in range(3)`` and ``True in range(3)`` hold: the type is checked too.
+        if type(value) is not int or value not in allowed:
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise self._invalid(field, value, allowed, "an int is required")
+            if value not in allowed:
+                raise self._invalid(field, value, allowed)
 
     def _check_values(self, field: str, values: tuple[int, ...], allowed: range) -> None:
         if not values:

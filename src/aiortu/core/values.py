@@ -33,6 +33,7 @@ Floats may be NaN or infinite: devices use both.
 
 from __future__ import annotations
 
+import codecs
 import enum
 import struct
 from collections.abc import Iterable, Sequence
@@ -43,7 +44,10 @@ from aiortu.core.pdu import pack_bits, unpack_bits
 __all__ = (
     "Layout",
     "ValueType",
+    "as_layout",
+    "as_value_type",
     "bits_to_bytes",
+    "check_encoding",
     "bytes_to_bits",
     "decode_value",
     "encode_value",
@@ -137,23 +141,34 @@ _FLOAT_RANGES = {
 }
 
 
-def _as_value_type(kind: ValueType | str) -> ValueType:
+def as_value_type(kind: ValueType | str) -> ValueType:
+    """*kind* as a :class:`ValueType`; raise InvalidValue if it names none."""
     try:
         return ValueType(kind)
-    except ValueError:
+    except (ValueError, TypeError):
         raise InvalidValue("kind", kind, ", ".join(ValueType)) from None
 
 
-def _as_layout(layout: Layout | str) -> Layout:
+def as_layout(layout: Layout | str) -> Layout:
+    """*layout* as a :class:`Layout`; raise InvalidValue if it names none."""
     try:
         return Layout(layout)
-    except ValueError:
+    except (ValueError, TypeError):
         raise InvalidValue("layout", layout, ", ".join(Layout)) from None
+
+
+def check_encoding(encoding: str) -> str:
+    """*encoding* if Python has a codec of that name; raise InvalidValue otherwise."""
+    try:
+        codecs.lookup(encoding)
+    except (LookupError, TypeError):
+        raise InvalidValue("encoding", encoding, "a codec Python knows") from None
+    return encoding
 
 
 def register_count(kind: ValueType | str) -> int:
     """How many registers a value of type *kind* spans: 1, 2 or 4."""
-    return _as_value_type(kind).register_count
+    return as_value_type(kind).register_count
 
 
 def _words(data: bytes, layout: Layout) -> tuple[int, ...]:
@@ -196,8 +211,8 @@ def encode_value(
     Integer types take an ``int`` in the type's range; float types take an ``int`` or a
     ``float`` (NaN and infinities included) that the type can represent, rounded to it.
     """
-    kind = _as_value_type(kind)
-    layout = _as_layout(layout)
+    kind = as_value_type(kind)
+    layout = as_layout(layout)
     fmt, _, allowed = _FORMATS[kind]
     if allowed is not None:
         if not isinstance(value, int) or isinstance(value, bool) or value not in allowed:
@@ -217,8 +232,8 @@ def decode_value(
     registers: Sequence[int], kind: ValueType | str, layout: Layout | str = Layout.ABCD
 ) -> int | float:
     """The *kind* held in *registers* (exactly :func:`register_count` of them) in *layout*."""
-    kind = _as_value_type(kind)
-    layout = _as_layout(layout)
+    kind = as_value_type(kind)
+    layout = as_layout(layout)
     fmt, count, _ = _FORMATS[kind]
     checked = _check_registers(registers, count)
     value: int | float = struct.unpack(fmt, _value_bytes(checked, layout))[0]
@@ -320,9 +335,9 @@ def string_to_registers(
     if not isinstance(text, str):
         raise InvalidValue("text", text, "a str")
     try:
-        data = text.encode(encoding)
-    except LookupError:
-        raise InvalidValue("encoding", encoding, "a codec Python knows") from None
+        data = text.encode(check_encoding(encoding))
+    except LookupError:  # a codec, but not a text encoding (base64, ...)
+        raise InvalidValue("encoding", encoding, "a text encoding Python knows") from None
     except UnicodeEncodeError as error:
         raise InvalidValue(
             "text", text, f"characters {encoding} can encode", str(error.reason)
@@ -363,13 +378,14 @@ def registers_to_string(
     trailing NULs and spaces (the usual padding) are removed.
     """
     checked = _check_registers(registers, None)
+    check_encoding(encoding)
     data = struct.pack(f">{len(checked)}H", *checked)
     if byte_swap:
         data = _swap_bytes(data)
     try:
         text = data.decode(encoding)
-    except LookupError:
-        raise InvalidValue("encoding", encoding, "a codec Python knows") from None
+    except LookupError:  # a codec, but not a text encoding (base64, ...)
+        raise InvalidValue("encoding", encoding, "a text encoding Python knows") from None
     except UnicodeDecodeError as error:
         raise InvalidValue(
             "registers", checked, f"bytes {encoding} can decode", str(error.reason)

@@ -41,7 +41,7 @@ import anyio.abc
 
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.master_transaction import Failure, RetryPolicy, Transaction
-from aiortu.core.pdu import ExceptionPDU, Request, Response
+from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response, decode_request
 from aiortu.core.pdu_bits import (
     ReadCoilsRequest,
     ReadCoilsResponse,
@@ -64,15 +64,24 @@ from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
 from aiortu.line._link import Link
+from aiortu.master._arguments import (
+    UNIT_RANGE,
+    check_at_least,
+    check_coil,
+    check_coils,
+    check_int,
+    check_master_settings,
+    check_priority,
+    check_registers,
+    check_timeout,
+    check_unit,
+)
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
 from aiortu.master._engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
 from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._serial_line import SerialLineFunctions
 
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
-
-UNIT_RANGE = range(1, 248)
-"""The unit addresses a unicast request may go to."""
 
 _ResponseT = TypeVar("_ResponseT", bound=Response)
 _ReadT = TypeVar(
@@ -82,6 +91,9 @@ _ReadT = TypeVar(
     ReadHoldingRegistersRequest,
     ReadInputRegistersRequest,
 )
+
+_STATS_UNITS = range(248)
+"""The units a master keeps statistics of: unit 0 counts the broadcasts."""
 
 _READ_CACHE_SIZE = 256
 """Read requests a master keeps made (see :meth:`Master._read_request`)."""
@@ -99,11 +111,17 @@ def _answer(
     return response
 
 
-def _check_unit(unit: object) -> int:
-    """Return *unit* if a unicast may go to it, else raise InvalidRequest."""
-    if isinstance(unit, bool) or not isinstance(unit, int) or unit not in UNIT_RANGE:
-        raise InvalidRequest("unit", unit, UNIT_RANGE, "use master.broadcast for unit 0")
-    return unit
+def _known_form(pdu: object) -> Request:
+    """*pdu* if it is a Request; a :class:`RawPDU` of a function code aiortu has a class
+    for as that class, so that its reply (decoded as that code's) is checked as such."""
+    if type(pdu) is RawPDU:
+        try:
+            return decode_request(pdu.encode())
+        except MalformedPDU as error:
+            raise InvalidRequest("pdu", pdu, "a request the spec allows", str(error)) from None
+    if not isinstance(pdu, Request):
+        raise InvalidRequest("pdu", pdu, "a Request PDU")
+    return pdu
 
 
 class Master(SerialLineFunctions):
@@ -112,7 +130,10 @@ class Master(SerialLineFunctions):
     *settings* give the line timing. *timeout* is the response timeout of each attempt,
     counted from when the request has left the wire; *retries* extra attempts follow a
     failure listed in *retry_on* (default: timeouts and frame errors, never exception
-    responses; add exception codes to retry those). *frame_gap* is the silence kept
+    responses; add exception codes to retry those), for requests whose function code is
+    in *repeatable* (default
+    :data:`~aiortu.core.master_transaction.SAFE_TO_REPEAT`: reads and the idempotent
+    writes; a request of another code is sent once). *frame_gap* is the silence kept
     before each request (``None``: t3.5; 0 for virtual lines and TCP gateways).
     *turnaround_delay* is the wait after a broadcast. Health: *offline_after*
     consecutive failures mark a unit offline; with *fail_fast_offline* calls to it raise
@@ -167,6 +188,7 @@ class Master(SerialLineFunctions):
         timeout: float = 1.0,
         retries: int = 2,
         retry_on: Collection[Failure | int] | None = None,
+        repeatable: Collection[int] | None = None,
         frame_gap: float | None = None,
         turnaround_delay: float = 0.1,
         late_reply_guard: float = 0.1,
@@ -180,14 +202,19 @@ class Master(SerialLineFunctions):
         reconnect_delay: tuple[float, float] = (0.1, 5.0),
         reconnect_fail_fast: bool = False,
     ) -> None:
-        if not timeout > 0:
-            raise ValueError(f"timeout must be > 0 seconds, not {timeout!r}")
-        if not turnaround_delay >= 0:
-            raise ValueError(f"turnaround_delay must be >= 0 seconds, not {turnaround_delay!r}")
+        check_master_settings(
+            timeout=timeout, retries=retries, retry_on=retry_on, repeatable=repeatable,
+            frame_gap=frame_gap, turnaround_delay=turnaround_delay,
+            late_reply_guard=late_reply_guard, offline_after=offline_after,
+            fail_fast_offline=fail_fast_offline, probe_interval=probe_interval,
+            reconnect=reconnect, reconnect_delay=reconnect_delay,
+            reconnect_fail_fast=reconnect_fail_fast, timing=timing, settings=settings,
+            clock=clock, opener=opener,
+        )  # fmt: skip
         self.settings = settings if settings is not None else LineSettings()
-        self.timeout = timeout
+        self.timeout = float(timeout)
         self.turnaround_delay = turnaround_delay
-        self.policy = RetryPolicy.of(retries, retry_on)
+        self.policy = RetryPolicy.of(retries, retry_on, repeatable)
 
         def make_link(stream: anyio.abc.ByteStream) -> Link:
             return Link(
@@ -253,16 +280,16 @@ class Master(SerialLineFunctions):
         return self.engine.stats
 
     def unit_stats(self, unit: int) -> UnitStats:
-        """The statistics and health of *unit*."""
-        return self.engine.unit_stats(unit)
+        """The statistics and health of *unit* (0..247: 0 counts the broadcasts)."""
+        return self.engine.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
         """False once *unit* failed ``offline_after`` times in a row, until a success."""
-        return self.engine.unit_stats(unit).online
+        return self.unit_stats(unit).online
 
     def slave(self, unit: int) -> UnitHandle:
         """A handle on one unit: the same methods without the unit, plus typed values."""
-        return UnitHandle(self, _check_unit(unit))
+        return UnitHandle(self, check_unit(unit))
 
     # -- the core of every call ------------------------------------------------------
 
@@ -270,12 +297,17 @@ class Master(SerialLineFunctions):
         self, unit: int, pdu: Request, *, timeout: float | None = None, priority: int = 0
     ) -> Response | ExceptionPDU:
         """Send any request PDU (a :class:`~aiortu.core.pdu.RawPDU` for custom codes) and
-        return the reply as it came, an exception reply included (not raised)."""
-        _check_unit(unit)
-        if not isinstance(pdu, Request):
-            raise InvalidRequest("pdu", pdu, "a Request PDU")
-        transaction = Transaction(unit, pdu, self._timeout(timeout), self.policy)
-        response = await self.engine.submit(transaction, priority)
+        return the reply as it came, an exception reply included (not raised).
+
+        A RawPDU of a function code aiortu has a class for is sent as that class, and
+        its reply checked as such (a malformed one raises InvalidRequest). A request is
+        sent again after a failure only if its code is in the master's *repeatable*.
+        """
+        check_unit(unit)
+        pdu = _known_form(pdu)
+        policy = self.policy.for_function(pdu.function_code)
+        transaction = Transaction(unit, pdu, self._timeout(timeout), policy)
+        response = await self.engine.submit(transaction, check_priority(priority))
         assert response is not None
         return response
 
@@ -284,13 +316,15 @@ class Master(SerialLineFunctions):
 
         No reply is awaited. Unit 0 takes only requests the spec lets be broadcast.
         """
-        if unit == BROADCAST_UNIT:
+        pdu = _known_form(pdu)
+        if type(unit) is int and unit == BROADCAST_UNIT:
             if not pdu.broadcastable:
                 raise InvalidRequest(
                     "unit", unit, UNIT_RANGE, f"{type(pdu).__name__} may not be broadcast"
                 )
         else:
-            _check_unit(unit)
+            check_unit(unit)
+        check_priority(priority)
         transaction = Transaction(
             unit,
             pdu,
@@ -317,11 +351,14 @@ class Master(SerialLineFunctions):
         unit that has stopped answering sends once).
         """
         # execute(), inlined: one coroutine less per call.
-        if not isinstance(pdu, Request):
-            raise InvalidRequest("pdu", pdu, "a Request PDU")
+        if type(pdu) is RawPDU or not isinstance(pdu, Request):
+            pdu = _known_form(pdu)
+        if not isinstance(expected, type) or not issubclass(expected, Response):
+            raise InvalidRequest("expected", expected, "a Response class")
         policy = self.policy
-        if retries is not None and retries != policy.retries:
-            policy = RetryPolicy(retries, policy.retry_on)
+        if retries is not None:
+            policy = policy.with_retries(check_at_least("retries", retries, 0, InvalidRequest))
+        policy = policy.for_function(pdu.function_code)
         response = await self._submit(unit, pdu, timeout, priority, policy)
         assert response is not None
         return _answer(response, pdu, unit, expected)
@@ -340,17 +377,21 @@ class Master(SerialLineFunctions):
         engine's future."""
         # The commonest call (a unicast unit, the master's timeout) makes no further call.
         if type(unit) is not int or unit not in UNIT_RANGE:
-            _check_unit(unit)  # raises, saying why
-        response_timeout = self.timeout if timeout is None else self._timeout(timeout)
+            check_unit(unit)  # raises, saying why
+        if type(priority) is not int:
+            priority = check_priority(priority)
+        response_timeout = self.timeout if timeout is None else check_timeout(timeout)
         if policy is None:
             policy = self.policy
+            if request.function_code not in policy.repeatable:
+                policy = policy.for_function(request.function_code)
         return self.engine.submit_request(unit, request, response_timeout, policy, priority)
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
         """``kind(address, count)``, made once per address and count: a poll loop reads
         the same blocks again and again, and the master encodes a request object once."""
         if type(address) is not int or type(count) is not int:
-            return kind(address, count)  # the constructor says what is wrong
+            return kind(address, count)  # the constructor says what is wrong (a float...)
         key = (kind, address, count)
         request = self._reads.get(key)
         if request is None:
@@ -361,11 +402,7 @@ class Master(SerialLineFunctions):
         return request  # type: ignore[return-value]  # the key's kind made it
 
     def _timeout(self, timeout: float | None) -> float:
-        if timeout is None:
-            return self.timeout
-        if not timeout > 0:
-            raise ValueError(f"timeout must be > 0 seconds, not {timeout!r}")
-        return timeout
+        return self.timeout if timeout is None else check_timeout(timeout)
 
     # -- bits ------------------------------------------------------------------------
 
@@ -410,8 +447,12 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """Set the coil at *address* on or off (05); the echo is verified."""
-        request = WriteSingleCoilRequest(address, value)
+        """Set the coil at *address* on or off (05); the echo is verified.
+
+        *value* is a bool, 1 or 0, or the spec's encoding 0xFF00 or 0x0000; anything
+        else (``"off"`` is true to Python) raises InvalidRequest.
+        """
+        request = WriteSingleCoilRequest(address, check_coil(value))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
     async def write_coils(
@@ -423,8 +464,9 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """Set 1..1968 coils from *address* (0F); the reply's address and count are verified."""
-        request = WriteMultipleCoilsRequest(address, tuple(values))
+        """Set 1..1968 coils from *address* (0F), each a bool, 1 or 0; the reply's address
+        and count are verified."""
+        request = WriteMultipleCoilsRequest(address, check_coils(values))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
     # -- registers -------------------------------------------------------------------
@@ -467,7 +509,7 @@ class Master(SerialLineFunctions):
         priority: int = 0,
     ) -> None:
         """Write *value* (0..65535) to the holding register at *address* (06); echo verified."""
-        request = WriteSingleRegisterRequest(address, value)
+        request = WriteSingleRegisterRequest(address, value)  # checks the value's type
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
     async def write_registers(
@@ -480,7 +522,7 @@ class Master(SerialLineFunctions):
         priority: int = 0,
     ) -> None:
         """Write 1..123 registers from *address* (10); the echoed address and count are checked."""
-        request = WriteMultipleRegistersRequest(address, tuple(values))
+        request = WriteMultipleRegistersRequest(address, check_registers("values", values))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
     async def mask_write_register(
@@ -511,7 +553,7 @@ class Master(SerialLineFunctions):
     ) -> list[int]:
         """Write *values* from *write_address*, then read *read_count* registers (17)."""
         request = ReadWriteMultipleRegistersRequest(
-            read_address, read_count, write_address, tuple(values)
+            read_address, read_count, write_address, check_registers("values", values)
         )
         reply = await self.request(
             unit, request, ReadHoldingRegistersResponse, timeout=timeout, priority=priority
@@ -540,6 +582,7 @@ async def open_master(
     timeout: float = 1.0,
     retries: int = 2,
     retry_on: Collection[Failure | int] | None = None,
+    repeatable: Collection[int] | None = None,
     frame_gap: float | None = None,
     turnaround_delay: float = 0.1,
     late_reply_guard: float = 0.1,
@@ -566,25 +609,22 @@ async def open_master(
     """
     from aiortu.transport import open_stream
 
+    options: dict[str, Any] = {
+        "timeout": timeout, "retries": retries, "retry_on": retry_on, "repeatable": repeatable,
+        "frame_gap": frame_gap, "turnaround_delay": turnaround_delay,
+        "late_reply_guard": late_reply_guard, "offline_after": offline_after,
+        "fail_fast_offline": fail_fast_offline, "probe_interval": probe_interval,
+        "timing": timing, "reconnect": reconnect, "reconnect_delay": reconnect_delay,
+        "reconnect_fail_fast": reconnect_fail_fast,
+    }  # fmt: skip
+    check_master_settings(**options)  # before the port is opened: a bad one leaves it shut
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     stream = await open_stream(port_or_url, settings, **transport_options)
     master = Master(
         stream,
         settings,
-        timeout=timeout,
-        retries=retries,
-        retry_on=retry_on,
-        frame_gap=frame_gap,
-        turnaround_delay=turnaround_delay,
-        late_reply_guard=late_reply_guard,
-        offline_after=offline_after,
-        fail_fast_offline=fail_fast_offline,
-        probe_interval=probe_interval,
-        timing=timing,
         opener=lambda: open_stream(port_or_url, settings, **transport_options),
-        reconnect=reconnect,
-        reconnect_delay=reconnect_delay,
-        reconnect_fail_fast=reconnect_fail_fast,
+        **options,
     )
     try:
         async with master:

@@ -16,7 +16,6 @@ the slaves can execute it.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING
 
 from aiortu.core import pdu_files
 from aiortu.core.addressing import Table, parse_reference
@@ -38,14 +37,22 @@ from aiortu.core.pdu_serial_line import (
 from aiortu.core.values import (
     Layout,
     ValueType,
+    as_layout,
+    as_value_type,
+    check_encoding,
     decode_value,
     encode_value,
     registers_to_string,
     string_to_registers,
 )
-
-if TYPE_CHECKING:
-    from aiortu.master._client import Master
+from aiortu.master._arguments import (
+    check_coil,
+    check_coils,
+    check_int,
+    check_items,
+    check_registers,
+)
+from aiortu.master._calls import FileRecordLike, MasterCalls, RecordRequestLike, Requester
 
 __all__ = (
     "BroadcastHandle",
@@ -54,13 +61,9 @@ __all__ = (
     "UnitHandle",
     "as_file_record",
     "as_record_request",
+    "file_records",
+    "record_requests",
 )
-
-RecordRequestLike = pdu_files.FileRecordRequest | tuple[int, int, int]
-"""A read file record sub-request: the class, or ``(file, record, length)``."""
-
-FileRecordLike = pdu_files.FileRecord | tuple[int, int, Sequence[int]]
-"""A write file record sub-record: the class, or ``(file, record, values)``."""
 
 _REGISTER_TABLES = {
     "holding": Table.HOLDING_REGISTERS,
@@ -70,8 +73,21 @@ _REGISTER_TABLES = {
 }
 
 
+def _fields(name: str, item: object, kind: type, names: tuple[str, str, str]) -> tuple[object, ...]:
+    """The three fields of *item*, an instance of *kind* or a tuple of three."""
+    if isinstance(item, kind):
+        return tuple(getattr(item, field) for field in names)
+    if not isinstance(item, tuple | list) or len(item) != 3:
+        raise InvalidRequest(name, item, f"a {kind.__name__} or ({', '.join(names)})")
+    return tuple(item)
+
+
 def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
     """A read file record sub-request from the class or a ``(file, record, length)`` tuple."""
+    names = ("file_number", "record_number", "record_length")
+    fields = _fields("sub_request", sub, pdu_files.FileRecordRequest, names)
+    for name, value in zip(names, fields, strict=True):
+        check_int(name, value, range(0x10000), InvalidRequest)
     if isinstance(sub, pdu_files.FileRecordRequest):
         return sub
     return pdu_files.FileRecordRequest(*sub)
@@ -79,22 +95,39 @@ def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
 
 def as_file_record(record: FileRecordLike) -> pdu_files.FileRecord:
     """A write file record sub-record from the class or a ``(file, record, values)`` tuple."""
-    if isinstance(record, pdu_files.FileRecord):
-        return record
-    file_number, record_number, values = record
-    return pdu_files.FileRecord(file_number, record_number, tuple(values))
+    names = ("file_number", "record_number", "values")
+    file_number, record_number, values = _fields("record", record, pdu_files.FileRecord, names)
+    check_int("file_number", file_number, range(0x10000), InvalidRequest)
+    check_int("record_number", record_number, range(0x10000), InvalidRequest)
+    return pdu_files.FileRecord(
+        file_number,  # type: ignore[arg-type]  # checked above
+        record_number,  # type: ignore[arg-type]
+        check_registers("values", values),
+    )
+
+
+def record_requests(sub_requests: object) -> tuple[pdu_files.FileRecordRequest, ...]:
+    """The sub-requests of a read file record (14), each checked."""
+    items = check_items("sub_requests", sub_requests, "an iterable of sub-requests")
+    return tuple(as_record_request(sub) for sub in items)  # type: ignore[arg-type]
+
+
+def file_records(records: object) -> tuple[pdu_files.FileRecord, ...]:
+    """The sub-records of a write file record (15), each checked."""
+    items = check_items("records", records, "an iterable of records")
+    return tuple(as_file_record(record) for record in items)  # type: ignore[arg-type]
 
 
 class BroadcastHandle:
     """The broadcast writes of a master (see the module docstring); each returns once the
     request is sent and the turnaround delay has passed."""
 
-    def __init__(self, master: Master) -> None:
+    def __init__(self, master: Requester) -> None:
         self._master = master
 
     async def write_coil(self, address: int, value: bool, *, priority: int = 0) -> None:
         """Set the coil at *address* on every unit (05)."""
-        request = WriteSingleCoilRequest(address, value)
+        request = WriteSingleCoilRequest(address, check_coil(value))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def write_register(self, address: int, value: int, *, priority: int = 0) -> None:
@@ -104,14 +137,14 @@ class BroadcastHandle:
 
     async def write_coils(self, address: int, values: Sequence[bool], *, priority: int = 0) -> None:
         """Set 1..1968 coils from *address* on every unit (0F)."""
-        request = WriteMultipleCoilsRequest(address, tuple(values))
+        request = WriteMultipleCoilsRequest(address, check_coils(values))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def write_registers(
         self, address: int, values: Sequence[int], *, priority: int = 0
     ) -> None:
         """Write 1..123 registers from *address* on every unit (10)."""
-        request = WriteMultipleRegistersRequest(address, tuple(values))
+        request = WriteMultipleRegistersRequest(address, check_registers("values", values))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def mask_write_register(
@@ -125,7 +158,7 @@ class BroadcastHandle:
         self, records: Iterable[FileRecordLike], *, priority: int = 0
     ) -> None:
         """Write file records on every unit (15)."""
-        request = pdu_files.WriteFileRecordRequest(tuple(as_file_record(r) for r in records))
+        request = pdu_files.WriteFileRecordRequest(file_records(records))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
 
@@ -135,7 +168,7 @@ class UnitHandle:
     Every method takes ``timeout=`` and ``priority=`` as the master's do.
     """
 
-    def __init__(self, master: Master, unit: int) -> None:
+    def __init__(self, master: MasterCalls, unit: int) -> None:
         self.master = master
         self.unit = unit
 
@@ -354,8 +387,12 @@ class UnitHandle:
 
         *table* is ``"holding"`` (the default) or ``"input"``.
         """
-        count = ValueType(kind).register_count
-        registers = await self._read_registers(table, address, count, timeout, priority)
+        # Checked before the request goes out: a bad layout must not cost a read.
+        kind = as_value_type(kind)
+        layout = as_layout(layout)
+        registers = await self._read_registers(
+            table, address, kind.register_count, timeout, priority
+        )
         return decode_value(registers, kind, layout)
 
     async def write_value(
@@ -456,6 +493,7 @@ class UnitHandle:
         timeout: float | None = None,
     ) -> str:
         """Read text from *register_count* registers, two bytes each, padding stripped."""
+        check_encoding(encoding)
         registers = await self._read_registers(table, address, register_count, timeout, 0)
         return registers_to_string(registers, encoding, byte_swap)
 
@@ -470,7 +508,7 @@ class UnitHandle:
         timeout: float | None = None,
     ) -> None:
         """Write *text* to holding registers from *address*, NUL-padded to *register_count*."""
-        registers = string_to_registers(text, register_count, encoding, byte_swap)
+        registers = string_to_registers(text, register_count, encoding, byte_swap)  # checks all
         await self.write_registers(address, registers, timeout=timeout)
 
     async def read_reference(
@@ -494,7 +532,7 @@ class UnitHandle:
         timeout: float | None,
         priority: int,
     ) -> list[int]:
-        resolved = _REGISTER_TABLES.get(table)
+        resolved = _REGISTER_TABLES.get(table) if isinstance(table, str) else None
         if resolved is Table.INPUT_REGISTERS:
             return await self.read_input_registers(
                 address, count, timeout=timeout, priority=priority

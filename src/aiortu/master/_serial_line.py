@@ -6,24 +6,22 @@
 :class:`SerialLineFunctions` is a base class of :class:`~aiortu.master._client.Master`; it holds
 the function codes beyond the four tables (14, 15, 07, 08, 0B, 0C, 11, 2B/0E), written
 on top of the master's :meth:`~aiortu.master._client.Master.request`, so that ``master.py`` stays
-about the tables, the lifetime and the core of every call.
+about the tables, the lifetime and the core of every call. Its methods need of ``self``
+only what :class:`~aiortu.master._calls.Requester` names, so this module never imports the
+class built on it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, TypeVar
+from typing import TypeVar
 
 from aiortu.core import pdu_device_id, pdu_files, pdu_serial_line
 from aiortu.core.codes import DeviceIdReadCode, DiagnosticSubFunction
-from aiortu.core.pdu import Request, Response
-from aiortu.errors import MalformedPDU
-from aiortu.master._handles import (
-    FileRecordLike,
-    RecordRequestLike,
-    as_file_record,
-    as_record_request,
-)
+from aiortu.core.pdu import Response
+from aiortu.errors import InvalidRequest, MalformedPDU
+from aiortu.master._calls import FileRecordLike, RecordRequestLike, Requester
+from aiortu.master._handles import file_records, record_requests
 
 __all__ = ("SerialLineFunctions",)
 
@@ -40,26 +38,10 @@ class SerialLineFunctions:
     master's other methods do.
     """
 
-    if TYPE_CHECKING:
-
-        async def request(
-            self,
-            unit: int,
-            pdu: Request,
-            expected: type[_ResponseT],
-            *,
-            timeout: float | None = None,
-            priority: int = 0,
-        ) -> _ResponseT: ...
-
-        async def send_without_reply(
-            self, unit: int, pdu: Request, *, priority: int = 0
-        ) -> None: ...
-
     # -- file records ----------------------------------------------------------------
 
     async def read_file_record(
-        self,
+        self: Requester,
         unit: int,
         sub_requests: Iterable[RecordRequestLike],
         *,
@@ -71,9 +53,7 @@ class SerialLineFunctions:
         Each sub-request is a :class:`~aiortu.core.pdu_files.FileRecordRequest` or a
         ``(file_number, record_number, record_length)`` tuple.
         """
-        request = pdu_files.ReadFileRecordRequest(
-            tuple(as_record_request(sub) for sub in sub_requests)
-        )
+        request = pdu_files.ReadFileRecordRequest(record_requests(sub_requests))
         reply = await self.request(
             unit,
             request,
@@ -84,7 +64,7 @@ class SerialLineFunctions:
         return [list(values) for values in reply.records]
 
     async def write_file_record(
-        self,
+        self: Requester,
         unit: int,
         records: Iterable[FileRecordLike],
         *,
@@ -96,13 +76,13 @@ class SerialLineFunctions:
         Each record is a :class:`~aiortu.core.pdu_files.FileRecord` or a
         ``(file_number, record_number, values)`` tuple.
         """
-        request = pdu_files.WriteFileRecordRequest(tuple(as_file_record(r) for r in records))
+        request = pdu_files.WriteFileRecordRequest(file_records(records))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
     # -- serial line functions -------------------------------------------------------
 
     async def read_exception_status(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
+        self: Requester, unit: int, *, timeout: float | None = None, priority: int = 0
     ) -> int:
         """Read the eight exception status bits of the device as one byte (07)."""
         reply = await self.request(
@@ -115,7 +95,7 @@ class SerialLineFunctions:
         return reply.status
 
     async def diagnostics(
-        self,
+        self: Requester,
         unit: int,
         sub_function: int,
         data: bytes = b"\x00\x00",
@@ -128,6 +108,8 @@ class SerialLineFunctions:
         Force listen-only mode (04) gets no reply: it is sent, followed by the turnaround
         delay, and ``None`` is returned.
         """
+        if not isinstance(data, bytes | bytearray | memoryview):
+            raise InvalidRequest("data", data, "bytes")
         request = pdu_serial_line.DiagnosticsRequest(sub_function, data)
         if request.sub_function == DiagnosticSubFunction.FORCE_LISTEN_ONLY_MODE:
             await self.send_without_reply(unit, request, priority=priority)
@@ -141,7 +123,7 @@ class SerialLineFunctions:
         )
 
     async def get_comm_event_counter(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
+        self: Requester, unit: int, *, timeout: float | None = None, priority: int = 0
     ) -> pdu_serial_line.GetCommEventCounterResponse:
         """Read the status word and the event counter of the device (0B)."""
         return await self.request(
@@ -153,7 +135,7 @@ class SerialLineFunctions:
         )
 
     async def get_comm_event_log(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
+        self: Requester, unit: int, *, timeout: float | None = None, priority: int = 0
     ) -> pdu_serial_line.GetCommEventLogResponse:
         """Read the status, the counters and the event log of the device (0C)."""
         return await self.request(
@@ -165,7 +147,7 @@ class SerialLineFunctions:
         )
 
     async def report_server_id(
-        self, unit: int, *, timeout: float | None = None, priority: int = 0
+        self: Requester, unit: int, *, timeout: float | None = None, priority: int = 0
     ) -> pdu_serial_line.ReportServerIdResponse:
         """Read the device's server id, run indicator and additional data (11)."""
         return await self.request(
@@ -177,7 +159,7 @@ class SerialLineFunctions:
         )
 
     async def read_device_identification(
-        self,
+        self: Requester,
         unit: int,
         read_code: int = DeviceIdReadCode.BASIC,
         object_id: int = 0,

@@ -14,12 +14,22 @@ leaves the decision to the frame receiver, which rejects the garbage on its CRC 
 resynchronises, so the master sees a frame error or a timeout and can retry; nothing is
 ever silently swallowed beyond the bytes that did match the echo.
 
+Missing echo: an echo comes back while its bytes are on the wire, ahead of any reply, so
+the echo still expected is at most the frame being sent (256 bytes at most, possibly
+written in several chunks). Bytes expected beyond that are echoes that never came (an
+adapter that dropped them, or does not echo, with a device that left the requests
+unanswered): :meth:`LocalEchoFilter.expect` forgets them and counts them in
+:attr:`LocalEchoFilter.missing`, so that what is expected never grows with the requests.
+
 The filter does no I/O and reads no clock, so every case is testable with exact bytes.
 """
 
 from __future__ import annotations
 
 __all__ = ("LocalEchoFilter",)
+
+_MAX_ECHO = 256
+"""The longest frame, so the longest echo that can still be on its way."""
 
 
 class LocalEchoFilter:
@@ -36,7 +46,7 @@ class LocalEchoFilter:
     b'\\x11\\x03\\x06'
     """
 
-    __slots__ = ("_pending", "echoed", "mismatches")
+    __slots__ = ("_pending", "echoed", "mismatches", "missing")
 
     def __init__(self) -> None:
         self._pending = bytearray()
@@ -44,6 +54,8 @@ class LocalEchoFilter:
         """Bytes removed as echo so far."""
         self.mismatches = 0
         """Times the received bytes differed from the expected echo (see the module docs)."""
+        self.missing = 0
+        """Bytes whose echo never came, forgotten by :meth:`expect` (see the module docs)."""
 
     @property
     def pending(self) -> int:
@@ -51,8 +63,16 @@ class LocalEchoFilter:
         return len(self._pending)
 
     def expect(self, sent: bytes | bytearray | memoryview) -> None:
-        """Record bytes about to be written, whose echo will arrive ahead of anything else."""
-        self._pending += sent
+        """Record bytes about to be written, whose echo will arrive ahead of anything else.
+
+        An echo still expected that would take the total past 256 bytes (the longest
+        frame) never came, and is forgotten first (see the module docs).
+        """
+        pending = self._pending
+        if pending and len(pending) + len(sent) > _MAX_ECHO:
+            self.missing += len(pending)
+            pending.clear()
+        pending += sent
 
     def reset(self) -> None:
         """Forget any echo still expected (after the line was reopened, for instance)."""

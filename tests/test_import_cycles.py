@@ -1,0 +1,85 @@
+"""No import cycle among aiortu's modules, type-checking imports included.
+
+The deprecated forwarding modules (``aiortu/link.py``, ``aiortu/store.py``, ...) are left
+out: they import their new home lazily, for users only, and nothing inside aiortu
+imports them (an import-linter contract holds that).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import grimp
+
+_PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
+_FORWARDING_CONTRACT = "Nothing inside aiortu imports the deprecated forwarding modules"
+
+
+def forwarding_modules() -> set[str]:
+    """The deprecated forwarding modules, as the import-linter contract lists them."""
+    config = tomllib.loads(_PYPROJECT.read_text())
+    for contract in config["tool"]["importlinter"]["contracts"]:
+        if contract["name"] == _FORWARDING_CONTRACT:
+            return set(contract["forbidden_modules"])
+    raise AssertionError(f"no contract named {_FORWARDING_CONTRACT!r} in pyproject.toml")
+
+
+def cycles(imports: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (or a module importing
+    itself), each sorted: Tarjan's algorithm, iterative."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    for root in sorted(imports):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(imports[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            module, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(imports[child]))))
+                elif child in on_stack:
+                    low[module] = min(low[module], index[child])
+                continue
+            work.pop()
+            if work:
+                parent = work[-1][0]
+                low[parent] = min(low[parent], low[module])
+            if low[module] == index[module]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == module:
+                        break
+                if len(component) > 1 or module in imports[module]:
+                    found.append(sorted(component))
+    return found
+
+
+def test_the_cycle_finder_finds_cycles() -> None:
+    imports = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a", "d"}, "e": set()}
+    assert sorted(cycles(imports)) == [["a", "b", "c"], ["d"]]
+
+
+def test_no_import_cycle_type_checking_imports_included() -> None:
+    graph = grimp.build_graph("aiortu", exclude_type_checking_imports=False)
+    left_out = forwarding_modules()
+    assert left_out <= graph.modules, "a forwarding module listed in pyproject.toml is gone"
+    modules = graph.modules - left_out
+    imports = {
+        module: graph.find_modules_directly_imported_by(module) & modules for module in modules
+    }
+    assert cycles(imports) == []
