@@ -7,6 +7,7 @@ import pytest
 import aiortu
 from aiortu import errors
 from aiortu.core.codes import ExceptionCode
+from aiortu.errors import InvalidValue
 
 
 def test_every_error_is_a_modbus_error() -> None:
@@ -85,3 +86,14 @@ def test_the_package_reexports_the_errors_users_catch() -> None:
         "InvalidRequest",
     ):
         assert getattr(aiortu, name) is getattr(errors, name)
+
+
+def test_a_value_not_in_a_range_says_what_is_allowed_in_words() -> None:
+    error = InvalidValue("port", "tcp://x", "a serial device path")
+    assert str(error) == "port must be a serial device path, not 'tcp://x'"
+
+
+def test_a_value_error_may_carry_its_own_sentence() -> None:
+    error = InvalidValue("coils", 3, "blocks", message="coils: the block at 3..4 overlaps")
+    assert str(error) == "coils: the block at 3..4 overlaps"
+    assert (error.field, error.value, error.allowed) == ("coils", 3, "blocks")

@@ -118,7 +118,11 @@ def check_error(error: ModbusError) -> None:
     assert " at 0x" not in message, message  # no object's repr
     assert len(message) < 400, message
     if isinstance(error, InvalidValue):
-        assert message.startswith(f"{error.field} = "), message
+        # It names the argument first: "count = 0 is outside the allowed range 1..125"
+        # for a range, "priority must be an int, not 'x'" for anything else.
+        assert message.startswith(f"{error.field} "), message
+        if not isinstance(error.allowed, range):
+            assert "outside the allowed range" not in message, message
 
 
 async def exercise(sequence: list[tuple[str, str, list[Any], dict[str, Any]]]) -> None:

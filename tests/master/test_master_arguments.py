@@ -44,7 +44,7 @@ async def test_bad_priorities_fail_at_once_and_leave_the_queue_to_the_others() -
         for bad in ("x", None, 1.5):
             error = results[bad]
             assert isinstance(error, InvalidRequest)
-            assert str(error).startswith("priority = ")
+            assert str(error).startswith("priority ")
         for good in (0, 1, 2):
             assert results[good] == [register_value(9, 0), register_value(9, 1)]
         assert len(slave.seen) == 3
@@ -92,7 +92,7 @@ async def test_a_bad_argument_raises_before_anything_is_sent(
         with pytest.raises(InvalidRequest) as raised:
             await getattr(master, call)(*args)
         assert raised.value.field == field
-        assert str(raised.value).startswith(f"{field} = ")
+        assert str(raised.value).startswith(f"{field} ")
         assert "\n" not in str(raised.value)
         await anyio.sleep(0.01)
         assert not bus.trace
@@ -145,7 +145,7 @@ def test_a_bad_setting_is_refused_when_the_master_is_made(setting: str, value: o
     bus = VirtualBus(2)
     with pytest.raises(InvalidValue) as raised:
         Master(bus.endpoints[0], **{setting: value})  # type: ignore[arg-type]
-    assert str(raised.value).startswith(f"{setting} = ")
+    assert str(raised.value).startswith(f"{setting} ")
 
 
 def test_good_settings_are_taken() -> None:
@@ -262,7 +262,7 @@ async def test_broadcast_values_are_checked_too() -> None:
 
 async def test_open_master_checks_its_settings_before_opening_the_port() -> None:
     # The port does not exist: the setting is refused before it is looked for.
-    with pytest.raises(InvalidValue, match=r"^late_reply_guard = "):
+    with pytest.raises(InvalidValue, match=r"^late_reply_guard "):
         async with aiortu.open_master("/dev/aiortu-no-such-port", late_reply_guard=-1):
             pass
 
@@ -275,20 +275,20 @@ async def test_reads_follow_the_repeatable_codes_too() -> None:
         with pytest.raises(aiortu.ResponseTimeout):
             await master.read_holding_registers(17, 0, 1)
         assert len(slave.seen) == 1
-        with pytest.raises(InvalidRequest, match=r"^retries = "):
+        with pytest.raises(InvalidRequest, match=r"^retries "):
             await master.request(17, slave.seen[0].request, Response, retries=-1)
 
 
 async def test_a_typed_value_is_refused_before_the_read_goes_out() -> None:
     async with line() as (master, slave, bus):
         handle = master.slave(17)
-        with pytest.raises(InvalidValue, match=r"^layout = 'XYZW' "):
+        with pytest.raises(InvalidValue, match=r"^layout must be .*, not 'XYZW'"):
             await handle.read_float32(0, layout="XYZW")
-        with pytest.raises(InvalidValue, match=r"^kind = 'float16' "):
+        with pytest.raises(InvalidValue, match=r"^kind must be .*, not 'float16'"):
             await handle.read_value(0, "float16")
-        with pytest.raises(InvalidValue, match=r"^encoding = "):
+        with pytest.raises(InvalidValue, match=r"^encoding "):
             await handle.read_string(0, 2, encoding="no-such-codec")
-        with pytest.raises(InvalidRequest, match=r"^table = "):
+        with pytest.raises(InvalidRequest, match=r"^table "):
             await handle.read_float32(0, table="coils")
         await anyio.sleep(0.01)
         assert not bus.trace

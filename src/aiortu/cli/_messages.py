@@ -80,26 +80,16 @@ _TEMPLATE = re.compile(
     r"(?P<field>[\w.\[\] +]+) = (?P<value>.+?) is outside the allowed range (?P<allowed>.+?)"
     r"(?:: (?P<detail>.*))?"
 )
-_BLOCK = re.compile(r"Block\(start=(0x[0-9A-Fa-f]+), count=(\d+)\)")
-_OVERLAP = "blocks that do not overlap "
 
 
 def config_problem(problem: str) -> str:
     """The problem a device description has, without the library's range template."""
-    problem = _BLOCK.sub(_block, problem)
     found = _TEMPLATE.fullmatch(problem)
     if found is None:
         return problem
     field, value, allowed = found["field"], found["value"].strip("'\""), found["allowed"]
-    if allowed.startswith(_OVERLAP):
-        return f"{field}: {value} overlaps {allowed.removeprefix(_OVERLAP)}"
     sentence = f"{field} must be {allowed}, not {value}"
     return f"{sentence} ({found['detail']})" if found["detail"] else sentence
-
-
-def _block(match: re.Match[str]) -> str:
-    start, count = int(match.group(1), 16), int(match.group(2))
-    return f"the block at {start}..{start + count - 1}"
 
 
 def port_failure(error: PortError) -> str:

@@ -64,6 +64,12 @@ def _show(value: object) -> str:
     return f"{'an' if name[0] in 'AEIOUaeiou' else 'a'} {name}"
 
 
+def _sentence(field: str, shown: str, allowed: object) -> str:
+    if isinstance(allowed, range):
+        return f"{field} = {shown} is outside the allowed range {_describe_range(allowed)}"
+    return f"{field} must be {allowed}, not {shown}"  # a description, not a range
+
+
 class InvalidValue(ModbusError, ValueError):
     """A field or a setting is outside its allowed range. Caused by the caller.
 
@@ -72,12 +78,20 @@ class InvalidValue(ModbusError, ValueError):
     describes what the spec permits (a :class:`range` or a short text).
     """
 
-    def __init__(self, field: str, value: object, allowed: object, detail: str = "") -> None:
+    def __init__(
+        self,
+        field: str,
+        value: object,
+        allowed: object,
+        detail: str = "",
+        *,
+        message: str | None = None,
+    ) -> None:
         self.field = field
         self.value = value
         self.allowed = allowed
-        shown = _show(value)
-        message = f"{field} = {shown} is outside the allowed range {_describe_range(allowed)}"
+        if message is None:
+            message = _sentence(field, _show(value), allowed)
         if detail:
             message = f"{message}: {detail}"
         super().__init__(message)

@@ -436,7 +436,13 @@ def _blocks_of(table: Table, spec: BlockSpec | None) -> list[Block]:
     ordered = sorted(found, key=lambda block: block.start)
     for before, after in itertools.pairwise(ordered):
         if after.start < before.stop:
-            raise InvalidValue(table.value, after, f"blocks that do not overlap {before!r}")
+            raise InvalidValue(
+                table.value,
+                after,
+                "blocks that do not overlap",
+                message=f"{table.value}: the block at {after.start}..{after.stop - 1} "
+                f"overlaps the block at {before.start}..{before.stop - 1}",
+            )
     return found
 
 
