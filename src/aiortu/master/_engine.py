@@ -56,7 +56,7 @@ import anyio
 
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import FrameError
-from aiortu.core.master_machine import KnownRequest, MasterMachine
+from aiortu.core.master_machine import KnownRequest, MasterMachine, MasterState
 from aiortu.core.master_transaction import (
     Outcome,
     OutcomeKind,
@@ -546,6 +546,9 @@ class LineEngine:
         except ConnectionLost as error:
             self.machine.connection_lost(error)
             job.finish(None, error)
+        except BaseException:
+            self._stop_serving(job)
+            raise
         finally:
             self._adopted = None
             self._release()
@@ -555,14 +558,27 @@ class LineEngine:
         try:
             await self._exchange(job, on_the_wire=True)
         except BaseException:
-            # The line task is cancelled: the master is closing.
-            if not job.done:
-                job.finish(None, ConnectionLost("the master is closed"))
+            self._stop_serving(job)
             raise
         finally:
             if self._adopted is job:
                 self._adopted = None
             self._release()
+
+    def _stop_serving(self, job: Job) -> None:
+        """The line task is cancelled (the master closes) while it runs *job*.
+
+        The attempt on the wire is given up: the machine goes back to IDLE (through its
+        table, as if the line were lost) and *job* fails. The line is not handed on: a
+        queued caller would begin a transaction nobody can finish; :meth:`close` fails
+        the queue instead.
+        """
+        self._serving = False
+        error = ConnectionLost("the master is closed")
+        if self.machine.state is not MasterState.IDLE:
+            self.machine.connection_lost(error)
+        if not job.done:
+            job.finish(None, error)
 
     async def _keep_guard(self) -> None:
         delay = self._quiet_until - self.link.clock()
