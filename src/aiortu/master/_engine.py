@@ -79,12 +79,24 @@ _UsualExchange = tuple[
 ]
 
 
+def guard_ends(quiet_until: float, last_activity: float, guard: float) -> float:
+    """When the late-reply guard is kept: *guard* seconds of silence on the line after
+    the failure that set *quiet_until* (the failure plus *guard*).
+
+    Bytes that arrive meanwhile (*last_activity*: the line's last byte) start the silence
+    again, at most once over: a line that never falls silent delays a request by two
+    guards, not for ever.
+    """
+    return max(quiet_until, min(last_activity, quiet_until) + guard)
+
+
 class LineEngine:
     """The master's side of one line (see the module docstring).
 
-    *late_reply_guard* is the silence, in seconds, kept after a transaction in which an
-    attempt failed, before the next request goes out: a reply that turns up that late is
-    dropped as stale. *frame_error_grace* is how long a wait goes on after bad bytes.
+    *late_reply_guard* is the silence, in seconds, kept after a failed attempt (timeout
+    or frame error) before anything goes out, the retry included (see
+    :func:`guard_ends`): a reply that turns up that late is dropped as stale.
+    *frame_error_grace* is how long a wait goes on after bad bytes.
     """
 
     def __init__(
@@ -216,7 +228,7 @@ class LineEngine:
             and not self._link_closed
             and self._failed is None
             and not self.health.fail_fast_offline
-            and self._quiet_until <= link.clock()
+            and self._quiet_until == -math.inf
         ):
             known = self.machine.usual_exchange(unit, request)
             if known is not None:
@@ -468,7 +480,7 @@ class LineEngine:
         try:
             while True:
                 if not on_the_wire:
-                    if self._quiet_until > link.clock():
+                    if self._quiet_until != -math.inf:
                         await self._keep_guard()
                     frame = machine.frame
                     self._forget_arrivals()
@@ -489,11 +501,15 @@ class LineEngine:
                         raise
                     machine.sent(end - wire_time, end)
                 on_the_wire = False  # a retry sends the request again
+                failures = len(transaction.failures)
                 outcome = await self._wait_for_attempt(job, stats)
                 if outcome.kind is not OutcomeKind.RETRY:
                     break
                 stats.count_failed_attempt(transaction)
                 stats.retries += 1
+                if len(transaction.failures) > failures:
+                    # Timed out or garbled, not refused: its reply may still come.
+                    self._start_guard()
         except ConnectionLost as error:
             # Back to IDLE, wherever the line failed: the next line may serve again.
             machine.connection_lost(error)
@@ -505,7 +521,7 @@ class LineEngine:
                 # attempt may still be answered late: keep the guard.
                 transaction.abandoned = True
                 if transaction.failures:
-                    self._quiet_until = link.clock() + self.late_reply_guard
+                    self._start_guard()
             raise
         self._settle(job, outcome, stats)
 
@@ -580,10 +596,21 @@ class LineEngine:
         if not job.done:
             job.finish(None, error)
 
+    def _start_guard(self) -> None:
+        """An attempt failed: nothing goes out until the late-reply guard is kept."""
+        self._quiet_until = self.link.clock() + self.late_reply_guard
+
     async def _keep_guard(self) -> None:
-        delay = self._quiet_until - self.link.clock()
-        if delay > 0:
+        """Wait until the line has been silent for the late-reply guard after the last
+        failed attempt (see :func:`guard_ends`), then clear the guard."""
+        link = self.link
+        while True:
+            delay = guard_ends(self._quiet_until, link.last_activity, self.late_reply_guard)
+            delay -= link.clock()
+            if delay <= 0:
+                break
             await anyio.sleep(delay)
+        self._quiet_until = -math.inf
 
     async def _wait_for_outcome(self, stats: UnitStats) -> Outcome:
         machine = self.machine
@@ -677,7 +704,7 @@ class LineEngine:
         if transaction.failures or outcome.kind is OutcomeKind.FAILED:
             # An earlier attempt may still be answered late; keep the line quiet a while
             # so that such a reply arrives before the next request and is dropped.
-            self._quiet_until = self.link.clock() + self.late_reply_guard
+            self._start_guard()
         if outcome.kind is OutcomeKind.FAILED:
             stats.count_failed_attempt(transaction)
             error = outcome.error
