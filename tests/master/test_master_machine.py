@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.errors import CRCError, FrameError, ResponseTimeout
+from aiortu.core.errors import CRCError, FrameError, MalformedPDU, ResponseTimeout
 from aiortu.core.master_machine import (
     TRANSITIONS,
     MasterEvent,
@@ -97,18 +97,64 @@ def test_the_deadline_counts_from_the_end_of_transmission() -> None:
     assert machine.state is MasterState.IDLE
 
 
-def test_stale_other_unit_and_mismatching_frames_are_skipped() -> None:
+def test_stale_other_unit_and_other_function_frames_are_skipped() -> None:
     machine = started()
     machine.sent(10.0, 10.004)
     assert machine.frame_received(1, REPLY, 9.0, 9.9).skipped is SkipReason.STALE
     assert machine.frame_received(2, REPLY, 10.0, 10.01).skipped is SkipReason.OTHER_UNIT
     other = WriteSingleRegisterRequest(0, 1).encode()
     assert machine.frame_received(1, other, 10.0, 10.01).skipped is SkipReason.OTHER_FUNCTION
-    three = ReadHoldingRegistersResponse((1, 2, 3)).encode()
-    assert machine.frame_received(1, three, 10.0, 10.01).skipped is SkipReason.MALFORMED
     outcome = machine.frame_received(1, REPLY, 10.0, 10.02)
     assert outcome.kind is OutcomeKind.DONE
     assert outcome.response == ReadHoldingRegistersResponse((1, 2))
+
+
+MISSHAPEN = {
+    "one register for two": ReadHoldingRegistersResponse((1,)).encode(),
+    "three registers for two": ReadHoldingRegistersResponse((1, 2, 3)).encode(),
+    "byte count off": bytes((0x03, 0x05, 0, 1, 0, 2)),
+    "truncated": bytes((0x03, 0x04, 0, 1)),
+    "exception without its code": bytes((0x83,)),
+}
+
+
+@pytest.mark.parametrize("pdu", MISSHAPEN.values(), ids=MISSHAPEN.keys())
+@pytest.mark.parametrize("observed", [False, True])
+def test_a_misshapen_reply_from_the_unit_asked_fails_the_attempt_at_once(
+    pdu: bytes, observed: bool
+) -> None:
+    seen: list[tuple[MasterState, MasterEvent, MasterState]] = []
+    machine = MasterMachine(on_transition=(lambda *step: seen.append(step)) if observed else None)
+    machine.begin(Transaction(1, ReadHoldingRegistersRequest(0, 2), 3.0, RetryPolicy(0)))
+    machine.sent(10.0, 10.004)
+    outcome = machine.frame_received(1, pdu, 10.01, 10.02)
+    assert outcome.kind is OutcomeKind.FAILED  # at once, not after the 3 s timeout
+    assert isinstance(outcome.error, MalformedPDU)
+    assert machine.state is MasterState.IDLE
+    assert machine.transaction is not None
+    assert machine.transaction.failures == [Failure.FRAME_ERROR]
+    if observed:
+        assert (MasterState.PROCESSING_REPLY, MasterEvent.REPLY_MALFORMED) in {
+            (state, event) for state, event, _ in seen
+        }
+
+
+def test_a_misshapen_reply_is_retried_as_a_frame_error() -> None:
+    machine = started(retries=1)
+    machine.sent(10.0, 10.004)
+    one = ReadHoldingRegistersResponse((1,)).encode()
+    assert machine.frame_received(1, one, 10.01, 10.02).kind is OutcomeKind.RETRY
+    machine.sent(11.0, 11.004)
+    assert machine.frame_received(1, REPLY, 11.01, 11.02).kind is OutcomeKind.DONE
+
+
+def test_a_misshapen_frame_from_another_unit_or_stale_is_skipped() -> None:
+    machine = started()
+    machine.sent(10.0, 10.004)
+    one = ReadHoldingRegistersResponse((1,)).encode()
+    assert machine.frame_received(2, one, 10.01, 10.02).skipped is SkipReason.OTHER_UNIT
+    assert machine.frame_received(1, one, 9.0, 9.9).skipped is SkipReason.STALE
+    assert machine.state is MasterState.WAITING_REPLY
 
 
 def test_retries_follow_the_policy() -> None:
