@@ -47,9 +47,9 @@ async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_q
             callers.start_soon(read)
             await _until(lambda: engine.machine.state is MasterState.WAITING_REPLY)
             callers.start_soon(write)
-            await _until(lambda: bool(engine._queue))
+            await _until(lambda: engine.queued > 0)
             read_scope.cancel()
-            await _until(lambda: engine._adopted is not None)
+            await _until(lambda: engine._for_line_task is not None)
         with anyio.fail_after(2):
             while not ended:  # noqa: ASYNC110
                 await anyio.sleep(0.001)
@@ -81,7 +81,7 @@ async def test_a_caller_cancelled_while_queued_is_dropped_and_the_line_goes_on()
             callers.start_soon(read_first)
             await _until(lambda: engine.machine.state is MasterState.WAITING_REPLY)
             callers.start_soon(read_queued)
-            await _until(lambda: bool(engine._queue))
+            await _until(lambda: engine.queued > 0)
             queued.cancel()
         assert first == [[1000, 1001]]
         with anyio.fail_after(2):  # hangs if the cancelled caller was handed the line
@@ -92,7 +92,7 @@ async def test_a_caller_cancelled_while_queued_is_dropped_and_the_line_goes_on()
             ReadHoldingRegistersRequest(20, 1),
         ]
         assert engine.transactions == 2
-        assert not engine._busy
+        assert not engine.busy
 
 
 @pytest.mark.parametrize("cancel_after", [0.0, 0.02])
@@ -114,12 +114,12 @@ async def test_queued_callers_cancelled_in_any_order_leave_the_line_free(
             await _until(lambda: engine.machine.state is MasterState.WAITING_REPLY)
             for index, scope in enumerate(scopes):
                 callers.start_soon(read_queued, scope, 100 + index)
-            await _until(lambda: len(engine._queue) == len(scopes))
+            await _until(lambda: engine.queued == len(scopes))
             await anyio.sleep(cancel_after)
             for scope in reversed(scopes):
                 scope.cancel()
         with anyio.fail_after(2):
             assert await master.read_holding_registers(1, 7, 1) == [1007]
         assert [seen.request.address for seen in slave.seen] == [0, 7]  # type: ignore[attr-defined]
-        assert not engine._busy
-        assert not engine._queue
+        assert not engine.busy
+        assert engine.queued == 0

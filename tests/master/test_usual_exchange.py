@@ -196,7 +196,7 @@ async def test_a_caller_cancelled_after_the_machine_took_over_gets_no_more_retri
             assert sent == REQUEST * 2
             stats = master.unit_stats(1)
             assert (stats.requests, stats.retries, stats.successes) == (1, 1, 0)
-            assert not master.engine._busy  # the line is free again
+            assert not master.engine.busy  # the line is free again
 
 
 async def _drain(pty: Pty) -> bytes:
@@ -228,7 +228,7 @@ async def test_closing_the_master_fails_a_usual_exchange_in_flight() -> None:
 
                 tg.start_soon(read)
                 assert await read_master(pty, len(REQUEST)) == REQUEST
-                assert master.engine._in_flight is not None  # the usual exchange waits
+                assert master.engine._usual is not None  # the usual exchange waits
             with anyio.fail_after(0.5):  # not the 5 s timeout
                 await ended.wait()
         assert isinstance(outcome[0], ConnectionLost)
@@ -248,7 +248,7 @@ async def _read_on_the_wire(master: Master, pty: Pty) -> asyncio.Task[list[int]]
     """A read of registers 0..1 of unit 1, started as a task, its request on the wire."""
     read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
     assert await read_master(pty, len(REQUEST)) == REQUEST
-    assert master.engine._in_flight is not None  # its usual exchange waits
+    assert master.engine._usual is not None  # its usual exchange waits
     return read
 
 
@@ -266,7 +266,7 @@ async def test_a_caller_cancelled_once_its_reply_came_leaves_it_counted() -> Non
     async with _master_on_a_pty(response_timeout=1.0) as (master, pty):
         read = await _read_on_the_wire(master, pty)
         pty.write(REPLY)
-        await _in_the_same_pass(lambda: master.engine._in_flight is None)
+        await _in_the_same_pass(lambda: master.engine._usual is None)
         read.cancel()
         with pytest.raises(asyncio.CancelledError):
             await read
@@ -284,7 +284,7 @@ async def test_closing_the_master_fails_a_read_the_machine_took_over() -> None:
     async with _master_on_a_pty(response_timeout=5.0) as (master, pty):
         read = await _read_on_the_wire(master, pty)
         pty.write(OTHER_UNIT)
-        await _in_the_same_pass(lambda: master.engine._adopted is not None)
+        await _in_the_same_pass(lambda: master.engine._for_line_task is not None)
     with anyio.fail_after(1), pytest.raises(ConnectionLost):
         await read
 

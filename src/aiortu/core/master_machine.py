@@ -40,7 +40,8 @@ sleeps until :attr:`MasterMachine.deadline`:
   will refuse again).
 * A register read that gets its usual reply changes nothing in the machine, so a driver
   may run it without the machine and hand it over only if something else happens
-  (:meth:`MasterMachine.usual_exchange`).
+  (:meth:`MasterMachine.usual_exchange`; the async master's driver of that is
+  :mod:`aiortu.master._usual_exchange`).
 
 Time comes in as arguments; the machine never reads a clock.
 """
@@ -307,14 +308,6 @@ class MasterMachine:
         """
         return (self._entry or self._known()).frame
 
-    @property
-    def usual_reply(self) -> tuple[bytes, int] | None:
-        """The first bytes and the length of the usual reply to the transaction in
-        progress, where it has one (a register read's: unit, function code, byte count);
-        else None. A link can spot that frame without decoding it
-        (:meth:`aiortu.line._link.Link.expect`) and hand it to :meth:`take_usual_reply`."""
-        return (self._entry or self._known()).reply_shape
-
     def _known(self) -> KnownRequest:
         """What the machine remembers of the request in progress (see :attr:`frame`)."""
         transaction = self._current
@@ -380,33 +373,6 @@ class MasterMachine:
         known.last_reply = frame
         known.last_response = response
         return response
-
-    def take_usual_reply(self, frame: bytes, end: float) -> Response | None:
-        """Finish the transaction with *frame*, a whole frame with a good CRC that ended
-        at *end* and has the shape :attr:`usual_reply` gives; return its response.
-
-        This is :meth:`frame_received` for that frame in one step: the table's
-        REPLY_RECEIVED and REPLY_OK. None, with nothing changed, where that does not
-        apply (not waiting, a frame from before the request, a transition observer, or
-        another shape): then call :meth:`frame_received`.
-        """
-        transaction = self.transaction
-        entry = self._entry
-        shape = None if entry is None else entry.reply_shape
-        if (
-            shape is None
-            or self.state is not MasterState.WAITING_REPLY
-            or self._on_transition is not None
-            or transaction is None
-            or len(frame) != shape[1]
-            or not frame.startswith(shape[0])
-            or end < transaction.attempt_start
-        ):
-            return None
-        assert entry is not None
-        self.state = _USUAL_REPLY_TARGET
-        self.deadline = None
-        return self.usual_response(entry, frame)
 
     def sent(self, start: float, end: float) -> float:
         """The request began to go out at *start* and left the wire at *end*.
