@@ -68,7 +68,6 @@ from aiortu.master._job import Job, JobQueue
 from aiortu.master._stats import HealthPolicy, UnitStats
 from aiortu.master._usual_exchange import (
     UsualExchange,
-    finish_usual_exchange,
     send_usual_exchange,
     take_over,
     usual_exchange_for,
@@ -173,7 +172,7 @@ class LineEngine:
     @property
     def queued(self) -> int:
         """Callers waiting for the line."""
-        return len(self._jobs)
+        return len(self._jobs.waiting)
 
     # -- the callers' side -----------------------------------------------------------
 
@@ -250,7 +249,13 @@ class LineEngine:
             inbox.events.clear()  # nothing that came before can answer it
             stats = self.stats.get(unit) or self.unit_stats(unit)
             exchange = send_usual_exchange(
-                link, known, stats, timeout=response_timeout, policy=policy, priority=priority
+                link,
+                known,
+                stats,
+                timeout=response_timeout,
+                policy=policy,
+                priority=priority,
+                done=self._release,
             )
             if exchange is not None:
                 jobs.busy = True
@@ -261,17 +266,9 @@ class LineEngine:
                     self._arm_timer(deadline)
                 shape = known.reply_shape
                 assert shape is not None
-                link.expect(shape[0], shape[1], self._on_usual_reply, known.last_reply)
+                link.expect(shape[0], shape[1], exchange.on_reply, known.last_reply)
                 return exchange.caller
         return self.submit(Transaction(unit, request, response_timeout, policy), priority)
-
-    def _on_usual_reply(self, frame: bytes, end: float) -> None:
-        """The link's read callback found the usual exchange's reply."""
-        exchange = self._usual
-        assert exchange is not None
-        self._usual = None
-        finish_usual_exchange(exchange, frame, self.link.clock())
-        self._release()
 
     def _take_over(self) -> None:
         """Something other than the usual reply came during the usual exchange, or its
@@ -301,12 +298,16 @@ class LineEngine:
 
     def _release(self) -> None:
         """The transaction that had the line is over: hand the line on."""
+        self._usual = None  # if it was a usual exchange, it is over
+        jobs = self._jobs
         if not self._open:
             # The queue waits for the line task: it fails it (dead link) or serves it.
-            self._jobs.busy = False
+            jobs.busy = False
             self._wake.set()
-            return
-        self._jobs.grant_next()
+        elif jobs.waiting:
+            jobs.grant_next()
+        else:
+            jobs.busy = False
 
     @property
     def connected(self) -> bool:

@@ -104,17 +104,15 @@ class JobQueue:
     """Who holds the line (:attr:`busy`) and who waits for it: lower priority first, then
     in order of arrival."""
 
-    __slots__ = ("_heap", "_sequence", "busy")
+    __slots__ = ("_sequence", "busy", "waiting")
 
     def __init__(self) -> None:
-        self._heap: list[Job] = []
+        self.waiting: list[Job] = []
+        """The queued jobs, a heap (read it; change it through the methods)."""
         self._sequence = itertools.count()
         self.busy = False
         """The line belongs to a transaction (running, handed over, or left to the line
         task)."""
-
-    def __len__(self) -> int:
-        return len(self._heap)
 
     def new_job(self, transaction: Transaction, priority: int) -> Job:
         """A job for *transaction*, next in order of arrival among equal priorities."""
@@ -122,11 +120,11 @@ class JobQueue:
 
     def push(self, job: Job) -> None:
         """Queue *job* (it has its :attr:`Job.turn`)."""
-        heapq.heappush(self._heap, job)
+        heapq.heappush(self.waiting, job)
 
     def grant_next(self) -> None:
         """Hand the line to the first job whose caller still waits, or mark it free."""
-        heap = self._heap
+        heap = self.waiting
         while heap:
             job = heapq.heappop(heap)
             if job.transaction.abandoned:
@@ -140,7 +138,7 @@ class JobQueue:
 
     def fail_all(self, why: str) -> None:
         """Fail every queued job with ConnectionLost(*why*)."""
-        heap = self._heap
+        heap = self.waiting
         while heap:
             job = heapq.heappop(heap)
             if not job.done:

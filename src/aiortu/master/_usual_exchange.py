@@ -13,9 +13,9 @@ the machine:
    caller awaits. The engine asks the link to hand the usual reply (its first bytes and
    length) straight from the read callback
    (:meth:`~aiortu.line._link.Link.expect`).
-3. That reply ends it (:func:`finish_usual_exchange`): it is decoded and counted, and
-   the future completed. The caller's task is woken once, and no coroutine of the
-   engine runs.
+3. That reply ends it (:meth:`UsualExchange.on_reply`, called by the link): it is
+   decoded and counted, the line handed on, and the future completed. The caller's
+   task is woken once, and no coroutine of the engine runs.
 4. Anything else (another frame, bad bytes, the response timeout, the line lost) makes
    the machine take the attempt over (:func:`take_over`): it begins the transaction
    and is told the request went out when it did, so it knows everything it would have
@@ -31,6 +31,7 @@ the wire.
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from aiortu.core.master_machine import KnownRequest, MasterMachine
@@ -45,7 +46,6 @@ __all__ = (
     "send_usual_exchange",
     "take_over",
     "usual_exchange_for",
-    "finish_usual_exchange",
 )
 
 
@@ -70,6 +70,18 @@ class UsualExchange:
     """When the request began to go out (the link's clock)."""
     end: float
     """When it had left the wire."""
+    done: Callable[[], None]
+    """What the engine does once the usual reply came: hand the line on."""
+
+    def on_reply(self, frame: bytes, end: float) -> None:
+        """The link's read callback: *frame*, the usual reply (its shape matched, its CRC
+        checked), ended at *end*. Count it, hand the line on, complete the future."""
+        response = MasterMachine.usual_response(self.known, frame)
+        self.stats.count_success(end - self.start)
+        self.done()
+        caller = self.caller
+        if not caller.done():  # done: cancelled; the reply is counted all the same
+            caller.set_result(response)
 
 
 def usual_exchange_for(
@@ -119,6 +131,7 @@ def send_usual_exchange(
     timeout: float,
     policy: RetryPolicy,
     priority: int,
+    done: Callable[[], None],
 ) -> UsualExchange | None:
     """Send *known*'s request now and return the exchange on the wire, or None (nothing
     sent) where the line asks for a wait (see :meth:`~aiortu.line._link.Link.send_now`)."""
@@ -128,17 +141,7 @@ def send_usual_exchange(
         return None
     start = end - len(frame) * link.char_time
     caller = link.loop.create_future()
-    return UsualExchange(caller, known, stats, timeout, policy, priority, start, end)
-
-
-def finish_usual_exchange(exchange: UsualExchange, frame: bytes, now: float) -> None:
-    """*frame*, the usual reply to *exchange* (its shape matched and its CRC checked by
-    the link), came at *now*: count it and complete the caller's future."""
-    response = MasterMachine.usual_response(exchange.known, frame)
-    exchange.stats.count_success(now - exchange.start)
-    caller = exchange.caller
-    if not caller.done():  # done: cancelled; the reply is counted all the same
-        caller.set_result(response)
+    return UsualExchange(caller, known, stats, timeout, policy, priority, start, end, done)
 
 
 def take_over(exchange: UsualExchange, machine: MasterMachine, jobs: JobQueue) -> Job:
