@@ -8,11 +8,15 @@ from collections.abc import Callable
 import anyio
 import pytest
 
+from aiortu.core.frame import encode_frame
 from aiortu.core.master_machine import MasterState
 from aiortu.core.pdu import Request
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest
 from aiortu.errors import ConnectionLost
+from aiortu.master._client import Master
+from aiortu.transport._serial import open_serial
 from tests.master.fakes import FakeSlave, answer, line, silent
+from tests.transport.ptys import LINE, open_pty, read_master
 
 
 async def _until(condition: Callable[[], bool]) -> None:
@@ -123,3 +127,39 @@ async def test_queued_callers_cancelled_in_any_order_leave_the_line_free(
         assert [seen.request.address for seen in slave.seen] == [0, 7]  # type: ignore[attr-defined]
         assert not engine.busy
         assert engine.queued == 0
+
+
+async def test_closing_while_the_line_task_runs_a_read_taken_over_fails_the_queued_write() -> None:
+    # The same shutdown on a serial port, where the read ran as a usual exchange and the
+    # machine took it over (another unit's frame came first).
+    ended: list[BaseException] = []
+    async with anyio.create_task_group() as callers:
+        with open_pty() as pty:
+            stream = await open_serial(pty.path, LINE)
+            async with Master(stream, LINE, timeout=5.0, retries=0, frame_gap=0) as master:
+                engine = master.engine
+                await anyio.sleep(0.05)  # past the receiver's first silence
+
+                async def read() -> None:
+                    with pytest.raises(ConnectionLost):
+                        await master.read_holding_registers(1, 0, 2)
+
+                callers.start_soon(read)
+                await read_master(pty, 8)
+                assert engine._usual is not None  # the usual exchange waits
+
+                async def write() -> None:
+                    try:
+                        await master.write_register(1, 0, 5)
+                    except Exception as error:  # what ended it is the point
+                        ended.append(error)
+
+                callers.start_soon(write)
+                await _until(lambda: engine.queued > 0)
+                pty.write(encode_frame(2, bytes.fromhex("030400090009")))
+                await _until(lambda: engine._for_line_task is not None)
+            with anyio.fail_after(2):
+                while not ended:  # noqa: ASYNC110
+                    await anyio.sleep(0.001)
+    assert isinstance(ended[0], ConnectionLost), ended
+    assert engine.machine.state is MasterState.IDLE
