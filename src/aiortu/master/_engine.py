@@ -89,6 +89,18 @@ def guard_ends(quiet_until: float, last_activity: float, guard: float) -> float:
     return max(quiet_until, min(last_activity, quiet_until) + guard)
 
 
+class _LateReplyGuard:
+    """The silence kept after a failed attempt before anything goes out (see
+    :func:`guard_ends`)."""
+
+    __slots__ = ("seconds", "until")
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+        self.until = _NO_GUARD
+        """The failure plus :attr:`seconds`, until a request has kept the guard."""
+
+
 class _Inbox:
     """What the link delivered to the transaction on the line, and how it is woken."""
 
@@ -138,9 +150,7 @@ class LineEngine:
         self.usual_exchanges = True
         """Whether register reads may run their usual exchange without the machine (see
         :mod:`aiortu.master._usual_exchange`); false runs every transaction through it."""
-        self._late_reply_guard = late_reply_guard
-        self._quiet_until = _NO_GUARD
-        """The failure plus the late-reply guard, until a request has kept it."""
+        self._guard = _LateReplyGuard(late_reply_guard)
         self._jobs = JobQueue()
         self._open = False
         """The line task serves a live link, and the engine is not closed."""
@@ -157,7 +167,7 @@ class LineEngine:
     @property
     def late_reply_guard(self) -> float:
         """The silence kept after a failed attempt, in seconds."""
-        return self._late_reply_guard
+        return self._guard.seconds
 
     @property
     def transactions(self) -> int:
@@ -239,7 +249,7 @@ class LineEngine:
             request,
             enabled=self.usual_exchanges,
             line_free=self._open and not jobs.busy,
-            guard_pending=self._quiet_until != _NO_GUARD,
+            guard_pending=self._guard.until != _NO_GUARD,
             fail_fast_offline=self.health.fail_fast_offline,
             link=link,
             machine=self.machine,
@@ -450,7 +460,7 @@ class LineEngine:
             while True:
                 if on_the_wire:
                     on_the_wire = False  # a retry sends the request again
-                elif self._quiet_until != _NO_GUARD or not self._send_at_once():
+                elif self._guard.until != _NO_GUARD or not self._send_at_once():
                     await self._send(job)
                 failures = len(transaction.failures)
                 outcome = await self._wait_for_attempt(job, stats)
@@ -492,7 +502,7 @@ class LineEngine:
     async def _send(self, job: Job) -> None:
         """Send the machine's frame for *job* once the late-reply guard is kept and the
         line lets it go, and tell the machine when it went out."""
-        if self._quiet_until != _NO_GUARD:
+        if self._guard.until != _NO_GUARD:
             await self._keep_guard()
         if self._send_at_once():
             return
@@ -583,19 +593,20 @@ class LineEngine:
 
     def _start_guard(self) -> None:
         """An attempt failed: nothing goes out until the late-reply guard is kept."""
-        self._quiet_until = self.link.clock() + self._late_reply_guard
+        guard = self._guard
+        guard.until = self.link.clock() + guard.seconds
 
     async def _keep_guard(self) -> None:
         """Wait until the line has been silent for the late-reply guard after the last
         failed attempt (see :func:`guard_ends`), then clear the guard."""
         link = self.link
+        guard = self._guard
         while True:
-            ends = guard_ends(self._quiet_until, link.last_activity, self._late_reply_guard)
-            delay = ends - link.clock()
+            delay = guard_ends(guard.until, link.last_activity, guard.seconds) - link.clock()
             if delay <= 0:
                 break
             await anyio.sleep(delay)
-        self._quiet_until = _NO_GUARD
+        guard.until = _NO_GUARD
 
     async def _wait_for_outcome(self, stats: UnitStats) -> Outcome:
         machine = self.machine
