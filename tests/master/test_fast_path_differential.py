@@ -32,7 +32,12 @@ from tests.master.fakes import standard_reply
 from tests.transport.ptys import LINE, Pty, open_pty, read_master
 
 TIMEOUT = 0.15
-"""The response timeout: long enough for a device under load to answer in time."""
+"""The response timeout of the plans where an attempt must time out."""
+PATIENT = 2.0
+"""The response timeout of the others: the device's answer is never late for it."""
+TIMING_OUT = frozenset(
+    ("silent, then ok", "silent twice", "late, then ok", "cancelled, then silent")
+)
 GUARD = 0.15
 """The late-reply guard: a late reply sent once the retry is decided lands in it."""
 NOISE = b"\x00\xff\x13"
@@ -80,13 +85,15 @@ def scenario(seed: int, length: int, must: list[str]) -> list[Op]:
 
 
 def perform(master: Master, op: Op) -> Awaitable[object]:
+    timeout = TIMEOUT if op.plan in TIMING_OUT else PATIENT
     if op.kind == "read":
-        return master.read_holding_registers(op.unit, op.address, op.count)
+        return master.read_holding_registers(op.unit, op.address, op.count, timeout=timeout)
     if op.kind == "read_input":
-        return master.read_input_registers(op.unit, op.address, op.count)
+        return master.read_input_registers(op.unit, op.address, op.count, timeout=timeout)
     if op.kind == "write":
-        return master.write_register(op.unit, op.address, op.count)
-    return master.write_registers(op.unit, op.address, list(range(op.count)))
+        return master.write_register(op.unit, op.address, op.count, timeout=timeout)
+    values = list(range(op.count))
+    return master.write_registers(op.unit, op.address, values, timeout=timeout)
 
 
 class Device:
