@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.errors import CRCError, FrameError, ResponseTimeout
+from aiortu.core.errors import CRCError, FrameError, MalformedPDU, ResponseTimeout
 from aiortu.core.master_machine import (
     TRANSITIONS,
     MasterEvent,
@@ -97,18 +97,64 @@ def test_the_deadline_counts_from_the_end_of_transmission() -> None:
     assert machine.state is MasterState.IDLE
 
 
-def test_stale_other_unit_and_mismatching_frames_are_skipped() -> None:
+def test_stale_other_unit_and_other_function_frames_are_skipped() -> None:
     machine = started()
     machine.sent(10.0, 10.004)
     assert machine.frame_received(1, REPLY, 9.0, 9.9).skipped is SkipReason.STALE
     assert machine.frame_received(2, REPLY, 10.0, 10.01).skipped is SkipReason.OTHER_UNIT
     other = WriteSingleRegisterRequest(0, 1).encode()
     assert machine.frame_received(1, other, 10.0, 10.01).skipped is SkipReason.OTHER_FUNCTION
-    three = ReadHoldingRegistersResponse((1, 2, 3)).encode()
-    assert machine.frame_received(1, three, 10.0, 10.01).skipped is SkipReason.MALFORMED
     outcome = machine.frame_received(1, REPLY, 10.0, 10.02)
     assert outcome.kind is OutcomeKind.DONE
     assert outcome.response == ReadHoldingRegistersResponse((1, 2))
+
+
+MISSHAPEN = {
+    "one register for two": ReadHoldingRegistersResponse((1,)).encode(),
+    "three registers for two": ReadHoldingRegistersResponse((1, 2, 3)).encode(),
+    "byte count off": bytes((0x03, 0x05, 0, 1, 0, 2)),
+    "truncated": bytes((0x03, 0x04, 0, 1)),
+    "exception without its code": bytes((0x83,)),
+}
+
+
+@pytest.mark.parametrize("pdu", MISSHAPEN.values(), ids=MISSHAPEN.keys())
+@pytest.mark.parametrize("observed", [False, True])
+def test_a_misshapen_reply_from_the_unit_asked_fails_the_attempt_at_once(
+    pdu: bytes, observed: bool
+) -> None:
+    seen: list[tuple[MasterState, MasterEvent, MasterState]] = []
+    machine = MasterMachine(on_transition=(lambda *step: seen.append(step)) if observed else None)
+    machine.begin(Transaction(1, ReadHoldingRegistersRequest(0, 2), 3.0, RetryPolicy(0)))
+    machine.sent(10.0, 10.004)
+    outcome = machine.frame_received(1, pdu, 10.01, 10.02)
+    assert outcome.kind is OutcomeKind.FAILED  # at once, not after the 3 s timeout
+    assert isinstance(outcome.error, MalformedPDU)
+    assert machine.state is MasterState.IDLE
+    assert machine.transaction is not None
+    assert machine.transaction.failures == [Failure.FRAME_ERROR]
+    if observed:
+        assert (MasterState.PROCESSING_REPLY, MasterEvent.REPLY_MALFORMED) in {
+            (state, event) for state, event, _ in seen
+        }
+
+
+def test_a_misshapen_reply_is_retried_as_a_frame_error() -> None:
+    machine = started(retries=1)
+    machine.sent(10.0, 10.004)
+    one = ReadHoldingRegistersResponse((1,)).encode()
+    assert machine.frame_received(1, one, 10.01, 10.02).kind is OutcomeKind.RETRY
+    machine.sent(11.0, 11.004)
+    assert machine.frame_received(1, REPLY, 11.01, 11.02).kind is OutcomeKind.DONE
+
+
+def test_a_misshapen_frame_from_another_unit_or_stale_is_skipped() -> None:
+    machine = started()
+    machine.sent(10.0, 10.004)
+    one = ReadHoldingRegistersResponse((1,)).encode()
+    assert machine.frame_received(2, one, 10.01, 10.02).skipped is SkipReason.OTHER_UNIT
+    assert machine.frame_received(1, one, 9.0, 9.9).skipped is SkipReason.STALE
+    assert machine.state is MasterState.WAITING_REPLY
 
 
 def test_retries_follow_the_policy() -> None:
@@ -213,50 +259,42 @@ def test_the_usual_reply_in_one_step_equals_the_table_step_by_step(
 
 
 @usual_reply_cases
-def test_taking_the_usual_reply_equals_receiving_it(
+def test_the_usual_response_equals_receiving_the_reply(
     kind: type[ReadHoldingRegistersRequest],
     count: int,
     unit: int,
     pdu: bytes,
     end: float,
 ) -> None:
-    """What a link hands over as the usual reply ends the transaction exactly as
-    frame_received would; anything else is refused with nothing changed."""
+    """A frame of the usual reply's shape, taken without the machine, gives the response
+    frame_received gives; a frame of any other shape is left to the machine."""
     frame = bytes([unit]) + pdu + b"\x00\x00"  # the CRC is the link's to check
-    by_frame, by_take = MasterMachine(), MasterMachine()
-    for machine in (by_frame, by_take):
-        machine.begin(Transaction(1, kind(0, count), 1.0))
-        machine.sent(10.0, 10.004)
-    shape = by_take.usual_reply
+    request = kind(0, count)
+    known = MasterMachine().usual_exchange(1, request)
+    assert known is not None
+    shape = known.reply_shape
     assert shape == (bytes([1, kind.function_code, 2 * count]), 5 + 2 * count)
-    expected = by_frame.frame_received(unit, pdu, end - 0.001, end)
-    taken = by_take.take_usual_reply(frame, end)
-    fits = len(frame) == shape[1] and frame.startswith(shape[0]) and end >= 10.0
-    if fits:
-        assert expected.kind is OutcomeKind.DONE
-        assert taken == expected.response
-        assert by_take.state is by_frame.state is MasterState.IDLE
-        assert by_take.deadline is by_frame.deadline is None
-    else:
-        assert taken is None
-        assert by_take.state is MasterState.WAITING_REPLY  # unchanged
-        assert by_take.deadline == pytest.approx(11.004)
-
-
-def test_only_register_reads_have_a_usual_reply_and_an_observer_takes_none() -> None:
     machine = MasterMachine()
-    machine.begin(Transaction(1, WriteSingleRegisterRequest(0, 1), 1.0))
-    assert machine.usual_reply is None
+    machine.begin(Transaction(1, request, 1.0))
     machine.sent(10.0, 10.004)
-    assert machine.take_usual_reply(b"\x01\x06\x00\x00\x00\x01\x00\x00", 10.01) is None
+    expected = machine.frame_received(unit, pdu, end - 0.001, end)
+    if len(frame) == shape[1] and frame.startswith(shape[0]) and end >= 10.0:
+        assert expected.kind is OutcomeKind.DONE
+        assert MasterMachine.usual_response(known, frame) == expected.response
+        assert machine.state is MasterState.IDLE
+
+
+def test_only_register_reads_on_an_idle_unobserved_machine_have_a_usual_exchange() -> None:
+    machine = MasterMachine()
+    assert machine.usual_exchange(1, WriteSingleRegisterRequest(0, 1)) is None
+    assert machine.usual_exchange(0, ReadHoldingRegistersRequest(0, 1)) is None  # broadcast
+    assert machine.usual_exchange(1, ReadInputRegistersRequest(0, 1)) is not None
+    machine.begin(Transaction(1, ReadHoldingRegistersRequest(0, 1), 1.0))
+    machine.sent(10.0, 10.004)
+    assert machine.usual_exchange(1, ReadHoldingRegistersRequest(0, 1)) is None  # busy
+    # With an observer every transition must be seen: no shortcut.
     observed = MasterMachine(on_transition=lambda *step: None)
-    observed.begin(Transaction(1, ReadHoldingRegistersRequest(0, 1), 1.0))
-    observed.sent(10.0, 10.004)
-    frame = b"\x01\x03\x02\x00\x07\x00\x00"
-    assert observed.usual_reply is not None
-    # With an observer every transition is fired one by one: frame_received does it.
-    assert observed.take_usual_reply(frame, 10.01) is None
-    assert observed.state is MasterState.WAITING_REPLY
+    assert observed.usual_exchange(1, ReadHoldingRegistersRequest(0, 1)) is None
 
 
 @given(

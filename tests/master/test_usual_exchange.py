@@ -19,9 +19,12 @@ import pytest
 
 import aiortu
 from aiortu.core.crc import crc16
-from aiortu.core.master_machine import MasterState
+from aiortu.core.master_machine import KnownRequest, MasterMachine, MasterState
+from aiortu.core.master_transaction import Transaction
+from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, WriteSingleRegisterRequest
 from aiortu.errors import ConnectionLost
 from aiortu.master._client import Master
+from aiortu.master._usual_exchange import usual_exchange_for
 from aiortu.transport._serial import open_serial
 from tests.transport.ptys import LINE, Pty, open_pty, read_master
 
@@ -196,7 +199,7 @@ async def test_a_caller_cancelled_after_the_machine_took_over_gets_no_more_retri
             assert sent == REQUEST * 2
             stats = master.unit_stats(1)
             assert (stats.requests, stats.retries, stats.successes) == (1, 1, 0)
-            assert not master.engine._busy  # the line is free again
+            assert not master.engine.busy  # the line is free again
 
 
 async def _drain(pty: Pty) -> bytes:
@@ -228,7 +231,7 @@ async def test_closing_the_master_fails_a_usual_exchange_in_flight() -> None:
 
                 tg.start_soon(read)
                 assert await read_master(pty, len(REQUEST)) == REQUEST
-                assert master.engine._in_flight is not None  # the usual exchange waits
+                assert master.engine._usual is not None  # the usual exchange waits
             with anyio.fail_after(0.5):  # not the 5 s timeout
                 await ended.wait()
         assert isinstance(outcome[0], ConnectionLost)
@@ -248,7 +251,7 @@ async def _read_on_the_wire(master: Master, pty: Pty) -> asyncio.Task[list[int]]
     """A read of registers 0..1 of unit 1, started as a task, its request on the wire."""
     read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
     assert await read_master(pty, len(REQUEST)) == REQUEST
-    assert master.engine._in_flight is not None  # its usual exchange waits
+    assert master.engine._usual is not None  # its usual exchange waits
     return read
 
 
@@ -266,7 +269,7 @@ async def test_a_caller_cancelled_once_its_reply_came_leaves_it_counted() -> Non
     async with _master_on_a_pty(response_timeout=1.0) as (master, pty):
         read = await _read_on_the_wire(master, pty)
         pty.write(REPLY)
-        await _in_the_same_pass(lambda: master.engine._in_flight is None)
+        await _in_the_same_pass(lambda: master.engine._usual is None)
         read.cancel()
         with pytest.raises(asyncio.CancelledError):
             await read
@@ -284,7 +287,7 @@ async def test_closing_the_master_fails_a_read_the_machine_took_over() -> None:
     async with _master_on_a_pty(response_timeout=5.0) as (master, pty):
         read = await _read_on_the_wire(master, pty)
         pty.write(OTHER_UNIT)
-        await _in_the_same_pass(lambda: master.engine._adopted is not None)
+        await _in_the_same_pass(lambda: master.engine._for_line_task is not None)
     with anyio.fail_after(1), pytest.raises(ConnectionLost):
         await read
 
@@ -298,3 +301,62 @@ async def test_closing_the_engine_fails_a_read_taken_over_and_not_finished() -> 
         master.engine.close(ConnectionLost("closed"))
         with anyio.fail_after(1), pytest.raises(ConnectionLost, match="closed"):
             await read
+
+
+def _predicate_case(
+    unit: int = 1, request: object = None, **changes: object
+) -> KnownRequest | None:
+    """usual_exchange_for where every condition holds, but for *changes*."""
+
+    class _Link:
+        loop = object()  # a push stream's link has one
+
+    conditions: dict[str, object] = {
+        "enabled": True,
+        "line_free": True,
+        "guard_pending": False,
+        "fail_fast_offline": False,
+        "link": _Link(),
+        "machine": MasterMachine(),
+    }
+    conditions.update(changes)
+    if request is None:
+        request = ReadHoldingRegistersRequest(0, 2)
+    return usual_exchange_for(unit, request, **conditions)  # type: ignore[arg-type]
+
+
+class _NoLoop:
+    loop = None
+
+
+def _busy_machine() -> MasterMachine:
+    machine = MasterMachine()
+    machine.begin(Transaction(1, ReadHoldingRegistersRequest(0, 2), 1.0))
+    machine.sent(0.0, 0.004)  # waiting for its reply
+    return machine
+
+
+VETOES: dict[str, dict[str, object]] = {
+    "switched off": {"enabled": False},
+    "no read callback": {"link": _NoLoop()},
+    "line held or waited for": {"line_free": False},
+    "late-reply guard pending": {"guard_pending": True},
+    "fail fast on offline units": {"fail_fast_offline": True},
+    "machine not idle": {"machine": _busy_machine()},
+    "machine observed": {"machine": MasterMachine(on_transition=lambda *step: None)},
+    "not a register read": {"request": WriteSingleRegisterRequest(0, 1)},
+    "a broadcast": {"unit": 0},
+}
+
+
+def test_the_usual_exchange_runs_where_every_condition_holds() -> None:
+    known = _predicate_case()
+    assert isinstance(known, KnownRequest)
+    assert known.reply_shape == (bytes((1, 3, 4)), 9)
+
+
+@pytest.mark.parametrize("change", VETOES.values(), ids=VETOES.keys())
+def test_each_condition_of_the_usual_exchange_alone_keeps_it_off(
+    change: dict[str, object],
+) -> None:
+    assert _predicate_case(**change) is None

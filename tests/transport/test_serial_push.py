@@ -214,8 +214,9 @@ async def test_expected_requests_go_to_their_callback_until_stopped() -> None:
         (["0103020007"], [7], 0, 1),
         # Split in two chunks: the receiver assembles it as usual.
         (["01030200|07"], [7], 0, 0),
-        # Another unit first, then ours.
-        (["0203020009", "0103020007"], [7], 1, 1),
+        # Another unit first, then ours: the machine has taken the read over, and its
+        # table takes the reply.
+        (["0203020009", "0103020007"], [7], 1, 0),
         # An exception reply.
         (["018302"], aiortu.ExceptionResponse, 0, 0),
     ],

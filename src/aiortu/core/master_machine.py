@@ -10,6 +10,7 @@ The machine follows the master diagram of the serial line spec::
     PROCESSING_REPLY    does the frame answer us?  -- yes -->                 IDLE
                                                    -- stale, other unit -->   WAITING_REPLY
                                                    -- an exception reply -->  PROCESSING_ERROR
+                                                   -- ours, misshapen -->     PROCESSING_ERROR
     PROCESSING_ERROR    retry, give up, or go on   -- retry, give up -->      IDLE
                         waiting                    -- a frame error noted --> WAITING_REPLY
 
@@ -24,8 +25,13 @@ sleeps until :attr:`MasterMachine.deadline`:
   :meth:`MasterMachine.sent`), per attempt.
 * A frame answers the request only when it ended after the request began to go out (older
   frames are stale), comes from the unit asked, carries the request's function code or its
-  exception form, decodes, and passes ``request.check_response``. Anything else is skipped
-  and the wait goes on: on a multi-drop line other units talk too.
+  exception form, decodes, and passes ``request.check_response``. A stale frame, or one
+  from another unit or with another function code, is skipped and the wait goes on: on a
+  multi-drop line other units talk too. A frame from the unit asked with the request's
+  function code that does not decode or does not answer the request (a byte count or an
+  echo that differs) fails the attempt at once with
+  :class:`~aiortu.core.errors.MalformedPDU`: nobody else on the line sends it, and the
+  unit will not send a better one for this attempt.
 * Bytes that fail the CRC or the framing are noted; the wait goes on for a short grace
   (a good frame may follow in the same burst), and if nothing answers, the attempt fails
   with that frame error rather than a plain timeout.
@@ -34,7 +40,8 @@ sleeps until :attr:`MasterMachine.deadline`:
   will refuse again).
 * A register read that gets its usual reply changes nothing in the machine, so a driver
   may run it without the machine and hand it over only if something else happens
-  (:meth:`MasterMachine.usual_exchange`).
+  (:meth:`MasterMachine.usual_exchange`; the async master's driver of that is
+  :mod:`aiortu.master._usual_exchange`).
 
 Time comes in as arguments; the machine never reads a clock.
 """
@@ -107,6 +114,9 @@ class MasterEvent(enum.Enum):
     """The frame is stale, from another unit, or does not answer the request."""
     REPLY_EXCEPTION = "reply exception"
     """The unit answered with an exception response."""
+    REPLY_MALFORMED = "reply malformed"
+    """The unit asked answered with the request's function code, but the reply does not
+    decode or does not answer the request."""
     FRAME_ERROR = "frame error"
     """Bytes arrived that do not make a valid frame."""
     TIMEOUT = "timeout"
@@ -196,6 +206,7 @@ TRANSITIONS: Final[dict[tuple[MasterState, MasterEvent], tuple[MasterState, str]
     (_S.PROCESSING_REPLY, _E.REPLY_OK): (_S.IDLE, "finish_with_reply"),
     (_S.PROCESSING_REPLY, _E.REPLY_UNEXPECTED): (_S.WAITING_REPLY, "skip_frame"),
     (_S.PROCESSING_REPLY, _E.REPLY_EXCEPTION): (_S.PROCESSING_ERROR, "note_exception"),
+    (_S.PROCESSING_REPLY, _E.REPLY_MALFORMED): (_S.PROCESSING_ERROR, "note_malformed_reply"),
     (_S.PROCESSING_ERROR, _E.ERROR_NOTED): (_S.WAITING_REPLY, "shorten_wait"),
     (_S.PROCESSING_ERROR, _E.RETRY): (_S.IDLE, "prepare_retry"),
     (_S.PROCESSING_ERROR, _E.GIVE_UP): (_S.IDLE, "finish_with_failure"),
@@ -297,14 +308,6 @@ class MasterMachine:
         """
         return (self._entry or self._known()).frame
 
-    @property
-    def usual_reply(self) -> tuple[bytes, int] | None:
-        """The first bytes and the length of the usual reply to the transaction in
-        progress, where it has one (a register read's: unit, function code, byte count);
-        else None. A link can spot that frame without decoding it
-        (:meth:`aiortu.line._link.Link.expect`) and hand it to :meth:`take_usual_reply`."""
-        return (self._entry or self._known()).reply_shape
-
     def _known(self) -> KnownRequest:
         """What the machine remembers of the request in progress (see :attr:`frame`)."""
         transaction = self._current
@@ -370,33 +373,6 @@ class MasterMachine:
         known.last_reply = frame
         known.last_response = response
         return response
-
-    def take_usual_reply(self, frame: bytes, end: float) -> Response | None:
-        """Finish the transaction with *frame*, a whole frame with a good CRC that ended
-        at *end* and has the shape :attr:`usual_reply` gives; return its response.
-
-        This is :meth:`frame_received` for that frame in one step: the table's
-        REPLY_RECEIVED and REPLY_OK. None, with nothing changed, where that does not
-        apply (not waiting, a frame from before the request, a transition observer, or
-        another shape): then call :meth:`frame_received`.
-        """
-        transaction = self.transaction
-        entry = self._entry
-        shape = None if entry is None else entry.reply_shape
-        if (
-            shape is None
-            or self.state is not MasterState.WAITING_REPLY
-            or self._on_transition is not None
-            or transaction is None
-            or len(frame) != shape[1]
-            or not frame.startswith(shape[0])
-            or end < transaction.attempt_start
-        ):
-            return None
-        assert entry is not None
-        self.state = _USUAL_REPLY_TARGET
-        self.deadline = None
-        return self.usual_response(entry, frame)
 
     def sent(self, start: float, end: float) -> float:
         """The request began to go out at *start* and left the wire at *end*.
@@ -511,10 +487,8 @@ class MasterMachine:
                 if not isinstance(response, ExceptionPDU):
                     request.check_response(response)
             except MalformedPDU as error:
-                # From our unit with our function code, yet wrong: remember it, so that
-                # if nothing better comes the caller hears why rather than "timeout".
-                transaction.frame_error = error
-                reason = SkipReason.MALFORMED
+                self._fire(_E.REPLY_MALFORMED, error)
+                return
         if reason is not None:
             self._fire(_E.REPLY_UNEXPECTED, reason)
         elif isinstance(response, ExceptionPDU):
@@ -566,6 +540,12 @@ class MasterMachine:
         assert isinstance(end, float | int)
         assert self.deadline is not None
         self.deadline = min(self.deadline, end + self.frame_error_grace)
+
+    def _note_malformed_reply(self, error: object) -> None:
+        assert isinstance(error, MalformedPDU)
+        # The unit asked answered, wrongly: waiting longer brings nothing better.
+        self._current.frame_error = error
+        self._note_attempt_failed(None)
 
     def _note_attempt_failed(self, _: object) -> None:
         transaction = self._current

@@ -137,8 +137,6 @@ class SkipReason(enum.StrEnum):
     """It comes from another unit."""
     OTHER_FUNCTION = "other function"
     """Its function code is neither the request's nor its exception form."""
-    MALFORMED = "malformed"
-    """It does not decode, or does not answer the request (count, echo)."""
 
 
 class OutcomeKind(enum.Enum):

@@ -2,23 +2,26 @@
 whoever waits for its result.
 
 :class:`~aiortu.master._engine.LineEngine` queues a :class:`Job` for each transaction
-that must wait for the line (lower *priority* first, then in order of arrival) and hands
-the line to the first one by setting its :attr:`Job.turn`. The job ends with
-:meth:`Job.finish`, which tells whoever waits: the caller's task through the same event,
-or, for a usual exchange the machine took over, the caller's future
-(:attr:`Job.caller`).
+that must wait for the line (lower *priority* first, then in order of arrival) in its
+:class:`JobQueue`, which hands the line to the first one by setting its
+:attr:`Job.turn`. The job ends with :meth:`Job.finish`, which tells whoever waits: the
+caller's task through the same event, or, for a usual exchange the machine took over,
+the caller's future (:attr:`Job.caller`).
 """
 
 from __future__ import annotations
 
 import asyncio
+import heapq
+import itertools
 
 import anyio
 
 from aiortu.core.master_transaction import Transaction
 from aiortu.core.pdu import ExceptionPDU, Response
+from aiortu.errors import ConnectionLost
 
-__all__ = ("Job", "JobResult")
+__all__ = ("Job", "JobQueue", "JobResult")
 
 JobResult = Response | ExceptionPDU | None
 """What a transaction returns: the response, the exception response, or nothing (a
@@ -52,12 +55,27 @@ class Job:
         self.response: JobResult = None
         self.error: Exception | None = None
         self.caller: asyncio.Future[JobResult] | None = None
-        """The future of a usual exchange's caller, for a job the machine took over: the
-        line task runs the job, and :meth:`finish` completes the future (see
-        :meth:`~aiortu.master._engine.LineEngine.submit_request`)."""
+        """The future of a usual exchange's caller, for a job the machine took over (see
+        :attr:`taken_over`)."""
 
     def __lt__(self, other: Job) -> bool:
         return (self.priority, self.sequence) < (other.priority, other.sequence)
+
+    @property
+    def taken_over(self) -> bool:
+        """Whether the job is a usual exchange the machine took over: the line task runs
+        the whole transaction for a caller who awaits :attr:`caller`. Not to be confused
+        with a job *adopted* by the line task, whose caller is gone and whose attempt on
+        the wire is only finished, never retried."""
+        return self.caller is not None
+
+    def take_over(self, caller: asyncio.Future[JobResult]) -> None:
+        """Make this the job of a usual exchange whose caller awaits *caller*."""
+        self.caller = caller
+        if caller.done():
+            self.transaction.abandoned = True  # cancelled already: no retries
+        else:
+            caller.add_done_callback(self.on_caller_done)
 
     def finish(self, response: JobResult, error: Exception | None) -> None:
         """End the job with *response* or *error*, and tell whoever waits for it."""
@@ -80,3 +98,48 @@ class Job:
         """The caller's future is done: if cancelled, the caller is gone (no retries)."""
         if caller.cancelled():
             self.transaction.abandoned = True
+
+
+class JobQueue:
+    """Who holds the line (:attr:`busy`) and who waits for it: lower priority first, then
+    in order of arrival."""
+
+    __slots__ = ("_sequence", "busy", "waiting")
+
+    def __init__(self) -> None:
+        self.waiting: list[Job] = []
+        """The queued jobs, a heap (read it; change it through the methods)."""
+        self._sequence = itertools.count()
+        self.busy = False
+        """The line belongs to a transaction (running, handed over, or left to the line
+        task)."""
+
+    def new_job(self, transaction: Transaction, priority: int) -> Job:
+        """A job for *transaction*, next in order of arrival among equal priorities."""
+        return Job(transaction, priority, next(self._sequence))
+
+    def push(self, job: Job) -> None:
+        """Queue *job* (it has its :attr:`Job.turn`)."""
+        heapq.heappush(self.waiting, job)
+
+    def grant_next(self) -> None:
+        """Hand the line to the first job whose caller still waits, or mark it free."""
+        heap = self.waiting
+        while heap:
+            job = heapq.heappop(heap)
+            if job.transaction.abandoned:
+                continue  # its caller was cancelled while queued
+            self.busy = True
+            job.granted = True
+            assert job.turn is not None
+            job.turn.set()
+            return
+        self.busy = False
+
+    def fail_all(self, why: str) -> None:
+        """Fail every queued job with ConnectionLost(*why*)."""
+        heap = self.waiting
+        while heap:
+            job = heapq.heappop(heap)
+            if not job.done:
+                job.finish(None, ConnectionLost(why))

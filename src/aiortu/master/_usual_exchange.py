@@ -1,0 +1,160 @@
+"""The usual exchange: the master's fast path, in one place.
+
+A register read on an idle serial line usually goes like this: the request goes out, the
+unit's reply comes back whole in one chunk with a good CRC, and the transaction is over.
+Run through the master machine, that reply takes SEND_UNICAST, REPLY_RECEIVED and REPLY_OK
+and leaves the machine IDLE with nothing to remember, so the engine may run it without
+the machine:
+
+1. :func:`usual_exchange_for` says whether the shortcut may run: every condition is
+   named there, and nowhere else.
+2. :func:`send_usual_exchange` sends the request at once (no wait, no yield) and returns
+   the :class:`UsualExchange` on the wire, whose :attr:`~UsualExchange.caller` future the
+   caller awaits. The engine asks the link to hand the usual reply (its first bytes and
+   length) straight from the read callback
+   (:meth:`~aiortu.line._link.Link.expect`).
+3. That reply ends it (:meth:`UsualExchange.on_reply`, called by the link): it is
+   decoded and counted, the line handed on, and the future completed. The caller's
+   task is woken once, and no coroutine of the engine runs.
+4. Anything else (another frame, bad bytes, the response timeout, the line lost) makes
+   the machine take the attempt over (:func:`take_over`): it begins the transaction
+   and is told the request went out when it did, so it knows everything it would have
+   known had it sent the request itself, and the engine's line task runs the rest
+   (retries, the late-reply guard, statistics) for the caller.
+
+So a reply ends a transaction by one of two routes: the usual reply here, or the table
+of :class:`~aiortu.core.master_machine.MasterMachine`. The differential tests run the
+same scenarios with the shortcut on and off and compare results, statistics and bytes on
+the wire.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from aiortu.core.master_machine import KnownRequest, MasterMachine
+from aiortu.core.master_transaction import RetryPolicy, Transaction
+from aiortu.core.pdu import Request
+from aiortu.line._link import Link
+from aiortu.master._job import Job, JobQueue, JobResult
+from aiortu.master._stats import UnitStats
+
+__all__ = (
+    "UsualExchange",
+    "send_usual_exchange",
+    "take_over",
+    "usual_exchange_for",
+)
+
+
+@dataclass(slots=True, eq=False)
+class UsualExchange:
+    """A register read on the wire, run without the machine (see the module docstring)."""
+
+    caller: asyncio.Future[JobResult]
+    """What the caller awaits: completed with the response, or by the line task after
+    :func:`take_over`; cancelled if the caller is."""
+    known: KnownRequest
+    """What the machine remembers of the request: its frame, its reply's shape."""
+    stats: UnitStats
+    """The unit's statistics (its request is counted already)."""
+    timeout: float
+    """The response timeout, from :attr:`end`."""
+    policy: RetryPolicy
+    """How a failed attempt is retried, once the machine has taken it over."""
+    priority: int
+    """The caller's priority, should the machine take it over."""
+    start: float
+    """When the request began to go out (the link's clock)."""
+    end: float
+    """When it had left the wire."""
+    done: Callable[[], None]
+    """What the engine does once the usual reply came: hand the line on."""
+
+    def on_reply(self, frame: bytes, end: float) -> None:
+        """The link's read callback: *frame*, the usual reply (its shape matched, its CRC
+        checked), ended at *end*. Count it, hand the line on, complete the future."""
+        response = MasterMachine.usual_response(self.known, frame)
+        self.stats.count_success(end - self.start)
+        self.done()
+        caller = self.caller
+        if not caller.done():  # done: cancelled; the reply is counted all the same
+            caller.set_result(response)
+
+
+def usual_exchange_for(
+    unit: int,
+    request: Request,
+    *,
+    enabled: bool,
+    line_free: bool,
+    guard_pending: bool,
+    fail_fast_offline: bool,
+    link: Link,
+    machine: MasterMachine,
+) -> KnownRequest | None:
+    """What the machine remembers of *request* to *unit* where the usual exchange may run
+    for it; else None, and the transaction goes through the machine.
+
+    One more condition is tried rather than asked: the link must let the request go at
+    once (:meth:`~aiortu.line._link.Link.send_now`; see :func:`send_usual_exchange`).
+    """
+    if not (
+        # The engine's switch: off, every transaction goes through the machine.
+        enabled
+        # The reply is handed over by the link's read callback: a stream that pushes its
+        # bytes (a serial port) has one, and an event loop for the caller's future.
+        and link.loop is not None
+        # Nobody holds the line or waits for it, and the line task serves it (it runs
+        # what the machine takes over).
+        and line_free
+        # After a failed attempt the late-reply guard comes first: the machine's route
+        # keeps it.
+        and not guard_pending
+        # Requests to offline units may be refused, which the machine's route decides.
+        and not fail_fast_offline
+    ):
+        return None
+    # The machine is IDLE (nothing in flight to take over), has no transition observer
+    # (it must see every transition), and the request is a register read to one unit
+    # (its reply has a fixed shape, spotted without decoding).
+    return machine.usual_exchange(unit, request)
+
+
+def send_usual_exchange(
+    link: Link,
+    known: KnownRequest,
+    stats: UnitStats,
+    *,
+    timeout: float,
+    policy: RetryPolicy,
+    priority: int,
+    done: Callable[[], None],
+) -> UsualExchange | None:
+    """Send *known*'s request now and return the exchange on the wire, or None (nothing
+    sent) where the line asks for a wait (see :meth:`~aiortu.line._link.Link.send_now`)."""
+    frame = known.frame
+    end = link.send_now(frame)
+    if end is None:
+        return None
+    start = end - len(frame) * link.char_time
+    caller = link.loop.create_future()
+    return UsualExchange(caller, known, stats, timeout, policy, priority, start, end, done)
+
+
+def take_over(exchange: UsualExchange, machine: MasterMachine, jobs: JobQueue) -> Job:
+    """Hand *exchange*'s attempt, begun and on the wire, to *machine*; return the job the
+    line task runs for the caller (see :attr:`Job.taken_over`).
+
+    A caller already gone (its future cancelled) leaves the transaction abandoned: the
+    attempt is finished, not retried.
+    """
+    known = exchange.known
+    transaction = Transaction(known.frame[0], known.request, exchange.timeout, exchange.policy)
+    machine.begin(transaction)
+    machine.sent(exchange.start, exchange.end)
+    job = jobs.new_job(transaction, exchange.priority)
+    job.take_over(exchange.caller)
+    return job
