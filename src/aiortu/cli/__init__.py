@@ -1,12 +1,12 @@
-"""The ``aiortu`` command: one subcommand per module of this package.
+"""The `aiortu` command: one subcommand per module of this package.
 
-Each public module here (``virtual_bus.py``, ...) defines ``register(subparsers)``, which
-adds its parser and sets ``run`` (a function from the parsed arguments to an exit code)
-as a default. :func:`main` finds the modules by itself, so adding a subcommand means adding
+Each public module here (`virtual_bus.py`, ...) defines `register(subparsers)`, which
+adds its parser and sets `run` (a function from the parsed arguments to an exit code)
+as a default. `main` finds the modules by itself, so adding a subcommand means adding
 one module.
 
 Exit codes: 0 success, 1 a runtime failure (reported on one line), 2 bad arguments (one
-line on stderr, as ``aiortu COMMAND: error: ...``), 130 interrupted before a command could
+line on stderr, as `aiortu COMMAND: error: ...`), 130 interrupted before a command could
 install its own signal handling.
 """
 
@@ -23,7 +23,7 @@ from aiortu.errors import InvalidValue
 __all__ = ("CommandFailed", "Subparsers", "build_parser", "main")
 
 Subparsers: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
-"""The type of the object a command module's ``register`` receives."""
+"""The type of the object a command module's `register` receives."""
 
 Runner = Callable[[argparse.Namespace], int]
 
@@ -31,7 +31,7 @@ Runner = Callable[[argparse.Namespace], int]
 class CommandFailed(Exception):
     """A command could not do its job; the message is shown on one line. Caused by the environment.
 
-    Raised by command modules (a device that cannot be opened, ...); :func:`main` turns
+    Raised by command modules (a device that cannot be opened, ...); `main` turns
     it into exit code 1.
     """
 
@@ -44,7 +44,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 _COMMANDS = ("demo", "monitor", "poll", "read", "scan", "serve", "virtual_bus", "write")
-"""The subcommands, each a private module ``_NAME`` with a ``register(subparsers)``."""
+"""The subcommands, each a private module `_NAME` with a `register(subparsers)`."""
 
 
 def _command_modules() -> list[str]:
@@ -52,7 +52,7 @@ def _command_modules() -> list[str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Return the parser of the ``aiortu`` command, with every subcommand registered."""
+    """Return the parser of the `aiortu` command, with every subcommand registered."""
     from aiortu import __version__
 
     parser = _Parser(
@@ -68,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the ``aiortu`` command with *argv* (default: ``sys.argv[1:]``); return the exit code."""
+    """Run the `aiortu` command with `argv` (default: `sys.argv[1:]`); return the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
     run: Runner = args.run

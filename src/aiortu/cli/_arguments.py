@@ -1,5 +1,5 @@
 """The argument types every command shares: each turns a command-line string into a value
-or raises :class:`argparse.ArgumentTypeError` naming the problem, which argparse prints
+or raises `argparse.ArgumentTypeError` naming the problem, which argparse prints
 with the option's name before exiting with code 2."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ __all__ = ("address", "positive_int", "probability", "seconds", "seconds_or_zero
 
 
 def address(text: str) -> int:
-    """An address or a count: decimal or ``0x`` hex."""
+    """An address or a count: decimal or `0x` hex."""
     try:
         value = int(text, 16) if text.lower().startswith("0x") else int(text, 10)
     except ValueError:
@@ -21,7 +21,7 @@ def address(text: str) -> int:
 
 
 def positive_int(text: str) -> int:
-    """An integer >= 1, decimal or ``0x`` hex."""
+    """An integer >= 1, decimal or `0x` hex."""
     value = address(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1: {text!r}")

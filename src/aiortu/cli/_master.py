@@ -1,4 +1,4 @@
-"""What the master's commands (``read``, ``write``, ``poll``) share: line options, number
+"""What the master's commands (`read`, `write`, `poll`) share: line options, number
 parsing, opening the master, and turning failures into one line and an exit code.
 
 Exit codes of those commands:
@@ -68,7 +68,7 @@ aiortu and mbpoll side by side (mbpoll -m rtu ...):
 
 
 class UsageError(Exception):
-    """Arguments that do not go together; shown as ``error: ...`` with exit code 2."""
+    """Arguments that do not go together; shown as `error: ...` with exit code 2."""
 
 
 TABLES: dict[str, Table] = {
@@ -77,13 +77,13 @@ TABLES: dict[str, Table] = {
     "input": Table.INPUT_REGISTERS,
     "holding": Table.HOLDING_REGISTERS,
 }
-"""The ``--table`` names and the tables they mean."""
+"""The `--table` names and the tables they mean."""
 
 TABLE_NAMES: dict[Table, str] = {table: name for name, table in TABLES.items()}
 
 
 def add_line_options(parser: argparse.ArgumentParser) -> None:
-    """Add the port argument and ``--baudrate --parity --stopbits --timeout --retries``."""
+    """Add the port argument and `--baudrate --parity --stopbits --timeout --retries`."""
     parser.add_argument("port", metavar="PORT", help="a serial device path or rtu+tcp://host:port")
     line = parser.add_argument_group("line settings")
     line.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
@@ -99,7 +99,7 @@ def add_line_options(parser: argparse.ArgumentParser) -> None:
 
 @asynccontextmanager
 async def open_from_args(args: argparse.Namespace, **options: object) -> AsyncIterator[Master]:
-    """Open a master on ``args.port`` with the line options of *args*; no reconnecting."""
+    """Open a master on `args.port` with the line options of `args`; no reconnecting."""
     async with open_master(
         args.port,
         baudrate=args.baudrate,
@@ -130,7 +130,7 @@ def _describe(error: BaseException) -> tuple[int, str]:
 
 
 def run_master(args: argparse.Namespace, body: Callable[[], Awaitable[int]]) -> int:
-    """Run *body* in an event loop; print a failure as one line on stderr, return the code."""
+    """Run `body` in an event loop; print a failure as one line on stderr, return the code."""
     prog = f"aiortu {args.command}"
     try:
         return anyio.run(body)

@@ -1,9 +1,9 @@
-"""``aiortu serve``: simulate the devices a TOML file describes on a serial port.
+"""`aiortu serve`: simulate the devices a TOML file describes on a serial port.
 
-Reads the description (see :mod:`aiortu.slave._config`), opens the port, and serves the
+Reads the description (see [`aiortu.slave`][aiortu.slave]), opens the port, and serves the
 units until SIGINT or SIGTERM (exit 0). A bad file is one line on stderr naming the file,
 the key and the problem (exit 2); a port that cannot be opened is one line (exit 1).
-``--trace`` logs every frame on stderr, in hex, with its meaning.
+`--trace` logs every frame on stderr, in hex, with its meaning.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ failed; 2 bad arguments or a bad configuration file (one line naming file, key, 
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``serve`` subcommand to *subparsers*."""
+    """Add the `serve` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "serve",
         help="simulate Modbus RTU devices described in a TOML file",

@@ -1,10 +1,12 @@
-"""What the master's state machine works on and answers with: one transaction to one
-unit (:class:`Transaction`), how its failed attempts are retried (:class:`RetryPolicy`),
-and the machine's answer to each event (:class:`Outcome`).
+"""What the master's state machine works on and answers with: one transaction to one unit
+([`Transaction`][aiortu.core.master_transaction.Transaction]), how its failed attempts are retried
+([`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy]), and the machine's answer to each
+event ([`Outcome`][aiortu.core.master_transaction.Outcome]).
 
-Sans-IO, like :mod:`aiortu.core.master_machine`, which drives these; the async master
-(:mod:`aiortu.master._engine`) makes a :class:`Transaction` per request and acts on each
-:class:`Outcome`.
+Sans-IO, like [`aiortu.core.master_machine`][aiortu.core.master_machine], which drives these; the
+async master ([`aiortu.master`][aiortu.master]) makes a
+[`Transaction`][aiortu.core.master_transaction.Transaction] per request and acts on each
+[`Outcome`][aiortu.core.master_transaction.Outcome].
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ __all__ = (
 
 
 class Failure(enum.Enum):
-    """The kinds of failed attempt a :class:`RetryPolicy` can retry."""
+    """The kinds of failed attempt a [`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy] can
+    retry."""
 
     TIMEOUT = "timeout"
     """No reply within the response timeout."""
@@ -50,9 +53,9 @@ DEFAULT_RETRY_ON: Final[frozenset[Failure | int]] = frozenset(
 class RetryPolicy:
     """How often a failed attempt is repeated, and after which failures.
 
-    *retries* is the number of extra attempts (0 sends once). *retry_on* holds
-    :class:`Failure` members and, to retry exception responses too, exception codes
-    (``ExceptionCode.SERVER_DEVICE_BUSY``, for instance).
+    `retries` is the number of extra attempts (0 sends once). `retry_on` holds
+    [`Failure`][aiortu.core.master_transaction.Failure] members and, to retry exception responses
+    too, exception codes (`ExceptionCode.SERVER_DEVICE_BUSY`, for instance).
     """
 
     retries: int = 2
@@ -65,7 +68,7 @@ class RetryPolicy:
 
     @classmethod
     def of(cls, retries: int, retry_on: Collection[Failure | int] | None = None) -> RetryPolicy:
-        """A policy from the usual arguments; *retry_on* ``None`` means the default."""
+        """A policy from the usual arguments; `retry_on` `None` means the default."""
         return cls(retries, DEFAULT_RETRY_ON if retry_on is None else frozenset(retry_on))
 
 
@@ -86,20 +89,22 @@ class OutcomeKind(enum.Enum):
     """What the caller of the machine does next."""
 
     WAIT = "wait"
-    """Keep waiting until :attr:`~aiortu.core.master_machine.MasterMachine.deadline`."""
+    """Keep waiting until [`deadline`][aiortu.core.master_machine.MasterMachine.deadline]."""
     DONE = "done"
-    """The transaction is over: :attr:`Outcome.response` (or ``None`` without reply)."""
+    """The transaction is over: [`Outcome.response`][aiortu.core.master_transaction.Outcome] (or
+    `None` without reply)."""
     RETRY = "retry"
-    """Send :attr:`~aiortu.core.master_machine.MasterMachine.frame` again, then call
-    :meth:`~aiortu.core.master_machine.MasterMachine.sent`."""
+    """Send [`frame`][aiortu.core.master_machine.MasterMachine.frame] again, then call
+    [`sent`][aiortu.core.master_machine.MasterMachine.sent]."""
     FAILED = "failed"
-    """The transaction is over: raise :attr:`Outcome.error`."""
+    """The transaction is over: raise [`Outcome.error`][aiortu.core.master_transaction.Outcome]."""
 
 
 @dataclass(slots=True)
 class Outcome:
-    """The machine's answer to an event; see :class:`OutcomeKind`. Read it, do not change
-    it (not frozen: one is made per reply, and a frozen dataclass takes twice as long)."""
+    """The machine's answer to an event; see
+    [`OutcomeKind`][aiortu.core.master_transaction.OutcomeKind]. Read it, do not change it (not
+    frozen: one is made per reply, and a frozen dataclass takes twice as long)."""
 
     kind: OutcomeKind
     response: Response | ExceptionPDU | None = None
@@ -111,10 +116,10 @@ class Outcome:
 class Transaction:
     """One request to one unit, and what happened to it so far.
 
-    *expects_reply* is false for broadcasts and for requests a device never answers
-    (diagnostics 04, force listen-only mode); those wait *turnaround* seconds instead.
-    Set :attr:`abandoned` when the caller is gone: the attempt in flight finishes (so
-    that its reply cannot reach a later request) but is not retried.
+    `expects_reply` is false for broadcasts and for requests a device never answers (diagnostics 04,
+    force listen-only mode); those wait `turnaround` seconds instead. Set
+    [`abandoned`][aiortu.core.master_transaction.Transaction] when the caller is gone: the attempt
+    in flight finishes (so that its reply cannot reach a later request) but is not retried.
     """
 
     unit: int
@@ -142,8 +147,8 @@ class Transaction:
 
 
 def frame_error_from_discard(data: bytes, reason: str) -> FrameError:
-    """The error that discarded bytes stand for: :class:`CRCError` when a CRC is there to
-    compare, else :class:`FrameError` with *reason*."""
+    """The error that discarded bytes stand for: [`CRCError`][aiortu.errors.CRCError] when a CRC is
+    there to compare, else [`FrameError`][aiortu.errors.FrameError] with `reason`."""
     if reason == "crc" and len(data) >= 4:
         return CRCError(data[-2] | data[-1] << 8, crc16(data[:-2]))
     return FrameError(

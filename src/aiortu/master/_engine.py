@@ -1,44 +1,43 @@
 """The master's line: one transaction at a time on one line, for any number of callers.
 
-:class:`LineEngine` owns a :class:`~aiortu.line._link.Link` and runs the sans-IO
-:class:`~aiortu.core.master_machine.MasterMachine` on it. Callers hand it
-:class:`~aiortu.core.master_transaction.Transaction` objects through :meth:`LineEngine.submit`.
+`LineEngine` owns a [`Link`][aiortu.line.Link] and runs the sans-IO
+[`MasterMachine`][aiortu.core.master_machine.MasterMachine] on it. Callers hand it
+[`Transaction`][aiortu.core.master_transaction.Transaction] objects through `LineEngine.submit`.
 
-The line belongs to one transaction at a time, and the transaction runs in the task of
-the caller that submitted it: the caller sends the request and waits for the reply
-itself, so a read on an idle line costs no hand-over between tasks. When the line is
-busy, the caller queues (FIFO, lower *priority* first) and waits for its turn; the
-transaction that ends hands the line straight to the next one in the queue. The link
-hands every frame to the engine (:meth:`~aiortu.line._link.Link.listen`), which wakes the
-waiting transaction directly. On a serial port, the usual reply to a register read (the
-shape :attr:`~aiortu.core.master_machine.MasterMachine.usual_reply` gives) is handed over
-by the link's read callback as it came (:meth:`~aiortu.line._link.Link.expect`) and ends the
-transaction in one step (:meth:`~aiortu.core.master_machine.MasterMachine.take_usual_reply`);
-any other frame goes through the machine's table as usual. On an idle line such a read
-does not even begin in the machine unless something unusual happens
-(:meth:`LineEngine.submit_request`).
+The line belongs to one transaction at a time, and the transaction runs in the task of the caller
+that submitted it: the caller sends the request and waits for the reply itself, so a read on an idle
+line costs no hand-over between tasks. When the line is busy, the caller queues (FIFO, lower
+*priority* first) and waits for its turn; the transaction that ends hands the line straight to the
+next one in the queue. The link hands every frame to the engine
+([`listen`][aiortu.line.Link.listen]), which wakes the waiting transaction directly. On a serial
+port, the usual reply to a register read (the shape
+[`usual_reply`][aiortu.core.master_machine.MasterMachine.usual_reply] gives) is handed over by the
+link's read callback as it came ([`expect`][aiortu.line.Link.expect]) and ends the transaction in
+one step ([`take_usual_reply`][aiortu.core.master_machine.MasterMachine.take_usual_reply]); any
+other frame goes through the machine's table as usual. On an idle line such a read does not even
+begin in the machine unless something unusual happens (`LineEngine.submit_request`).
 
 Cancellation never leaves the line half way through an exchange. A caller cancelled
 while queued is dropped; one cancelled before its request began to go out gives the line
 up at once; one cancelled after that leaves its transaction to the engine's line task
-(:meth:`LineEngine.serve`), which finishes the attempt in flight (its reply must not
+(`LineEngine.serve`), which finishes the attempt in flight (its reply must not
 reach a later request) without retries and then hands the line on. So the exchanges on
 the line stay strictly one after the other, exactly as if one task ran them all: the
 line task runs only what a cancelled caller left behind and the usual exchanges the
-machine took over (see :meth:`LineEngine.submit_request`), and notices a dead link.
+machine took over (see `LineEngine.submit_request`), and notices a dead link.
 
-It also keeps :class:`UnitStats` per unit and their health: a unit is offline after
-*offline_after* consecutive failed transactions, and online again after a success. With
-*fail_fast_offline*, a request to an offline unit raises :class:`UnitOffline` at once,
-except for one probe every *probe_interval* seconds.
+It also keeps [`UnitStats`][aiortu.master.UnitStats] per unit and their health: a unit is offline
+after *offline_after* consecutive failed transactions, and online again after a success. With
+*fail_fast_offline*, a request to an offline unit raises [`UnitOffline`][aiortu.errors.UnitOffline]
+at once, except for one probe every *probe_interval* seconds.
 
 When the link fails, the request in flight and the queued ones fail with
-ConnectionLost and :meth:`LineEngine.serve` returns; the
-:class:`~aiortu.master._connection.LineConnection` closes the engine for good or serves it
-again on a reopened link, while :meth:`LineEngine.submit` waits for the line within the
-request's timeout or fails at once (see :attr:`LineEngine.wait_for_reconnect`).
+ConnectionLost and `LineEngine.serve` returns; the
+`LineConnection` closes the engine for good or serves it
+again on a reopened link, while `LineEngine.submit` waits for the line within the
+request's timeout or fails at once (see `LineEngine.wait_for_reconnect`).
 
-:class:`~aiortu.master._client.Master` is the API built on this; see its docstring for the guard
+[`Master`][aiortu.master.Master] is the API built on this; see its docstring for the guard
 against late replies.
 """
 
@@ -82,9 +81,9 @@ _UsualExchange = tuple[
 class LineEngine:
     """The master's side of one line (see the module docstring).
 
-    *late_reply_guard* is the silence, in seconds, kept after a transaction in which an
+    `late_reply_guard` is the silence, in seconds, kept after a transaction in which an
     attempt failed, before the next request goes out: a reply that turns up that late is
-    dropped as stale. *frame_error_grace* is how long a wait goes on after bad bytes.
+    dropped as stale. `frame_error_grace` is how long a wait goes on after bad bytes.
     """
 
     def __init__(
@@ -128,19 +127,19 @@ class LineEngine:
         self._connected.set()
         self.wait_for_reconnect = False
         """Whether requests made while the line is down wait for it to come back (set by
-        :class:`~aiortu.master._connection.LineConnection` when it can reopen the port)."""
+        `LineConnection` when it can reopen the port)."""
         self.fail_fast_reconnect = False
-        """With :attr:`wait_for_reconnect`: raise at once instead of waiting."""
+        """With `wait_for_reconnect`: raise at once instead of waiting."""
         self.transactions = 0
         """Transactions run on the line (abandoned ones included)."""
         self.usual_exchanges = True
         """Whether register reads may run their usual exchange without the machine (see
-        :meth:`submit_request`); false runs every transaction through it."""
+        `submit_request`); false runs every transaction through it."""
 
     # -- the callers' side -----------------------------------------------------------
 
     def unit_stats(self, unit: int) -> UnitStats:
-        """The statistics of *unit* (created empty on first use)."""
+        """The statistics of `unit` (created empty on first use)."""
         stats = self.stats.get(unit)
         if stats is None:
             stats = self.stats[unit] = UnitStats()
@@ -149,12 +148,12 @@ class LineEngine:
     async def submit(
         self, transaction: Transaction, priority: int = 0
     ) -> Response | ExceptionPDU | None:
-        """Run *transaction* when the line is free, and return the reply (``None``
+        """Run `transaction` when the line is free, and return the reply (`None`
         without one).
 
         Raises the transaction's error (ResponseTimeout, FrameError, ConnectionLost) and
-        :class:`UnitOffline` when failing fast. If the caller is cancelled, the request
-        is dropped from the queue or, when in flight, finished without retries.
+        [`UnitOffline`][aiortu.errors.UnitOffline] when failing fast. If the caller is cancelled,
+        the request is dropped from the queue or, when in flight, finished without retries.
         """
         if self._failed is not None:
             raise ConnectionLost(str(self._failed))
@@ -170,7 +169,7 @@ class LineEngine:
         return await self._run(job)
 
     async def _run(self, job: Job) -> Response | ExceptionPDU | None:
-        """Run *job*, which has the line; return its reply."""
+        """Run `job`, which has the line; return its reply."""
         if not job.done:
             try:
                 await self._exchange(job)
@@ -189,21 +188,21 @@ class LineEngine:
         policy: RetryPolicy,
         priority: int = 0,
     ) -> Awaitable[Response | ExceptionPDU | None]:
-        """:meth:`submit` of ``Transaction(unit, request, response_timeout, policy)``, as
+        """`submit` of `Transaction(unit, request, response_timeout, policy)`, as
         an awaitable.
 
         On an idle line with a loop, a register read whose reply comes as usual runs
         without the master machine (see
-        :meth:`~aiortu.core.master_machine.MasterMachine.usual_exchange`): the request
+        [`usual_exchange`][aiortu.core.master_machine.MasterMachine.usual_exchange]): the request
         goes out now, and the return is a future of the link's loop that the link's read
         callback completes with the response, counted, the line handed on. The caller's
         task is woken once, with its result, and no coroutine of the engine runs.
         Anything else that happens while it waits (another frame, bad bytes, the
         timeout, the link failing) hands the attempt in flight to the machine, which
         goes on exactly as if it had sent the request itself, in the line task; that
-        completes the future as :meth:`submit` would return or raise. A caller cancelled
+        completes the future as `submit` would return or raise. A caller cancelled
         meanwhile cancels the future: the attempt is finished without retries and its
-        reply is counted. Set :attr:`usual_exchanges` false to run every transaction
+        reply is counted. Set `usual_exchanges` false to run every transaction
         through the machine.
         """
         link = self.link
@@ -277,7 +276,7 @@ class LineEngine:
         self._wake.set()
 
     async def _wait_turn(self, job: Job) -> None:
-        """Queue *job* and wait until it is handed the line (or failed)."""
+        """Queue `job` and wait until it is handed the line (or failed)."""
         backend = self.link.backend
         turn = job.turn = anyio.Event() if backend is None else backend.create_event()
         heapq.heappush(self._queue, job)
@@ -330,7 +329,7 @@ class LineEngine:
             await self._connected.wait()
 
     async def _wait_connected(self, seconds: float) -> None:
-        """Wait up to *seconds* for the line to come back, else raise ConnectionLost."""
+        """Wait up to `seconds` for the line to come back, else raise ConnectionLost."""
         if not self.wait_for_reconnect:
             raise ConnectionLost("the line is down")
         if self.fail_fast_reconnect:
@@ -356,7 +355,7 @@ class LineEngine:
     # -- the line task ---------------------------------------------------------------
 
     async def run(self) -> None:
-        """Serve :attr:`link` until cancelled or the line fails, then fail every request,
+        """Serve `link` until cancelled or the line fails, then fail every request,
         then and later, with ConnectionLost."""
         try:
             self.close(await self.serve(self.link))
@@ -364,12 +363,12 @@ class LineEngine:
             self.close(ConnectionLost("the master is closed"))
 
     async def serve(self, link: Link) -> ConnectionLost:
-        """Serve the line on *link* (entered by the caller) until it fails; return why.
+        """Serve the line on `link` (entered by the caller) until it fails; return why.
 
         This is the line task: it takes the link's events, finishes the transactions
         that cancelled callers leave behind, and notices a dead link. The request in
         flight and the queued ones fail with the link's ConnectionLost; requests made
-        afterwards wait for the next :meth:`serve` or fail (see :meth:`submit`).
+        afterwards wait for the next `serve` or fail (see `submit`).
         """
         self.link = link
         self._link_closed = False
@@ -401,7 +400,7 @@ class LineEngine:
         return lost
 
     def close(self, error: ConnectionLost) -> None:
-        """Fail every queued request, and every later one, with *error* (first error wins)."""
+        """Fail every queued request, and every later one, with `error` (first error wins)."""
         if self._failed is None:
             self._failed = error
         self._fail_queued(self._failed)
@@ -452,9 +451,9 @@ class LineEngine:
                 job.finish(None, ConnectionLost(str(error)))
 
     async def _exchange(self, job: Job, on_the_wire: bool = False) -> None:
-        """Run *job*'s transaction on the line; the line is the caller's meanwhile.
+        """Run `job`'s transaction on the line; the line is the caller's meanwhile.
 
-        *on_the_wire* is for a usual exchange taken over (see :meth:`submit_request`):
+        `on_the_wire` is for a usual exchange taken over (see `submit_request`):
         the machine has begun the transaction and its first attempt is on the wire.
         """
         transaction = job.transaction

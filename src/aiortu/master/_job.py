@@ -1,12 +1,12 @@
 """A master's unit of work on its line: one transaction, its place in the queue, and
 whoever waits for its result.
 
-:class:`~aiortu.master._engine.LineEngine` queues a :class:`Job` for each transaction
+`LineEngine` queues a `Job` for each transaction
 that must wait for the line (lower *priority* first, then in order of arrival) and hands
-the line to the first one by setting its :attr:`Job.turn`. The job ends with
-:meth:`Job.finish`, which tells whoever waits: the caller's task through the same event,
+the line to the first one by setting its `Job.turn`. The job ends with
+`Job.finish`, which tells whoever waits: the caller's task through the same event,
 or, for a usual exchange the machine took over, the caller's future
-(:attr:`Job.caller`).
+(`Job.caller`).
 """
 
 from __future__ import annotations
@@ -53,14 +53,14 @@ class Job:
         self.error: Exception | None = None
         self.caller: asyncio.Future[JobResult] | None = None
         """The future of a usual exchange's caller, for a job the machine took over: the
-        line task runs the job, and :meth:`finish` completes the future (see
-        :meth:`~aiortu.master._engine.LineEngine.submit_request`)."""
+        line task runs the job, and `finish` completes the future (see
+        `submit_request`)."""
 
     def __lt__(self, other: Job) -> bool:
         return (self.priority, self.sequence) < (other.priority, other.sequence)
 
     def finish(self, response: JobResult, error: Exception | None) -> None:
-        """End the job with *response* or *error*, and tell whoever waits for it."""
+        """End the job with `response` or `error`, and tell whoever waits for it."""
         self.response = response
         self.error = error
         self.done = True

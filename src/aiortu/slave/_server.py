@@ -1,32 +1,32 @@
 """The slave: serves one or many unit addresses on one line from data stores.
 
-:class:`Slave` takes any byte stream (a serial port, a TCP connection to a serial device
-server, a virtual line) and a mapping of unit addresses to data stores::
+[`Slave`][aiortu.slave.Slave] takes any byte stream (a serial port, a TCP connection to a serial
+device server, a virtual line) and a mapping of unit addresses to data stores:
 
     store = aiortu.MemoryStore(holding_registers={0x6B: 3})
     async with aiortu.Slave(stream, {17: store}):
         ...                                   # the slave serves in the background
 
-or ``await slave.serve()`` to serve in the current task. :func:`serve` opens a port or a
-URL first. One line may carry a whole bus of simulated units.
+or `await slave.serve()` to serve in the current task. [`serve`][aiortu.slave.serve] opens a port or
+a URL first. One line may carry a whole bus of simulated units.
 
-Each frame goes through the core's :class:`~aiortu.core.slave_machine.SlaveMachine`,
-which decides what the spec says: frames for other units are dropped and counted, frames
-with a bad CRC never reach it (the link discards and counts them), broadcasts are
-executed by every unit and never answered, and exceptions come in the spec's order
-(01, 03, 02, 04). A request is dispatched by function code to a handler (see
-:mod:`aiortu.slave._handlers`); users register their own with :meth:`Slave.set_handler`,
-including for the user-defined codes 65-72 and 100-110, which arrive as
-:class:`~aiortu.core.pdu.RawPDU`. A handler that raises
-:class:`~aiortu.errors.ExceptionResponse` answers with its code; any other error answers
-04, is logged, and the slave goes on serving. The reply goes out after ``frame_gap`` of
+Each frame goes through the core's [`SlaveMachine`][aiortu.core.slave_machine.SlaveMachine], which
+decides what the spec says: frames for other units are dropped and counted, frames with a bad CRC
+never reach it (the link discards and counts them), broadcasts are executed by every unit and never
+answered, and exceptions come in the spec's order (01, 03, 02, 04). A request is dispatched by
+function code to a handler (see [`aiortu.slave`][aiortu.slave]); users register their own with
+[`Slave.set_handler`][aiortu.slave.Slave.set_handler], including for the user-defined codes 65-72
+and 100-110, which arrive as [`RawPDU`][aiortu.core.pdu.RawPDU]. A handler that raises
+[`ExceptionResponse`][aiortu.errors.ExceptionResponse] answers with its code; any other error
+answers 04, is logged, and the slave goes on serving. The reply goes out after `frame_gap` of
 silence on the line (t3.5 by default; the link keeps it).
 
-Beyond function codes: :meth:`Slave.route` serves an address range of one table with a
-function (see :mod:`aiortu.slave._routes`); :meth:`Slave.before_request` and
-:meth:`Slave.after_request` add hooks around every request; a handler or hook that
-returns a :class:`~aiortu.slave._handlers.Reply` answers late, as another unit, or not at
-all, to test masters. *trace* sees every frame received and sent.
+Beyond function codes: [`Slave.route`][aiortu.slave.Slave.route] serves an address range of one
+table with a function (see [`aiortu.slave`][aiortu.slave]);
+[`Slave.before_request`][aiortu.slave.Slave.before_request] and
+[`Slave.after_request`][aiortu.slave.Slave.after_request] add hooks around every request; a handler
+or hook that returns a [`Reply`][aiortu.slave.Reply] answers late, as another unit, or not at all,
+to test masters. *trace* sees every frame received and sent.
 """
 
 from __future__ import annotations
@@ -70,17 +70,17 @@ __all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback", "serve")
 _log = logging.getLogger(__name__)
 
 BeforeHook = Callable[[Any, RequestContext], Answer]
-"""Called before the handler with (request, context): ``None`` goes on to the handler, a
-response or :class:`~aiortu.slave._handlers.Reply` answers instead of it, and raising
-:class:`~aiortu.errors.ExceptionResponse` refuses the request. May be async."""
+"""Called before the handler with (request, context): `None` goes on to the handler, a
+response or [`Reply`][aiortu.slave.Reply] answers instead of it, and raising
+[`ExceptionResponse`][aiortu.errors.ExceptionResponse] refuses the request. May be async."""
 
 AfterHook = Callable[[Any, RequestContext, HandlerResult], Answer]
-"""Called after the handler with (request, context, its answer): ``None`` keeps the
+"""Called after the handler with (request, context, its answer): `None` keeps the
 answer, anything else replaces it. May be async. Not called when the handler raised."""
 
 TraceCallback = Callable[[str, bytes], object]
-"""Sees the line: ``("received", frame)`` for every frame whose CRC checks (for any
-unit), ``("sent", frame)`` for every reply, ``("discarded", data)`` for bytes dropped."""
+"""Sees the line: `("received", frame)` for every frame whose CRC checks (for any
+unit), `("sent", frame)` for every reply, `("discarded", data)` for bytes dropped."""
 
 _UNIT_RANGE = range(1, 248)
 _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
@@ -88,7 +88,7 @@ _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
 
 class _Taken:
     """A request the read callback took (counted, the machine CHECKING) and left to the
-    serve loop: to answer (*reply* None), or with its *reply* PDU to send."""
+    serve loop: to answer (`reply` None), or with its `reply` PDU to send."""
 
     __slots__ = ("frame", "reply")
 
@@ -100,14 +100,14 @@ class _Taken:
 class Slave:
     """A Modbus RTU slave on one line (see the module docstring).
 
-    *units* maps each unit address (1..247) to its data store. *settings* are the line
-    settings; *frame_gap* is the silence kept before each reply (``None`` for t3.5 of the
-    settings, 0 for lines without a wire such as TCP). *timing* and *frame_silence*
-    configure the receiver (see :mod:`aiortu.core.receiver`). *handlers* adds or replaces
-    handlers by function code, as :meth:`set_handler` does. *clock* is the link's clock.
-    *trace* sees every frame (see :data:`TraceCallback`).
+    `units` maps each unit address (1..247) to its data store. `settings` are the line settings;
+    `frame_gap` is the silence kept before each reply (`None` for t3.5 of the settings, 0 for lines
+    without a wire such as TCP). `timing` and `frame_silence` configure the receiver (see
+    [`aiortu.core.receiver`][aiortu.core.receiver]). `handlers` adds or replaces handlers by
+    function code, as [`set_handler`][aiortu.slave.Slave.set_handler] does. `clock` is the link's
+    clock. `trace` sees every frame (see [`TraceCallback`][aiortu.slave.TraceCallback]).
 
-    Raises :class:`~aiortu.errors.InvalidValue` for a unit address outside 1..247 or a
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a unit address outside 1..247 or a
     function code outside 1..127.
     """
 
@@ -150,7 +150,7 @@ class Slave:
         for function_code, handler in (handlers or {}).items():
             self.set_handler(function_code, handler)
         self.trace = trace
-        """The trace callback, or ``None``."""
+        """The trace callback, or `None`."""
         self._routed: dict[int, RoutedStore] = {}
         self._before: list[BeforeHook] = []
         self._after: list[AfterHook] = []
@@ -172,12 +172,12 @@ class Slave:
     # -- handlers --------------------------------------------------------------------
 
     def set_handler(self, function_code: int, handler: Handler | None) -> None:
-        """Serve *function_code* with *handler*; ``None`` removes it (the code then gets 01).
+        """Serve `function_code` with `handler`; `None` removes it (the code then gets 01).
 
-        The handler is called as ``handler(request, context)`` with the decoded request
-        (a :class:`~aiortu.core.pdu.RawPDU` for codes without a class) and a
-        :class:`~aiortu.slave._handlers.RequestContext`; it returns the response PDU, or
-        ``None`` to send nothing, and may be a coroutine function.
+        The handler is called as `handler(request, context)` with the decoded request
+        (a [`RawPDU`][aiortu.core.pdu.RawPDU] for codes without a class) and a
+        [`RequestContext`][aiortu.slave.RequestContext]; it returns the response PDU, or
+        `None` to send nothing, and may be a coroutine function.
         """
         if function_code not in _FUNCTION_CODE_RANGE:
             raise InvalidValue("function_code", function_code, _FUNCTION_CODE_RANGE)
@@ -188,7 +188,7 @@ class Slave:
         self._build_fast_paths()
 
     def handler(self, function_code: int) -> Callable[[Handler], Handler]:
-        """Decorator form of :meth:`set_handler`."""
+        """Decorator form of [`set_handler`][aiortu.slave.Slave.set_handler]."""
 
         def register(handler: Handler) -> Handler:
             self.set_handler(function_code, handler)
@@ -204,9 +204,9 @@ class Slave:
         *,
         units: Iterable[int] | None = None,
     ) -> None:
-        """Serve *addresses* of *table* with *handler* on *units* (default: every unit).
+        """Serve `addresses` of `table` with `handler` on `units` (default: every unit).
 
-        See :mod:`aiortu.slave._routes`. A later route wins where routes overlap.
+        See [`aiortu.slave`][aiortu.slave]. A later route wins where routes overlap.
         """
         table = Table(table)
         for unit in self.units if units is None else units:
@@ -219,7 +219,7 @@ class Slave:
         self._build_contexts()
 
     def before_request(self, hook: BeforeHook) -> Callable[[], None]:
-        """Call *hook* before each request's handler (see :data:`BeforeHook`).
+        """Call `hook` before each request's handler (see [`BeforeHook`][aiortu.slave.BeforeHook]).
 
         Returns a function that removes the hook.
         """
@@ -227,7 +227,7 @@ class Slave:
         return lambda: self._before.remove(hook) if hook in self._before else None
 
     def after_request(self, hook: AfterHook) -> Callable[[], None]:
-        """Call *hook* after each request's handler (see :data:`AfterHook`).
+        """Call `hook` after each request's handler (see [`AfterHook`][aiortu.slave.AfterHook]).
 
         Returns a function that removes the hook.
         """
@@ -285,7 +285,7 @@ class Slave:
     async def serve(self) -> None:
         """Serve until cancelled.
 
-        Raises :class:`~aiortu.errors.ConnectionLost` when the line fails or closes.
+        Raises [`ConnectionLost`][aiortu.errors.ConnectionLost] when the line fails or closes.
         """
         lost: ConnectionLost | None = None
         async with self.link:
@@ -333,7 +333,7 @@ class Slave:
     async def _serve_frames(self) -> None:
         """Take the link's events and answer the requests, until the link closes.
 
-        The link hands its events to :meth:`_on_link_event` in its reader task. Discards
+        The link hands its events to `_on_link_event` in its reader task. Discards
         and frames for other units are dealt with there at once when nothing is pending
         (they only count), so they never wake this task; a frame for one of our units is
         queued, and this task answers it. It drains the queue before it waits again, so a
@@ -421,12 +421,12 @@ class Slave:
             wake.set()
 
     def _leave(self, taken: _Taken) -> None:
-        """The serve loop finishes *taken*, in order."""
+        """The serve loop finishes `taken`, in order."""
         self._queue.append(taken)
         self._wake_serve_loop()
 
     def _on_whole_request(self, frame: bytes, end: float) -> None:
-        """The link's read callback got *frame*, a whole 8-byte request with a good CRC
+        """The link's read callback got `frame`, a whole 8-byte request with a good CRC
         (see Link.expect_requests): answer it here when a fast path does, counted in one
         step when the reply goes out at once (SlaveMachine.answered_at_once); otherwise
         it is the FrameReceived the receiver would have made, and goes the usual way."""
@@ -457,7 +457,7 @@ class Slave:
         self._reply_at_once(frame, _exception_pdu(frame[1], answer))
 
     def _reply_at_once(self, frame: bytes, reply: bytes) -> None:
-        """Send *reply*, the PDU answering *frame*, now if the line allows it, else leave
+        """Send `reply`, the PDU answering `frame`, now if the line allows it, else leave
         it to the serve loop (the machine is FORMATTING_REPLY or FORMATTING_ERROR)."""
         out = encode_frame(frame[0], reply)
         if self.link.send_now(out) is None:
@@ -513,7 +513,7 @@ class Slave:
             self.machine.no_reply()
 
     def _fast_answer(self, frame: bytes) -> bytes | int | None:
-        """What a fast path (see slave_handlers) answers to *frame*: the reply PDU, or the
+        """What a fast path (see slave_handlers) answers to `frame`: the reply PDU, or the
         exception code it raised (before changing anything); None where none applies
         (hooks, another store, or a request it leaves to the handler). Counts nothing."""
         fast = self._fast_paths.get(frame[1])
@@ -528,7 +528,7 @@ class Slave:
             return error.code
 
     def _count_fast(self, answer: bytes | int) -> None:
-        """Count a fast path's *answer* (the machine is CHECKING)."""
+        """Count a fast path's `answer` (the machine is CHECKING)."""
         self.machine.check_request(supported=True)
         if isinstance(answer, bytes):
             self.machine.processed()
@@ -553,7 +553,7 @@ class Slave:
         await self._send_reply(unit, reply)
 
     async def _send_reply(self, unit: int, reply: bytes | Reply | None) -> None:
-        """Send *reply* (a PDU or a Reply) for *unit*, unless there is none to send."""
+        """Send `reply` (a PDU or a Reply) for `unit`, unless there is none to send."""
         machine = self.machine
         if reply is not None and machine.should_reply:
             if type(reply) is bytes:
@@ -670,13 +670,13 @@ async def serve(
     trace: TraceCallback | None = None,
     **options: Any,
 ) -> AsyncIterator[Slave]:
-    """Open *port_or_url* and serve *units* on it for the duration of the ``async with``.
+    """Open `port_or_url` and serve `units` on it for the duration of the `async with`.
 
-    *port_or_url* is a serial device path or ``rtu+tcp://host:port``; the line settings
-    are the spec's 19200 8E1 by default; *options* go to
-    :func:`aiortu.transport.open_stream` (``exclusive``, ``rs485``, ``local_echo``,
-    ``connect_timeout``). Yields the running :class:`Slave`. Raises the transport's
-    :class:`~aiortu.errors.PortError` subclasses when the port cannot be opened.
+    `port_or_url` is a serial device path or `rtu+tcp://host:port`; the line settings are the spec's
+    19200 8E1 by default; `options` go to
+    [`aiortu.transport.open_stream`][aiortu.transport.open_stream] (`exclusive`, `rs485`,
+    `local_echo`, `connect_timeout`). Yields the running [`Slave`][aiortu.slave.Slave]. Raises the
+    transport's [`PortError`][aiortu.errors.PortError] subclasses when the port cannot be opened.
     """
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     stream = await open_stream(port_or_url, settings, **options)
