@@ -3,8 +3,9 @@
 Public means: each module on the way is public (no part starts with an underscore, and it
 is not a deprecated module left behind by a move), each name a module gives is in its
 `__all__` (or is a public submodule), and an attribute of a class is one without a
-leading underscore that the class has. The guides are README.md and docs/*.md (but for the architecture page); names are
-taken from their code spans and code blocks, including `from aiortu... import ...` lines.
+leading underscore that the class has. The guides are README.md and docs/*.md (but for
+the architecture page); names are taken from their code spans and code blocks, including
+`from aiortu... import ...` lines.
 """
 
 from __future__ import annotations
