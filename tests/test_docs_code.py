@@ -115,9 +115,14 @@ def blocks_of(page: Path) -> list[Block]:
         line = text.count("\n", 0, match.start()) + 1
         before = text[: match.start()].rstrip("\n").rsplit("\n", 1)[-1]
         marker = MARKER.match(before)
-        assert marker, f"{name}:{line}: a python block needs a <!-- test: ... --> line above it"
         code = textwrap.dedent(match.group("code"))
-        block = Block(name, line, code, **_parse_marker(marker.group("spec")))
+        try:
+            assert marker, "a python block needs a <!-- test: ... --> line above it"
+            block = Block(name, line, code, **_parse_marker(marker.group("spec")))
+        except AssertionError as error:
+            # Reported by a test, so that one bad marker does not stop the collection.
+            found.append(Block(name, line, code, kind="unmarked", reason=str(error)))
+            continue
         if block.prints is not None:
             console = re.search(r"```console\n(.*?)```", text[match.end() :], re.S)
             assert console, f"{block.where}: 'prints' needs a console block after it"
@@ -129,6 +134,11 @@ def blocks_of(page: Path) -> list[Block]:
 
 ALL_BLOCKS = [block for page in PAGES for block in blocks_of(page)]
 PAGES_WITH_CODE = sorted({block.page for block in ALL_BLOCKS})
+
+
+def test_every_python_block_says_how_it_is_tested() -> None:
+    problems = [f"{b.where}: {b.reason}" for b in ALL_BLOCKS if b.kind == "unmarked"]
+    assert problems == []
 
 
 def test_the_docs_have_python_blocks_and_most_of_them_run() -> None:
@@ -344,7 +354,7 @@ async def test_the_python_blocks_of_a_page_run(
 
 
 async def run_page_block(page: Page, block: Block, tmp_path: Path) -> None:
-    if block.kind == "compile":
+    if block.kind in ("compile", "unmarked"):
         return
     if block.kind == "pytest":
         run_pytest_block(block, tmp_path)
