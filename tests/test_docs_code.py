@@ -185,7 +185,7 @@ async def in_memory_line(
         if serve is not None:
             await stack.enter_async_context(serve(bus.endpoints[1]))
         master = await stack.enter_async_context(
-            aiortu.Master(bus.endpoints[0], frame_gap=0, timeout=2.0)
+            aiortu.Master(bus.endpoints[0], frame_gap=0, timeout=0.5)
         )
         yield master, bus
 
@@ -302,28 +302,34 @@ async def run_with_context(page: Page, block: Block) -> None:
         await run_block(page, block, namespace, None)
 
 
-def run_pytest_block(block: Block, directory: Path) -> None:
-    # The page's suite: the config of its first pytest block holds for the later ones.
-    lines = block.code.splitlines()
-    if lines and lines[0].startswith("# pyproject.toml:"):
-        config = []
-        for line in lines[1:]:
-            if not line.startswith("# "):
-                break
-            config.append(line.removeprefix("# "))
-        (directory / "pyproject.toml").write_text("\n".join(config) + "\n", encoding="utf-8")
-    test_file = directory / f"test_block_{block.line}.py"
-    test_file.write_text(block.code, encoding="utf-8")
+def run_pytest_blocks(blocks: list[Block], directory: Path) -> None:
+    """Run a page's pytest blocks as one suite: one pytest, which must pass without a warning."""
+    for block in blocks:
+        # The config of the page's first pytest block holds for the later ones.
+        lines = block.code.splitlines()
+        if (
+            lines
+            and lines[0].startswith("# pyproject.toml:")
+            and not (directory / "pyproject.toml").exists()
+        ):
+            config = []
+            for line in lines[1:]:
+                if not line.startswith("# "):
+                    break
+                config.append(line.removeprefix("# "))
+            (directory / "pyproject.toml").write_text("\n".join(config) + "\n", encoding="utf-8")
+        (directory / f"test_block_{block.line}.py").write_text(block.code, encoding="utf-8")
     result = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-W", "error", test_file],
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-W", "error", directory],
         capture_output=True,
         text=True,
         timeout=120,
         check=False,
         cwd=directory,
     )
-    assert result.returncode == 0, f"{block.where}:\n{result.stdout}\n{result.stderr}"
-    assert "warning" not in result.stdout.lower(), f"{block.where}:\n{result.stdout}"
+    where = ", ".join(block.where for block in blocks)
+    assert result.returncode == 0, f"{where}:\n{result.stdout}\n{result.stderr}"
+    assert "warning" not in result.stdout.lower(), f"{where}:\n{result.stdout}"
 
 
 @pytest.mark.parametrize("page_name", PAGES_WITH_CODE)
@@ -357,7 +363,9 @@ async def run_page_block(page: Page, block: Block, tmp_path: Path) -> None:
     if block.kind in ("compile", "unmarked"):
         return
     if block.kind == "pytest":
-        run_pytest_block(block, tmp_path)
+        suite = [b for b in ALL_BLOCKS if b.page == block.page and b.kind == "pytest"]
+        if block is suite[0]:
+            run_pytest_blocks(suite, tmp_path)
         return
     start = page.output.tell()
     await run_with_context(page, block)
