@@ -1,6 +1,6 @@
 """The simulated devices of `aiortu demo` (see `aiortu.cli`): each a
 [`MemoryStore`][aiortu.slave.MemoryStore] that a [`Slave`][aiortu.slave.Slave] serves, the
-`Reading`\\ s a master polls from it, and a simulation step that moves its values.
+`Reading`s a master polls from it, and a simulation step that moves its values.
 
 - `EnergyMeter`: float32 readings in CDAB word order in input registers: voltage
   (30001), current (30007), power (30013) and energy (30343).

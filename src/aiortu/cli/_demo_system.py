@@ -30,7 +30,7 @@ The scenario: after *first_change* seconds, and then every *change_every* second
 master writes the next of *setpoints* to the controller (function 06) and switches the
 pump and fan for heating or cooling (function 0F). Each `Snapshot` carries the
 latest values, a trend per value, the health of each unit, the poll cycle times and the
-recent `DemoEvent`\\ s.
+recent `DemoEvent`s.
 """
 
 from __future__ import annotations

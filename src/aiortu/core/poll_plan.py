@@ -152,7 +152,7 @@ class PointSlice:
 @dataclass(frozen=True, slots=True)
 class PlannedRead:
     """One read request: `count` elements of `table` from `address` on `unit`, and the
-    [`PointSlice`][aiortu.core.poll_plan.PointSlice]\\ s it serves, in address order."""
+    [`PointSlice`][aiortu.core.poll_plan.PointSlice]s it serves, in address order."""
 
     unit: int
     table: Table

@@ -556,7 +556,7 @@ async def open_master(
     The line settings come from `baudrate`, `parity`, `stopbits` and `bytesize`; the other arguments
     are [`Master`][aiortu.master.Master]'s, and `transport_options` go to
     [`aiortu.transport.open_stream`][aiortu.transport.open_stream] (`exclusive`, `rs485`,
-    `local_echo`, `connect_timeout`). Opening errors are [`PortError`][aiortu.errors.PortError]\\ s.
+    `local_echo`, `connect_timeout`). Opening errors are [`PortError`][aiortu.errors.PortError]s.
 
     With `reconnect` (the default) the master reopens the same port with the same
     settings after it disappears (a USB adapter unplugged); see [`Master`][aiortu.master.Master] for

@@ -28,7 +28,7 @@ another device, see `examples/proxy_store.py`); a sync store keeps costing nothi
         server_id=ServerId(b"\x11", True, b"sim"),
     )
 
-Each table is a set of [`Block`][aiortu.slave.Block] s with explicit extents; a read or write whose
+Each table is a set of [`Block`][aiortu.slave.Block]s with explicit extents; a read or write whose
 range is not entirely inside one block gets exception 02, as a device without those addresses
 answers. Tables alias each other by sharing blocks (pass the same [`Block`][aiortu.slave.Block] to
 both, or name the other table). Writes from the master to a read-only range get exception 02 (or the
