@@ -26,8 +26,8 @@ The devices (unit address, register map; see `aiortu.cli`):
   and four discrete inputs (10001-10004): pump and fan feedback that follow their coils
   after a short delay, a door contact that opens and closes at random, and a heartbeat.
 
-The scenario: after *first_change* seconds, and then every *change_every* seconds, the
-master writes the next of *setpoints* to the controller (function 06) and switches the
+The scenario: after `first_change` seconds, and then every `change_every` seconds, the
+master writes the next of `setpoints` to the controller (function 06) and switches the
 pump and fan for heating or cooling (function 0F). Each `Snapshot` carries the
 latest values, a trend per value, the health of each unit, the poll cycle times and the
 recent `DemoEvent`s.

@@ -32,7 +32,7 @@ How a frame's direction is told, in order:
 
 A reply is paired with the request it answers, so that the reply to a read can name the
 addresses it carries. A request that gets no reply stays pending until the next request,
-a frame that looks like its mangled reply, or, with *reply_timeout*, until that long has
+a frame that looks like its mangled reply, or, with `reply_timeout`, until that long has
 passed.
 
 [`describe_frame`][aiortu.core.bus_decoder.describe_frame] describes one frame on its own, for

@@ -6,7 +6,7 @@ protocol address, and for register tables a [`ValueType`][aiortu.core.values.Val
 [`Layout`][aiortu.core.values.Layout], with an optional scale.
 [`plan_reads`][aiortu.core.poll_plan.plan_reads] groups the points by unit and table, sorts them by
 address and merges neighbours into one read when the unused elements between them are at most
-*max_gap* (*max_bit_gap* for coils and discrete inputs) and the merged read stays within the spec's
+`max_gap` (`max_bit_gap` for coils and discrete inputs) and the merged read stays within the spec's
 limits (125 registers, 2000 bits) or smaller ones the caller gives. Each
 [`PlannedRead`][aiortu.core.poll_plan.PlannedRead] knows which slice of its reply belongs to which
 point; [`PlannedRead.decode`][aiortu.core.poll_plan.PlannedRead.decode] turns a reply into values.

@@ -5,7 +5,7 @@ master's `LineEngine` on a [`Link`][aiortu.line.Link]; when
 the link fails, the request in flight and those queued fail with
 [`ConnectionLost`][aiortu.errors.ConnectionLost], and then:
 
-- without an *opener* (a [`Master`][aiortu.master.Master] given a bare stream) or with
+- without an `opener` (a [`Master`][aiortu.master.Master] given a bare stream) or with
   reconnecting off, the master stays failed: every later request raises ConnectionLost;
 - with one (`open_master` passes one that opens the same port with the same settings),
   the port is reopened with exponential backoff, from `delay[0]` doubling up to

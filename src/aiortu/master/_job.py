@@ -2,7 +2,7 @@
 whoever waits for its result.
 
 `LineEngine` queues a `Job` for each transaction
-that must wait for the line (lower *priority* first, then in order of arrival) and hands
+that must wait for the line (lower `priority` first, then in order of arrival) and hands
 the line to the first one by setting its `Job.turn`. The job ends with
 `Job.finish`, which tells whoever waits: the caller's task through the same event,
 or, for a usual exchange the machine took over, the caller's future

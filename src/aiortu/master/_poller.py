@@ -11,28 +11,28 @@
 
 The points are planned once
 ([`aiortu.core.poll_plan.plan_reads`][aiortu.core.poll_plan.plan_reads]): neighbours on the same
-unit and table share one read when the gap between them is at most *max_gap* elements, within the
+unit and table share one read when the gap between them is at most `max_gap` elements, within the
 spec's limits. Points with their own `interval` are polled on their own schedule; each interval has
 its own cycle.
 
 A cycle runs its reads one after the other (the line carries one transaction at a time anyway) and
 delivers one [`Sample`][aiortu.master.Sample] per point: a value, or the error that kept it from
-being read. Samples go to the callbacks given as *on_sample* (and *on_cycle*, once per cycle with
+being read. Samples go to the callbacks given as `on_sample` (and `on_cycle`, once per cycle with
 all its samples) and to `async for sample in poller`; when an iterating consumer falls more than
-*max_pending* samples behind, the oldest are dropped and counted in
+`max_pending` samples behind, the oldest are dropped and counted in
 [`Poller.dropped`][aiortu.master.Poller.dropped].
 
 Dead devices: the master marks a unit offline after `offline_after` consecutive
 failures (see [`Master`][aiortu.master.Master]). The poller then skips the unit's reads,
 delivering samples with [`UnitSkipped`][aiortu.errors.UnitSkipped], except for one probe read every
-*offline_probe_interval* seconds; a probe that succeeds brings the unit back (the
+`offline_probe_interval` seconds; a probe that succeeds brings the unit back (the
 master marks it online) and its other reads go on in the same cycle. Within a cycle, a
 read that fails and leaves the unit offline skips the unit's remaining reads, so one
 dead device costs at most one timeout per cycle, and none between probes. The poller
 does not wait for the master's `offline_after`: a unit whose read failed (no reply, a
 garbled one; not an exception response, which is an answer) is treated as down from the
 next read on, and probes are sent once, without the master's retries. And at most
-*max_probes_per_cycle* offline units (1 by default; `None` for no limit) are probed
+`max_probes_per_cycle` offline units (1 by default; `None` for no limit) are probed
 in one cycle, the one waiting longest first: with many dead devices on a bus, a cycle
 pays for one probe, not for one per dead device, and they take turns.
 """

@@ -26,7 +26,7 @@ table with a function (see [`aiortu.slave`][aiortu.slave]);
 [`Slave.before_request`][aiortu.slave.Slave.before_request] and
 [`Slave.after_request`][aiortu.slave.Slave.after_request] add hooks around every request; a handler
 or hook that returns a [`Reply`][aiortu.slave.Reply] answers late, as another unit, or not at all,
-to test masters. *trace* sees every frame received and sent.
+to test masters. `trace` sees every frame received and sent.
 """
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ Each table is a set of [`Block`][aiortu.slave.Block]s with explicit extents; a r
 range is not entirely inside one block gets exception 02, as a device without those addresses
 answers. Tables alias each other by sharing blocks (pass the same [`Block`][aiortu.slave.Block] to
 both, or name the other table). Writes from the master to a read-only range get exception 02 (or the
-code given as *read_only_exception*). Observers
+code given as `read_only_exception`). Observers
 ([`MemoryStore.observe`][aiortu.slave.MemoryStore.observe] callbacks and
 [`MemoryStore.changes`][aiortu.slave.MemoryStore.changes] async iterators) see every write a master
 makes, so an application can react to it. Reading registers is one list slice.

@@ -29,7 +29,7 @@ configuration of a port always succeeds, with any parity. A second configuration
 the same settings still fails with parity E or O: pyserial's `timeout` setter does this
 (and pymodbus's serial server with it), as does closing and at once reopening the port
 before the relay has seen the close. Programs that reconfigure an open port are best run
-with parity N on a pty bus; the bus paces by its own *settings* anyway.
+with parity N on a pty bus; the bus paces by its own `settings` anyway.
 
 Two ways to relay: on an unpaced bus with no adapter model and no faults, under asyncio,
 the relay reads a port's master from an event-loop reader callback, puts the bytes on the

@@ -11,26 +11,26 @@ The wire model:
   collision in [`VirtualBus.collisions`][aiortu.testing.VirtualBus.collisions] and queues the new
   bytes after the ones on the wire, unchanged, as if the transceiver had waited. A test that wants
   collisions to garble frames adds a [`FaultPlan`][aiortu.testing.FaultPlan].
-- Pacing: with *settings*, bytes leave at the character rate of those line settings:
+- Pacing: with `settings`, bytes leave at the character rate of those line settings:
   byte k of a transmission starting at t0 arrives at `t0 + (k + 1) * char_time`. Due
   times are absolute, so a slow scheduler delays single deliveries but never accumulates
-  drift. Without *settings* the line is unpaced and bytes arrive at once.
-- Adapter chunking: *latency* models the receive timer of a USB serial adapter: bytes are
-  held and handed over *latency* seconds after the first of them arrived, at most
-  *chunk_size* bytes at a time (a full chunk goes at once). Every receiver's adapter runs in
+  drift. Without `settings` the line is unpaced and bytes arrive at once.
+- Adapter chunking: `latency` models the receive timer of a USB serial adapter: bytes are
+  held and handed over `latency` seconds after the first of them arrived, at most
+  `chunk_size` bytes at a time (a full chunk goes at once). Every receiver's adapter runs in
   step, so all see the same chunk boundaries.
 - Faults: one [`FaultInjector`][aiortu.testing.FaultInjector] per bus, applied to each transmission
   as it goes on the wire; every receiver sees the same corrupted bytes, as with noise on
   the cable. Faults are reproducible from the plan's seed, for a given sequence of sends.
-- [`VirtualBus.trace`][aiortu.testing.VirtualBus.trace] keeps the last *trace_size* transmissions
+- [`VirtualBus.trace`][aiortu.testing.VirtualBus.trace] keeps the last `trace_size` transmissions
   with their paced wire times. A transmission that continues the same sender's previous one without
   a pause is merged into its entry, so one entry is one burst on the wire.
-- Receive buffers are bounded (*receive_buffer_size* bytes per endpoint). An endpoint that does not
+- Receive buffers are bounded (`receive_buffer_size` bytes per endpoint). An endpoint that does not
   read loses its oldest bytes, counted in
   [`VirtualEndpoint.overrun_bytes`][aiortu.testing.VirtualEndpoint.overrun_bytes], like a UART
   overrun; it never stalls the bus.
 - Send buffers: on a paced bus [`VirtualEndpoint.send`][aiortu.testing.VirtualEndpoint.send] returns
-  once the bytes are queued, and waits first while more than *send_buffer_size* bytes are waiting
+  once the bytes are queued, and waits first while more than `send_buffer_size` bytes are waiting
   for the wire, like a kernel transmit buffer.
 
 Wake-ups: a receiver waiting for paced bytes sleeps until they are due. asyncio's event

@@ -10,7 +10,7 @@ It runs on any anyio backend.
 
 Errors while connecting are [`PortNotFound`][aiortu.errors.PortNotFound], whatever the cause
 (unknown host, connection refused, unreachable network, or no answer within
-*connect_timeout*), with a message that says which host and port and why: for the caller
+`connect_timeout`), with a message that says which host and port and why: for the caller
 they all mean the same thing, that there is no device server at that address now, and
 that trying again later may work. While running, anyio's stream raises
 `anyio.EndOfStream` from `receive()` when the server closes the connection and
