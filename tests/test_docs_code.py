@@ -218,8 +218,8 @@ class Page:
         code = code.replace('parity="E"', 'parity="N"').replace('"E", 1)', '"N", 1)')
         code = code.replace('"192.168.1.50", 4001', f'"127.0.0.1", {self.tcp_port}')
         code = code.replace("192.168.1.50:4001", f"127.0.0.1:{self.tcp_port}")
-        code = re.sub(r"^anyio\.run\((\w+)\)$", r"await \1()", code, flags=re.M)
-        return re.sub(r"^asyncio\.run\(", "await (", code, flags=re.M)
+        code = re.sub(r"^([ \t]*)anyio\.run\((\w+)\)[ \t]*$", r"\1await \2()", code, flags=re.M)
+        return re.sub(r"^([ \t]*)asyncio\.run\(", r"\1await (", code, flags=re.M)
 
     async def execute(self, block: Block, namespace: dict[str, Any]) -> None:
         code = compile(
