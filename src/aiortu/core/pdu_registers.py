@@ -480,8 +480,9 @@ class ReadFifoQueueResponse(Response):
 class ReadFifoQueueRequest(Request):
     """Read the FIFO queue whose pointer register is at `address` (0..65535).
 
-    The reply holds up to 31 values and reading leaves them queued. Nothing in the request
-    bounds the reply's count, so `check_response` checks the reply's class only.
+    The reply holds up to 31 values and reading leaves them queued. Nothing in the request bounds
+    the reply's count, so [`check_response`][aiortu.core.pdu.Request.check_response] checks the
+    reply's class only.
     """
 
     function_code: ClassVar[int] = FunctionCode.READ_FIFO_QUEUE

@@ -137,8 +137,7 @@ class SerialAttribute(anyio.TypedAttributeSet):
     settings: LineSettings = anyio.typed_attribute()
     """The line settings in force."""
     serial: Any = anyio.typed_attribute()
-    """The underlying [`serial.Serial`][aiortu.transport.SerialAttribute.serial], for modem lines;
-    never read or write it."""
+    """The underlying `serial.Serial`, for modem lines; never read or write it."""
 
 
 _NO_DATA = (
