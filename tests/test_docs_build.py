@@ -106,3 +106,10 @@ def test_the_page_of_top_level_names_lists_what_aiortu_exports(site: Path) -> No
     assert listed == set(aiortu.__all__) - {"__version__"}
     links = re.findall(r'<a class="autorefs[^"]*"[^>]*href="([^"]+)"', rendered(site, "aiortu"))
     assert len(links) >= len(listed)
+
+
+def test_no_page_shows_the_markers_of_the_code_tests(site: Path) -> None:
+    pages = sorted(site.rglob("index.html"))
+    assert len(pages) > 10
+    for page in pages:
+        assert "<!-- test:" not in shown_text(page.read_text(encoding="utf-8")), page
