@@ -119,15 +119,14 @@ def blocks_of(page: Path) -> list[Block]:
         try:
             assert marker, "a python block needs a <!-- test: ... --> line above it"
             block = Block(name, line, code, **_parse_marker(marker.group("spec")))
+            if block.prints is not None:
+                console = re.search(r"```console\n(.*?)```", text[match.end() :], re.S)
+                assert console, "'prints' needs a console block after the python block"
+                shown = [ln for ln in console.group(1).splitlines() if not ln.startswith("$")]
+                block.prints = "\n".join(shown)
         except AssertionError as error:
             # Reported by a test, so that one bad marker does not stop the collection.
-            found.append(Block(name, line, code, kind="unmarked", reason=str(error)))
-            continue
-        if block.prints is not None:
-            console = re.search(r"```console\n(.*?)```", text[match.end() :], re.S)
-            assert console, f"{block.where}: 'prints' needs a console block after it"
-            shown = [ln for ln in console.group(1).splitlines() if not ln.startswith("$")]
-            block.prints = "\n".join(shown)
+            block = Block(name, line, code, kind="unmarked", reason=str(error))
         found.append(block)
     return found
 
@@ -205,7 +204,6 @@ class Page:
     paths: tuple[str, ...]
     tcp_port: int
     group: anyio.abc.TaskGroup
-    stack: contextlib.AsyncExitStack
     output: io.StringIO
     namespace: dict[str, Any] = field(default_factory=lambda: {"__name__": "__docs__"})
     stream_master: aiortu.Master | None = None
@@ -347,7 +345,7 @@ async def test_the_python_blocks_of_a_page_run(
         line, line_bus = await stack.enter_async_context(in_memory_line(None))
         async with anyio.create_task_group() as group:
             group.start_soon(listener.serve, _hold)
-            page = Page(bus.paths, tcp_port, group, stack, output)
+            page = Page(bus.paths, tcp_port, group, output)
             # `stream` is the other end of the line that `line` masters in expectations.
             page.namespace["stream"] = line_bus.endpoints[1]
             page.stream_master = line
