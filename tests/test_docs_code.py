@@ -184,7 +184,7 @@ async def in_memory_line(
         if serve is not None:
             await stack.enter_async_context(serve(bus.endpoints[1]))
         master = await stack.enter_async_context(
-            aiortu.Master(bus.endpoints[0], frame_gap=0, timeout=0.5)
+            aiortu.Master(bus.endpoints[0], frame_gap=0, timeout=1.0)
         )
         yield master, bus
 
