@@ -240,10 +240,21 @@ async def check_expectation(page: Page, block: Block, line: aiortu.Master | None
         expression = compile(
             block.expect, block.where, "eval", flags=ast.PyCF_ALLOW_TOP_LEVEL_AWAIT
         )
-        result = eval(expression, names)
-        if inspect.iscoroutine(result):
-            result = await result
-        assert result, f"{block.where}: expected {block.expect}"
+        # A background block may still be starting (a port opens in a worker thread, a
+        # poller's first cycle runs): evaluate until it holds, within a generous bound.
+        last: object = None
+        with anyio.move_on_after(20):
+            while True:
+                try:
+                    last = eval(expression, names)
+                    if inspect.iscoroutine(last):
+                        last = await last
+                except aiortu.ModbusError as error:
+                    last = error
+                if last is True or (last and not isinstance(last, Exception)):
+                    return
+                await anyio.sleep(0.05)
+        raise AssertionError(f"{block.where}: expected {block.expect}, got {last!r}")
 
 
 async def run_block(page: Page, block: Block, namespace: dict[str, Any], line: Any) -> None:
