@@ -235,7 +235,11 @@ async def check_expectation(page: Page, block: Block, line: aiortu.Master | None
         names = {**page.namespace, "line": line or page.stream_master, "aiortu": aiortu}
         if "port" in block.expect:
             names["port"] = await stack.enter_async_context(
-                aiortu.open_master(page.paths[0], parity="N", timeout=2.0, reconnect=False)
+                # Not exclusive: a port still closing (under load) must not lock out the
+                # next block's program.
+                aiortu.open_master(
+                    page.paths[0], parity="N", timeout=2.0, reconnect=False, exclusive=False
+                )
             )
         expression = compile(
             block.expect, block.where, "eval", flags=ast.PyCF_ALLOW_TOP_LEVEL_AWAIT
@@ -305,7 +309,7 @@ async def run_with_context(page: Page, block: Block) -> None:
             namespace["slave"] = slave[0]
             await run_block(page, block, namespace, master)
     elif block.kind == "program with devices":
-        async with aiortu.serve(page.paths[1], devices(), parity="N"):
+        async with aiortu.serve(page.paths[1], devices(), parity="N", exclusive=False):
             await run_block(page, block, namespace, None)
     else:
         await run_block(page, block, namespace, None)
