@@ -210,9 +210,10 @@ class Page:
     kept: list[anyio.CancelScope] = field(default_factory=list)
 
     def prepare(self, code: str) -> str:
-        for port, names in PORT_NAMES.items():
-            for name in names:
-                code = code.replace(f'"{name}"', f'"{self.paths[port]}"')
+        # One pass: a pty's own path may be one of the names the docs use (/dev/pts/6).
+        ports = {f'"{name}"': port for port, names in PORT_NAMES.items() for name in names}
+        pattern = "|".join(re.escape(name) for name in ports)
+        code = re.sub(pattern, lambda m: f'"{self.paths[ports[m.group(0)]]}"', code)
         code = code.replace('parity="E"', 'parity="N"').replace('"E", 1)', '"N", 1)')
         code = code.replace('"192.168.1.50", 4001', f'"127.0.0.1", {self.tcp_port}')
         code = code.replace("192.168.1.50:4001", f"127.0.0.1:{self.tcp_port}")
