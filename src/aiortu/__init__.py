@@ -1,8 +1,9 @@
 """aiortu: an asyncio Modbus RTU master/slave framework.
 
-See the README and ``docs/`` for the guides; the names they use are re-exported here.
-The packages :mod:`aiortu.master`, :mod:`aiortu.slave`, :mod:`aiortu.testing`,
-:mod:`aiortu.transport`, :mod:`aiortu.line` and :mod:`aiortu.core` hold the rest.
+See the README and `docs/` for the guides; the names they use are re-exported here. The packages
+[`aiortu.master`][aiortu.master], [`aiortu.slave`][aiortu.slave],
+[`aiortu.testing`][aiortu.testing], [`aiortu.transport`][aiortu.transport],
+[`aiortu.line`][aiortu.line] and [`aiortu.core`][aiortu.core] hold the rest.
 """
 
 from __future__ import annotations
@@ -96,8 +97,8 @@ _LAZY: dict[str, str] = {
     "open_master": "aiortu.master",
     "serve": "aiortu.slave",
 }
-"""Where each public name lives: imported on first use, so that ``import aiortu`` (and
-the ``aiortu`` command's ``--help``) does not pay for the whole package."""
+"""Where each public name lives: imported on first use, so that `import aiortu` (and
+the `aiortu` command's `--help`) does not pay for the whole package."""
 
 __version__ = "0.1.0"
 

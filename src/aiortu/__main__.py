@@ -1,4 +1,4 @@
-"""``python -m aiortu``: the same as the ``aiortu`` command."""
+"""`python -m aiortu`: the same as the `aiortu` command."""
 
 from __future__ import annotations
 

@@ -10,8 +10,8 @@ from typing import Any
 
 
 def forward(old: str, home: str, public: str) -> Callable[[str], Any]:
-    """Warn that *old* is deprecated (once: a module is imported once) and return a
-    module ``__getattr__`` that finds each name in *home*; *public* is where users
+    """Warn that `old` is deprecated (once: a module is imported once) and return a
+    module `__getattr__` that finds each name in `home`; `public` is where users
     should import it from now."""
     warnings.warn(
         f"{old} is deprecated; import from {public} instead",

@@ -1,8 +1,8 @@
 """The exceptions aiortu raises, and who causes each of them.
 
-Every error aiortu raises on purpose is a :class:`ModbusError`, so one ``except`` clause
-catches them all. Below it, the tree says who is at fault, which is what the caller
-needs to decide whether to fix their code, retry, or look at the wiring::
+Every error aiortu raises on purpose is a [`ModbusError`][aiortu.errors.ModbusError], so one
+`except` clause catches them all. Below it, the tree says who is at fault, which is what the caller
+needs to decide whether to fix their code, retry, or look at the wiring:
 
     ModbusError                      anything aiortu raises on purpose
     ├── InvalidValue                 (the caller) a field or setting out of its allowed range
@@ -22,11 +22,12 @@ needs to decide whether to fix their code, retry, or look at the wiring::
         ├── PortPermissionDenied     the user may not open the port
         └── UnsupportedSettings      the port or the OS refuses the line settings
 
-A Modbus exception response is not a transport failure: :class:`ExceptionResponse` carries
-the device's :attr:`~ExceptionResponse.code`, a value the caller can inspect and act on,
-while the other branches say the exchange itself failed.
+A Modbus exception response is not a transport failure:
+[`ExceptionResponse`][aiortu.errors.ExceptionResponse] carries the device's
+[`code`][aiortu.errors.ExceptionResponse], a value the caller can inspect and act on, while the
+other branches say the exchange itself failed.
 
-The classes are defined in :mod:`aiortu.core.errors`, because the sans-IO core raises
+The classes are defined in `aiortu.core.errors`, because the sans-IO core raises
 them too and the core imports nothing from the rest of the package; this module is where
 users import them from.
 """

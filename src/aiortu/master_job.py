@@ -1,4 +1,4 @@
-"""Deprecated: moved to :mod:`aiortu.master`. Importing this module warns once."""
+"""Deprecated: moved to [`aiortu.master`][aiortu.master]. Importing this module warns once."""
 
 from aiortu._moved import forward
 

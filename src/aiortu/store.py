@@ -1,4 +1,4 @@
-"""Deprecated: moved to :mod:`aiortu.slave`. Importing this module warns once."""
+"""Deprecated: moved to [`aiortu.slave`][aiortu.slave]. Importing this module warns once."""
 
 from aiortu._moved import forward
 

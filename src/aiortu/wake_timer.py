@@ -1,4 +1,4 @@
-"""Deprecated: moved to :mod:`aiortu.line`. Importing this module warns once."""
+"""Deprecated: moved to [`aiortu.line`][aiortu.line]. Importing this module warns once."""
 
 from aiortu._moved import forward
 

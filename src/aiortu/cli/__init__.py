@@ -1,12 +1,12 @@
-"""The ``aiortu`` command: one subcommand per module of this package.
+"""The `aiortu` command: one subcommand per module of this package.
 
-Each public module here (``virtual_bus.py``, ...) defines ``register(subparsers)``, which
-adds its parser and sets ``run`` (a function from the parsed arguments to an exit code)
-as a default. :func:`main` finds the modules by itself, so adding a subcommand means adding
+Each public module here (`virtual_bus.py`, ...) defines `register(subparsers)`, which
+adds its parser and sets `run` (a function from the parsed arguments to an exit code)
+as a default. `main` finds the modules by itself, so adding a subcommand means adding
 one module.
 
 Exit codes: 0 success, 1 a runtime failure (reported on one line), 2 bad arguments (one
-line on stderr, as ``aiortu COMMAND: error: ...``), 130 interrupted before a command could
+line on stderr, as `aiortu COMMAND: error: ...`), 130 interrupted before a command could
 install its own signal handling.
 """
 
@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 __all__ = ("SUMMARIES", "CommandFailed", "Subparsers", "build_parser", "main")
 
 Subparsers: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
-"""The type of the object a command module's ``register`` receives."""
+"""The type of the object a command module's `register` receives."""
 
 Runner: TypeAlias = "Callable[[argparse.Namespace], int]"
 
@@ -36,21 +36,21 @@ SUMMARIES: dict[str, str] = {
     "virtual-bus": "a virtual RS-485 bus of pseudo-terminals that any program can open",
     "write": "write coils or holding registers of a device once",
 }
-"""Each subcommand's one-line help. Each lives in a private module ``_NAME`` (dashes as
-underscores) with a ``register(subparsers)``; only the command run is imported, so that
-``aiortu --help`` and each command start fast."""
+"""Each subcommand's one-line help. Each lives in a private module `_NAME` (dashes as
+underscores) with a `register(subparsers)`; only the command run is imported, so that
+`aiortu --help` and each command start fast."""
 
 
 class CommandFailed(Exception):
     """A command could not do its job; the message is shown on one line. Caused by the environment.
 
-    Raised by command modules (a device that cannot be opened, ...); :func:`main` turns
+    Raised by command modules (a device that cannot be opened, ...); `main` turns
     it into exit code 1.
     """
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """Return the parser of the ``aiortu`` command: *command* registered in full (every
+    """Return the parser of the `aiortu` command: `command` registered in full (every
     command when None), the others by name and summary only."""
     import argparse
     import importlib
@@ -82,7 +82,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def _plain_choices(message: str) -> str:
-    """argparse's ``invalid choice: 'x' (choose from 'a', 'b')`` in the command's words."""
+    """argparse's `invalid choice: 'x' (choose from 'a', 'b')` in the command's words."""
     import re
 
     found = re.fullmatch(r"(argument \S+: )invalid choice: '?(.*?)'? \(choose from (.*)\)", message)
@@ -93,15 +93,15 @@ def _plain_choices(message: str) -> str:
 
 
 def _command_in(argv: list[str]) -> str | None:
-    """The subcommand *argv* names: its first word that is not an option."""
+    """The subcommand `argv` names: its first word that is not an option."""
     return next((word for word in argv if not word.startswith("-")), None)
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the ``aiortu`` command with *argv* (default: ``sys.argv[1:]``); return the exit code.
+    """Run the `aiortu` command with `argv` (default: `sys.argv[1:]`); return the exit code.
 
     Exit codes: 0 success, 1 a runtime failure (reported on one line), 2 bad arguments
-    (one line on stderr, as ``aiortu COMMAND: error: ...``), 130 interrupted by Ctrl-C
+    (one line on stderr, as `aiortu COMMAND: error: ...`), 130 interrupted by Ctrl-C
     before a command installed its own handling (while starting, for instance), without
     a traceback.
     """

@@ -1,5 +1,5 @@
 """The argument types every command shares: each turns a command-line string into a value
-or raises :class:`argparse.ArgumentTypeError` naming the problem, which argparse prints
+or raises `argparse.ArgumentTypeError` naming the problem, which argparse prints
 with the option's name before exiting with code 2."""
 
 from __future__ import annotations
@@ -32,12 +32,12 @@ _PARITIES = {"n": "N", "none": "N", "e": "E", "even": "E", "o": "O", "odd": "O"}
 
 
 def plural(count: int, noun: str, nouns: str | None = None) -> str:
-    """``1 cycle``, ``2 cycles``: *count* and the noun that goes with it."""
+    """`1 cycle`, `2 cycles`: `count` and the noun that goes with it."""
     return f"{count} {noun if count == 1 else nouns or noun + 's'}"
 
 
 def address(text: str) -> int:
-    """An address or a count: decimal or ``0x`` hex."""
+    """An address or a count: decimal or `0x` hex."""
     value = _integer(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be 0 or more, not {text}")
@@ -45,7 +45,7 @@ def address(text: str) -> int:
 
 
 def positive_int(text: str) -> int:
-    """An integer >= 1, decimal or ``0x`` hex."""
+    """An integer >= 1, decimal or `0x` hex."""
     value = _integer(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be 1 or more, not {text}")
@@ -104,7 +104,7 @@ def _number_of_seconds(text: str) -> float:
 
 
 def parity(text: str) -> str:
-    """A parity: ``N``, ``E`` or ``O``, or ``none``, ``even``, ``odd``, in any case."""
+    """A parity: `N`, `E` or `O`, or `none`, `even`, `odd`, in any case."""
     found = _PARITIES.get(text.strip().lower())
     if found is None:
         raise argparse.ArgumentTypeError(f"must be N, E or O (or none, even, odd), not {text}")
@@ -112,7 +112,7 @@ def parity(text: str) -> str:
 
 
 def add_line_settings(group: argparse._ArgumentGroup) -> None:
-    """Add ``--baudrate``, ``--parity`` and ``--stopbits``; see :func:`resolve_line_settings`."""
+    """Add `--baudrate`, `--parity` and `--stopbits`; see `resolve_line_settings`."""
     group.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
     group.add_argument(
         "--parity",
@@ -131,8 +131,8 @@ def add_line_settings(group: argparse._ArgumentGroup) -> None:
 
 
 def resolve_line_settings(args: argparse.Namespace) -> None:
-    """Fill in the parity and stop bits *args* leave out: the spec's 8E1 on a serial port,
-    8N2 on a pseudo-terminal (such as ``aiortu virtual-bus`` makes), and 2 stop bits
+    """Fill in the parity and stop bits `args` leave out: the spec's 8E1 on a serial port,
+    8N2 on a pseudo-terminal (such as `aiortu virtual-bus` makes), and 2 stop bits
     whenever the parity is N, as the spec says."""
     if args.parity is None:
         args.parity = "N" if is_pty(args.port) else "E"
@@ -141,7 +141,7 @@ def resolve_line_settings(args: argparse.Namespace) -> None:
 
 
 def is_pty(port: str) -> bool:
-    """Whether *port* is the device path of a pseudo-terminal (links followed)."""
+    """Whether `port` is the device path of a pseudo-terminal (links followed)."""
     try:
         device = os.stat(port).st_rdev if stat.S_ISCHR(os.stat(port).st_mode) else None
     except (OSError, ValueError):

@@ -1,8 +1,8 @@
-"""``aiortu demo``: three simulated devices on an in-memory bus, polled live.
+"""`aiortu demo`: three simulated devices on an in-memory bus, polled live.
 
-Runs :class:`aiortu.cli._demo_system.Demo` (no ports, no hardware) and shows what the poller
+Runs `Demo` (no ports, no hardware) and shows what the poller
 reads: on a terminal, a table redrawn in place after every poll cycle; otherwise (a pipe,
-a file) plain lines, a block a second plus one line per event. Stops after ``--duration``
+a file) plain lines, a block a second plus one line per event. Stops after `--duration`
 seconds, or at SIGINT (Ctrl-C) or SIGTERM, and exits 0.
 """
 
@@ -54,7 +54,7 @@ _SHOW_CURSOR = "\x1b[?25h"
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``demo`` subcommand to *subparsers*."""
+    """Add the `demo` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "demo",
         help=SUMMARIES["demo"],
@@ -133,7 +133,7 @@ def header_lines(demo: Demo, degree: str = "°C") -> list[str]:
 
 
 def _value_text(view: ReadingView) -> tuple[str, str]:
-    """The number (or on/off) and the unit of measure of *view*, apart."""
+    """The number (or on/off) and the unit of measure of `view`, apart."""
     reading = view.reading
     if view.value is None:
         return "-", reading.unit_of_measure
@@ -145,7 +145,7 @@ def _value_text(view: ReadingView) -> tuple[str, str]:
 
 
 def _health_text(device: DeviceView, separator: str) -> tuple[str, bool]:
-    """A short health summary of *device*, parts joined by *separator*, and whether it is
+    """A short health summary of `device`, parts joined by `separator`, and whether it is
     online."""
     health, stats = device.health, device.stats
     # The poller's states: online, suspect (a read failed lately), OFFLINE (probed only).
@@ -173,8 +173,8 @@ def _cycle_text(snapshot: Snapshot) -> str:
 class TableRenderer:
     """Draws snapshots as a table on a terminal, redrawing it in place each time.
 
-    *color* adds ANSI colours (bold names, green online, red offline); *symbols* choose
-    Unicode or ASCII. :meth:`close` shows the cursor again.
+    `color` adds ANSI colours (bold names, green online, red offline); `symbols` choose
+    Unicode or ASCII. `close` shows the cursor again.
     """
 
     def __init__(self, out: TextIO, *, color: bool = True) -> None:
@@ -187,7 +187,7 @@ class TableRenderer:
         return f"\x1b[{code}m{text}\x1b[0m" if self.color else text
 
     def lines(self, snapshot: Snapshot) -> list[str]:
-        """The table for *snapshot*, one string per line, styled."""
+        """The table for `snapshot`, one string per line, styled."""
         symbols = self.symbols
         title = f"  {snapshot.elapsed:6.1f} s   {_cycle_text(snapshot)}"
         out = [self._style(title, "1"), ""]
@@ -227,7 +227,7 @@ class TableRenderer:
         return out
 
     def draw(self, snapshot: Snapshot) -> None:
-        """Replace the table drawn last with the one for *snapshot*."""
+        """Replace the table drawn last with the one for `snapshot`."""
         width = shutil.get_terminal_size((100, 24)).columns
         lines = [self._fit(line, width) for line in self.lines(snapshot)]
         parts = []
@@ -255,7 +255,7 @@ class TableRenderer:
 
 
 class PlainRenderer:
-    """Writes snapshots as plain lines: a block of values every *every* poll cycles (and
+    """Writes snapshots as plain lines: a block of values every `every` poll cycles (and
     the first), and each event as it comes."""
 
     def __init__(self, out: TextIO, *, every: int = 2) -> None:
@@ -264,7 +264,7 @@ class PlainRenderer:
         self._events_seen = 0
 
     def lines(self, snapshot: Snapshot, *, block: bool = True) -> list[str]:
-        """The lines for *snapshot*: its new events, and with *block* every device's values."""
+        """The lines for `snapshot`: its new events, and with `block` every device's values."""
         stamp = f"[{snapshot.elapsed:7.1f} s]"
         out: list[str] = []
         if block:
@@ -283,7 +283,7 @@ class PlainRenderer:
         return out
 
     def draw(self, snapshot: Snapshot) -> None:
-        """Write what is due for *snapshot*."""
+        """Write what is due for `snapshot`."""
         lines = self.lines(snapshot, block=snapshot.cycle % self.every == 1 % self.every)
         if lines:
             self.out.write("\n".join(lines) + "\n")
@@ -299,7 +299,7 @@ class PlainRenderer:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the demo described by *args*; return the exit code."""
+    """Run the demo described by `args`; return the exit code."""
     return anyio.run(_demo, args)
 
 

@@ -1,14 +1,14 @@
-"""The simulated devices of ``aiortu demo`` (see :mod:`aiortu.cli._demo_system`): each a
-:class:`~aiortu.slave._store.MemoryStore` that a :class:`~aiortu.slave._server.Slave` serves, the
-:class:`Reading`\\ s a master polls from it, and a simulation step that moves its values.
+"""The simulated devices of `aiortu demo` (see `aiortu.cli`): each a
+[`MemoryStore`][aiortu.slave.MemoryStore] that a [`Slave`][aiortu.slave.Slave] serves, the
+`Reading`s a master polls from it, and a simulation step that moves its values.
 
-- :class:`EnergyMeter`: float32 readings in CDAB word order in input registers: voltage
+- `EnergyMeter`: float32 readings in CDAB word order in input registers: voltage
   (30001), current (30007), power (30013) and energy (30343).
-- :class:`TemperatureController`: the setpoint in holding register 40001 and the process
+- `TemperatureController`: the setpoint in holding register 40001 and the process
   value in input register 30001 (int16 tenths of a degree), heater output in 30002 (%).
-- :class:`DigitalIO`: four output coils and four discrete inputs.
+- `DigitalIO`: four output coils and four discrete inputs.
 
-The devices take a :class:`random.Random`, so that a seeded generator repeats a run.
+The devices take a `random.Random`, so that a seeded generator repeats a run.
 """
 
 from __future__ import annotations
@@ -40,8 +40,8 @@ Value = bool | int | float
 
 @dataclass(frozen=True, slots=True)
 class Reading:
-    """One value the demo polls and shows: its :class:`~aiortu.master._poller.Point`, a *label*,
-    a unit of measure and how many *digits* after the point to show."""
+    """One value the demo polls and shows: its [`Point`][aiortu.core.poll_plan.Point], a `label`,
+    a unit of measure and how many `digits` after the point to show."""
 
     point: Point
     label: str
@@ -50,11 +50,11 @@ class Reading:
 
     @property
     def reference(self) -> str:
-        """The point's 5-digit reference, as a device manual lists it (``"30001"``)."""
+        """The point's 5-digit reference, as a device manual lists it (`"30001"`)."""
         return format_reference(Reference(self.point.table, self.point.address))
 
     def format(self, value: Value | None) -> str:
-        """*value* for display: ``"230.4 V"``, ``"on"``, or ``"-"`` when unread."""
+        """`value` for display: `"230.4 V"`, `"on"`, or `"-"` when unread."""
         if value is None:
             return "-"
         if isinstance(value, bool):
@@ -65,7 +65,7 @@ class Reading:
 
 class SimulatedDevice(Protocol):
     """What the demo needs of a simulated device: its unit address, names, the store a
-    :class:`~aiortu.slave._server.Slave` serves, the readings to poll, and a simulation step."""
+    [`Slave`][aiortu.slave.Slave] serves, the readings to poll, and a simulation step."""
 
     unit: int
     title: str
@@ -74,7 +74,7 @@ class SimulatedDevice(Protocol):
     readings: tuple[Reading, ...]
 
     def step(self, now: float, dt: float) -> None:
-        """Advance the simulation to *now* (seconds), *dt* seconds after the last step."""
+        """Advance the simulation to `now` (seconds), `dt` seconds after the last step."""
 
 
 def _float32_cdab(value: float) -> list[int]:
@@ -84,7 +84,7 @@ def _float32_cdab(value: float) -> list[int]:
 class EnergyMeter:
     """Unit 1 (by default): a single-phase energy meter with float32 readings in CDAB order.
 
-    *rng* drives the noise and the load steps, so a seeded generator repeats a run.
+    `rng` drives the noise and the load steps, so a seeded generator repeats a run.
     """
 
     VOLTAGE, CURRENT, POWER, ENERGY = 0, 6, 12, 342
@@ -121,7 +121,7 @@ class EnergyMeter:
         self.step(0.0, 0.0)
 
     def step(self, now: float, dt: float) -> None:
-        """Advance the meter to *now*: new voltage, current and power; count the energy."""
+        """Advance the meter to `now`: new voltage, current and power; count the energy."""
         rng = self._rng
         if now >= self._next_switch:
             # An appliance (a kettle, a compressor) switches on or off now and then.
@@ -144,7 +144,7 @@ class EnergyMeter:
 
 
 def to_tenths(value: float) -> int:
-    """*value* in tenths, as an int16 in a 16-bit register (clamped to the int16 range)."""
+    """`value` in tenths, as an int16 in a 16-bit register (clamped to the int16 range)."""
     tenths = max(-32768, min(32767, round(value * 10)))
     return tenths & 0xFFFF
 
@@ -158,7 +158,7 @@ class TemperatureController:
     """Unit 2 (by default): a heater controller whose process value follows its setpoint.
 
     The setpoint (holding register 40001) and the process value (input register 30001)
-    are int16 tenths of a degree; the heater output (30002) is in percent. *tau* is the
+    are int16 tenths of a degree; the heater output (30002) is in percent. `tau` is the
     time constant of the process in seconds. *on_setpoint* is called with the old and new
     setpoint (degrees) whenever a master writes a new one.
     """
@@ -253,7 +253,7 @@ class DigitalIO:
     """Unit 3 (by default): four output coils and four discrete inputs.
 
     Coils (00001-00004): pump, fan, valve, lamp. Inputs (10001-10004): pump running and
-    fan running (each follows its coil *feedback_delay* seconds later, as a contactor's
+    fan running (each follows its coil `feedback_delay` seconds later, as a contactor's
     auxiliary contact does), door closed (opens and closes at random) and a heartbeat
     that toggles every second.
     """

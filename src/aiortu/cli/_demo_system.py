@@ -1,36 +1,36 @@
-"""A small simulated plant on an in-memory bus, polled by a :class:`~aiortu.master._poller.Poller`.
+"""A small simulated plant on an in-memory bus, polled by a [`Poller`][aiortu.master.Poller].
 
-This is what ``aiortu demo`` shows, and a worked example of the whole stack: three
-devices, each an :class:`~aiortu.slave.Slave` over a :class:`~aiortu.slave.MemoryStore`
-on its own drop of a four-port :class:`~aiortu.testing.VirtualBus` paced at the baud
-rate, and a :class:`~aiortu.master._client.Master` on the fourth drop that polls typed points
-with a Poller and writes a new setpoint now and then::
+This is what `aiortu demo` shows, and a worked example of the whole stack: three
+devices, each an [`Slave`][aiortu.slave.Slave] over a [`MemoryStore`][aiortu.slave.MemoryStore]
+on its own drop of a four-port [`VirtualBus`][aiortu.testing.VirtualBus] paced at the baud
+rate, and a [`Master`][aiortu.master.Master] on the fourth drop that polls typed points
+with a Poller and writes a new setpoint now and then:
 
     async with Demo(baudrate=19200, seed=1) as demo:
         for _ in range(10):
             snapshot = await demo.next_snapshot()
             print(snapshot.elapsed, snapshot.value("controller.process_value"))
 
-The devices (unit address, register map; see :mod:`aiortu.cli._demo_devices`):
+The devices (unit address, register map; see `aiortu.cli`):
 
-- unit 1, :class:`EnergyMeter`: float32 readings in CDAB word order in input registers:
+- unit 1, `EnergyMeter`: float32 readings in CDAB word order in input registers:
   voltage (30001), current (30007), power (30013) and energy (30343), moving as a
   household supply does: a mains voltage wandering around 230 V, a load that steps when
   an appliance switches, energy that only ever counts up.
-- unit 2, :class:`TemperatureController`: the setpoint in holding register 40001 and the
+- unit 2, `TemperatureController`: the setpoint in holding register 40001 and the
   process value in input register 30001, both int16 tenths of a degree, and the heater
   output in percent in 30002. The process value follows the setpoint with a first-order
   lag, so a new setpoint visibly takes effect over a few seconds. The device watches its
   store with an observer and logs each setpoint a master writes.
-- unit 3, :class:`DigitalIO`: four output coils (pump, fan, valve, lamp, 00001-00004)
+- unit 3, `DigitalIO`: four output coils (pump, fan, valve, lamp, 00001-00004)
   and four discrete inputs (10001-10004): pump and fan feedback that follow their coils
   after a short delay, a door contact that opens and closes at random, and a heartbeat.
 
-The scenario: after *first_change* seconds, and then every *change_every* seconds, the
-master writes the next of *setpoints* to the controller (function 06) and switches the
-pump and fan for heating or cooling (function 0F). Each :class:`Snapshot` carries the
+The scenario: after `first_change` seconds, and then every `change_every` seconds, the
+master writes the next of `setpoints` to the controller (function 06) and switches the
+pump and fan for heating or cooling (function 0F). Each `Snapshot` carries the
 latest values, a trend per value, the health of each unit, the poll cycle times and the
-recent :class:`DemoEvent`\\ s.
+recent `DemoEvent`s.
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ _STEP = 0.1
 
 @dataclass(frozen=True, slots=True)
 class DemoEvent:
-    """Something that happened, *time* seconds after the demo started."""
+    """Something that happened, `time` seconds after the demo started."""
 
     time: float
     text: str
@@ -77,8 +77,8 @@ class DemoEvent:
 
 @dataclass(frozen=True, slots=True)
 class ReadingView:
-    """One reading in a :class:`Snapshot`: the value (None until read or after an error),
-    its display text, and its *trend* since the previous cycle (-1, 0 or +1)."""
+    """One reading in a `Snapshot`: the value (None until read or after an error),
+    its display text, and its `trend` since the previous cycle (-1, 0 or +1)."""
 
     reading: Reading
     value: Value | None
@@ -89,7 +89,7 @@ class ReadingView:
 
 @dataclass(frozen=True, slots=True)
 class DeviceView:
-    """One device in a :class:`Snapshot`: its readings, health and the master's counters."""
+    """One device in a `Snapshot`: its readings, health and the master's counters."""
 
     unit: int
     title: str
@@ -101,7 +101,7 @@ class DeviceView:
 
 @dataclass(frozen=True, slots=True)
 class Snapshot:
-    """The state of the demo after one poll cycle (see :meth:`Demo.snapshot`)."""
+    """The state of the demo after one poll cycle (see `Demo.snapshot`)."""
 
     elapsed: float
     """Seconds since the demo started."""
@@ -113,12 +113,12 @@ class Snapshot:
     events: tuple[DemoEvent, ...]
     """The latest events, oldest first."""
     event_count: int
-    """Events logged since the start; the last ``len(events)`` of them are in :attr:`events`."""
+    """Events logged since the start; the last `len(events)` of them are in `events`."""
     next_change: float | None
     """When the next setpoint change is due (seconds since the start), if any."""
 
     def value(self, name: str) -> Value | None:
-        """The latest value of the point called *name* (``"meter.voltage"``)."""
+        """The latest value of the point called `name` (`"meter.voltage"`)."""
         for device in self.devices:
             for view in device.readings:
                 if view.reading.point.name == name:
@@ -129,13 +129,13 @@ class Snapshot:
 class Demo:
     """The simulated plant, its bus, master and poller; an async context manager.
 
-    *baudrate* paces the bus (8E1, the spec's default framing). *interval* is the poll
-    interval in seconds. The scenario writes *setpoints* (degrees, in turn) at
-    *first_change* seconds and then every *change_every* seconds (None: once). *seed*
-    makes the simulation repeatable; *degree* is the unit of measure shown for
+    `baudrate` paces the bus (8E1, the spec's default framing). `interval` is the poll
+    interval in seconds. The scenario writes `setpoints` (degrees, in turn) at
+    `first_change` seconds and then every `change_every` seconds (None: once). `seed`
+    makes the simulation repeatable; `degree` is the unit of measure shown for
     temperatures.
 
-    Raises :class:`~aiortu.errors.InvalidValue` for a baud rate, interval or schedule
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a baud rate, interval or schedule
     that is not positive, or no setpoints.
     """
 
@@ -185,7 +185,7 @@ class Demo:
         self.events: deque[DemoEvent] = deque(maxlen=max_events)
         """The latest events, oldest first."""
         self.event_count = 0
-        """Events logged since the start (more than :attr:`events` keeps)."""
+        """Events logged since the start (more than `events` keeps)."""
         self._start = 0.0
         self._latest: dict[str, ReadingView] = {}
         self._cycles = 0

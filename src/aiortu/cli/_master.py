@@ -1,4 +1,4 @@
-"""What the master's commands (``read``, ``write``, ``poll``) share: line options, number
+"""What the master's commands (`read`, `write`, `poll`) share: line options, number
 parsing, opening the master, and turning failures into one line and an exit code.
 
 Exit codes of those commands:
@@ -79,7 +79,7 @@ aiortu and mbpoll side by side (mbpoll -m rtu ...):
 
 
 class UsageError(Exception):
-    """Arguments that do not go together; shown as ``error: ...`` with exit code 2."""
+    """Arguments that do not go together; shown as `error: ...` with exit code 2."""
 
 
 TABLES: dict[str, Table] = {
@@ -88,13 +88,13 @@ TABLES: dict[str, Table] = {
     "input": Table.INPUT_REGISTERS,
     "holding": Table.HOLDING_REGISTERS,
 }
-"""The ``--table`` names and the tables they mean."""
+"""The `--table` names and the tables they mean."""
 
 TABLE_NAMES: dict[Table, str] = {table: name for name, table in TABLES.items()}
 
 
 def add_line_options(parser: argparse.ArgumentParser) -> None:
-    """Add the port argument and ``--baudrate --parity --stopbits --timeout --retries``."""
+    """Add the port argument and `--baudrate --parity --stopbits --timeout --retries`."""
     parser.add_argument("port", metavar="PORT", help="a serial device path or rtu+tcp://host:port")
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
@@ -107,7 +107,7 @@ def add_line_options(parser: argparse.ArgumentParser) -> None:
 
 
 def reference(text: str) -> Reference:
-    """The reference ``--ref`` gives; a 4-digit one that reads as a register is refused."""
+    """The reference `--ref` gives; a 4-digit one that reads as a register is refused."""
     digits = text.strip()
     if len(digits) == 4 and digits.isdigit() and digits[0] in "134":
         kind = {"1": "discrete input", "3": "input register", "4": "holding register"}
@@ -123,9 +123,9 @@ def reference(text: str) -> Reference:
 async def open_from_args(
     args: argparse.Namespace, *, reconnect: bool = False, **options: object
 ) -> AsyncIterator[Master]:
-    """Open a master on ``args.port`` with the line options of *args*.
+    """Open a master on `args.port` with the line options of `args`.
 
-    With *reconnect* the master reopens the port after it disappears; without, a lost
+    With `reconnect` the master reopens the port after it disappears; without, a lost
     line fails the command (exit 1)."""
     # Imported here, not above: ``--help`` and bad arguments need none of the master.
     from aiortu.master._client import open_master
@@ -163,7 +163,7 @@ def _describe(error: BaseException) -> tuple[int, str]:
 
 
 def run_master(args: argparse.Namespace, body: Callable[[], Awaitable[int]]) -> int:
-    """Run *body* in an event loop; print a failure as one line on stderr, return the code."""
+    """Run `body` in an event loop; print a failure as one line on stderr, return the code."""
     prog = f"aiortu {args.command}"
     try:
         import anyio

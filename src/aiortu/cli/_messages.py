@@ -1,7 +1,7 @@
-"""Failures as the ``aiortu`` command shows them: one sentence each, for people.
+"""Failures as the `aiortu` command shows them: one sentence each, for people.
 
-The library's errors name Python arguments (``count``) and carry exception reprs from the
-layers below (``EndOfStream()``); the command shows the option a user typed (``--count``)
+The library's errors name Python arguments (`count`) and carry exception reprs from the
+layers below (`EndOfStream()`); the command shows the option a user typed (`--count`)
 and what happened to the port, without doubling a prefix the message already has.
 """
 
@@ -46,7 +46,7 @@ _FAILED = "the line failed: "
 
 
 def invalid_value(error: InvalidValue) -> str:
-    """*error* as one sentence: what was given, what is allowed, under the option's name."""
+    """`error` as one sentence: what was given, what is allowed, under the option's name."""
     field = _OPTIONS.get(error.field, error.field)
     allowed = error.allowed
     if isinstance(allowed, range):
@@ -68,7 +68,7 @@ def _detail(error: InvalidValue) -> str:
 
 
 def _plain(value: object) -> str | None:
-    """*value* as a person typed it; None for values that only have a Python spelling."""
+    """`value` as a person typed it; None for values that only have a Python spelling."""
     if isinstance(value, bool):
         return str(value).lower()
     if isinstance(value, str | int | float):
@@ -101,7 +101,7 @@ def port_failure(error: PortError) -> str:
 
 
 def line_failure(error: ConnectionLost) -> str:
-    """A line that failed under a command: ``the line failed: WHY``, once."""
+    """A line that failed under a command: `the line failed: WHY`, once."""
     text = str(error)
     while text.startswith(_FAILED):
         text = text[len(_FAILED) :]
@@ -117,6 +117,6 @@ def _cause(match: re.Match[str]) -> str:
 
 
 def no_reply(error: ResponseTimeout) -> str:
-    """No reply in time: ``no reply ...`` once."""
+    """No reply in time: `no reply ...` once."""
     text = str(error)
     return text if text.startswith("no reply") else f"no reply: {text}"

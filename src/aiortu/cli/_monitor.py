@@ -1,9 +1,9 @@
-"""``aiortu monitor``: a passive sniffer that prints every frame on a bus with its meaning.
+"""`aiortu monitor`: a passive sniffer that prints every frame on a bus with its meaning.
 
-Opens the port (a device path or ``rtu+tcp://host:port``), listens with a receiver in
-the ``MONITOR`` role and never sends. Each frame becomes one line on stdout: the time,
+Opens the port (a device path or `rtu+tcp://host:port`), listens with a receiver in
+the `MONITOR` role and never sends. Each frame becomes one line on stdout: the time,
 the direction, the CRC status and a description from
-:class:`~aiortu.core.bus_decoder.BusDecoder`, or, with ``--json``, one JSON object. Runs
+[`BusDecoder`][aiortu.core.bus_decoder.BusDecoder], or, with `--json`, one JSON object. Runs
 until SIGINT or SIGTERM and exits 0; a port that cannot be opened, or that fails while
 listening, gives one line on stderr and exit code 1.
 """
@@ -63,7 +63,7 @@ exit codes:
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``monitor`` subcommand to *subparsers*."""
+    """Add the `monitor` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "monitor",
         help=SUMMARIES["monitor"],
@@ -104,9 +104,9 @@ def register(subparsers: Subparsers) -> None:
 
 
 class FramePrinter:
-    """Writes decoded frames to *out*, one line each, flushed at once.
+    """Writes decoded frames to `out`, one line each, flushed at once.
 
-    *start* is the receiver-clock time that relative times count from, and *wall_start*
+    `start` is the receiver-clock time that relative times count from, and `wall_start`
     the wall-clock time (seconds since the epoch) at that moment, for ISO times.
     """
 
@@ -136,7 +136,7 @@ class FramePrinter:
         return round(elapsed, 6)
 
     def format(self, record: DecodedFrame) -> str:
-        """The line for *record*, without the newline."""
+        """The line for `record`, without the newline."""
         stamp = self.timestamp(record.time)
         if self.json_lines:
             data = record.to_dict(raw=self.raw)
@@ -150,13 +150,13 @@ class FramePrinter:
         return line
 
     def emit(self, record: DecodedFrame) -> None:
-        """Write and flush the line for *record*."""
+        """Write and flush the line for `record`."""
         self.out.write(self.format(record) + "\n")
         self.out.flush()
 
 
 def run(args: argparse.Namespace) -> int:
-    """Monitor the port described by *args* until SIGINT or SIGTERM; return the exit code."""
+    """Monitor the port described by `args` until SIGINT or SIGTERM; return the exit code."""
     return anyio.run(_monitor, args)
 
 

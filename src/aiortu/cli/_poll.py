@@ -1,14 +1,14 @@
-"""``aiortu poll``: poll points on one or more units and show them as a table.
+"""`aiortu poll`: poll points on one or more units and show them as a table.
 
-The points come from ``--ref`` with ``--count`` (COUNT values of one type from that
-reference, on every ``--unit``) or from repeated ``--point NAME=UNIT:REF[:TYPE[:LAYOUT]]``.
+The points come from `--ref` with `--count` (COUNT values of one type from that
+reference, on every `--unit`) or from repeated `--point NAME=UNIT:REF[:TYPE[:LAYOUT]]`.
 On a terminal the table is redrawn in place after each cycle (ANSI cursor movement);
 when stdout is not a terminal each cycle is printed as plain lines followed by a blank
-line, and with ``--json`` each sample is one JSON object per line. Each unit's health
+line, and with `--json` each sample is one JSON object per line. Each unit's health
 (online, suspect or offline, failures in a row, latency, the next probe) is shown under the
-points. Runs until ``--cycles`` or ``--duration`` is reached, or SIGINT/SIGTERM (exit 0).
-When the port disappears the master reopens it, and the table says ``line down,
-reopening`` meanwhile; with ``--no-reconnect`` a lost line ends the command (exit 1).
+points. Runs until `--cycles` or `--duration` is reached, or SIGINT/SIGTERM (exit 0).
+When the port disappears the master reopens it, and the table says `line down,
+reopening` meanwhile; with `--no-reconnect` a lost line ends the command (exit 1).
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ the same with mbpoll (which polls one unit and one range):
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``poll`` subcommand to *subparsers*."""
+    """Add the `poll` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "poll",
         help=SUMMARIES["poll"],
@@ -130,7 +130,7 @@ def register(subparsers: Subparsers) -> None:
 
 
 def parse_point(text: str) -> Point:
-    """A point from ``NAME=UNIT:REF[:TYPE[:LAYOUT]]``; InvalidValue if malformed."""
+    """A point from `NAME=UNIT:REF[:TYPE[:LAYOUT]]`; InvalidValue if malformed."""
     name, equals, spec = text.partition("=")
     fields = spec.split(":")
     if not equals or not name or not 2 <= len(fields) <= 4:
@@ -152,7 +152,7 @@ def _unit(text: str) -> int:
 
 
 def points_from_args(args: argparse.Namespace) -> list[Point]:
-    """The points *args* describe (``--ref`` on each ``--unit``, then each ``--point``)."""
+    """The points `args` describe (`--ref` on each `--unit`, then each `--point`)."""
     found = [parse_point(text) for text in args.point]
     if args.ref is not None:
         if args.unit is None:
@@ -203,7 +203,7 @@ def _format_value(sample: Sample) -> str:
 
 
 class TablePrinter:
-    """Prints cycles to *out*: redrawn in place with *ansi*, else as plain blocks."""
+    """Prints cycles to `out`: redrawn in place with `ansi`, else as plain blocks."""
 
     def __init__(self, out: TextIO, poller: Poller, *, ansi: bool) -> None:
         self.out = out
@@ -213,7 +213,7 @@ class TablePrinter:
         self._shown = 0
 
     def lines(self, report: CycleReport) -> list[str]:
-        """The table after *report*: a header, the points, each unit's health."""
+        """The table after `report`: a header, the points, each unit's health."""
         for sample in report.samples:
             self._latest[sample.name] = sample
         stats = self.poller.cycle_time
@@ -234,7 +234,7 @@ class TablePrinter:
         return lines
 
     def show(self, report: CycleReport) -> None:
-        """Print the table after *report*."""
+        """Print the table after `report`."""
         lines = self.lines(report)
         if self.ansi:
             # Back to the first line of the previous table, and clear it all.
@@ -247,7 +247,7 @@ class TablePrinter:
 
 
 def health_line(health: UnitHealth, now: float) -> str:
-    """One unit's health as the table shows it, at *now* on the master's clock."""
+    """One unit's health as the table shows it, at `now` on the master's clock."""
     parts = [f"unit {health.unit}: {health.state.value}"]
     if health.state is UnitState.OFFLINE:
         parts[0] = f"unit {health.unit}: OFFLINE"
@@ -286,7 +286,7 @@ def _json_sample(sample: Sample) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Poll what *args* ask for until told to stop; return the exit code."""
+    """Poll what `args` ask for until told to stop; return the exit code."""
 
     async def body() -> int:
         points = points_from_args(args)

@@ -1,9 +1,9 @@
-"""``aiortu read``: read coils, discrete inputs, input or holding registers once, and print them.
+"""`aiortu read`: read coils, discrete inputs, input or holding registers once, and print them.
 
-One line per element (``ADDRESS VALUE``), or with ``--json`` exactly one JSON object,
-``{"unit": U, "table": "...", "address": A, "values": [...]}`` (bits as ``true`` and
-``false``). Failures give one line on stderr and the exit codes of
-:mod:`aiortu.cli._master`.
+One line per element (`ADDRESS VALUE`), or with `--json` exactly one JSON object,
+`{"unit": U, "table": "...", "address": A, "values": [...]}` (bits as `true` and
+`false`). Failures give one line on stderr and the exit codes of
+`aiortu.cli`.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ the same reads with mbpoll:
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``read`` subcommand to *subparsers*."""
+    """Add the `read` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "read",
         help=SUMMARIES["read"],
@@ -79,7 +79,7 @@ def register(subparsers: Subparsers) -> None:
 
 
 def target(args: argparse.Namespace, parser_name: str) -> tuple[Table, int]:
-    """The table and address from ``--ref`` or ``--table`` and ``--address``."""
+    """The table and address from `--ref` or `--table` and `--address`."""
     if args.ref is not None:
         if args.table is not None or args.address is not None:
             raise UsageError("give either --ref, or --table and --address, not both")
@@ -91,7 +91,7 @@ def target(args: argparse.Namespace, parser_name: str) -> tuple[Table, int]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Read what *args* ask for and print it; return the exit code."""
+    """Read what `args` ask for and print it; return the exit code."""
 
     async def body() -> int:
         table, start = target(args, "read")
@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
 def print_values(
     as_json: bool, unit: int, table: Table, start: int, values: list[bool] | list[int]
 ) -> None:
-    """Print *values* read or written at *start*: one JSON object, or a line each."""
+    """Print `values` read or written at `start`: one JSON object, or a line each."""
     if as_json:
         document = {"unit": unit, "table": TABLE_NAMES[table], "address": start}
         print(json.dumps({**document, "values": values}), flush=True)

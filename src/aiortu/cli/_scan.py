@@ -1,7 +1,7 @@
 # ruff: noqa: ASYNC109
 # ``timeout=`` here is each probe's response timeout, counted from when the request has
 # left the wire; a cancel scope around the call cannot express that.
-"""``aiortu scan``: find the units that answer on a port, and the line settings they use.
+"""`aiortu scan`: find the units that answer on a port, and the line settings they use.
 
 For each combination of baud rate, parity and stop bits, the port is opened once with
 those settings, and each unit is sent a cheap request: read one holding register at
@@ -98,7 +98,7 @@ _PARITY_NAMES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": 
 
 @dataclass(frozen=True, slots=True)
 class Answer:
-    """A unit that answered at *settings*: what it said, and how long after the probe
+    """A unit that answered at `settings`: what it said, and how long after the probe
     went out (None for a late reply credited after its probe timed out)."""
 
     unit: int
@@ -110,7 +110,7 @@ class Answer:
 @dataclass(slots=True)
 class SettingResult:
     """What one line setting gave: the units that answered, the bad frames seen, and
-    whether the port refused the setting (*skipped*, with the reason)."""
+    whether the port refused the setting (`skipped`, with the reason)."""
 
     settings: LineSettings
     answers: list[Answer] = field(default_factory=list)
@@ -129,9 +129,9 @@ class SettingResult:
 
 
 def parse_units(text: str) -> list[int]:
-    """Unit addresses from ``"1-247"``, ``"5"`` or ``"1,2,10-12"``, in order, once each.
+    """Unit addresses from `"1-247"`, `"5"` or `"1,2,10-12"`, in order, once each.
 
-    Raises :class:`argparse.ArgumentTypeError` outside 1..247 or for a malformed list.
+    Raises `argparse.ArgumentTypeError` outside 1..247 or for a malformed list.
     """
     units: set[int] = set()
     for part in text.split(","):
@@ -193,7 +193,7 @@ def _timeout(text: str) -> float:
 def settings_to_try(
     baudrates: Iterable[int], parities: Iterable[Parity], stopbits: int | None = None
 ) -> list[LineSettings]:
-    """Every combination, baud rate by baud rate. Without *stopbits*, the spec's rule:
+    """Every combination, baud rate by baud rate. Without `stopbits`, the spec's rule:
     2 stop bits with no parity, 1 with a parity bit (11 bits a character either way)."""
     return [
         LineSettings(
@@ -207,7 +207,7 @@ def settings_to_try(
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``scan`` subcommand to *subparsers*."""
+    """Add the `scan` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "scan",
         help=SUMMARIES["scan"],
@@ -299,10 +299,10 @@ async def probe_units(
     timeout: float,
     on_probe: Callable[[int, SettingResult], object] | None = None,
 ) -> SettingResult:
-    """Probe each of *units* on *stream* at *settings*; return who answered.
+    """Probe each of `units` on `stream` at `settings`; return who answered.
 
-    *on_probe* is called after each unit with the unit and the result so far. The
-    stream is closed on return. Raises :class:`~aiortu.errors.ConnectionLost` if the
+    `on_probe` is called after each unit with the unit and the result so far. The
+    stream is closed on return. Raises [`ConnectionLost`][aiortu.errors.ConnectionLost] if the
     stream fails.
     """
     result = SettingResult(settings)
@@ -359,12 +359,12 @@ async def scan(
     on_result: Callable[[SettingResult], object] | None = None,
     **options: object,
 ) -> list[SettingResult]:
-    """Probe *units* on *port* at each of *settings* in turn, opening the port for each.
+    """Probe `units` on `port` at each of `settings` in turn, opening the port for each.
 
-    A setting the port refuses is skipped (:attr:`SettingResult.skipped`). With *first*,
-    stop after the first setting at which a unit answered. *options* go to
-    :func:`~aiortu.transport.open_stream`. Raises :class:`~aiortu.errors.PortError` if
-    the port cannot be opened at all, :class:`~aiortu.errors.ConnectionLost` if it fails.
+    A setting the port refuses is skipped (`SettingResult.skipped`). With `first`,
+    stop after the first setting at which a unit answered. `options` go to
+    [`open_stream`][aiortu.transport.open_stream]. Raises [`PortError`][aiortu.errors.PortError] if
+    the port cannot be opened at all, [`ConnectionLost`][aiortu.errors.ConnectionLost] if it fails.
     """
     results: list[SettingResult] = []
     for line in settings:
@@ -388,7 +388,7 @@ async def scan(
 
 
 class _Progress:
-    """Progress on *err*: a bar redrawn in place on a terminal, else a line per setting."""
+    """Progress on `err`: a bar redrawn in place on a terminal, else a line per setting."""
 
     def __init__(self, err: TextIO, total: int, *, quiet: bool) -> None:
         self.err = err
@@ -446,7 +446,7 @@ class _Progress:
 
 
 def report(results: Sequence[SettingResult], out: TextIO) -> bool:
-    """Write what *results* found to *out*; return whether any unit answered."""
+    """Write what `results` found to `out`; return whether any unit answered."""
     answers = [answer for result in results for answer in result.answers]
     if answers:
         out.write(f"{'unit':>4}  {'settings':<11} {'reply':>8}  answer\n")
@@ -472,7 +472,7 @@ def report(results: Sequence[SettingResult], out: TextIO) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Scan the port described by *args*; return the exit code (0 found, 1 nothing)."""
+    """Scan the port described by `args`; return the exit code (0 found, 1 nothing)."""
     return anyio.run(_scan, args)
 
 

@@ -1,11 +1,11 @@
-"""``aiortu serve``: simulate the devices a TOML file describes on a serial port.
+"""`aiortu serve`: simulate the devices a TOML file describes on a serial port.
 
-Reads the description (see :mod:`aiortu.slave._config`), opens the port, and serves the
+Reads the description (see [`aiortu.slave`][aiortu.slave]), opens the port, and serves the
 units until SIGINT or SIGTERM (exit 0). A bad file is one line on stderr naming the file,
 the key and the problem (exit 2); a port that cannot be opened is one line (exit 1).
-When the port disappears under it (a USB adapter unplugged), ``serve`` says so on stderr
-and reopens it, with the same stores, until it is back; with ``--no-reconnect`` it exits 1.
-``--trace`` logs every frame on stderr, in hex, with its meaning.
+When the port disappears under it (a USB adapter unplugged), `serve` says so on stderr
+and reopens it, with the same stores, until it is back; with `--no-reconnect` it exits 1.
+`--trace` logs every frame on stderr, in hex, with its meaning.
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ file, key, problem)
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``serve`` subcommand to *subparsers*."""
+    """Add the `serve` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "serve",
         help=SUMMARIES["serve"],

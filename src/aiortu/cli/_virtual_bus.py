@@ -1,4 +1,4 @@
-"""``aiortu virtual-bus``: a virtual RS-485 bus of pseudo-terminals for other programs.
+"""`aiortu virtual-bus`: a virtual RS-485 bus of pseudo-terminals for other programs.
 
 Prints one device path per port on stdout, one a line, as soon as the bus is up; then
 relays until SIGINT or SIGTERM and exits 0.
@@ -43,7 +43,7 @@ exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the ptys cannot be create
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``virtual-bus`` subcommand to *subparsers*."""
+    """Add the `virtual-bus` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "virtual-bus",
         help=SUMMARIES["virtual-bus"],
@@ -100,7 +100,7 @@ def register(subparsers: Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the bus described by *args* until SIGINT or SIGTERM; return the exit code."""
+    """Run the bus described by `args` until SIGINT or SIGTERM; return the exit code."""
     settings = (
         None
         if args.no_pacing

@@ -1,10 +1,10 @@
-"""``aiortu write``: write coils or holding registers once.
+"""`aiortu write`: write coils or holding registers once.
 
 One value goes out as a single write (05 or 06), several as a multiple write (0F or 10);
-``--multiple`` forces the multiple form for one value. Prints what was written, one
-``ADDRESS VALUE`` line each, or with ``--json`` exactly one JSON object,
-``{"unit": U, "table": "...", "address": A, "values": [...]}``. Failures give one line on
-stderr and the exit codes of :mod:`aiortu.cli._master`.
+`--multiple` forces the multiple form for one value. Prints what was written, one
+`ADDRESS VALUE` line each, or with `--json` exactly one JSON object,
+`{"unit": U, "table": "...", "address": A, "values": [...]}`. Failures give one line on
+stderr and the exit codes of `aiortu.cli`.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ _BITS = {"1": True, "0": False, "true": True, "false": False, "on": True, "off":
 
 
 def register(subparsers: Subparsers) -> None:
-    """Add the ``write`` subcommand to *subparsers*."""
+    """Add the `write` subcommand to `subparsers`."""
     parser = subparsers.add_parser(
         "write",
         help=SUMMARIES["write"],
@@ -78,9 +78,9 @@ def register(subparsers: Subparsers) -> None:
 
 
 def parse_values(text: str, table: Table) -> list[bool] | list[int]:
-    """The comma-separated *text* as coil states or register values for *table*.
+    """The comma-separated `text` as coil states or register values for `table`.
 
-    Raises :class:`~aiortu.errors.InvalidValue` for an empty list or a bad item.
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for an empty list or a bad item.
     """
     items = [item.strip() for item in text.split(",")]
     if not items or any(not item for item in items):
@@ -105,7 +105,7 @@ def parse_values(text: str, table: Table) -> list[bool] | list[int]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Write what *args* ask for and print it; return the exit code."""
+    """Write what `args` ask for and print it; return the exit code."""
 
     async def body() -> int:
         table, start = target(args, "write")

@@ -15,7 +15,7 @@ holding registers         40001-49999   400001-465536
 
 A 5-digit coil reference may drop its leading zeros ("1" is coil 1), but a 6-digit one
 keeps them: "000001" is coil 1, while "100001" is discrete input 1. So the number of digits
-decides the form, and only six digits reach numbers above 9999::
+decides the form, and only six digits reach numbers above 9999:
 
     >>> ref = parse_reference("40108")
     >>> ref.table, ref.address, ref.number
@@ -77,7 +77,7 @@ class Table(enum.StrEnum):
 
     @classmethod
     def from_prefix(cls, prefix: int) -> Table:
-        """The table whose references start with *prefix*; InvalidValue for 2 and 5..9."""
+        """The table whose references start with `prefix`; InvalidValue for 2 and 5..9."""
         for table, digit in _PREFIXES.items():
             if digit == prefix:
                 return table
@@ -99,23 +99,23 @@ def _check_int(field: str, value: object, allowed: range) -> None:
 
 
 def protocol_address(number: int) -> int:
-    """The protocol address (0..65535) of data-model number *number* (1..65536)."""
+    """The protocol address (0..65535) of data-model number `number` (1..65536)."""
     _check_int("number", number, NUMBER_RANGE)
     return number - 1
 
 
 def data_model_number(address: int) -> int:
-    """The data-model number (1..65536) of protocol address *address* (0..65535)."""
+    """The data-model number (1..65536) of protocol address `address` (0..65535)."""
     _check_int("address", address, ADDRESS_RANGE)
     return address + 1
 
 
 @dataclass(frozen=True, slots=True)
 class Reference:
-    """One element of one table: *table* and its protocol *address* (0..65535).
+    """One element of one table: `table` and its protocol `address` (0..65535).
 
-    *table* may also be given by its value (``"holding_registers"``); it is stored as a
-    :class:`Table`.
+    `table` may also be given by its value (`"holding_registers"`); it is stored as a
+    [`Table`][aiortu.core.addressing.Table].
     """
 
     table: Table
@@ -132,12 +132,12 @@ class Reference:
 
     @classmethod
     def from_number(cls, table: Table, number: int) -> Reference:
-        """The element of *table* with data-model number *number* (1..65536)."""
+        """The element of `table` with data-model number `number` (1..65536)."""
         return cls(table, protocol_address(number))
 
     @property
     def number(self) -> int:
-        """The 1-based data-model number, as manuals count: ``address + 1``."""
+        """The 1-based data-model number, as manuals count: `address + 1`."""
         return self.address + 1
 
     def __str__(self) -> str:
@@ -151,13 +151,13 @@ def _describe_forms() -> str:
 
 
 def parse_reference(text: str) -> Reference:
-    """Parse a 5- or 6-digit reference such as ``"40108"`` or ``"400108"``.
+    """Parse a 5- or 6-digit reference such as `"40108"` or `"400108"`.
 
     One to four digits are a 5-digit coil reference without its leading zeros, five digits
     a 5-digit reference (numbers 1..9999), six digits a 6-digit one (numbers 1..65536);
     the first of five or six digits names the table (0, 1, 3 or 4). Surrounding whitespace
-    is ignored. Anything else, a number 0 (``"40000"``, ``"400000"``) or a number beyond the
-    form's range raises :class:`~aiortu.errors.InvalidValue` with field ``"reference"``.
+    is ignored. Anything else, a number 0 (`"40000"`, `"400000"`) or a number beyond the
+    form's range raises [`InvalidValue`][aiortu.errors.InvalidValue] with field `"reference"`.
     """
     if not isinstance(text, str):
         raise InvalidValue("reference", text, _describe_forms(), "a reference is a string")
@@ -191,10 +191,10 @@ def parse_reference(text: str) -> Reference:
 
 
 def format_reference(reference: Reference, digits: int = 5) -> str:
-    """Write *reference* in the 5- or 6-digit notation, leading zeros included.
+    """Write `reference` in the 5- or 6-digit notation, leading zeros included.
 
     Only data-model numbers 1..9999 have a 5-digit form; for the others InvalidValue
-    (field ``"number"``) says to use six digits.
+    (field `"number"`) says to use six digits.
     """
     if digits == 5:
         if reference.number not in _FIVE_DIGIT_NUMBERS:

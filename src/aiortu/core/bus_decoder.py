@@ -1,12 +1,12 @@
 """What the frames on a bus mean: requests, replies, their pairing, and one-line descriptions.
 
 A passive observer of an RTU line sees frames without being told who sent them. A
-:class:`BusDecoder` is fed what a receiver in the ``MONITOR`` role yields
-(:class:`~aiortu.core.receiver.FrameReceived` and
-:class:`~aiortu.core.receiver.FrameDiscarded`) and turns each into a
-:class:`DecodedFrame`: the unit, the direction (request, reply, exception reply,
-broadcast, or unknown), the decoded PDU or the decode error, the CRC status, a one-line
-description and a JSON-able dict::
+[`BusDecoder`][aiortu.core.bus_decoder.BusDecoder] is fed what a receiver in the `MONITOR` role
+yields ([`FrameReceived`][aiortu.core.receiver.FrameReceived] and
+[`FrameDiscarded`][aiortu.core.receiver.FrameDiscarded]) and turns each into a
+[`DecodedFrame`][aiortu.core.bus_decoder.DecodedFrame]: the unit, the direction (request, reply,
+exception reply, broadcast, or unknown), the decoded PDU or the decode error, the CRC status, a
+one-line description and a JSON-able dict:
 
     >>> decoder = BusDecoder()
     >>> decoder.decode_frame(bytes.fromhex("11 03 00 6B 00 03 76 87")).description
@@ -18,12 +18,13 @@ How a frame's direction is told, in order:
 
 1. Unit 0 is a broadcast, always a request. A function code with the top bit set is an
    exception reply.
-2. Otherwise the frame is decoded both as a request and as a reply. When only one
-   succeeds, that is the direction. (Decoding checks the exact length, so this is where
-   the layouts of :func:`~aiortu.core.frame.expected_request_length` and
-   :func:`~aiortu.core.frame.expected_response_length` tell a request from a reply.)
+2. Otherwise the frame is decoded both as a request and as a reply. When only one succeeds, that is
+   the direction. (Decoding checks the exact length, so this is where the layouts of
+   [`expected_request_length`][aiortu.core.frame.expected_request_length] and
+   [`expected_response_length`][aiortu.core.frame.expected_response_length] tell a request from a
+   reply.)
 3. When both succeed (05, 06, 08, 15 and 16 echo their request; user-defined codes have
-   no known layout; a few reads such as ``01 03 ..`` fit both), the conversation decides:
+   no known layout; a few reads such as `01 03 ..` fit both), the conversation decides:
    the frame after a request to a unit with a function code, from that unit with that
    code, is its reply; anything else is a request.
 4. When neither decodes, the layout whose predicted length fits names the direction and
@@ -31,10 +32,11 @@ How a frame's direction is told, in order:
 
 A reply is paired with the request it answers, so that the reply to a read can name the
 addresses it carries. A request that gets no reply stays pending until the next request,
-a frame that looks like its mangled reply, or, with *reply_timeout*, until that long has
+a frame that looks like its mangled reply, or, with `reply_timeout`, until that long has
 passed.
 
-:func:`describe_frame` describes one frame on its own, for traces.
+[`describe_frame`][aiortu.core.bus_decoder.describe_frame] describes one frame on its own, for
+traces.
 """
 
 from __future__ import annotations
@@ -114,13 +116,13 @@ class CrcStatus(enum.StrEnum):
 class DecodedFrame:
     """One frame (or run of discarded bytes) seen on the bus, with its meaning.
 
-    ``time`` and ``end`` are when its first and last bytes arrived, in the clock of the
-    receiver. ``unit`` and ``function_code`` are ``None`` for discarded bytes. ``pdu`` is
-    the decoded request, response, :class:`~aiortu.core.pdu.ExceptionPDU` or
-    :class:`~aiortu.core.pdu.RawPDU`, or ``None`` when decoding failed; ``error`` then
+    `time` and `end` are when its first and last bytes arrived, in the clock of the
+    receiver. `unit` and `function_code` are `None` for discarded bytes. `pdu` is
+    the decoded request, response, [`ExceptionPDU`][aiortu.core.pdu.ExceptionPDU] or
+    [`RawPDU`][aiortu.core.pdu.RawPDU], or `None` when decoding failed; `error` then
     says why (it is also set when a decoded reply does not answer its request). A reply
-    paired with its request carries it in ``request`` and its ``index`` in
-    ``request_index``.
+    paired with its request carries it in `request` and its `index` in
+    `request_index`.
     """
 
     index: int
@@ -136,7 +138,7 @@ class DecodedFrame:
     pdu: PDU | None
     error: FrameError | None
     description: str
-    """One line saying what the frame means, e.g. ``unit 17 read coils 19..37 (19)``."""
+    """One line saying what the frame means, e.g. `unit 17 read coils 19..37 (19)`."""
     request: Request | None = None
     request_index: int | None = None
     discard_reason: DiscardReason | None = None
@@ -149,12 +151,12 @@ class DecodedFrame:
         return function_name(self.function_code)
 
     def to_dict(self, *, raw: bool = True) -> dict[str, Any]:
-        """The record as a dict of JSON types; with *raw*, the bytes in hex under ``frame``.
+        """The record as a dict of JSON types; with `raw`, the bytes in hex under `frame`.
 
-        Keys: ``index``, ``time``, ``end``, ``unit``, ``direction``, ``function_code``,
-        ``function``, ``crc``, ``description``, ``pdu`` (the PDU's class under ``type``
-        and its fields), ``error``, ``request_index``, ``discard_reason``, and, when the
-        frame reads or writes a table, ``table``, ``address``, ``count`` and ``values``.
+        Keys: `index`, `time`, `end`, `unit`, `direction`, `function_code`,
+        `function`, `crc`, `description`, `pdu` (the PDU's class under `type`
+        and its fields), `error`, `request_index`, `discard_reason`, and, when the
+        frame reads or writes a table, `table`, `address`, `count` and `values`.
         """
         out: dict[str, Any] = {
             "index": self.index,
@@ -190,9 +192,9 @@ class _Pending:
 class BusDecoder:
     """Decodes the frames of one bus in order, pairing replies with requests.
 
-    *reply_timeout* (seconds, in the receiver's clock): a request not answered within it
+    `reply_timeout` (seconds, in the receiver's clock): a request not answered within it
     is forgotten, so that a later frame with the same unit and function code is taken for
-    a new request. ``None`` (the default) keeps a request pending until the next one.
+    a new request. `None` (the default) keeps a request pending until the next one.
     """
 
     def __init__(self, *, reply_timeout: float | None = None) -> None:
@@ -225,7 +227,7 @@ class BusDecoder:
     ) -> DecodedFrame:
         """Decode whole frame bytes, checking the CRC here (for frames not from a receiver).
 
-        *direction* (``"request"`` or ``"reply"``) skips the guessing; *request* pairs a
+        `direction` (`"request"` or `"reply"`) skips the guessing; `request` pairs a
         reply with that request instead of the pending one.
         """
         if len(frame) < MIN_FRAME_LENGTH:
@@ -438,10 +440,10 @@ def describe_frame(
 ) -> str:
     """Describe one whole frame (unit, PDU, CRC) on its own, in one line.
 
-    Without *direction*, a frame that is both a valid request and a valid reply is taken
-    for a request. Pass ``"request"`` or ``"reply"`` when the sender is known (a slave
-    tracing what it receives and sends), and the *request* a reply answers to name the
-    addresses of its values::
+    Without `direction`, a frame that is both a valid request and a valid reply is taken
+    for a request. Pass `"request"` or `"reply"` when the sender is known (a slave
+    tracing what it receives and sends), and the `request` a reply answers to name the
+    addresses of its values:
 
         >>> describe_frame(bytes.fromhex("01 81 02 C1 91"))
         'unit 1 exception ILLEGAL_DATA_ADDRESS to read coils'

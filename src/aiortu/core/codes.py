@@ -1,7 +1,7 @@
 """The numbers of the Modbus application protocol, as enums.
 
 Function codes, exception codes, the sub-functions of Diagnostics (08), and the codes of
-Read Device Identification (2B/0E). Each is an :class:`enum.IntEnum`, so a member compares
+Read Device Identification (2B/0E). Each is an `enum.IntEnum`, so a member compares
 equal to the number on the wire and prints with its name.
 """
 
@@ -36,7 +36,7 @@ USER_DEFINED_FUNCTION_CODES = (*range(65, 73), *range(100, 111))
 
 
 def is_user_defined(function_code: int) -> bool:
-    """Tell whether *function_code* lies in a range the spec leaves to users."""
+    """Tell whether `function_code` lies in a range the spec leaves to users."""
     return 65 <= function_code <= 72 or 100 <= function_code <= 110
 
 

@@ -74,7 +74,7 @@ def receive_event(
 def send_event(exception_code: int | None = None, *, listen_only: bool = False) -> int:
     """The event byte the spec stores when a request has been processed.
 
-    *exception_code* is the exception answered, if any (``None`` for a normal reply or
+    `exception_code` is the exception answered, if any (`None` for a normal reply or
     none at all).
     """
     event = _SEND

@@ -1,7 +1,7 @@
 """CRC-16/MODBUS, the checksum that ends every RTU frame, in pure Python.
 
 The CRC is the reflected polynomial 0xA001 with initial value 0xFFFF, computed over the
-unit address and the PDU and sent low byte first::
+unit address and the PDU and sent low byte first:
 
     >>> hex(crc16(b"\\x02\\x07"))
     '0x1241'
@@ -14,7 +14,7 @@ more than it saves on so few bytes once the CPU caches are cold (see _WORD_THRES
 Longer inputs take two bytes per step: the CRC register is 16 bits wide, so XOR-ing a
 little-endian data word into it and then running two zero-byte steps is one lookup in a
 65536-entry table indexed by the register itself. That halves the number of Python-level
-iterations, and reading the words through ``memoryview.cast("H")`` keeps the loop free of
+iterations, and reading the words through `memoryview.cast("H")` keeps the loop free of
 shifts and masks; on CPython 3.11 it is 2.5 to 3 times as fast as the byte loop on 256-byte
 frames. The word table (about 2.6 MB as a list of ints, built in 3 to 5 ms with
 bytes-level operations rather than 65536 Python steps) is built on first use, not at
@@ -26,7 +26,7 @@ frame in about 10 microseconds, while the frame takes 24 ms on the wire even at 
 the CRC costs under 0.05 % of the line's time, and on the 8-byte requests that make up most
 traffic the packages save well under a microsecond, less than the call overhead around
 them. That is not worth a binary dependency and the platforms it would lack wheels for.
-``benchmarks/bench_core.py`` measures them all side by side.
+`benchmarks/bench_core.py` measures them all side by side.
 """
 
 from __future__ import annotations
@@ -51,9 +51,9 @@ _WORD_THRESHOLD = 32 if sys.byteorder == "little" else sys.maxsize
 10 bytes, but a master or a slave computes one CRC per frame, between which the other
 processes of the machine evict the CPU caches: then the word loop's setup (a memoryview, a
 slice, a cast) and its 2.6 MB table cost more than they save on short frames (measured
-with ``benchmarks/bench_core.py``: a 23-byte reply, caches flushed before each call). The
+with `benchmarks/bench_core.py`: a 23-byte reply, caches flushed before each call). The
 frames of the commonest requests and replies are under 32 bytes. The word loop reads
-little-endian words through ``memoryview.cast("H")``, which is native order, so a
+little-endian words through `memoryview.cast("H")`, which is native order, so a
 big-endian machine always takes the byte loop."""
 
 
@@ -68,10 +68,10 @@ def _byte_table() -> list[int]:
 
 
 _TABLE: list[int] = _byte_table()
-"""``_TABLE[i]``: the register after eight shifts starting from ``i`` (one byte step)."""
+"""`_TABLE[i]`: the register after eight shifts starting from `i` (one byte step)."""
 
 _WORD_TABLE: list[int] = []
-"""``_WORD_TABLE[r]``: the register after two zero-byte steps from ``r``; empty until the
+"""`_WORD_TABLE[r]`: the register after two zero-byte steps from `r`; empty until the
 first long input needs it."""
 
 
@@ -103,11 +103,11 @@ def _build_word_table() -> list[int]:
 
 
 def crc16(data: bytes | bytearray | memoryview, initial: int = CRC_INITIAL) -> int:
-    """The CRC-16/MODBUS of *data*, as an int 0..0xFFFF.
+    """The CRC-16/MODBUS of `data`, as an int 0..0xFFFF.
 
-    *initial* continues a CRC over several pieces: ``crc16(b, crc16(a)) == crc16(a + b)``.
-    A :class:`memoryview` must be contiguous; it is read as bytes whatever its format.
-    Raises :class:`~aiortu.errors.InvalidValue` when *initial* is not 0..0xFFFF.
+    `initial` continues a CRC over several pieces: `crc16(b, crc16(a)) == crc16(a + b)`.
+    A `memoryview` must be contiguous; it is read as bytes whatever its format.
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] when `initial` is not 0..0xFFFF.
     """
     # A frame's bytes from the initial value, the call made per frame, check nothing
     # more: with cold caches every step counts.
@@ -134,16 +134,16 @@ def crc16(data: bytes | bytearray | memoryview, initial: int = CRC_INITIAL) -> i
 
 
 def crc16_bytes(data: bytes | bytearray | memoryview) -> bytes:
-    """The CRC of *data* as the two bytes that follow it on the wire, low byte first."""
+    """The CRC of `data` as the two bytes that follow it on the wire, low byte first."""
     crc = crc16(data)
     return bytes((crc & 0xFF, crc >> 8))
 
 
 def check_crc(frame: bytes | bytearray | memoryview) -> bool:
-    """Whether the last two bytes of *frame* are the CRC of the bytes before them.
+    """Whether the last two bytes of `frame` are the CRC of the bytes before them.
 
     Runs the CRC over the whole frame, CRC included: the result is 0 exactly when the CRC
-    matches. A frame shorter than two bytes has no CRC and gives ``False``; whether the
+    matches. A frame shorter than two bytes has no CRC and gives `False`; whether the
     frame is long enough to mean anything is the framer's business.
     """
     if type(frame) is memoryview:

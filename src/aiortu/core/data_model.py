@@ -1,26 +1,31 @@
 """The Modbus data model: the four tables, and the protocols a slave's data store follows.
 
-The tables are coils (one bit, read/write), discrete inputs (one bit, read-only), input
-registers (16 bits, read-only) and holding registers (16 bits, read/write), each with
-protocol addresses 0..65535; :class:`Table` is :class:`aiortu.core.addressing.Table`,
-re-exported here. A slave unit serves them from a :class:`DataStore`:
-:meth:`~DataStore.read` and :meth:`~DataStore.write` on a :class:`Table`, raising
-:class:`~aiortu.errors.ExceptionResponse` with the code the master should get (02 for an
-address outside the map). Optional capabilities are separate protocols:
+The tables are coils (one bit, read/write), discrete inputs (one bit, read-only), input registers
+(16 bits, read-only) and holding registers (16 bits, read/write), each with protocol addresses
+0..65535; [`Table`][aiortu.core.addressing.Table] is
+[`aiortu.core.addressing.Table`][aiortu.core.addressing.Table], re-exported here. A slave unit
+serves them from a [`DataStore`][aiortu.core.data_model.DataStore]:
+[`read`][aiortu.core.data_model.DataStore.read] and
+[`write`][aiortu.core.data_model.DataStore.write] on a [`Table`][aiortu.core.addressing.Table],
+raising [`ExceptionResponse`][aiortu.errors.ExceptionResponse] with the code the master should get
+(02 for an address outside the map). Optional capabilities are separate protocols:
 
-- :class:`SupportsFifoQueues`: Read FIFO Queue (18);
-- :class:`SupportsExceptionStatus`: Read Exception Status (07);
-- :class:`SupportsFileRecords`: Read and Write File Record (14, 15);
-- :class:`SupportsDeviceIdentification`: Read Device Identification (2B/0E);
-- :class:`SupportsServerId`: Report Server ID (11).
+- [`SupportsFifoQueues`][aiortu.core.data_model.SupportsFifoQueues]: Read FIFO Queue (18);
+- [`SupportsExceptionStatus`][aiortu.core.data_model.SupportsExceptionStatus]: Read Exception Status
+  (07);
+- [`SupportsFileRecords`][aiortu.core.data_model.SupportsFileRecords]: Read and Write File Record
+  (14, 15);
+- [`SupportsDeviceIdentification`][aiortu.core.data_model.SupportsDeviceIdentification]: Read Device
+  Identification (2B/0E);
+- [`SupportsServerId`][aiortu.core.data_model.SupportsServerId]: Report Server ID (11).
 
-Any of these methods may instead return an awaitable (be ``async def``): that is an
-async store, for example one that proxies another device through a master
-(:class:`AsyncDataStore` spells the protocol out). The slave awaits such results; a
-sync store pays nothing for that possibility.
+Any of these methods may instead return an awaitable (be `async def`): that is an async store, for
+example one that proxies another device through a master
+([`AsyncDataStore`][aiortu.core.data_model.AsyncDataStore] spells the protocol out). The slave
+awaits such results; a sync store pays nothing for that possibility.
 
 These definitions live in the core because both the slave and the stores
-(:mod:`aiortu.slave._store`, where users import them from) depend on them.
+([`aiortu.slave`][aiortu.slave], where users import them from) depend on them.
 """
 
 from __future__ import annotations
@@ -49,37 +54,38 @@ __all__ = (
 class DataStore(Protocol):
     """What a slave unit serves its tables from (see the module docstring).
 
-    Both methods raise :class:`~aiortu.errors.ExceptionResponse` with the code to answer:
-    02 (``ILLEGAL_DATA_ADDRESS``) when any address of the range is not served, and
-    whatever else the store decides (04 when a backing device failed, ...). Any other
-    error makes the slave answer 04 and log it.
+    Both methods raise [`ExceptionResponse`][aiortu.errors.ExceptionResponse] with the code to
+    answer: 02 (`ILLEGAL_DATA_ADDRESS`) when any address of the range is not served, and whatever
+    else the store decides (04 when a backing device failed, ...). Any other error makes the slave
+    answer 04 and log it.
     """
 
     def read(self, table: Table, address: int, count: int) -> Sequence[int]:
-        """Return *count* values of *table* from *address* (bits as bool or 0/1)."""
+        """Return `count` values of `table` from `address` (bits as bool or 0/1)."""
         ...
 
     def write(self, table: Table, address: int, values: Sequence[int]) -> object:
-        """Store *values* into *table* from *address*, on behalf of a master.
+        """Store `values` into `table` from `address`, on behalf of a master.
 
-        Returns ``None`` (anything else but an awaitable is ignored).
+        Returns `None` (anything else but an awaitable is ignored).
         """
         ...
 
 
 @runtime_checkable
 class AsyncDataStore(Protocol):
-    """A :class:`DataStore` whose methods are coroutines (a proxy to another device, ...).
+    """A [`DataStore`][aiortu.core.data_model.DataStore] whose methods are coroutines (a proxy to
+    another device, ...).
 
-    The slave accepts it wherever it accepts a :class:`DataStore`.
+    The slave accepts it wherever it accepts a [`DataStore`][aiortu.core.data_model.DataStore].
     """
 
     async def read(self, table: Table, address: int, count: int) -> Sequence[int]:
-        """Return *count* values of *table* from *address*."""
+        """Return `count` values of `table` from `address`."""
         ...
 
     async def write(self, table: Table, address: int, values: Sequence[int]) -> None:
-        """Store *values* into *table* from *address*, on behalf of a master."""
+        """Store `values` into `table` from `address`, on behalf of a master."""
         ...
 
 
@@ -88,7 +94,7 @@ class SupportsFifoQueues(Protocol):
     """A store that serves Read FIFO Queue (18)."""
 
     def read_fifo_queue(self, address: int) -> Sequence[int]:
-        """The values queued behind the FIFO pointer *address*, oldest first; 02 if none."""
+        """The values queued behind the FIFO pointer `address`, oldest first; 02 if none."""
         ...
 
 
@@ -106,18 +112,18 @@ class SupportsFileRecords(Protocol):
     """A store that serves Read File Record (14) and Write File Record (15).
 
     A file (1..65535) is a run of records (registers) numbered from 0. Both methods
-    raise :class:`~aiortu.errors.ExceptionResponse` 02 for a file the device does not
+    raise [`ExceptionResponse`][aiortu.errors.ExceptionResponse] 02 for a file the device does not
     have or records past its end.
     """
 
     def read_file_record(self, file_number: int, record_number: int, count: int) -> Sequence[int]:
-        """*count* records of file *file_number* from *record_number*."""
+        """`count` records of file `file_number` from `record_number`."""
         ...
 
     def write_file_record(
         self, file_number: int, record_number: int, values: Sequence[int]
     ) -> None:
-        """Store *values* into file *file_number* from *record_number*."""
+        """Store `values` into file `file_number` from `record_number`."""
         ...
 
 
@@ -135,8 +141,8 @@ _MAX_SERVER_ID_BYTES = 250
 
 @dataclass(frozen=True, slots=True)
 class ServerId:
-    """What Report Server ID (11) answers: the *server_id* bytes (at least one), the
-    *run_indicator* (running or not), and *additional_data* of the device's own."""
+    """What Report Server ID (11) answers: the `server_id` bytes (at least one), the
+    `run_indicator` (running or not), and `additional_data` of the device's own."""
 
     server_id: bytes
     run_indicator: bool = True
@@ -162,6 +168,6 @@ class SupportsServerId(Protocol):
     """A store that serves Report Server ID (11)."""
 
     def report_server_id(self) -> ServerId | None:
-        """The server id, run indicator and additional data; ``None`` for the slave's
+        """The server id, run indicator and additional data; `None` for the slave's
         default (the unit address as the id, running, no data)."""
         ...

@@ -35,7 +35,7 @@ _INDIVIDUAL_ACCESS = 0x80
 
 
 def conformity_level(objects: Mapping[int, bytes]) -> int:
-    """The conformity level of a device with *objects*, individual access included."""
+    """The conformity level of a device with `objects`, individual access included."""
     if any(object_id >= 0x80 for object_id in objects):
         return _INDIVIDUAL_ACCESS | DeviceIdReadCode.EXTENDED
     if any(object_id >= 0x03 for object_id in objects):
@@ -46,9 +46,9 @@ def conformity_level(objects: Mapping[int, bytes]) -> int:
 def answer_device_identification(
     objects: Mapping[int, bytes], read_code: int, object_id: int
 ) -> ReadDeviceIdentificationResponse | None:
-    """The reply to a read of *read_code* from *object_id*, or ``None`` for exception 02.
+    """The reply to a read of `read_code` from `object_id`, or `None` for exception 02.
 
-    ``None`` comes only for an individual read of an object the device does not have.
+    `None` comes only for an individual read of an object the device does not have.
     """
     level = conformity_level(objects)
     if read_code == DeviceIdReadCode.INDIVIDUAL:

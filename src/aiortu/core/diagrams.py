@@ -1,7 +1,7 @@
 """Draw a state machine's transition table as a Mermaid state diagram.
 
 The documentation's diagrams are generated from the same tables the machines run on
-(``python -m aiortu.core.diagrams``), and a test checks that the pages still match, so a
+(`python -m aiortu.core.diagrams`), and a test checks that the pages still match, so a
 diagram can never drift from the code.
 """
 
@@ -21,10 +21,10 @@ def state_diagram(
     transitions: Mapping[tuple[StateT, EventT], tuple[StateT, str] | StateT],
     initial: StateT,
 ) -> str:
-    """A Mermaid ``stateDiagram-v2`` block with one arrow per (state, event) entry.
+    """A Mermaid `stateDiagram-v2` block with one arrow per (state, event) entry.
 
-    A table maps ``(state, event)`` to ``(next state, action)`` or to the next state
-    alone. Arrows are labelled ``EVENT / action`` (or ``EVENT``); *initial* gets the start
+    A table maps `(state, event)` to `(next state, action)` or to the next state
+    alone. Arrows are labelled `EVENT / action` (or `EVENT`); `initial` gets the start
     marker. Entries that share their source, target and action are merged into one arrow
     whose label lists the events.
     """

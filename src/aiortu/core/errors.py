@@ -1,7 +1,7 @@
-"""The definitions of aiortu's exceptions; see :mod:`aiortu.errors` for the tree.
+"""The definitions of aiortu's exceptions; see [`aiortu.errors`][aiortu.errors] for the tree.
 
 They live in the core because the sans-IO core raises them and imports nothing from the
-rest of the package. Users import them from :mod:`aiortu.errors` or :mod:`aiortu`.
+rest of the package. Users import them from [`aiortu.errors`][aiortu.errors] or `aiortu`.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ _SHOWN_LENGTH = 60
 
 
 def _show(value: object) -> str:
-    """*value* as a message shows it: the literal of a short plain value, else its type
+    """`value` as a message shows it: the literal of a short plain value, else its type
     (never an object's repr with its address, never a whole long list)."""
     if isinstance(value, enum.Enum):
         return f"{type(value).__name__}.{value.name}"
@@ -74,8 +74,9 @@ class InvalidValue(ModbusError, ValueError):
     """A field or a setting is outside its allowed range. Caused by the caller.
 
     Raised while building a request, a response or line settings, before any byte exists.
-    :attr:`field` names the field, :attr:`value` is what was given and :attr:`allowed`
-    describes what the spec permits (a :class:`range` or a short text).
+    [`field`][aiortu.errors.InvalidValue] names the field, [`value`][aiortu.errors.InvalidValue] is
+    what was given and [`allowed`][aiortu.errors.InvalidValue] describes what the spec permits (a
+    `range` or a short text).
     """
 
     def __init__(
@@ -107,10 +108,11 @@ class InvalidRequest(InvalidValue):
 class ExceptionResponse(ModbusError):
     """The device answered with a Modbus exception response. Caused by the peer.
 
-    The exchange itself worked: the device understood the frame and refused the
-    request. :attr:`code` is the exception code the device sent (an ``ExceptionCode``
-    when it is one the spec defines, else the raw ``int``), :attr:`function_code` is the
-    function code of the request, and :attr:`unit` the device's address when known.
+    The exchange itself worked: the device understood the frame and refused the request.
+    [`code`][aiortu.errors.ExceptionResponse] is the exception code the device sent (an
+    `ExceptionCode` when it is one the spec defines, else the raw `int`),
+    [`function_code`][aiortu.errors.ExceptionResponse] is the function code of the request, and
+    [`unit`][aiortu.errors.ExceptionResponse] the device's address when known.
     """
 
     def __init__(
@@ -136,15 +138,15 @@ class ResponseTimeout(ModbusError, TimeoutError):
     """No valid reply arrived within the response timeout. Caused by the peer or the line.
 
     The device may be off, at another address or baud rate, or the reply was too corrupted
-    to recognise. Also a :class:`TimeoutError`, so generic timeout handling catches it.
+    to recognise. Also a `TimeoutError`, so generic timeout handling catches it.
     """
 
 
 class FrameError(ModbusError):
     """Bytes arrived that do not make a valid frame. Caused by the peer or the line.
 
-    :attr:`reason` is a short machine-readable word (``"crc"``, ``"length"``,
-    ``"content"``, ...), and the message explains it.
+    [`reason`][aiortu.errors.FrameError] is a short machine-readable word (`"crc"`, `"length"`,
+    `"content"`, ...), and the message explains it.
     """
 
     reason = "frame"
@@ -175,9 +177,10 @@ class CRCError(FrameError):
 class MalformedPDU(FrameError):
     """A frame with a good CRC whose content breaks the spec. Caused by the peer.
 
-    :attr:`field`, :attr:`value` and :attr:`allowed` name what is wrong when it is one
-    field. :attr:`exception_code` is the Modbus exception a slave answers such a request
-    with (``ILLEGAL_DATA_VALUE`` unless the function itself is unknown).
+    [`field`][aiortu.errors.MalformedPDU], [`value`][aiortu.errors.MalformedPDU] and
+    [`allowed`][aiortu.errors.MalformedPDU] name what is wrong when it is one field.
+    [`exception_code`][aiortu.errors.MalformedPDU] is the Modbus exception a slave answers such a
+    request with (`ILLEGAL_DATA_VALUE` unless the function itself is unknown).
     """
 
     reason = "content"
@@ -211,7 +214,7 @@ class ConnectionLost(ModbusError):
 class PortError(ModbusError):
     """A port could not be opened as asked. Caused by the environment.
 
-    :attr:`port` names the device path or URL.
+    [`port`][aiortu.errors.PortError] names the device path or URL.
     """
 
     def __init__(self, port: str, message: str) -> None:
@@ -228,7 +231,7 @@ class PortBusy(PortError):
 
 
 class PortPermissionDenied(PortError):
-    """The user may not open the port (on Linux, usually missing from the ``dialout`` group)."""
+    """The user may not open the port (on Linux, usually missing from the `dialout` group)."""
 
 
 class UnsupportedSettings(PortError):
@@ -238,8 +241,8 @@ class UnsupportedSettings(PortError):
 class UnitOffline(ResponseTimeout):
     """The unit is marked offline and the master fails fast: nothing was sent. Caused by the peer.
 
-    Raised only with ``fail_fast_offline=True``, between probes. Also a
-    :class:`ResponseTimeout`, since the unit has not been answering.
+    Raised only with `fail_fast_offline=True`, between probes. Also a
+    [`ResponseTimeout`][aiortu.errors.ResponseTimeout], since the unit has not been answering.
     """
 
     def __init__(self, unit: int, failures: int) -> None:
@@ -253,7 +256,8 @@ class UnitOffline(ResponseTimeout):
 class UnitSkipped(ResponseTimeout):
     """The poller skipped a read of an offline unit until its next probe. Caused by the peer.
 
-    Nothing was sent. Also a :class:`ResponseTimeout`, since the unit has not been answering.
+    Nothing was sent. Also a [`ResponseTimeout`][aiortu.errors.ResponseTimeout], since the unit has
+    not been answering.
     """
 
     def __init__(self, unit: int, next_probe_in: float) -> None:
@@ -265,8 +269,9 @@ class UnitSkipped(ResponseTimeout):
 class ConfigError(ModbusError, ValueError):
     """A device description file is wrong. Caused by the caller (the file's author).
 
-    The message is one line, ``FILE: KEY: PROBLEM``; :attr:`source`, :attr:`key` (a key
-    path such as ``slave[0].coils[1].count``) and :attr:`problem` hold the parts.
+    The message is one line, `FILE: KEY: PROBLEM`; [`source`][aiortu.errors.ConfigError],
+    [`key`][aiortu.errors.ConfigError] (a key path such as `slave[0].coils[1].count`) and
+    [`problem`][aiortu.errors.ConfigError] hold the parts.
     """
 
     def __init__(self, source: str, key: str, problem: str) -> None:

@@ -1,15 +1,16 @@
 """RTU frames: unit address, PDU and CRC, and the length of a frame from its first bytes.
 
-An RTU frame (the spec's ADU) is ``unit + PDU + CRC``, 4 to 256 bytes, the CRC sent low
-byte first. :func:`encode_frame` and :func:`decode_frame` build and check whole frames.
+An RTU frame (the spec's ADU) is `unit + PDU + CRC`, 4 to 256 bytes, the CRC sent low byte first.
+[`encode_frame`][aiortu.core.frame.encode_frame] and
+[`decode_frame`][aiortu.core.frame.decode_frame] build and check whole frames.
 
-The receiver does not have to wait for t3.5 of silence to know that a frame has ended:
-for every public function code the length follows from at most the first few bytes
-(the function code and, for variable-length PDUs, a byte count). The predictors here
-answer, for the bytes received so far, either the total frame length, :data:`NEED_MORE`
-(a few more bytes will tell), or :data:`CANNOT_KNOW` (a custom function code, or bytes
-that break the layout). A request and a reply with the same function code usually have
-different layouts, so there is one predictor for each direction.
+The receiver does not have to wait for t3.5 of silence to know that a frame has ended: for every
+public function code the length follows from at most the first few bytes (the function code and, for
+variable-length PDUs, a byte count). The predictors here answer, for the bytes received so far,
+either the total frame length, [`NEED_MORE`][aiortu.core.frame.NEED_MORE] (a few more bytes will
+tell), or [`CANNOT_KNOW`][aiortu.core.frame.CANNOT_KNOW] (a custom function code, or bytes that
+break the layout). A request and a reply with the same function code usually have different layouts,
+so there is one predictor for each direction.
 """
 
 from __future__ import annotations
@@ -57,10 +58,10 @@ class Frame:
 
 
 def encode_frame(unit: int, pdu: bytes) -> bytes:
-    """Build the frame ``unit + pdu + CRC`` (CRC low byte first).
+    """Build the frame `unit + pdu + CRC` (CRC low byte first).
 
-    *unit* may be any byte (0 is broadcast, 248..255 are reserved but some devices use
-    them); *pdu* must be 1..253 bytes. Raises :class:`~aiortu.errors.InvalidValue`.
+    `unit` may be any byte (0 is broadcast, 248..255 are reserved but some devices use
+    them); `pdu` must be 1..253 bytes. Raises [`InvalidValue`][aiortu.errors.InvalidValue].
     """
     if unit not in _UNIT_RANGE:
         raise InvalidValue("unit", unit, _UNIT_RANGE)
@@ -74,8 +75,8 @@ def encode_frame(unit: int, pdu: bytes) -> bytes:
 def decode_frame(frame: bytes) -> Frame:
     """Check the length and the CRC of a whole frame and split it.
 
-    Raises :class:`~aiortu.errors.MalformedPDU` for a length outside 4..256 and
-    :class:`~aiortu.errors.CRCError` when the CRC does not match.
+    Raises [`MalformedPDU`][aiortu.errors.MalformedPDU] for a length outside 4..256 and
+    [`CRCError`][aiortu.errors.CRCError] when the CRC does not match.
     """
     length = len(frame)
     if not MIN_FRAME_LENGTH <= length <= MAX_FRAME_LENGTH:
@@ -198,10 +199,10 @@ def _predict_mei(frame: bytes | bytearray, reply: bool) -> int:
 
 
 def expected_request_length(frame: bytes | bytearray) -> int:
-    """The total length of the request frame that starts with *frame*.
+    """The total length of the request frame that starts with `frame`.
 
-    Returns the length in bytes (unit and CRC included), :data:`NEED_MORE`, or
-    :data:`CANNOT_KNOW` for function codes without a known layout.
+    Returns the length in bytes (unit and CRC included), [`NEED_MORE`][aiortu.core.frame.NEED_MORE],
+    or [`CANNOT_KNOW`][aiortu.core.frame.CANNOT_KNOW] for function codes without a known layout.
 
     >>> expected_request_length(bytes.fromhex("11 03 00"))
     8
@@ -210,10 +211,10 @@ def expected_request_length(frame: bytes | bytearray) -> int:
 
 
 def expected_response_length(frame: bytes | bytearray) -> int:
-    """The total length of the reply frame that starts with *frame*.
+    """The total length of the reply frame that starts with `frame`.
 
-    Returns the length in bytes (unit and CRC included), :data:`NEED_MORE`, or
-    :data:`CANNOT_KNOW` for function codes without a known layout.
+    Returns the length in bytes (unit and CRC included), [`NEED_MORE`][aiortu.core.frame.NEED_MORE],
+    or [`CANNOT_KNOW`][aiortu.core.frame.CANNOT_KNOW] for function codes without a known layout.
 
     >>> expected_response_length(bytes.fromhex("11 03 06"))
     11

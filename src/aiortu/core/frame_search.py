@@ -1,17 +1,17 @@
 """Finding frames inside bytes that did not make one: the receiver's resynchronisation.
 
-When bytes end in silence, or overflow the 256-byte buffer, without making one valid
-frame (garbage glued to a reply, a flood of noise with requests inside), the receiver asks
-a :class:`FrameSearch` where valid frames start in them. A frame is found only where its
-CRC checks at the length its first bytes predict, so a search never accepts a frame whose
-CRC fails.
+When bytes end in silence, or overflow the 256-byte buffer, without making one valid frame (garbage
+glued to a reply, a flood of noise with requests inside), the receiver asks a
+[`FrameSearch`][aiortu.core.frame_search.FrameSearch] where valid frames start in them. A frame is
+found only where its CRC checks at the length its first bytes predict, so a search never accepts a
+frame whose CRC fails.
 
-The search is cheap on noise: a precompiled pattern finds the offsets where an expected
-unit address is followed by a function code with a known layout; a length is predicted
-only there, and the CRC is checked only when the predicted frame is all in the buffer.
-The search also remembers what it has judged (:meth:`FrameSearch.keep`), so bytes kept
-after an overflow are not searched again: a flood costs a pattern scan per byte, not a
-prediction per offset per overflow.
+The search is cheap on noise: a precompiled pattern finds the offsets where an expected unit address
+is followed by a function code with a known layout; a length is predicted only there, and the CRC is
+checked only when the predicted frame is all in the buffer. The search also remembers what it has
+judged ([`FrameSearch.keep`][aiortu.core.frame_search.FrameSearch.keep]), so bytes kept after an
+overflow are not searched again: a flood costs a pattern scan per byte, not a prediction per offset
+per overflow.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ _MEI: Final = 0x2B
 class FrameSearch:
     """Where valid frames start in a buffer, for one receiver.
 
-    *addresses* are the unit addresses to look for; *requests* and *replies* say which
+    `addresses` are the unit addresses to look for; `requests` and `replies` say which
     layouts to expect (a master: replies; a slave: requests to its own units; a monitor:
     both, from anyone).
     """
@@ -72,25 +72,26 @@ class FrameSearch:
             self._pending = []
 
     def offsets(self, buffer: bytearray, last_start: int) -> Iterator[int]:
-        """The offsets up to *last_start* where a frame may start, in order, not yet judged."""
+        """The offsets up to `last_start` where a frame may start, in order, not yet judged."""
         yield from self._pending
         # The pattern looks two bytes ahead: offsets up to last_start need last_start + 2.
         for match in self._starts.finditer(buffer, self._scan_from, last_start + 2):
             yield match.start()
 
     def keep(self, pending: list[int], keep_from: int, scanned_to: int) -> None:
-        """The buffer's first *keep_from* bytes are dropped; remember what was judged.
+        """The buffer's first `keep_from` bytes are dropped; remember what was judged.
 
-        *pending* are the offsets that needed more bytes, *scanned_to* the first offset
+        `pending` are the offsets that needed more bytes, `scanned_to` the first offset
         the pattern has not scanned yet (both in the buffer before the drop).
         """
         self._pending = [offset - keep_from for offset in pending if offset >= keep_from]
         self._scan_from = max(0, scanned_to - keep_from)
 
     def frame_at(self, buffer: bytearray, offset: int) -> int:
-        """The length of a valid frame starting at *offset*, or NEED_MORE / CANNOT_KNOW.
+        """The length of a valid frame starting at `offset`, or NEED_MORE / CANNOT_KNOW.
 
-        Only for offsets :meth:`offsets` gave: unit address and function code are known.
+        Only for offsets [`offsets`][aiortu.core.frame_search.FrameSearch.offsets] gave: unit
+        address and function code are known.
         """
         function_code = buffer[offset + 1]
         if self.requests and not self.replies:
@@ -118,7 +119,7 @@ class FrameSearch:
 
 
 def _known_codes(predict: Callable[[bytes], int]) -> frozenset[int]:
-    """The function codes whose frames *predict* can tell the length of."""
+    """The function codes whose frames `predict` can tell the length of."""
     return frozenset(
         code
         for code in range(256)

@@ -1,6 +1,6 @@
 """The master's state machine, written as a table: one transaction at a time, sans-IO.
 
-The machine follows the master diagram of the serial line spec::
+The machine follows the master diagram of the serial line spec:
 
     IDLE                nothing in flight          -- a unicast sent -->      WAITING_REPLY
                                                    -- a broadcast sent -->    WAITING_TURNAROUND
@@ -14,34 +14,35 @@ The machine follows the master diagram of the serial line spec::
     PROCESSING_ERROR    retry, give up, or go on   -- retry, give up -->      IDLE
                         waiting                    -- a frame error noted --> WAITING_REPLY
 
-:data:`TRANSITIONS` is that diagram as data: ``(state, event) -> (next state, action)``.
-A pair missing from it is a bug and raises :class:`MasterMachineError`, never a silent
-no-op. The documentation draws its diagram from the same table.
+[`TRANSITIONS`][aiortu.core.master_machine.TRANSITIONS] is that diagram as data: `(state, event) ->
+(next state, action)`. A pair missing from it is a bug and raises
+[`MasterMachineError`][aiortu.core.master_machine.MasterMachineError], never a silent no-op. The
+documentation draws its diagram from the same table.
 
 The machine owns the decisions of a transaction; the async master only moves bytes and
-sleeps until :attr:`MasterMachine.deadline`:
+sleeps until [`MasterMachine.deadline`][aiortu.core.master_machine.MasterMachine.deadline]:
 
 * The response timeout runs from the end of transmission (the time the caller passes to
-  :meth:`MasterMachine.sent`), per attempt.
+  [`MasterMachine.sent`][aiortu.core.master_machine.MasterMachine.sent]), per attempt.
 * A frame answers the request only when it ended after the request began to go out (older
   frames are stale), comes from the unit asked, carries the request's function code or its
-  exception form, decodes, and passes ``request.check_response``. A stale frame, or one
+  exception form, decodes, and passes `request.check_response`. A stale frame, or one
   from another unit or with another function code, is skipped and the wait goes on: on a
   multi-drop line other units talk too. A frame from the unit asked with the request's
   function code that does not decode or does not answer the request (a byte count or an
   echo that differs) fails the attempt at once with
-  :class:`~aiortu.core.errors.MalformedPDU`: nobody else on the line sends it, and the
+  [`MalformedPDU`][aiortu.errors.MalformedPDU]: nobody else on the line sends it, and the
   unit will not send a better one for this attempt.
 * Bytes that fail the CRC or the framing are noted; the wait goes on for a short grace
   (a good frame may follow in the same burst), and if nothing answers, the attempt fails
   with that frame error rather than a plain timeout.
-* Retries follow a :class:`~aiortu.core.master_transaction.RetryPolicy`: by default on
+* Retries follow a [`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy]: by default on
   timeouts and frame errors only, never on exception responses (a device that refused
   will refuse again).
-* A register read that gets its usual reply changes nothing in the machine, so a driver
-  may run it without the machine and hand it over only if something else happens
-  (:meth:`MasterMachine.usual_exchange`; the async master's driver of that is
-  :mod:`aiortu.master._usual_exchange`).
+* A register read that gets its usual reply changes nothing in the machine, so a driver may run it
+  without the machine and hand it over only if something else happens
+  ([`MasterMachine.usual_exchange`][aiortu.core.master_machine.MasterMachine.usual_exchange]; the
+  async master's driver of that is [`aiortu.master`][aiortu.master]).
 
 Time comes in as arguments; the machine never reads a clock.
 """
@@ -138,7 +139,8 @@ class MasterMachineError(RuntimeError):
 _WAIT = Outcome(OutcomeKind.WAIT)
 
 _FRAME_CACHE_SIZE: Final = 256
-"""Request frames a machine remembers (see :attr:`MasterMachine.frame`)."""
+"""Request frames a machine remembers (see
+[`MasterMachine.frame`][aiortu.core.master_machine.MasterMachine.frame])."""
 
 
 @dataclass(slots=True)
@@ -155,8 +157,9 @@ class _BadBytes:
 
 
 class KnownRequest:
-    """What a machine remembers of a request to a unit (see :attr:`MasterMachine.frame`):
-    its frame, the shape of its usual reply, and the last usual reply it decoded."""
+    """What a machine remembers of a request to a unit (see
+    [`MasterMachine.frame`][aiortu.core.master_machine.MasterMachine.frame]): its frame, the shape
+    of its usual reply, and the last usual reply it decoded."""
 
     __slots__ = ("frame", "last_reply", "last_response", "reply_shape", "request")
 
@@ -170,7 +173,7 @@ class KnownRequest:
         self.last_reply: bytes | None = None
         """The last usual reply (a whole frame whose CRC was found good), or None."""
         self.last_response: Response | None = None
-        """The response :attr:`last_reply` holds."""
+        """The response [`last_reply`][aiortu.core.master_machine.KnownRequest.last_reply] holds."""
 
 
 _REGISTER_READS: Final = frozenset((ReadHoldingRegistersRequest, ReadInputRegistersRequest))
@@ -181,7 +184,7 @@ _WORDS: Final = tuple(struct.Struct(f">{count}H") for count in range(126))
 
 
 def _register_reply(request: ReadHoldingRegistersRequest, data: bytes, offset: int) -> Response:
-    """The response to a register read whose words start at *offset* of *data*, built
+    """The response to a register read whose words start at `offset` of `data`, built
     without decode_response's general checks: the caller has matched the length to the
     request's count, and 16-bit words are always in range."""
     response = object.__new__(request.response_class)
@@ -211,7 +214,7 @@ TRANSITIONS: Final[dict[tuple[MasterState, MasterEvent], tuple[MasterState, str]
     (_S.PROCESSING_ERROR, _E.RETRY): (_S.IDLE, "prepare_retry"),
     (_S.PROCESSING_ERROR, _E.GIVE_UP): (_S.IDLE, "finish_with_failure"),
 }
-"""The master's transitions: ``(state, event) -> (next state, action name)``."""
+"""The master's transitions: `(state, event) -> (next state, action name)`."""
 
 _UNICAST_SENT_TARGET: Final = TRANSITIONS[_S.IDLE, _E.SEND_UNICAST][0]
 """Where sending a unicast request leaves the machine (the deadline: the response timeout)."""
@@ -223,7 +226,8 @@ _USUAL_REPLY_TARGET: Final = TRANSITIONS[
 
 
 def next_state(state: MasterState, event: MasterEvent) -> MasterState:
-    """The state *event* leads to from *state*; raises :class:`MasterMachineError` if none."""
+    """The state `event` leads to from `state`; raises
+    [`MasterMachineError`][aiortu.core.master_machine.MasterMachineError] if none."""
     entry = TRANSITIONS.get((state, event))
     if entry is None:
         raise MasterMachineError(f"no transition for event {event.name} in state {state.name}")
@@ -231,7 +235,7 @@ def next_state(state: MasterState, event: MasterEvent) -> MasterState:
 
 
 TransitionObserver = Callable[[MasterState, MasterEvent, MasterState], None]
-"""Called with ``(state, event, next state)`` for every transition."""
+"""Called with `(state, event, next state)` for every transition."""
 
 
 class MasterMachine:
@@ -239,16 +243,22 @@ class MasterMachine:
 
     Drive it like this for each transaction:
 
-    1. :meth:`begin` with a :class:`~aiortu.core.master_transaction.Transaction` (state IDLE).
-    2. Send :attr:`frame`, then :meth:`sent` with when it began to go out and when it had
-       left the wire.
-    3. Until the outcome is DONE or FAILED: feed :meth:`frame_received`,
-       :meth:`frame_error` and, once the clock passes :attr:`deadline`, :meth:`expired`.
-       On RETRY, send :attr:`frame` again and call :meth:`sent`.
+    1. [`begin`][aiortu.core.master_machine.MasterMachine.begin] with a
+       [`Transaction`][aiortu.core.master_transaction.Transaction] (state IDLE).
+    2. Send [`frame`][aiortu.core.master_machine.MasterMachine.frame], then
+       [`sent`][aiortu.core.master_machine.MasterMachine.sent] with when it began to go out and when
+       it had left the wire.
+    3. Until the outcome is DONE or FAILED: feed
+       [`frame_received`][aiortu.core.master_machine.MasterMachine.frame_received],
+       [`frame_error`][aiortu.core.master_machine.MasterMachine.frame_error] and, once the clock
+       passes [`deadline`][aiortu.core.master_machine.MasterMachine.deadline],
+       [`expired`][aiortu.core.master_machine.MasterMachine.expired]. On RETRY, send
+       [`frame`][aiortu.core.master_machine.MasterMachine.frame] again and call
+       [`sent`][aiortu.core.master_machine.MasterMachine.sent].
 
-    :meth:`connection_lost` ends the transaction in any state but PROCESSING_*.
-    *on_transition*, if given, is called with ``(state, event, next state)`` for every
-    transition (for tracing and for the tests).
+    [`connection_lost`][aiortu.core.master_machine.MasterMachine.connection_lost] ends the
+    transaction in any state but PROCESSING_*. `on_transition`, if given, is called with `(state,
+    event, next state)` for every transition (for tracing and for the tests).
     """
 
     __slots__ = (
@@ -272,9 +282,11 @@ class MasterMachine:
         self.state = MasterState.IDLE
         """The current state."""
         self.transaction: Transaction | None = None
-        """The transaction in progress (kept after it ends, until the next :meth:`begin`)."""
+        """The transaction in progress (kept after it ends, until the next
+        [`begin`][aiortu.core.master_machine.MasterMachine.begin])."""
         self.deadline: float | None = None
-        """When to call :meth:`expired`: the end of the response timeout or turnaround."""
+        """When to call [`expired`][aiortu.core.master_machine.MasterMachine.expired]: the end of
+        the response timeout or turnaround."""
         self.frame_error_grace = frame_error_grace
         """Seconds the wait goes on after a frame error (never past the response timeout)."""
         self._on_transition = on_transition
@@ -292,7 +304,7 @@ class MasterMachine:
     # -- driving ---------------------------------------------------------------------
 
     def begin(self, transaction: Transaction) -> None:
-        """Take *transaction* as the one in progress; the machine must be IDLE."""
+        """Take `transaction` as the one in progress; the machine must be IDLE."""
         if self.state is not MasterState.IDLE:
             raise MasterMachineError(f"a transaction begins in state IDLE, not {self.state.name}")
         self.transaction = transaction
@@ -309,7 +321,8 @@ class MasterMachine:
         return (self._entry or self._known()).frame
 
     def _known(self) -> KnownRequest:
-        """What the machine remembers of the request in progress (see :attr:`frame`)."""
+        """What the machine remembers of the request in progress (see
+        [`frame`][aiortu.core.master_machine.MasterMachine.frame])."""
         transaction = self._current
         known = self._entry = self._remember(transaction.unit, transaction.request)
         return known
@@ -332,17 +345,18 @@ class MasterMachine:
         return known
 
     def usual_exchange(self, unit: int, request: Request) -> KnownRequest | None:
-        """What the machine remembers of *request* to *unit* (its frame, its usual reply's
+        """What the machine remembers of `request` to `unit` (its frame, its usual reply's
         shape) where a transaction of it may run without the machine until something other
         than its usual reply happens; else None.
 
-        A transaction that gets its usual reply leaves the machine as it found it: IDLE,
-        after SEND_UNICAST, REPLY_RECEIVED and REPLY_OK, with nothing to remember. So a
-        driver may send *frame* and wait for the reply of that shape (first bytes,
-        length) without telling the machine. If that reply comes whole with a good CRC
-        before the response timeout, :meth:`usual_response` makes it the response. On
-        anything else (another frame, bad bytes, the timeout, the line lost), the
-        driver calls :meth:`begin` and then :meth:`sent` with the times the frame went out,
+        A transaction that gets its usual reply leaves the machine as it found it: IDLE, after
+        SEND_UNICAST, REPLY_RECEIVED and REPLY_OK, with nothing to remember. So a driver may send
+        *frame* and wait for the reply of that shape (first bytes, length) without telling the
+        machine. If that reply comes whole with a good CRC before the response timeout,
+        [`usual_response`][aiortu.core.master_machine.MasterMachine.usual_response] makes it the
+        response. On anything else (another frame, bad bytes, the timeout, the line lost), the
+        driver calls [`begin`][aiortu.core.master_machine.MasterMachine.begin] and then
+        [`sent`][aiortu.core.master_machine.MasterMachine.sent] with the times the frame went out,
         and goes on the usual way: the machine then knows everything it would have known.
 
         This applies where the machine is IDLE, has no transition observer (which must
@@ -355,13 +369,15 @@ class MasterMachine:
 
     @staticmethod
     def usual_response(known: KnownRequest, frame: bytes) -> Response:
-        """The response in *frame*, the usual reply to *known*'s request (see
-        :meth:`usual_exchange`): its shape is matched and its CRC checked.
+        """The response in `frame`, the usual reply to `known`'s request (see
+        [`usual_exchange`][aiortu.core.master_machine.MasterMachine.usual_exchange]): its shape is
+        matched and its CRC checked.
 
-        A poll loop reads the same block again and again and often gets the same bytes
-        back. A frame equal to :attr:`KnownRequest.last_reply` holds the same response,
-        so it is not decoded again (and a link need not check its CRC again: see
-        :meth:`aiortu.line._link.Link.expect`). Responses are immutable, so sharing one is safe.
+        A poll loop reads the same block again and again and often gets the same bytes back. A frame
+        equal to [`KnownRequest.last_reply`][aiortu.core.master_machine.KnownRequest.last_reply]
+        holds the same response, so it is not decoded again (and a link need not check its CRC
+        again: see [`aiortu.line.Link.expect`][aiortu.line.Link.expect]). Responses are immutable,
+        so sharing one is safe.
         """
         if frame == known.last_reply:
             response = known.last_response
@@ -375,9 +391,9 @@ class MasterMachine:
         return response
 
     def sent(self, start: float, end: float) -> float:
-        """The request began to go out at *start* and left the wire at *end*.
+        """The request began to go out at `start` and left the wire at `end`.
 
-        Returns the deadline: *end* plus the response timeout, or plus the turnaround.
+        Returns the deadline: `end` plus the response timeout, or plus the turnaround.
         """
         transaction = self._current
         transaction.attempts += 1
@@ -397,7 +413,7 @@ class MasterMachine:
         return self.deadline
 
     def frame_received(self, unit: int, pdu: bytes, start: float, end: float) -> Outcome:
-        """A frame with a good CRC arrived (``start``/``end``: its first and last byte)."""
+        """A frame with a good CRC arrived (`start`/`end`: its first and last byte)."""
         if self.state is MasterState.WAITING_REPLY and self._on_transition is None:
             # The usual reply to a register read takes the table's two transitions
             # (REPLY_RECEIVED, then REPLY_OK) in one step; anything else, and every frame
@@ -414,13 +430,14 @@ class MasterMachine:
         return self._fire(_E.REPLY_RECEIVED, _ArrivedFrame(unit, pdu, end))
 
     def frame_error(self, error: FrameError, end: float) -> Outcome:
-        """Bytes that ended at *end* made no valid frame; *error* says why."""
+        """Bytes that ended at `end` made no valid frame; `error` says why."""
         if self.state is MasterState.WAITING_TURNAROUND or end < self._current.attempt_start:
             return _WAIT
         return self._fire(_E.FRAME_ERROR, _BadBytes(error, end))
 
     def expired(self, now: float) -> Outcome:
-        """The clock reached *now*; past :attr:`deadline` this ends the wait."""
+        """The clock reached `now`; past
+        [`deadline`][aiortu.core.master_machine.MasterMachine.deadline] this ends the wait."""
         if self.deadline is None or now < self.deadline:
             return _WAIT
         if self.state is MasterState.WAITING_TURNAROUND:
@@ -428,7 +445,7 @@ class MasterMachine:
         return self._fire(_E.TIMEOUT, None)
 
     def connection_lost(self, error: Exception) -> Outcome:
-        """The line failed with *error*; the transaction fails with it."""
+        """The line failed with `error`; the transaction fails with it."""
         return self._fire(_E.CONNECTION_LOST, error)
 
     # -- the machine -----------------------------------------------------------------
@@ -497,7 +514,7 @@ class MasterMachine:
             self._fire(_E.REPLY_OK, response)
 
     def _usual_reply(self, unit: int, pdu: bytes, end: float) -> Response | None:
-        """The reply to a register read when *pdu* is one, from the unit asked, after the
+        """The reply to a register read when `pdu` is one, from the unit asked, after the
         request began: built without decode_response's general checks (its length is the
         request's count, and 16-bit words are always in range); else None."""
         transaction = self.transaction

@@ -1,10 +1,12 @@
-"""What the master's state machine works on and answers with: one transaction to one
-unit (:class:`Transaction`), how its failed attempts are retried (:class:`RetryPolicy`),
-and the machine's answer to each event (:class:`Outcome`).
+"""What the master's state machine works on and answers with: one transaction to one unit
+([`Transaction`][aiortu.core.master_transaction.Transaction]), how its failed attempts are retried
+([`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy]), and the machine's answer to each
+event ([`Outcome`][aiortu.core.master_transaction.Outcome]).
 
-Sans-IO, like :mod:`aiortu.core.master_machine`, which drives these; the async master
-(:mod:`aiortu.master._engine`) makes a :class:`Transaction` per request and acts on each
-:class:`Outcome`.
+Sans-IO, like [`aiortu.core.master_machine`][aiortu.core.master_machine], which drives these; the
+async master ([`aiortu.master`][aiortu.master]) makes a
+[`Transaction`][aiortu.core.master_transaction.Transaction] per request and acts on each
+[`Outcome`][aiortu.core.master_transaction.Outcome].
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ __all__ = (
 
 
 class Failure(enum.Enum):
-    """The kinds of failed attempt a :class:`RetryPolicy` can retry."""
+    """The kinds of failed attempt a [`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy] can
+    retry."""
 
     TIMEOUT = "timeout"
     """No reply within the response timeout."""
@@ -82,12 +85,13 @@ every code aiortu has no class for (user-defined, vendor codes): what they do is
 class RetryPolicy:
     """How often a failed attempt is repeated, after which failures, and for which requests.
 
-    *retries* is the number of extra attempts (0 sends once). *retry_on* holds
-    :class:`Failure` members and, to retry exception responses too, exception codes
-    (``ExceptionCode.SERVER_DEVICE_BUSY``, for instance). *repeatable* holds the function
-    codes whose requests may be sent again (:data:`SAFE_TO_REPEAT` by default: a timed-out
-    write may have been done, and only an idempotent one can safely be done twice); a
-    request of any other code is sent once.
+    `retries` is the number of extra attempts (0 sends once). `retry_on` holds
+    [`Failure`][aiortu.core.master_transaction.Failure] members and, to retry exception responses
+    too, exception codes (`ExceptionCode.SERVER_DEVICE_BUSY`, for instance). `repeatable` holds the
+    function codes whose requests may be sent again
+    ([`SAFE_TO_REPEAT`][aiortu.core.master_transaction.SAFE_TO_REPEAT] by default: a timed-out write
+    may have been done, and only an idempotent one can safely be done twice); a request of any other
+    code is sent once.
     """
 
     retries: int = 2
@@ -107,7 +111,7 @@ class RetryPolicy:
         retry_on: Collection[Failure | int] | None = None,
         repeatable: Collection[int] | None = None,
     ) -> RetryPolicy:
-        """A policy from the usual arguments; ``None`` means the default."""
+        """A policy from the usual arguments; `None` means the default."""
         return cls(
             retries,
             DEFAULT_RETRY_ON if retry_on is None else frozenset(retry_on),
@@ -115,14 +119,14 @@ class RetryPolicy:
         )
 
     def for_function(self, function_code: int) -> RetryPolicy:
-        """This policy for a request of *function_code*: without retries unless the
-        code is :attr:`repeatable`."""
+        """This policy for a request of `function_code`: without retries unless the
+        code is [`repeatable`][aiortu.core.master_transaction.RetryPolicy]."""
         if self.retries == 0 or function_code in self.repeatable:
             return self
         return RetryPolicy(0, self.retry_on, self.repeatable)
 
     def with_retries(self, retries: int) -> RetryPolicy:
-        """This policy with *retries* extra attempts."""
+        """This policy with `retries` extra attempts."""
         if retries == self.retries:
             return self
         return RetryPolicy(retries, self.retry_on, self.repeatable)
@@ -143,20 +147,22 @@ class OutcomeKind(enum.Enum):
     """What the caller of the machine does next."""
 
     WAIT = "wait"
-    """Keep waiting until :attr:`~aiortu.core.master_machine.MasterMachine.deadline`."""
+    """Keep waiting until [`deadline`][aiortu.core.master_machine.MasterMachine.deadline]."""
     DONE = "done"
-    """The transaction is over: :attr:`Outcome.response` (or ``None`` without reply)."""
+    """The transaction is over: [`Outcome.response`][aiortu.core.master_transaction.Outcome] (or
+    `None` without reply)."""
     RETRY = "retry"
-    """Send :attr:`~aiortu.core.master_machine.MasterMachine.frame` again, then call
-    :meth:`~aiortu.core.master_machine.MasterMachine.sent`."""
+    """Send [`frame`][aiortu.core.master_machine.MasterMachine.frame] again, then call
+    [`sent`][aiortu.core.master_machine.MasterMachine.sent]."""
     FAILED = "failed"
-    """The transaction is over: raise :attr:`Outcome.error`."""
+    """The transaction is over: raise [`Outcome.error`][aiortu.core.master_transaction.Outcome]."""
 
 
 @dataclass(slots=True)
 class Outcome:
-    """The machine's answer to an event; see :class:`OutcomeKind`. Read it, do not change
-    it (not frozen: one is made per reply, and a frozen dataclass takes twice as long)."""
+    """The machine's answer to an event; see
+    [`OutcomeKind`][aiortu.core.master_transaction.OutcomeKind]. Read it, do not change it (not
+    frozen: one is made per reply, and a frozen dataclass takes twice as long)."""
 
     kind: OutcomeKind
     response: Response | ExceptionPDU | None = None
@@ -168,10 +174,10 @@ class Outcome:
 class Transaction:
     """One request to one unit, and what happened to it so far.
 
-    *expects_reply* is false for broadcasts and for requests a device never answers
-    (diagnostics 04, force listen-only mode); those wait *turnaround* seconds instead.
-    Set :attr:`abandoned` when the caller is gone: the attempt in flight finishes (so
-    that its reply cannot reach a later request) but is not retried.
+    `expects_reply` is false for broadcasts and for requests a device never answers (diagnostics 04,
+    force listen-only mode); those wait `turnaround` seconds instead. Set
+    [`abandoned`][aiortu.core.master_transaction.Transaction] when the caller is gone: the attempt
+    in flight finishes (so that its reply cannot reach a later request) but is not retried.
     """
 
     unit: int
@@ -202,8 +208,8 @@ _CRC_REASONS: Final = frozenset(("crc", "noise"))
 
 
 def frame_error_from_discard(data: bytes, reason: str) -> FrameError:
-    """The error that discarded bytes stand for: :class:`CRCError` when a CRC is there to
-    compare, else :class:`FrameError` with *reason*.
+    """The error that discarded bytes stand for: [`CRCError`][aiortu.errors.CRCError] when a CRC is
+    there to compare, else [`FrameError`][aiortu.errors.FrameError] with `reason`.
 
     Bytes discarded as noise (they came while the receiver still waited for the line's
     first silence, as a reply does right after the port was opened) hold no frame whose

@@ -1,17 +1,17 @@
 """Modbus TCP framing: the MBAP header in front of a PDU, and a stream decoder.
 
-A Modbus TCP ADU is a 7-byte MBAP header followed by the PDU, at most 260 bytes in all::
+A Modbus TCP ADU is a 7-byte MBAP header followed by the PDU, at most 260 bytes in all:
 
     transaction id (2)  protocol id (2, always 0)  length (2)  unit id (1)  PDU (1..253)
 
-*length* counts the bytes that follow it: the unit id and the PDU, so 2..254. Every
+`length` counts the bytes that follow it: the unit id and the PDU, so 2..254. Every
 field is big-endian. There is no CRC: TCP already checks the bytes, and the length field
 alone says where an ADU ends. That is also why a stream cannot be resynchronised after a
 header that breaks these rules: nothing marks where the next ADU starts, so the decoder
 refuses every later byte and the connection must be closed (the spec's advice).
 
-:func:`encode_adu` and :func:`decode_adu` build and check whole ADUs;
-:class:`AduDecoder` takes a byte stream in any split, pipelined ADUs included.
+`encode_adu` and `decode_adu` build and check whole ADUs;
+`AduDecoder` takes a byte stream in any split, pipelined ADUs included.
 """
 
 from __future__ import annotations
@@ -65,15 +65,15 @@ class Adu:
     pdu: bytes
 
     def encode(self) -> bytes:
-        """The ADU's bytes (see :func:`encode_adu`)."""
+        """The ADU's bytes (see `encode_adu`)."""
         return encode_adu(self.transaction_id, self.unit, self.pdu)
 
 
 def encode_adu(transaction_id: int, unit: int, pdu: bytes) -> bytes:
-    """Build the ADU ``MBAP header + pdu``.
+    """Build the ADU `MBAP header + pdu`.
 
-    *transaction_id* is 0..65535, *unit* 0..255, *pdu* 1..253 bytes. Raises
-    :class:`~aiortu.errors.InvalidValue`.
+    `transaction_id` is 0..65535, `unit` 0..255, `pdu` 1..253 bytes. Raises
+    [`InvalidValue`][aiortu.errors.InvalidValue].
     """
     if transaction_id not in _WORD_RANGE:
         raise InvalidValue("transaction_id", transaction_id, _WORD_RANGE)
@@ -110,8 +110,8 @@ def _split(adu: bytes | bytearray, length: int) -> Adu:
 def decode_adu(adu: bytes) -> Adu:
     """Check a whole ADU and split it.
 
-    Raises :class:`MalformedHeader` for a protocol id other than 0 or a length field
-    outside 2..254, and :class:`~aiortu.errors.FrameError` (reason ``"length"``) when the
+    Raises `MalformedHeader` for a protocol id other than 0 or a length field
+    outside 2..254, and [`FrameError`][aiortu.errors.FrameError] (reason `"length"`) when the
     bytes given are not exactly as long as the length field says.
     """
     if len(adu) < HEADER_LENGTH + 1:
@@ -133,11 +133,11 @@ class AduDecoder:
     """Splits a byte stream into ADUs, whatever the chunks: one ADU in many pieces,
     many ADUs in one piece, or both.
 
-    :meth:`feed` returns the ADUs that the bytes so far complete. A header that breaks
-    the spec raises :class:`MalformedHeader`, and so does every later call: the length
+    `feed` returns the ADUs that the bytes so far complete. A header that breaks
+    the spec raises `MalformedHeader`, and so does every later call: the length
     field is the only marker of where an ADU ends, so the stream is lost and the
     connection must be closed; ADUs that came before it in the same chunk are dropped
-    with it. At most :data:`MAX_ADU_LENGTH` - 1 bytes are kept between calls.
+    with it. At most `MAX_ADU_LENGTH` - 1 bytes are kept between calls.
     """
 
     def __init__(self) -> None:

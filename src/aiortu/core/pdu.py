@@ -1,23 +1,24 @@
 """Protocol data units: the base classes, the registry, and decoding by function code.
 
-A PDU is the function code and its data, without the unit address and the CRC of the RTU
-frame around it (see :mod:`aiortu.core.frame`). Every public function code has a request
-class and a response class in one of the ``pdu_*`` modules; each is an immutable
-dataclass that checks the spec's limits when it is built and encodes itself to bytes::
+A PDU is the function code and its data, without the unit address and the CRC of the RTU frame
+around it (see [`aiortu.core.frame`][aiortu.core.frame]). Every public function code has a request
+class and a response class in one of the `pdu_*` modules; each is an immutable dataclass that checks
+the spec's limits when it is built and encodes itself to bytes:
 
     >>> ReadHoldingRegistersRequest(address=0x6B, count=3).encode().hex(" ")
     '03 00 6b 00 03'
 
 Errors follow who caused them. Building an object with a field out of range raises
-:class:`~aiortu.errors.InvalidRequest` (requests) or :class:`~aiortu.errors.InvalidValue`
-(responses), naming the field, the value and the allowed range. Decoding bytes that break
-the spec raises :class:`~aiortu.errors.MalformedPDU` and nothing else: never an
-``IndexError`` or a ``struct.error`` from inside.
+[`InvalidRequest`][aiortu.errors.InvalidRequest] (requests) or
+[`InvalidValue`][aiortu.errors.InvalidValue] (responses), naming the field, the value and the
+allowed range. Decoding bytes that break the spec raises
+[`MalformedPDU`][aiortu.errors.MalformedPDU] and nothing else: never an `IndexError` or a
+`struct.error` from inside.
 
-An exception response is a value, :class:`ExceptionPDU`, that the caller can inspect; the
-master turns it into :class:`~aiortu.errors.ExceptionResponse` at its boundary. Function
-codes without a class (the user-defined ones, vendor extensions) travel as
-:class:`RawPDU`.
+An exception response is a value, [`ExceptionPDU`][aiortu.core.pdu.ExceptionPDU], that the caller
+can inspect; the master turns it into [`ExceptionResponse`][aiortu.errors.ExceptionResponse] at its
+boundary. Function codes without a class (the user-defined ones, vendor extensions) travel as
+[`RawPDU`][aiortu.core.pdu.RawPDU].
 """
 
 from __future__ import annotations
@@ -71,7 +72,8 @@ class PDU:
     __slots__ = ()
 
     function_code: ClassVar[int]
-    """The function code this class encodes (for :class:`RawPDU`, an instance field)."""
+    """The function code this class encodes (for [`RawPDU`][aiortu.core.pdu.RawPDU], an instance
+    field)."""
 
     _invalid: ClassVar[type[InvalidValue]] = InvalidValue
 
@@ -81,9 +83,9 @@ class PDU:
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
-        """Decode *pdu* (function code included) into this class.
+        """Decode `pdu` (function code included) into this class.
 
-        Raises :class:`~aiortu.errors.MalformedPDU` when the bytes break the spec.
+        Raises [`MalformedPDU`][aiortu.errors.MalformedPDU] when the bytes break the spec.
         """
         raise NotImplementedError
 
@@ -119,11 +121,11 @@ class PDU:
 
     @classmethod
     def _build(cls, factory: Callable[[], Self]) -> Self:
-        """Run *factory* (a constructor call on decoded fields), blaming the peer for errors.
+        """Run `factory` (a constructor call on decoded fields), blaming the peer for errors.
 
         The MalformedPDU carries the exception a slave answers with: 02 when the field is
-        an address range (its name starts with a word ending in ``address``, such as
-        ``address + count`` or ``read_address + read_count``), else 03. Constructors check
+        an address range (its name starts with a word ending in `address`, such as
+        `address + count` or `read_address + read_count`), else 03. Constructors check
         quantities before address ranges, so a request wrong in both gets 03, as the spec
         orders the checks.
         """
@@ -139,12 +141,12 @@ class PDU:
             ) from None
 
     def _encode_words(self, *words: int) -> bytes:
-        """The function code, then *words* as big-endian 16-bit fields (already checked)."""
+        """The function code, then `words` as big-endian 16-bit fields (already checked)."""
         return bytes((self.function_code,)) + pack_registers(words)
 
     @classmethod
     def _decode_words(cls, pdu: bytes, count: int) -> Self:
-        """Decode a PDU made of the function code and *count* 16-bit fields, in field order."""
+        """Decode a PDU made of the function code and `count` 16-bit fields, in field order."""
         cls._expect_function_code(pdu)
         cls._expect_length(pdu, 1 + 2 * count)
         return cls._build(lambda: cls(*unpack_registers(pdu, 1, count)))
@@ -202,7 +204,8 @@ class Request(PDU):
     """Whether the spec lets this request go to unit 0 (only writes may)."""
 
     def check_response(self, response: Response) -> None:
-        """Raise :class:`~aiortu.errors.MalformedPDU` if *response* cannot answer this request.
+        """Raise [`MalformedPDU`][aiortu.errors.MalformedPDU] if `response` cannot answer this
+        request.
 
         The base checks the class; subclasses check what the reply echoes or counts.
         """
@@ -213,7 +216,7 @@ class Request(PDU):
             )
 
     def _check_echo(self, field: str, received: int, sent: int) -> None:
-        """Raise MalformedPDU unless the reply's *field* repeats what the request sent."""
+        """Raise MalformedPDU unless the reply's `field` repeats what the request sent."""
         if received != sent:
             raise MalformedPDU(
                 f"reply to {type(self).__name__} does not echo the request",
@@ -233,8 +236,8 @@ class Response(PDU):
 class ExceptionPDU(PDU):
     """An exception response: the request's function code with the top bit set, and a code.
 
-    ``function_code`` here is the request's function code (without the top bit);
-    ``exception_code`` is an :class:`~aiortu.core.codes.ExceptionCode` when the spec
+    `function_code` here is the request's function code (without the top bit);
+    `exception_code` is an [`ExceptionCode`][aiortu.core.codes.ExceptionCode] when the spec
     defines it, else the raw number.
     """
 
@@ -267,7 +270,7 @@ class ExceptionPDU(PDU):
 class RawPDU(Request, Response):
     """A PDU of a function code aiortu has no class for: user-defined and vendor codes.
 
-    ``data`` is everything after the function code. Used as a request and as a response.
+    `data` is everything after the function code. Used as a request and as a response.
     """
 
     function_code: int  # type: ignore[misc]
@@ -302,7 +305,7 @@ _SUB_DECODERS: dict[int, tuple[Callable[[bytes], Request], Callable[[bytes], Res
 
 
 def register(request_class: _RequestT) -> _RequestT:
-    """Class decorator: decode this code with *request_class* and its ``response_class``."""
+    """Class decorator: decode this code with `request_class` and its `response_class`."""
     code = request_class.function_code
     if code in _REQUESTS:
         raise RuntimeError(f"function code 0x{code:02X} registered twice")
@@ -333,10 +336,11 @@ def _function_code(pdu: bytes) -> int:
 
 
 def decode_request(pdu: bytes) -> Request:
-    """Decode a request PDU into its class, or into :class:`RawPDU` for an unknown code.
+    """Decode a request PDU into its class, or into [`RawPDU`][aiortu.core.pdu.RawPDU] for an
+    unknown code.
 
-    Raises :class:`~aiortu.errors.MalformedPDU` for function code 0 or >= 0x80, and for a
-    known function code whose data breaks the spec (its ``exception_code`` says which
+    Raises [`MalformedPDU`][aiortu.errors.MalformedPDU] for function code 0 or >= 0x80, and for a
+    known function code whose data breaks the spec (its `exception_code` says which
     exception a slave should answer).
     """
     code = _function_code(pdu)
@@ -358,7 +362,8 @@ def decode_request(pdu: bytes) -> Request:
 
 
 def decode_response(pdu: bytes) -> Response | ExceptionPDU:
-    """Decode a reply PDU: an :class:`ExceptionPDU`, a known response, or :class:`RawPDU`."""
+    """Decode a reply PDU: an [`ExceptionPDU`][aiortu.core.pdu.ExceptionPDU], a known response, or
+    [`RawPDU`][aiortu.core.pdu.RawPDU]."""
     code = _function_code(pdu)
     if code & EXCEPTION_BIT:
         return ExceptionPDU.decode(pdu)
@@ -387,7 +392,7 @@ def pack_registers(values: Iterable[int]) -> bytes:
 
 
 def unpack_registers(data: bytes, offset: int, count: int) -> tuple[int, ...]:
-    """*count* big-endian 16-bit words from *data* at *offset* (the length must be checked)."""
+    """`count` big-endian 16-bit words from `data` at `offset` (the length must be checked)."""
     return struct.unpack_from(f">{count}H", data, offset)
 
 
@@ -410,7 +415,7 @@ def pack_bits(bits: Iterable[bool]) -> bytes:
 
 
 def unpack_bits(data: bytes) -> tuple[bool, ...]:
-    """Every bit of *data*, LSB first: 8 bits per byte, padding included."""
+    """Every bit of `data`, LSB first: 8 bits per byte, padding included."""
     return tuple(_BYTE_BITS[byte][index] for byte in data for index in range(8))
 
 

@@ -1,9 +1,10 @@
 """The PDUs of the bit tables: read coils (01), read discrete inputs (02), and the coil writes
 (05, 0F).
 
-Bits travel packed eight to a byte, the first bit in the least significant position, the
-last byte padded with zeros. A decoded read response therefore holds every bit of its
-bytes, padding included; :meth:`ReadCoilsRequest.bits_of` trims them to the count asked.
+Bits travel packed eight to a byte, the first bit in the least significant position, the last byte
+padded with zeros. A decoded read response therefore holds every bit of its bytes, padding included;
+[`ReadCoilsRequest.bits_of`][aiortu.core.pdu_bits.ReadCoilsRequest.bits_of] trims them to the count
+asked.
 """
 
 from __future__ import annotations
@@ -82,7 +83,7 @@ class ReadCoilsResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class ReadCoilsRequest(Request):
-    """Read *count* (1..2000) coils from protocol address *address*."""
+    """Read `count` (1..2000) coils from protocol address `address`."""
 
     function_code: ClassVar[int] = FunctionCode.READ_COILS
     response_class: ClassVar[type[Response]] = ReadCoilsResponse
@@ -126,14 +127,15 @@ class ReadCoilsRequest(Request):
 
 @dataclass(frozen=True, slots=True)
 class ReadDiscreteInputsResponse(ReadCoilsResponse):
-    """Reply to read discrete inputs; the same layout as :class:`ReadCoilsResponse`."""
+    """Reply to read discrete inputs; the same layout as
+    [`ReadCoilsResponse`][aiortu.core.pdu_bits.ReadCoilsResponse]."""
 
     function_code: ClassVar[int] = FunctionCode.READ_DISCRETE_INPUTS
 
 
 @dataclass(frozen=True, slots=True)
 class ReadDiscreteInputsRequest(ReadCoilsRequest):
-    """Read *count* (1..2000) discrete inputs from protocol address *address*."""
+    """Read `count` (1..2000) discrete inputs from protocol address `address`."""
 
     function_code: ClassVar[int] = FunctionCode.READ_DISCRETE_INPUTS
     response_class: ClassVar[type[Response]] = ReadDiscreteInputsResponse
@@ -161,7 +163,7 @@ def _decode_single_coil(cls: type[Request] | type[Response], pdu: bytes) -> tupl
 
 @dataclass(frozen=True, slots=True)
 class WriteSingleCoilResponse(Response):
-    """Reply to write single coil: the request echoed, *address* and *value*.
+    """Reply to write single coil: the request echoed, `address` and `value`.
 
     On the wire the value is 0xFF00 (on) or 0x0000 (off); decoding rejects any other word.
     """
@@ -185,9 +187,9 @@ class WriteSingleCoilResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class WriteSingleCoilRequest(Request):
-    """Set the coil at protocol address *address* (0..65535) on (``True``) or off.
+    """Set the coil at protocol address `address` (0..65535) on (`True`) or off.
 
-    *value* is a ``bool``; it travels as 0xFF00 or 0x0000, and a decoded request with any
+    `value` is a `bool`; it travels as 0xFF00 or 0x0000, and a decoded request with any
     other word raises MalformedPDU with exception code 03. May be broadcast.
     """
 
@@ -218,7 +220,7 @@ class WriteSingleCoilRequest(Request):
 
 @dataclass(frozen=True, slots=True)
 class WriteMultipleCoilsResponse(Response):
-    """Reply to write multiple coils: the *address* and the *count* (1..1968) written."""
+    """Reply to write multiple coils: the `address` and the `count` (1..1968) written."""
 
     function_code: ClassVar[int] = FunctionCode.WRITE_MULTIPLE_COILS
     address: int
@@ -239,9 +241,9 @@ class WriteMultipleCoilsResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class WriteMultipleCoilsRequest(Request):
-    """Set 1..1968 consecutive coils from protocol address *address* to *values*.
+    """Set 1..1968 consecutive coils from protocol address `address` to `values`.
 
-    The count is ``len(values)``, and ``address + count`` may not pass 65536. On the wire the
+    The count is `len(values)`, and `address + count` may not pass 65536. On the wire the
     bits are packed LSB first; a decoded request keeps exactly the count sent and ignores the
     padding bits of the last byte. May be broadcast.
     """

@@ -3,13 +3,13 @@
 Function code 0x2B is the Encapsulated Interface Transport: its first data byte, the MEI
 type, says what it carries. aiortu models MEI type 0x0E, read device identification; any
 other MEI type (0x0D CANopen general reference, vendor types) decodes to
-:class:`~aiortu.core.pdu.RawPDU` with function code 0x2B and the MEI type as its first
+[`RawPDU`][aiortu.core.pdu.RawPDU] with function code 0x2B and the MEI type as its first
 data byte, so that it reaches a user handler instead of failing. Only a 2B PDU without an
 MEI type at all is malformed.
 
 A device's identification is a list of objects, each an id (0..255) and a value (bytes,
 usually ASCII text). A stream read (basic, regular, extended) may need several
-transactions: while a reply says ``more_follows``, ask again from ``next_object_id``.
+transactions: while a reply says `more_follows`, ask again from `next_object_id`.
 """
 
 from __future__ import annotations
@@ -67,11 +67,11 @@ def _as_bytes(value: object) -> bytes:
 class ReadDeviceIdentificationResponse(Response):
     """Reply to read device identification: some objects of the device, in the device's order.
 
-    *read_code* echoes the request's; *conformity_level* is one of
-    :data:`CONFORMITY_LEVELS`; *objects* is a tuple of ``(object id, value)`` pairs, ids
-    0..255 and values of bytes, as many as fit the 253-byte PDU (a value at most 244 bytes).
-    When *more_follows* is true, *next_object_id* names the object to ask for next; the
-    spec wants it 0 otherwise, which is not enforced because devices differ.
+    `read_code` echoes the request's; `conformity_level` is one of
+    [`CONFORMITY_LEVELS`][aiortu.core.pdu_device_id.CONFORMITY_LEVELS]; `objects` is a tuple of
+    `(object id, value)` pairs, ids 0..255 and values of bytes, as many as fit the 253-byte PDU (a
+    value at most 244 bytes). When `more_follows` is true, `next_object_id` names the object to ask
+    for next; the spec wants it 0 otherwise, which is not enforced because devices differ.
     """
 
     function_code: ClassVar[int] = FunctionCode.ENCAPSULATED_INTERFACE_TRANSPORT
@@ -160,10 +160,10 @@ class ReadDeviceIdentificationResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class ReadDeviceIdentificationRequest(Request):
-    """Read the identification of a device: *read_code* (1..4) from *object_id* (0..255).
+    """Read the identification of a device: `read_code` (1..4) from `object_id` (0..255).
 
     Read codes 1..3 (basic, regular, extended) stream the objects of that category from
-    *object_id* on, 0 to start; read code 4 (individual) reads the one object *object_id*.
+    `object_id` on, 0 to start; read code 4 (individual) reads the one object `object_id`.
     Whether an object id exists is the device's business (it answers exception 02), so any
     0..255 is accepted here.
     """

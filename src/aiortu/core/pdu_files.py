@@ -7,13 +7,14 @@ limits the whole PDU, request and reply alike, to 253 bytes, so the number and s
 sub-requests is bounded by what fits, and a read request is refused when its reply could
 not fit.
 
-The sub-requests are small frozen dataclasses (:class:`FileRecordRequest`,
-:class:`FileRecord`) that only normalise their fields; the PDU carrying them checks their
-ranges, so that an error names the sub-request by its index and is an
-:class:`~aiortu.errors.InvalidRequest` in a request and an
-:class:`~aiortu.errors.InvalidValue` in a reply. In decoded requests, a wrong reference
-type, file number or record range is exception code 2 (illegal data address); a wrong
-byte count, record length or size is exception code 3.
+The sub-requests are small frozen dataclasses
+([`FileRecordRequest`][aiortu.core.pdu_files.FileRecordRequest],
+[`FileRecord`][aiortu.core.pdu_files.FileRecord]) that only normalise their fields; the PDU carrying
+them checks their ranges, so that an error names the sub-request by its index and is an
+[`InvalidRequest`][aiortu.errors.InvalidRequest] in a request and an
+[`InvalidValue`][aiortu.errors.InvalidValue] in a reply. In decoded requests, a wrong reference
+type, file number or record range is exception code 2 (illegal data address); a wrong byte count,
+record length or size is exception code 3.
 """
 
 from __future__ import annotations
@@ -74,8 +75,8 @@ _WRITE_BYTE_COUNT = range(_SUB_REQUEST_SIZE + 2, MAX_PDU_LENGTH - 1)
 
 @dataclass(frozen=True, slots=True)
 class FileRecordRequest:
-    """One sub-request of :class:`ReadFileRecordRequest`: read *record_length* records of
-    file *file_number* from record *record_number*.
+    """One sub-request of [`ReadFileRecordRequest`][aiortu.core.pdu_files.ReadFileRecordRequest]:
+    read `record_length` records of file `file_number` from record `record_number`.
 
     The ranges (file 1..65535, records 0..9999, at least one record, not past record 9999)
     are checked by the request that carries it.
@@ -88,10 +89,10 @@ class FileRecordRequest:
 
 @dataclass(frozen=True, slots=True)
 class FileRecord:
-    """One sub-record of write file record (15): *values* written to file *file_number*
-    from record *record_number*.
+    """One sub-record of write file record (15): `values` written to file `file_number`
+    from record `record_number`.
 
-    ``record_length`` is ``len(values)``. The ranges (file 1..65535, records 0..9999, at
+    `record_length` is `len(values)`. The ranges (file 1..65535, records 0..9999, at
     least one value, not past record 9999, values 0..65535) are checked by the PDU that
     carries it.
     """
@@ -163,7 +164,7 @@ def _check_reference_type(cls: type[PDU], prefix: str, reference_type: int) -> N
 class ReadFileRecordResponse(Response):
     """Reply to read file record: for each sub-request, in order, the records read.
 
-    *records* is one tuple of register values (at least one) per sub-request. Each travels
+    `records` is one tuple of register values (at least one) per sub-request. Each travels
     as a length byte, reference type 6 and the words; the whole PDU fits 253 bytes.
     """
 
@@ -216,7 +217,8 @@ def _read_response_length(record_lengths: Iterable[int]) -> int:
 
 @dataclass(frozen=True, slots=True)
 class ReadFileRecordRequest(Request):
-    """Read file records: 1..35 :class:`FileRecordRequest` sub-requests in one PDU.
+    """Read file records: 1..35 [`FileRecordRequest`][aiortu.core.pdu_files.FileRecordRequest]
+    sub-requests in one PDU.
 
     Each reads 1 or more records of a file (1..65535) from a record number (0..9999), not
     past record 9999. The reply to the whole request must fit 253 bytes, so the record
@@ -386,7 +388,8 @@ class WriteFileRecordResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class WriteFileRecordRequest(Request):
-    """Write file records: one or more :class:`FileRecord` sub-records in one PDU.
+    """Write file records: one or more [`FileRecord`][aiortu.core.pdu_files.FileRecord] sub-records
+    in one PDU.
 
     Each writes 1 or more values (0..65535) to a file (1..65535) from a record number
     (0..9999), not past record 9999; the whole PDU fits 253 bytes (so at most 122 values

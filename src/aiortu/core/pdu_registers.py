@@ -1,8 +1,8 @@
 """The PDUs of the register tables: read holding (03) and input (04) registers, and the
 register writes (06, 10, 16, 17) and the FIFO queue (18).
 
-Registers are 16-bit big-endian words on the wire and ``int`` 0..65535 here; typed values
-(floats, 32-bit integers, strings) are converted by :mod:`aiortu.core.values`.
+Registers are 16-bit big-endian words on the wire and `int` 0..65535 here; typed values
+(floats, 32-bit integers, strings) are converted by [`aiortu.core.values`][aiortu.core.values].
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ class ReadHoldingRegistersResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class ReadHoldingRegistersRequest(Request):
-    """Read *count* (1..125) holding registers from protocol address *address*."""
+    """Read `count` (1..125) holding registers from protocol address `address`."""
 
     function_code: ClassVar[int] = FunctionCode.READ_HOLDING_REGISTERS
     response_class: ClassVar[type[Response]] = ReadHoldingRegistersResponse
@@ -129,14 +129,15 @@ class ReadHoldingRegistersRequest(Request):
 
 @dataclass(frozen=True, slots=True)
 class ReadInputRegistersResponse(ReadHoldingRegistersResponse):
-    """Reply to read input registers; the same layout as :class:`ReadHoldingRegistersResponse`."""
+    """Reply to read input registers; the same layout as
+    [`ReadHoldingRegistersResponse`][aiortu.core.pdu_registers.ReadHoldingRegistersResponse]."""
 
     function_code: ClassVar[int] = FunctionCode.READ_INPUT_REGISTERS
 
 
 @dataclass(frozen=True, slots=True)
 class ReadInputRegistersRequest(ReadHoldingRegistersRequest):
-    """Read *count* (1..125) input registers from protocol address *address*."""
+    """Read `count` (1..125) input registers from protocol address `address`."""
 
     function_code: ClassVar[int] = FunctionCode.READ_INPUT_REGISTERS
     response_class: ClassVar[type[Response]] = ReadInputRegistersResponse
@@ -144,7 +145,7 @@ class ReadInputRegistersRequest(ReadHoldingRegistersRequest):
 
 @dataclass(frozen=True, slots=True)
 class WriteSingleRegisterResponse(Response):
-    """Reply to write single register: the request echoed, *address* and *value* (0..65535)."""
+    """Reply to write single register: the request echoed, `address` and `value` (0..65535)."""
 
     function_code: ClassVar[int] = FunctionCode.WRITE_SINGLE_REGISTER
     address: int
@@ -164,7 +165,7 @@ class WriteSingleRegisterResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class WriteSingleRegisterRequest(Request):
-    """Write *value* (0..65535) to the holding register at *address* (0..65535).
+    """Write `value` (0..65535) to the holding register at `address` (0..65535).
 
     May be broadcast.
     """
@@ -195,7 +196,7 @@ class WriteSingleRegisterRequest(Request):
 
 @dataclass(frozen=True, slots=True)
 class WriteMultipleRegistersResponse(Response):
-    """Reply to write multiple registers: the *address* and the *count* (1..123) written."""
+    """Reply to write multiple registers: the `address` and the `count` (1..123) written."""
 
     function_code: ClassVar[int] = FunctionCode.WRITE_MULTIPLE_REGISTERS
     address: int
@@ -217,7 +218,7 @@ class WriteMultipleRegistersResponse(Response):
 def _decode_write_count(
     cls: type[Request], pdu: bytes, offset: int, allowed: range, field: str
 ) -> int:
-    """Check the count at *offset* and the byte count after it; return the count.
+    """Check the count at `offset` and the byte count after it; return the count.
 
     Both are the peer's quantity errors, exception 03. The count is checked here, before
     the constructor sees it, because it decides how many registers to unpack.
@@ -239,9 +240,9 @@ def _decode_write_count(
 
 @dataclass(frozen=True, slots=True)
 class WriteMultipleRegistersRequest(Request):
-    """Write 1..123 *values* (each 0..65535) to consecutive holding registers from *address*.
+    """Write 1..123 `values` (each 0..65535) to consecutive holding registers from `address`.
 
-    The count is ``len(values)``, and ``address + count`` may not pass 65536. May be
+    The count is `len(values)`, and `address + count` may not pass 65536. May be
     broadcast.
     """
 
@@ -289,7 +290,7 @@ class WriteMultipleRegistersRequest(Request):
 
 @dataclass(frozen=True, slots=True)
 class MaskWriteRegisterResponse(Response):
-    """Reply to mask write register: the request echoed, *address*, *and_mask*, *or_mask*."""
+    """Reply to mask write register: the request echoed, `address`, `and_mask`, `or_mask`."""
 
     function_code: ClassVar[int] = FunctionCode.MASK_WRITE_REGISTER
     address: int
@@ -315,10 +316,11 @@ class MaskWriteRegisterResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class MaskWriteRegisterRequest(Request):
-    """Change the bits of the holding register at *address* through two 16-bit masks.
+    """Change the bits of the holding register at `address` through two 16-bit masks.
 
-    The register becomes ``(current AND and_mask) OR (or_mask AND NOT and_mask)``; see
-    :meth:`apply`. Both masks are 0..65535. May be broadcast.
+    The register becomes `(current AND and_mask) OR (or_mask AND NOT and_mask)`; see
+    [`apply`][aiortu.core.pdu_registers.MaskWriteRegisterRequest.apply]. Both masks are 0..65535.
+    May be broadcast.
     """
 
     function_code: ClassVar[int] = FunctionCode.MASK_WRITE_REGISTER
@@ -334,7 +336,7 @@ class MaskWriteRegisterRequest(Request):
         self._check("or_mask", self.or_mask, REGISTER_RANGE)
 
     def apply(self, current: int) -> int:
-        """The register's new value, given its *current* value (0..65535)."""
+        """The register's new value, given its `current` value (0..65535)."""
         return (current & self.and_mask) | (self.or_mask & ~self.and_mask & 0xFFFF)
 
     def encode(self) -> bytes:
@@ -360,7 +362,8 @@ class MaskWriteRegisterRequest(Request):
 class ReadWriteMultipleRegistersResponse(ReadHoldingRegistersResponse):
     """Reply to read/write multiple registers: the 1..125 registers read.
 
-    The same layout as :class:`ReadHoldingRegistersResponse`.
+    The same layout as
+    [`ReadHoldingRegistersResponse`][aiortu.core.pdu_registers.ReadHoldingRegistersResponse].
     """
 
     function_code: ClassVar[int] = FunctionCode.READ_WRITE_MULTIPLE_REGISTERS
@@ -368,8 +371,8 @@ class ReadWriteMultipleRegistersResponse(ReadHoldingRegistersResponse):
 
 @dataclass(frozen=True, slots=True)
 class ReadWriteMultipleRegistersRequest(Request):
-    """Write 1..121 *values* from *write_address*, then read *read_count* (1..125) registers
-    from *read_address*, in one exchange.
+    """Write 1..121 `values` from `write_address`, then read `read_count` (1..125) registers
+    from `read_address`, in one exchange.
 
     The slave performs the write before the read. Neither range may pass address 65535.
     Not broadcastable: it reads.
@@ -433,9 +436,9 @@ class ReadWriteMultipleRegistersRequest(Request):
 
 @dataclass(frozen=True, slots=True)
 class ReadFifoQueueResponse(Response):
-    """Reply to read FIFO queue: the 0..31 *values* queued, oldest first.
+    """Reply to read FIFO queue: the 0..31 `values` queued, oldest first.
 
-    On the wire: a 2-byte byte count (``2 + 2 * len(values)``), a 2-byte FIFO count, then
+    On the wire: a 2-byte byte count (`2 + 2 * len(values)`), a 2-byte FIFO count, then
     the values.
     """
 
@@ -475,10 +478,11 @@ class ReadFifoQueueResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class ReadFifoQueueRequest(Request):
-    """Read the FIFO queue whose pointer register is at *address* (0..65535).
+    """Read the FIFO queue whose pointer register is at `address` (0..65535).
 
-    The reply holds up to 31 values and reading leaves them queued. Nothing in the request
-    bounds the reply's count, so :meth:`check_response` checks the reply's class only.
+    The reply holds up to 31 values and reading leaves them queued. Nothing in the request bounds
+    the reply's count, so [`check_response`][aiortu.core.pdu.Request.check_response] checks the
+    reply's class only.
     """
 
     function_code: ClassVar[int] = FunctionCode.READ_FIFO_QUEUE

@@ -1,11 +1,11 @@
 """The PDUs of the serial-line-only functions: read exception status (07), diagnostics (08),
 get comm event counter (0B), get comm event log (0C) and report server ID (11).
 
-These functions read the state of a device's serial interface rather than its data tables,
-so their replies carry status words, counters and device-specific bytes. Diagnostics
-carries a sub-function; the spec fixes the data of the sub-functions it defines (see
-:class:`DiagnosticsRequest`), and any other sub-function travels with its data unchecked
-so that vendor extensions still round trip.
+These functions read the state of a device's serial interface rather than its data tables, so their
+replies carry status words, counters and device-specific bytes. Diagnostics carries a sub-function;
+the spec fixes the data of the sub-functions it defines (see
+[`DiagnosticsRequest`][aiortu.core.pdu_serial_line.DiagnosticsRequest]), and any other sub-function
+travels with its data unchecked so that vendor extensions still round trip.
 """
 
 from __future__ import annotations
@@ -117,7 +117,8 @@ class _NoFieldsRequest(Request):
 class ReadExceptionStatusResponse(Response):
     """Reply to read exception status: eight device-defined status bits in one byte.
 
-    The meaning of each bit is up to the device; :attr:`bits` lists them LSB first.
+    The meaning of each bit is up to the device;
+    [`bits`][aiortu.core.pdu_serial_line.ReadExceptionStatusResponse.bits] lists them LSB first.
     """
 
     function_code: ClassVar[int] = FunctionCode.READ_EXCEPTION_STATUS
@@ -161,7 +162,7 @@ def _as_bytes(owner: PDU, name: str, value: object) -> bytes:
 
 
 def _check_diagnostic(pdu: PDU, sub_function: int, data: bytes, *, reply: bool) -> None:
-    """Check *data* against what the spec fixes for *sub_function* (request or reply)."""
+    """Check `data` against what the spec fixes for `sub_function` (request or reply)."""
     if sub_function == DiagnosticSubFunction.RETURN_QUERY_DATA:
         pdu._check("len(data)", len(data), _EVEN_DIAGNOSTIC_DATA_LENGTH)
         return
@@ -184,11 +185,11 @@ def _check_diagnostic(pdu: PDU, sub_function: int, data: bytes, *, reply: bool) 
 class DiagnosticsResponse(Response):
     """Reply to diagnostics: the sub-function echoed and its data.
 
-    For the counters and the diagnostic register (02, 0A..12, 14) the data is one 16-bit
-    value (:attr:`value`); for return query data (00) it echoes the request's even-length
-    data; for 01 and 03 it echoes the request's word. A reply to force listen-only mode (04)
-    never comes on the wire but may be built, with data 0x0000. Sub-functions the spec does
-    not define for a serial line keep up to 250 data bytes unchecked.
+    For the counters and the diagnostic register (02, 0A..12, 14) the data is one 16-bit value
+    ([`value`][aiortu.core.pdu_serial_line.DiagnosticsResponse.value]); for return query data (00)
+    it echoes the request's even-length data; for 01 and 03 it echoes the request's word. A reply to
+    force listen-only mode (04) never comes on the wire but may be built, with data 0x0000.
+    Sub-functions the spec does not define for a serial line keep up to 250 data bytes unchecked.
     """
 
     function_code: ClassVar[int] = FunctionCode.DIAGNOSTICS
@@ -225,10 +226,10 @@ def _known_sub_function(value: int) -> int:
 
 @dataclass(frozen=True, slots=True)
 class DiagnosticsRequest(Request):
-    """Run diagnostics sub-function *sub_function* (0..65535) with *data* (serial line only).
+    """Run diagnostics sub-function `sub_function` (0..65535) with `data` (serial line only).
 
-    *sub_function* becomes a :class:`~aiortu.core.codes.DiagnosticSubFunction` when the spec
-    defines it, else stays a raw number. The data is checked where the spec fixes it:
+    `sub_function` becomes a [`DiagnosticSubFunction`][aiortu.core.codes.DiagnosticSubFunction] when
+    the spec defines it, else stays a raw number. The data is checked where the spec fixes it:
 
     - 00 return query data: any even number of bytes (0..250), echoed by the reply;
     - 01 restart communications: 0x0000, or 0xFF00 to also clear the event log;
@@ -340,8 +341,8 @@ class GetCommEventCounterRequest(_NoFieldsRequest):
 class GetCommEventLogResponse(Response):
     """Reply to get comm event log: status, event count, message count and 0..64 events.
 
-    *events* holds one byte per event, the most recent first, as the device sent them; the
-    byte count on the wire is 6 + ``len(events)``.
+    `events` holds one byte per event, the most recent first, as the device sent them; the
+    byte count on the wire is 6 + `len(events)`.
     """
 
     function_code: ClassVar[int] = FunctionCode.GET_COMM_EVENT_LOG
@@ -407,15 +408,15 @@ class GetCommEventLogRequest(_NoFieldsRequest):
 class ReportServerIdResponse(Response):
     """Reply to report server ID: the server id, the run indicator, then additional data.
 
-    The spec leaves the length of the id to each device, and the wire carries only the
-    total byte count, so decoding needs a rule: the id is the first byte plus every
-    following byte up to the first 0x00 or 0xFF, that byte is the run indicator (0x00 off,
-    0xFF on), and the rest is additional data. For the common one-byte id this is exact.
-    An id longer than one byte that holds a 0x00 or 0xFF after its first byte decodes
-    split at the wrong place, but nothing is lost: encoding the decoded object gives the
-    same bytes back. When a device documents its id length, :meth:`with_id_length`
-    re-splits a decoded reply. Limits: *server_id* at least 1 byte, and the whole PDU
-    253 bytes (id + additional data at most 250).
+    The spec leaves the length of the id to each device, and the wire carries only the total byte
+    count, so decoding needs a rule: the id is the first byte plus every following byte up to the
+    first 0x00 or 0xFF, that byte is the run indicator (0x00 off, 0xFF on), and the rest is
+    additional data. For the common one-byte id this is exact. An id longer than one byte that holds
+    a 0x00 or 0xFF after its first byte decodes split at the wrong place, but nothing is lost:
+    encoding the decoded object gives the same bytes back. When a device documents its id length,
+    [`with_id_length`][aiortu.core.pdu_serial_line.ReportServerIdResponse.with_id_length] re-splits
+    a decoded reply. Limits: `server_id` at least 1 byte, and the whole PDU 253 bytes (id +
+    additional data at most 250).
     """
 
     function_code: ClassVar[int] = FunctionCode.REPORT_SERVER_ID
@@ -445,10 +446,10 @@ class ReportServerIdResponse(Response):
         return bytes((self.function_code, len(payload))) + payload
 
     def with_id_length(self, id_length: int) -> Self:
-        """The same bytes split with a server id of *id_length* bytes (as a device documents).
+        """The same bytes split with a server id of `id_length` bytes (as a device documents).
 
-        Raises :class:`~aiortu.errors.InvalidValue` when the byte after the id is not a run
-        indicator (0x00 or 0xFF) or *id_length* does not fit.
+        Raises [`InvalidValue`][aiortu.errors.InvalidValue] when the byte after the id is not a run
+        indicator (0x00 or 0xFF) or `id_length` does not fit.
         """
         payload = self._payload()
         self._check("id_length", id_length, range(1, len(payload)))

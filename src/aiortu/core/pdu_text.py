@@ -1,11 +1,10 @@
 """Words for PDUs: one-line descriptions and JSON-able dicts of requests and replies.
 
-Used by :mod:`aiortu.core.bus_decoder` and by traces. A request reads as what it asks
-(``read holding registers 107..109 (3)``, ``write coil 172 = ON``), a reply as what it
-says (``reply [44609, 22098, 17216]``), and a reply given the request it answers names
-the addresses of its values (``reply holding 107..109 = [44609, 22098, 17216]``).
-Addresses are protocol addresses (from 0), a span ``a..b`` is inclusive, and bits are
-written 1 and 0.
+Used by [`aiortu.core.bus_decoder`][aiortu.core.bus_decoder] and by traces. A request reads as what
+it asks (`read holding registers 107..109 (3)`, `write coil 172 = ON`), a reply as what it says
+(`reply [44609, 22098, 17216]`), and a reply given the request it answers names the addresses of its
+values (`reply holding 107..109 = [44609, 22098, 17216]`). Addresses are protocol addresses (from
+0), a span `a..b` is inclusive, and bits are written 1 and 0.
 """
 
 from __future__ import annotations
@@ -83,7 +82,7 @@ _TABLES = {
 
 
 def function_name(function_code: int) -> str:
-    """The spec's name of *function_code* in lower case, or ``function 0xNN``."""
+    """The spec's name of `function_code` in lower case, or `function 0xNN`."""
     try:
         return FunctionCode(function_code).name.lower().replace("_", " ")
     except ValueError:
@@ -91,7 +90,7 @@ def function_name(function_code: int) -> str:
 
 
 def hex_text(data: bytes, limit: int | None = HEX_LIMIT) -> str:
-    """*data* as upper-case hex pairs; past *limit* bytes, cut short with the total length."""
+    """`data` as upper-case hex pairs; past `limit` bytes, cut short with the total length."""
     if limit is not None and len(data) > limit:
         return f"{data[:limit].hex(' ').upper()} ... ({len(data)} bytes)"
     return data.hex(" ").upper()
@@ -114,7 +113,7 @@ def _on_off(value: bool) -> str:
 
 
 def enum_name(value: int, width: int = 2) -> str:
-    """The name of an enum member, or the number in hex (*width* digits) when it has none."""
+    """The name of an enum member, or the number in hex (`width` digits) when it has none."""
     return value.name if isinstance(value, enum.Enum) else f"0x{value:0{width}X}"
 
 
@@ -126,7 +125,7 @@ def _text(value: bytes) -> str:
 
 
 def describe_request(request: Request) -> str:
-    """What a request asks, without the unit: ``read holding registers 107..109 (3)``."""
+    """What a request asks, without the unit: `read holding registers 107..109 (3)`."""
     match request:
         case ReadCoilsRequest() | ReadHoldingRegistersRequest():
             span = _span(request.address, request.count)
@@ -171,9 +170,9 @@ def describe_request(request: Request) -> str:
 
 
 def describe_reply(reply: Response, request: Request | None = None) -> str:
-    """What a reply says, without the unit: ``reply holding 107..109 = [1, 2, 3]``.
+    """What a reply says, without the unit: `reply holding 107..109 = [1, 2, 3]`.
 
-    With the *request* it answers, a read reply names the addresses of its values and
+    With the `request` it answers, a read reply names the addresses of its values and
     drops the padding bits of a bit read.
     """
     match reply:
@@ -318,7 +317,7 @@ def _json(value: Any) -> Any:
 
 
 def pdu_to_dict(pdu: PDU) -> dict[str, Any]:
-    """The PDU as JSON types: its class name under ``type``, then its fields."""
+    """The PDU as JSON types: its class name under `type`, then its fields."""
     out: dict[str, Any] = {"type": type(pdu).__name__}
     if isinstance(pdu, ExceptionPDU):
         code = pdu.exception_code
@@ -330,8 +329,8 @@ def pdu_to_dict(pdu: PDU) -> dict[str, Any]:
 
 
 def table_access(pdu: PDU, request: Request | None) -> dict[str, Any]:
-    """Which table *pdu* reads or writes: ``table``, ``address``, ``count``, and ``values``
-    when it carries them (a read reply only when paired with its *request*); else ``{}``.
+    """Which table `pdu` reads or writes: `table`, `address`, `count`, and `values`
+    when it carries them (a read reply only when paired with its `request`); else `{}`.
     """
     code = pdu.function_code
     match pdu:

@@ -1,16 +1,15 @@
 """Poll planning, sans-IO: which read requests cover a set of points, and how to slice
 the replies back into typed values.
 
-A :class:`Point` is one value a poller reads: a name, a unit, a table, a protocol address,
-and for register tables a :class:`~aiortu.core.values.ValueType` in a
-:class:`~aiortu.core.values.Layout`, with an optional scale. :func:`plan_reads` groups the
-points by unit and table, sorts them by address and merges neighbours into one read when
-the unused elements between them are at most *max_gap* (*max_bit_gap* for coils and
-discrete inputs) and the merged read stays within the spec's limits (125 registers, 2000
-bits) or smaller ones the caller gives. Each :class:`PlannedRead` knows which slice of its
-reply belongs to which point; :meth:`PlannedRead.decode` turns a reply into values.
-
-::
+A [`Point`][aiortu.core.poll_plan.Point] is one value a poller reads: a name, a unit, a table, a
+protocol address, and for register tables a [`ValueType`][aiortu.core.values.ValueType] in a
+[`Layout`][aiortu.core.values.Layout], with an optional scale.
+[`plan_reads`][aiortu.core.poll_plan.plan_reads] groups the points by unit and table, sorts them by
+address and merges neighbours into one read when the unused elements between them are at most
+`max_gap` (`max_bit_gap` for coils and discrete inputs) and the merged read stays within the spec's
+limits (125 registers, 2000 bits) or smaller ones the caller gives. Each
+[`PlannedRead`][aiortu.core.poll_plan.PlannedRead] knows which slice of its reply belongs to which
+point; [`PlannedRead.decode`][aiortu.core.poll_plan.PlannedRead.decode] turns a reply into values.
 
     >>> points = [Point.of("a", 1, "40001"), Point.of("b", 1, "40003", "float32")]
     >>> [(r.address, r.count) for r in plan_reads(points, max_gap=2)]
@@ -62,15 +61,15 @@ def _layout(layout: Layout | str) -> Layout:
 
 @dataclass(frozen=True, slots=True)
 class Point:
-    """One value to poll: *name*, *unit* (1..247), *table*, protocol *address*.
+    """One value to poll: `name`, `unit` (1..247), `table`, protocol `address`.
 
-    For register tables *type* (a :class:`~aiortu.core.values.ValueType` or its name,
-    default ``uint16``) and *layout* say how the value sits in its registers; *scale*,
+    For register tables `type` (a [`ValueType`][aiortu.core.values.ValueType] or its name,
+    default `uint16`) and `layout` say how the value sits in its registers; `scale`,
     when given, multiplies the decoded number (a raw 215 with scale 0.1 reads 21.5). For
-    coils and discrete inputs the value is a ``bool`` and *type*, *layout* and *scale*
-    are ignored. *interval* overrides the poller's interval for this point (seconds).
+    coils and discrete inputs the value is a `bool` and `type`, `layout` and `scale`
+    are ignored. `interval` overrides the poller's interval for this point (seconds).
 
-    Raises :class:`~aiortu.errors.InvalidValue` for a unit, address, type or layout out
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a unit, address, type or layout out
     of range, or a value that would run past address 65535.
     """
 
@@ -114,7 +113,7 @@ class Point:
         scale: float | None = None,
         interval: float | None = None,
     ) -> Point:
-        """A point from a 5- or 6-digit reference such as ``"40108"`` (holding register 107)."""
+        """A point from a 5- or 6-digit reference such as `"40108"` (holding register 107)."""
         ref = parse_reference(reference)
         return cls(
             name,
@@ -133,7 +132,8 @@ class Point:
         return 1 if self.table.is_bit else self.type.register_count
 
     def decode(self, elements: Sequence[int | bool]) -> bool | int | float:
-        """The point's value from its *elements* (exactly :attr:`width` of them)."""
+        """The point's value from its `elements` (exactly
+        [`width`][aiortu.core.poll_plan.Point.width] of them)."""
         if self.table.is_bit:
             return bool(elements[0])
         value = decode_value([int(e) for e in elements], self.type, self.layout)
@@ -142,7 +142,7 @@ class Point:
 
 @dataclass(frozen=True, slots=True)
 class PointSlice:
-    """Where a point's elements sit in a read's reply: *offset* from its start, *width* long."""
+    """Where a point's elements sit in a read's reply: `offset` from its start, `width` long."""
 
     point: Point
     offset: int
@@ -151,8 +151,8 @@ class PointSlice:
 
 @dataclass(frozen=True, slots=True)
 class PlannedRead:
-    """One read request: *count* elements of *table* from *address* on *unit*, and the
-    :class:`PointSlice`\\ s it serves, in address order."""
+    """One read request: `count` elements of `table` from `address` on `unit`, and the
+    [`PointSlice`][aiortu.core.poll_plan.PointSlice]s it serves, in address order."""
 
     unit: int
     table: Table
@@ -166,10 +166,10 @@ class PlannedRead:
         return tuple(s.point for s in self.slices)
 
     def decode(self, elements: Sequence[int | bool]) -> list[tuple[Point, bool | int | float]]:
-        """Each point of this read with its value, from the reply's *elements*.
+        """Each point of this read with its value, from the reply's `elements`.
 
-        Raises :class:`~aiortu.errors.InvalidValue` if *elements* is shorter than
-        :attr:`count`.
+        Raises [`InvalidValue`][aiortu.errors.InvalidValue] if `elements` is shorter than
+        [`count`][aiortu.core.poll_plan.PlannedRead].
         """
         if len(elements) < self.count:
             raise InvalidValue("len(elements)", len(elements), f"at least {self.count}")
@@ -192,12 +192,12 @@ def plan_reads(
     max_registers: int = MAX_READ_REGISTERS,
     max_bits: int = MAX_READ_BITS,
 ) -> list[PlannedRead]:
-    """The read requests that cover *points*, ordered by unit, table and address.
+    """The read requests that cover `points`, ordered by unit, table and address.
 
     Points of the same unit and table are merged into one read while the unused
     elements between the end of the read so far and the next point are at most
-    *max_gap* registers (*max_bit_gap* bits; default ``16 * max_gap``) and the read
-    stays within *max_registers* (1..125) or *max_bits* (1..2000) elements. Overlapping
+    `max_gap` registers (`max_bit_gap` bits; default `16 * max_gap`) and the read
+    stays within `max_registers` (1..125) or `max_bits` (1..2000) elements. Overlapping
     points and duplicates share a read. Every point is in exactly one read.
     """
     _check_limit("max_registers", max_registers, MAX_READ_REGISTERS)

@@ -1,6 +1,6 @@
 """The RTU receiver: bytes and times in, frames out. A state machine written as a table.
 
-The machine follows the receiver of MODBUS-NOTES.md (after the serial line spec)::
+The machine follows the receiver of MODBUS-NOTES.md (after the serial line spec):
 
     INIT     wait for silence; bytes here are noise      -- silence -->  IDLE
     IDLE     waiting for a frame                         -- a byte -->   START
@@ -9,42 +9,42 @@ The machine follows the receiver of MODBUS-NOTES.md (after the serial line spec)
                                                             with a good CRC -->  RESPONSE
     RESPONSE checking the frame; handing it on           -- checked -->  IDLE
 
-and :data:`TRANSITIONS` is that diagram as data: each (state, event) pair names the next
-state and the action. A pair missing from the table is a bug and raises
-:class:`ReceiverError`, never a silent no-op. The documentation draws its diagram from
-the same table.
+and [`TRANSITIONS`][aiortu.core.receiver.TRANSITIONS] is that diagram as data: each (state, event)
+pair names the next state and the action. A pair missing from the table is a bug and raises
+[`ReceiverError`][aiortu.core.receiver.ReceiverError], never a silent no-op. The documentation draws
+its diagram from the same table.
 
 Two things go beyond the timer-driven spec, as DESIGN.md explains:
 
 * It is length-aware. Once the first bytes tell a frame's length (see
-  :mod:`aiortu.core.frame`) and the CRC checks at that length, the frame is complete at
-  once, without waiting for t3.5 of silence. Silence still ends frames whose length
-  cannot be predicted. Its role says which layouts to expect: a master expects replies;
-  a slave expects requests for its own units and either layout for other units, since on
-  a multi-drop bus it also hears other slaves' replies (a reply and a request with the
-  same function code have different lengths, and the CRC tells which one it is). Where
-  both layouts are possible, the first predicted length whose CRC checks wins, so a frame
-  whose first bytes happen to make a good shorter frame (about one in 65,536 of the
-  frames that can be read both ways) is split in two; waiting for silence instead would
-  take the length-aware completion from every short reply.
+  [`aiortu.core.frame`][aiortu.core.frame]) and the CRC checks at that length, the frame is complete
+  at once, without waiting for t3.5 of silence. Silence still ends frames whose length cannot be
+  predicted. Its role says which layouts to expect: a master expects replies; a slave expects
+  requests for its own units and either layout for other units, since on a multi-drop bus it also
+  hears other slaves' replies (a reply and a request with the same function code have different
+  lengths, and the CRC tells which one it is). Where both layouts are possible, the first predicted
+  length whose CRC checks wins, so a frame whose first bytes happen to make a good shorter frame
+  (about one in 65,536 of the frames that can be read both ways) is split in two; waiting for
+  silence instead would take the length-aware completion from every short reply.
 * It resynchronises. A buffer that fails its CRC, or outgrows the longest frame, is
   searched for a frame that starts later in it (garbage right before a good frame), and a
   frame whose CRC fails is never accepted. The search is cheap even in a flood of noise:
   a precompiled pattern finds where a unit address and a function code with a known
-  layout may start a frame (see :meth:`Receiver._salvage`). A slave searches garbage for
-  its own requests only (see :attr:`Role.SLAVE`).
+  layout may start a frame (see `Receiver._salvage`). A slave searches garbage for
+  its own requests only (see [`Role.SLAVE`][aiortu.core.receiver.Role.SLAVE]).
 
-Timing comes in as arguments: :meth:`Receiver.feed` takes a chunk and the time it
-arrived, :meth:`Receiver.expire` the current time, and :meth:`Receiver.next_deadline`
-tells the caller when to call :meth:`~Receiver.expire` next. Chunks are assumed to hold
-back-to-back characters that ended arriving at the given time, which is what a serial
-driver or a USB adapter hands over.
+Timing comes in as arguments: [`Receiver.feed`][aiortu.core.receiver.Receiver.feed] takes a chunk
+and the time it arrived, [`Receiver.expire`][aiortu.core.receiver.Receiver.expire] the current time,
+and [`Receiver.next_deadline`][aiortu.core.receiver.Receiver.next_deadline] tells the caller when to
+call [`expire`][aiortu.core.receiver.Receiver.expire] next. Chunks are assumed to hold back-to-back
+characters that ended arriving at the given time, which is what a serial driver or a USB adapter
+hands over.
 
-The t1.5 rule comes in two modes. ``strict`` follows the spec: a gap of more than t1.5
-inside a frame discards it, and t3.5 of silence ends a frame. ``tolerant`` (the default)
-ignores gaps inside frames, because USB adapters and virtual lines deliver bytes in
-bursts, and ends a frame only after a longer silence (:data:`TOLERANT_FRAME_SILENCE`, or
-t3.5 when that is longer).
+The t1.5 rule comes in two modes. `strict` follows the spec: a gap of more than t1.5 inside a frame
+discards it, and t3.5 of silence ends a frame. `tolerant` (the default) ignores gaps inside frames,
+because USB adapters and virtual lines deliver bytes in bursts, and ends a frame only after a longer
+silence ([`TOLERANT_FRAME_SILENCE`][aiortu.core.receiver.TOLERANT_FRAME_SILENCE], or t3.5 when that
+is longer).
 """
 
 from __future__ import annotations
@@ -168,7 +168,7 @@ class ReceiverError(RuntimeError):
 class FrameReceived:
     """A frame whose CRC checks: its bytes (unit, PDU and CRC) and when it arrived.
 
-    ``start`` is when its first byte arrived and ``end`` when its last byte did, in the
+    `start` is when its first byte arrived and `end` when its last byte did, in the
     clock of the times given to the receiver.
     """
 
@@ -221,19 +221,19 @@ TRANSITIONS: Final[dict[tuple[ReceiverState, ReceiverEvent], tuple[ReceiverState
     (_S.DATABUF, _E.OVERFLOW): (_S.INIT, "salvage_overflow"),
     (_S.RESPONSE, _E.CHECKED): (_S.IDLE, "nothing"),
 }
-"""The receiver's transitions: ``(state, event) -> (next state, action name)``."""
+"""The receiver's transitions: `(state, event) -> (next state, action name)`."""
 
 
 class Receiver:
     """The RTU receiver of one line (see the module docstring).
 
-    *settings* give the character time, t1.5 and t3.5. *role* chooses the layouts to
-    expect; *units* are a slave's own unit addresses (for :attr:`Role.SLAVE`). *timing*
-    is ``"tolerant"`` (default) or ``"strict"``. *frame_silence* overrides the silence
-    that ends a frame (default: t3.5 in strict mode, the longer of t3.5 and
-    :data:`TOLERANT_FRAME_SILENCE` in tolerant mode).
+    `settings` give the character time, t1.5 and t3.5. `role` chooses the layouts to expect; `units`
+    are a slave's own unit addresses (for [`Role.SLAVE`][aiortu.core.receiver.Role.SLAVE]). `timing`
+    is `"tolerant"` (default) or `"strict"`. `frame_silence` overrides the silence that ends a frame
+    (default: t3.5 in strict mode, the longer of t3.5 and
+    [`TOLERANT_FRAME_SILENCE`][aiortu.core.receiver.TOLERANT_FRAME_SILENCE] in tolerant mode).
 
-    *now* is when it starts listening: given, it starts in INIT (a frame under way when
+    `now` is when it starts listening: given, it starts in INIT (a frame under way when
     the port opened is not taken for a whole one); left out, in IDLE.
     """
 
@@ -297,7 +297,7 @@ class Receiver:
     # -- the driving interface -------------------------------------------------------
 
     def feed(self, data: bytes, now: float) -> list[ReceiverOutput]:
-        """Take a chunk of bytes that finished arriving at *now*; return what it completed."""
+        """Take a chunk of bytes that finished arriving at `now`; return what it completed."""
         out: list[ReceiverOutput] = []
         self._out = out
         count = len(data)
@@ -332,7 +332,7 @@ class Receiver:
         return out
 
     def _take_whole_frame(self, data: bytes, now: float) -> bool:
-        """Take *data*, a chunk that finished arriving at *now*, if it is exactly one frame
+        """Take `data`, a chunk that finished arriving at `now`, if it is exactly one frame
         with a good CRC reaching an idle receiver (the work of START, DATABUF and RESPONSE
         at once); return whether it was. False changes nothing."""
         if (
@@ -346,16 +346,16 @@ class Receiver:
         return False
 
     def take_expected_frame(self, data: bytes, now: float, checked: bytes | None = None) -> bool:
-        """Take *data*, a chunk that finished arriving at *now*, if it is one frame with a
+        """Take `data`, a chunk that finished arriving at `now`, if it is one frame with a
         good CRC reaching an idle receiver; return whether it was. False changes nothing:
-        give the chunk to :meth:`feed`.
+        give the chunk to [`feed`][aiortu.core.receiver.Receiver.feed].
 
-        This is what :meth:`feed` does with such a chunk, without building its
-        :class:`FrameReceived`, for a caller that has already matched the chunk's length
-        to the layout of the frame it expects (a link told what reply to look for): only
-        the state and the CRC are left to check here. *checked* is a frame whose CRC was
-        found good before (the last reply to the same request): a chunk equal to it has
-        the same CRC, so it is not computed again."""
+        This is what [`feed`][aiortu.core.receiver.Receiver.feed] does with such a chunk, without
+        building its [`FrameReceived`][aiortu.core.receiver.FrameReceived], for a caller that has
+        already matched the chunk's length to the layout of the frame it expects (a link told what
+        reply to look for): only the state and the CRC are left to check here. `checked` is a frame
+        whose CRC was found good before (the last reply to the same request): a chunk equal to it
+        has the same CRC, so it is not computed again."""
         if self.state is _S.IDLE and (
             data == checked or (len(data) >= MIN_FRAME_LENGTH and crc16(data) == 0)
         ):
@@ -364,19 +364,20 @@ class Receiver:
         return False
 
     def expire(self, now: float) -> list[ReceiverOutput]:
-        """Tell the receiver the time is *now*; return what the silence so far completed."""
+        """Tell the receiver the time is `now`; return what the silence so far completed."""
         out: list[ReceiverOutput] = []
         self._out = out
         return self._expire(now, out)
 
     def next_deadline(self) -> float | None:
-        """When :meth:`expire` should next be called, or ``None`` if no timer runs."""
+        """When [`expire`][aiortu.core.receiver.Receiver.expire] should next be called, or `None` if
+        no timer runs."""
         if self.state is ReceiverState.IDLE or self._last is None:
             return None
         return self._last + self.frame_silence
 
     def reset(self, now: float) -> None:
-        """Forget any partial frame and wait for silence from *now* (after reopening a port)."""
+        """Forget any partial frame and wait for silence from `now` (after reopening a port)."""
         self._buffer.clear()
         self._search.forget()
         self._last = now
@@ -391,7 +392,7 @@ class Receiver:
         return out
 
     def _fire(self, event: ReceiverEvent, data: bytes, position: int, now: float) -> int:
-        """Run one transition; return how far into *data* it consumed."""
+        """Run one transition; return how far into `data` it consumed."""
         entry = self._actions.get((self.state, event))
         if entry is None:
             raise ReceiverError(f"no transition for event {event.name} in state {self.state.name}")
@@ -402,7 +403,7 @@ class Receiver:
         return result
 
     def _arrival(self, position: int) -> float:
-        """When the byte at *position* of the current chunk finished arriving."""
+        """When the byte at `position` of the current chunk finished arriving."""
         return max(
             self._first_arrival,
             self._chunk_end - (self._chunk_length - 1 - position) * self.char_time,
@@ -475,7 +476,7 @@ class Receiver:
         return position
 
     def _whole_request_length(self, data: bytes) -> int:
-        """The length of the request *data* begins with, if it is for one of our units
+        """The length of the request `data` begins with, if it is for one of our units
         (else < 1: a slave salvages no other unit's frame out of a chunk)."""
         own = data[0] in self.units or data[0] == BROADCAST_UNIT
         return expected_request_length(data) if own else CANNOT_KNOW
@@ -504,7 +505,7 @@ class Receiver:
     def _complete_at_candidate(self, position: int) -> bool:
         """Check the CRC when the buffer reaches a candidate length; fire COMPLETE if it holds.
 
-        *position* is how far into the current chunk the buffer reaches.
+        `position` is how far into the current chunk the buffer reaches.
         """
         candidates = self._candidates
         buffer = self._buffer
@@ -560,13 +561,14 @@ class Receiver:
     def _salvage(
         self, reason: DiscardReason, *, keep_tail: bool = False, end: float | None = None
     ) -> None:
-        """Hand on every valid frame found inside the buffer; discard the rest with *reason*.
+        """Hand on every valid frame found inside the buffer; discard the rest with `reason`.
 
-        With *keep_tail* (overflow), bytes at the end that could still begin a frame stay
+        With `keep_tail` (overflow), bytes at the end that could still begin a frame stay
         in the buffer; otherwise the buffer is emptied.
 
-        Where frames may start, and whether one does, is :class:`FrameSearch`'s business;
-        after an overflow it remembers what it judged in the bytes kept.
+        Where frames may start, and whether one does, is
+        [`FrameSearch`][aiortu.core.frame_search.FrameSearch]'s business; after an overflow it
+        remembers what it judged in the bytes kept.
         """
         buffer = self._buffer
         if end is None:
@@ -626,7 +628,7 @@ class Receiver:
             search.forget()
 
     def _estimate(self, index: int, end: float) -> float:
-        """When byte *index* of the buffer arrived, assuming back-to-back characters."""
+        """When byte `index` of the buffer arrived, assuming back-to-back characters."""
         return min(end, self._first + index * self.char_time)
 
 

@@ -1,6 +1,6 @@
 """The slave's state machine, written as a table, and the serial line diagnostic counters.
 
-The machine follows the slave diagram of the serial line spec::
+The machine follows the slave diagram of the serial line spec:
 
     IDLE              waiting                 -- a frame with a good CRC -->  CHECKING
     CHECKING          for us, and valid?      -- another unit's frame -->     IDLE
@@ -12,24 +12,24 @@ The machine follows the slave diagram of the serial line spec::
     FORMATTING_REPLY  the normal reply        -- sent, or withheld -->        IDLE
     FORMATTING_ERROR  the exception reply     -- sent, or withheld -->        IDLE
 
-:data:`TRANSITIONS` is that diagram as data. A (state, event) pair missing from it is a
-bug and raises :class:`SlaveMachineError`, never a silent no-op.
+[`TRANSITIONS`][aiortu.core.slave_machine.TRANSITIONS] is that diagram as data. A (state, event)
+pair missing from it is a bug and raises
+[`SlaveMachineError`][aiortu.core.slave_machine.SlaveMachineError], never a silent no-op.
 
-The machine is sans-IO: the slave tells it what happened and it says what to do. It owns
-the spec's decisions: frames for units it does not serve are dropped and counted;
-broadcasts (unit 0) are executed and never answered, not even with an exception; in
-listen-only mode requests are only monitored (counted and logged), never executed nor
-answered, except restart communications (08/01), which leaves the mode; and exceptions
-come in the spec's order. That order
-falls out of the phases: :meth:`SlaveMachine.check_request` answers 01 for an unsupported
-function before any 03 or 02 the decoder found in the request itself (the decoder checks
-quantities before address ranges), and only a request that passed those checks reaches
-PROCESSING, where the data store answers 02 for unmapped addresses and a failing handler
-04.
+The machine is sans-IO: the slave tells it what happened and it says what to do. It owns the spec's
+decisions: frames for units it does not serve are dropped and counted; broadcasts (unit 0) are
+executed and never answered, not even with an exception; in listen-only mode requests are only
+monitored (counted and logged), never executed nor answered, except restart communications (08/01),
+which leaves the mode; and exceptions come in the spec's order. That order falls out of the phases:
+[`SlaveMachine.check_request`][aiortu.core.slave_machine.SlaveMachine.check_request] answers 01 for
+an unsupported function before any 03 or 02 the decoder found in the request itself (the decoder
+checks quantities before address ranges), and only a request that passed those checks reaches
+PROCESSING, where the data store answers 02 for unmapped addresses and a failing handler 04.
 
-:class:`SerialLineCounters` are the counters the spec's Diagnostics function (08)
-reports; the machine updates them as frames go by, along with the comm event log and
-counter (:class:`~aiortu.core.comm_events.CommEventLog`) that 0B and 0C report.
+[`SerialLineCounters`][aiortu.core.slave_machine.SerialLineCounters] are the counters the spec's
+Diagnostics function (08) reports; the machine updates them as frames go by, along with the comm
+event log and counter ([`CommEventLog`][aiortu.core.comm_events.CommEventLog]) that 0B and 0C
+report.
 """
 
 from __future__ import annotations
@@ -142,7 +142,7 @@ TRANSITIONS: Final[dict[tuple[SlaveState, SlaveEvent], SlaveState]] = {
     (_S.FORMATTING_ERROR, _E.REPLY_SENT): _S.IDLE,
     (_S.FORMATTING_ERROR, _E.NO_REPLY): _S.IDLE,
 }
-"""The slave's transitions: ``(state, event) -> next state``."""
+"""The slave's transitions: `(state, event) -> next state`."""
 
 _ANSWERED_TARGET: Final = TRANSITIONS[
     TRANSITIONS[TRANSITIONS[TRANSITIONS[_S.IDLE, _E.FRAME_RECEIVED], _E.REQUEST_OK], _E.PROCESSED],
@@ -159,8 +159,9 @@ _SEND_EVENT: Final = send_event()
 class SerialLineCounters:
     """The diagnostic counters of a serial line slave, as Diagnostics (08) reports them.
 
-    Each counts since the slave started or the counters were last cleared, and wraps at
-    65536 when reported (the spec's counters are 16-bit words; :meth:`word` does that).
+    Each counts since the slave started or the counters were last cleared, and wraps at 65536 when
+    reported (the spec's counters are 16-bit words;
+    [`word`][aiortu.core.slave_machine.SerialLineCounters.word] does that).
     """
 
     bus_message_count: int = 0
@@ -188,29 +189,38 @@ class SerialLineCounters:
             setattr(self, field.name, 0)
 
     def word(self, name: str) -> int:
-        """The counter *name* as the 16-bit word the spec reports."""
+        """The counter `name` as the 16-bit word the spec reports."""
         value: int = getattr(self, name)
         return value & 0xFFFF
 
 
 class SlaveMachine:
-    """The state machine of one slave serving *units* on one line (see the module docstring).
+    """The state machine of one slave serving `units` on one line (see the module docstring).
 
     Drive it in this order for each frame:
 
-    1. :meth:`frame_received`; if it returns ``False`` the frame is not for us: stop.
+    1. [`frame_received`][aiortu.core.slave_machine.SlaveMachine.frame_received]; if it returns
+       `False` the frame is not for us: stop.
     2. In listen-only mode, unless the request is restart communications (08/01), call
-       :meth:`ignore` and stop.
-    3. :meth:`check_request`; if it returns ``False`` the request gets an exception.
-    4. Otherwise execute the request, then :meth:`processed` or :meth:`processing_failed`.
-    5. If :attr:`should_reply`, send the reply (an exception with :attr:`exception_code`
-       when the state is FORMATTING_ERROR) and call :meth:`reply_sent`; otherwise call
-       :meth:`no_reply`.
+       [`ignore`][aiortu.core.slave_machine.SlaveMachine.ignore] and stop.
+    3. [`check_request`][aiortu.core.slave_machine.SlaveMachine.check_request]; if it returns
+       `False` the request gets an exception.
+    4. Otherwise execute the request, then
+       [`processed`][aiortu.core.slave_machine.SlaveMachine.processed] or
+       [`processing_failed`][aiortu.core.slave_machine.SlaveMachine.processing_failed].
+    5. If [`should_reply`][aiortu.core.slave_machine.SlaveMachine.should_reply], send the reply (an
+       exception with [`exception_code`][aiortu.core.slave_machine.SlaveMachine.exception_code] when
+       the state is FORMATTING_ERROR) and call
+       [`reply_sent`][aiortu.core.slave_machine.SlaveMachine.reply_sent]; otherwise call
+       [`no_reply`][aiortu.core.slave_machine.SlaveMachine.no_reply].
 
-    Corrupt frames and overruns are reported with :meth:`frame_corrupt` and
-    :meth:`character_overrun`, between frames. The diagnostics handlers change the
-    machine through :meth:`clear_counters`, :meth:`enter_listen_only` and
-    :meth:`restart_communications`.
+    Corrupt frames and overruns are reported with
+    [`frame_corrupt`][aiortu.core.slave_machine.SlaveMachine.frame_corrupt] and
+    [`character_overrun`][aiortu.core.slave_machine.SlaveMachine.character_overrun], between frames.
+    The diagnostics handlers change the machine through
+    [`clear_counters`][aiortu.core.slave_machine.SlaveMachine.clear_counters],
+    [`enter_listen_only`][aiortu.core.slave_machine.SlaveMachine.enter_listen_only] and
+    [`restart_communications`][aiortu.core.slave_machine.SlaveMachine.restart_communications].
     """
 
     __slots__ = (
@@ -297,7 +307,7 @@ class SlaveMachine:
     # -- one frame -------------------------------------------------------------------
 
     def frame_received(self, unit: int, function_code: int = 0) -> bool:
-        """A frame with a good CRC for *unit* arrived; tell whether this slave handles it.
+        """A frame with a good CRC for `unit` arrived; tell whether this slave handles it.
 
         A frame for another unit is counted and dropped (the machine is IDLE again). A
         frame for us is counted and logged as a receive event.
@@ -319,12 +329,14 @@ class SlaveMachine:
         return True
 
     def answered_at_once(self, unit: int, function_code: int) -> None:
-        """A request for *unit* (one of ours, not a broadcast) arrived, was executed and
-        got its normal reply, which has gone out, all while the machine was IDLE and not
-        in listen-only mode: :meth:`frame_received`, :meth:`check_request`,
-        :meth:`processed` and :meth:`reply_sent` in one step, the same counters and log
-        entries at a fraction of the work. A slave that answers a request in the read
-        callback counts it this way; the tests hold both ways equal.
+        """A request for `unit` (one of ours, not a broadcast) arrived, was executed and got its
+        normal reply, which has gone out, all while the machine was IDLE and not in listen-only
+        mode: [`frame_received`][aiortu.core.slave_machine.SlaveMachine.frame_received],
+        [`check_request`][aiortu.core.slave_machine.SlaveMachine.check_request],
+        [`processed`][aiortu.core.slave_machine.SlaveMachine.processed] and
+        [`reply_sent`][aiortu.core.slave_machine.SlaveMachine.reply_sent] in one step, the same
+        counters and log entries at a fraction of the work. A slave that answers a request in the
+        read callback counts it this way; the tests hold both ways equal.
         """
         if self.state is not _S.IDLE or self.listen_only or unit not in self._units:
             raise SlaveMachineError(
@@ -354,11 +366,11 @@ class SlaveMachine:
     def check_request(self, *, supported: bool, violation: int | None = None) -> bool:
         """Check the request; tell whether to execute it.
 
-        *supported* says whether the slave has a handler for the function code;
-        *violation* is the exception code decoding the request gave (03 for a quantity
-        or value, 02 for an address range), or ``None``. An unsupported function gets 01
-        whatever else is wrong with the request. On ``False`` the machine is in
-        FORMATTING_ERROR with :attr:`exception_code` set.
+        `supported` says whether the slave has a handler for the function code; `violation` is the
+        exception code decoding the request gave (03 for a quantity or value, 02 for an address
+        range), or `None`. An unsupported function gets 01 whatever else is wrong with the request.
+        On `False` the machine is in FORMATTING_ERROR with
+        [`exception_code`][aiortu.core.slave_machine.SlaveMachine.exception_code] set.
         """
         if not supported:
             return self._invalid(ExceptionCode.ILLEGAL_FUNCTION)
@@ -372,7 +384,7 @@ class SlaveMachine:
         self.fire(SlaveEvent.PROCESSED)
 
     def processing_failed(self, exception_code: int) -> None:
-        """Executing the request gave *exception_code*; an exception reply follows."""
+        """Executing the request gave `exception_code`; an exception reply follows."""
         self.fire(SlaveEvent.PROCESSING_FAILED)
         self.exception_code = exception_code
 
@@ -413,7 +425,7 @@ class SlaveMachine:
 
     def restart_communications(self, *, clear_log: bool) -> None:
         """08/01: once the current request is finished (its reply sent, unless the slave
-        was in listen-only mode), clear the counters, the event log too if *clear_log*,
+        was in listen-only mode), clear the counters, the event log too if `clear_log`,
         leave listen-only mode and log the restart (event 0x00)."""
         self._restart = clear_log
 

@@ -102,7 +102,7 @@ class LineSettings:
         return 3.5 * self.char_time
 
     def wire_time(self, length: int) -> float:
-        """Seconds a frame of *length* bytes takes on the wire, sent back to back."""
+        """Seconds a frame of `length` bytes takes on the wire, sent back to back."""
         return length * self.char_time
 
     def transaction_time(self, request_length: int, reply_length: int) -> float:
@@ -114,7 +114,8 @@ class LineSettings:
         return self.wire_time(request_length + reply_length) + 2 * self.t3_5
 
     def transaction_rate(self, request_length: int, reply_length: int) -> float:
-        """The wire-limited request/reply pairs per second (see :meth:`transaction_time`)."""
+        """The wire-limited request/reply pairs per second (see
+        [`transaction_time`][aiortu.core.timing.LineSettings.transaction_time])."""
         return 1.0 / self.transaction_time(request_length, reply_length)
 
     def __str__(self) -> str:

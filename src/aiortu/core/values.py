@@ -1,9 +1,9 @@
 """Typed values in 16-bit registers: integers, floats and strings, in every word layout.
 
-A register holds 16 bits; wider values span 2 or 4 consecutive registers, and devices
-disagree on the order of their bytes. :class:`Layout` names the four orders users meet,
-after the bytes of a 32-bit value written big-endian as ``A B C D`` (``A`` the most
-significant), listed in the order they sit in the registers:
+A register holds 16 bits; wider values span 2 or 4 consecutive registers, and devices disagree on
+the order of their bytes. [`Layout`][aiortu.core.values.Layout] names the four orders users meet,
+after the bytes of a 32-bit value written big-endian as `A B C D` (`A` the most significant), listed
+in the order they sit in the registers:
 
 ======  ================  =====================  =============================
 layout  32-bit registers  64-bit registers       meaning
@@ -14,11 +14,10 @@ BADC    BA DC             BA DC FE HG            words in order, the two bytes o
 DCBA    DC BA             HG FE DC BA            little-endian: everything reversed
 ======  ================  =====================  =============================
 
-So a layout is two independent switches, :attr:`Layout.word_swap` and
-:attr:`Layout.byte_swap`, and extends to any number of registers. A 16-bit value has one
-word: ABCD and CDAB leave it as it is, BADC and DCBA swap its two bytes.
-
-::
+So a layout is two independent switches, [`Layout.word_swap`][aiortu.core.values.Layout.word_swap]
+and [`Layout.byte_swap`][aiortu.core.values.Layout.byte_swap], and extends to any number of
+registers. A 16-bit value has one word: ABCD and CDAB leave it as it is, BADC and DCBA swap its two
+bytes.
 
     >>> [hex(r) for r in encode_value(123.456, ValueType.FLOAT32)]
     ['0x42f6', '0xe979']
@@ -27,7 +26,7 @@ word: ABCD and CDAB leave it as it is, BADC and DCBA swap its two bytes.
 
 Every value that does not fit (70000 as an int16, a float beyond float32's range, a wrong
 number of registers, a register outside 0..65535) raises
-:class:`~aiortu.errors.InvalidValue` naming the field, the value and the allowed range.
+[`InvalidValue`][aiortu.errors.InvalidValue] naming the field, the value and the allowed range.
 Floats may be NaN or infinite: devices use both.
 """
 
@@ -142,7 +141,8 @@ _FLOAT_RANGES = {
 
 
 def as_value_type(kind: ValueType | str) -> ValueType:
-    """*kind* as a :class:`ValueType`; raise InvalidValue if it names none."""
+    """`kind` as a [`ValueType`][aiortu.core.values.ValueType]; raise InvalidValue if it names
+    none."""
     try:
         return ValueType(kind)
     except (ValueError, TypeError):
@@ -150,7 +150,7 @@ def as_value_type(kind: ValueType | str) -> ValueType:
 
 
 def as_layout(layout: Layout | str) -> Layout:
-    """*layout* as a :class:`Layout`; raise InvalidValue if it names none."""
+    """`layout` as a [`Layout`][aiortu.core.values.Layout]; raise InvalidValue if it names none."""
     try:
         return Layout(layout)
     except (ValueError, TypeError):
@@ -158,7 +158,7 @@ def as_layout(layout: Layout | str) -> Layout:
 
 
 def check_encoding(encoding: str) -> str:
-    """*encoding* if Python has a codec of that name; raise InvalidValue otherwise."""
+    """`encoding` if Python has a codec of that name; raise InvalidValue otherwise."""
     try:
         codecs.lookup(encoding)
     except (LookupError, TypeError):
@@ -167,12 +167,12 @@ def check_encoding(encoding: str) -> str:
 
 
 def register_count(kind: ValueType | str) -> int:
-    """How many registers a value of type *kind* spans: 1, 2 or 4."""
+    """How many registers a value of type `kind` spans: 1, 2 or 4."""
     return as_value_type(kind).register_count
 
 
 def _words(data: bytes, layout: Layout) -> tuple[int, ...]:
-    """Big-endian value bytes to registers in *layout*."""
+    """Big-endian value bytes to registers in `layout`."""
     # Reading the words little-endian is the same as swapping the bytes of each one.
     count = len(data) // 2
     words: tuple[int, ...] = struct.unpack(f"{'<' if layout.byte_swap else '>'}{count}H", data)
@@ -180,7 +180,7 @@ def _words(data: bytes, layout: Layout) -> tuple[int, ...]:
 
 
 def _check_registers(registers: Sequence[int], count: int | None) -> tuple[int, ...]:
-    """*registers* as a tuple, each 0..65535, *count* of them unless *count* is None."""
+    """`registers` as a tuple, each 0..65535, `count` of them unless `count` is None."""
     try:
         registers = tuple(registers)
     except TypeError:
@@ -198,7 +198,7 @@ def _check_registers(registers: Sequence[int], count: int | None) -> tuple[int, 
 
 
 def _value_bytes(registers: tuple[int, ...], layout: Layout) -> bytes:
-    """Registers in *layout* back to the value's big-endian bytes (registers checked)."""
+    """Registers in `layout` back to the value's big-endian bytes (registers checked)."""
     words = registers[::-1] if layout.word_swap else registers
     return struct.pack(f"{'<' if layout.byte_swap else '>'}{len(words)}H", *words)
 
@@ -206,10 +206,10 @@ def _value_bytes(registers: tuple[int, ...], layout: Layout) -> bytes:
 def encode_value(
     value: float, kind: ValueType | str, layout: Layout | str = Layout.ABCD
 ) -> tuple[int, ...]:
-    """The registers (each 0..65535) that hold *value* as a *kind* in *layout*.
+    """The registers (each 0..65535) that hold `value` as a `kind` in `layout`.
 
-    Integer types take an ``int`` in the type's range; float types take an ``int`` or a
-    ``float`` (NaN and infinities included) that the type can represent, rounded to it.
+    Integer types take an `int` in the type's range; float types take an `int` or a
+    `float` (NaN and infinities included) that the type can represent, rounded to it.
     """
     kind = as_value_type(kind)
     layout = as_layout(layout)
@@ -231,7 +231,8 @@ def encode_value(
 def decode_value(
     registers: Sequence[int], kind: ValueType | str, layout: Layout | str = Layout.ABCD
 ) -> int | float:
-    """The *kind* held in *registers* (exactly :func:`register_count` of them) in *layout*."""
+    """The `kind` held in `registers` (exactly [`register_count`][aiortu.core.values.register_count]
+    of them) in `layout`."""
     kind = as_value_type(kind)
     layout = as_layout(layout)
     fmt, count, _ = _FORMATS[kind]
@@ -241,75 +242,75 @@ def decode_value(
 
 
 def int16_to_register(value: int, layout: Layout | str = Layout.ABCD) -> int:
-    """The register holding the signed 16-bit *value* (-32768..32767)."""
+    """The register holding the signed 16-bit `value` (-32768..32767)."""
     return encode_value(value, ValueType.INT16, layout)[0]
 
 
 def register_to_int16(register: int, layout: Layout | str = Layout.ABCD) -> int:
-    """The signed 16-bit value held in *register*."""
+    """The signed 16-bit value held in `register`."""
     return int(decode_value((register,), ValueType.INT16, layout))
 
 
 def int32_to_registers(value: int, layout: Layout | str = Layout.ABCD) -> tuple[int, int]:
-    """The two registers holding the signed 32-bit *value*."""
+    """The two registers holding the signed 32-bit `value`."""
     first, second = encode_value(value, ValueType.INT32, layout)
     return first, second
 
 
 def registers_to_int32(registers: Sequence[int], layout: Layout | str = Layout.ABCD) -> int:
-    """The signed 32-bit value held in two *registers*."""
+    """The signed 32-bit value held in two `registers`."""
     return int(decode_value(registers, ValueType.INT32, layout))
 
 
 def uint32_to_registers(value: int, layout: Layout | str = Layout.ABCD) -> tuple[int, int]:
-    """The two registers holding the unsigned 32-bit *value*."""
+    """The two registers holding the unsigned 32-bit `value`."""
     first, second = encode_value(value, ValueType.UINT32, layout)
     return first, second
 
 
 def registers_to_uint32(registers: Sequence[int], layout: Layout | str = Layout.ABCD) -> int:
-    """The unsigned 32-bit value held in two *registers*."""
+    """The unsigned 32-bit value held in two `registers`."""
     return int(decode_value(registers, ValueType.UINT32, layout))
 
 
 def int64_to_registers(value: int, layout: Layout | str = Layout.ABCD) -> tuple[int, ...]:
-    """The four registers holding the signed 64-bit *value*."""
+    """The four registers holding the signed 64-bit `value`."""
     return encode_value(value, ValueType.INT64, layout)
 
 
 def registers_to_int64(registers: Sequence[int], layout: Layout | str = Layout.ABCD) -> int:
-    """The signed 64-bit value held in four *registers*."""
+    """The signed 64-bit value held in four `registers`."""
     return int(decode_value(registers, ValueType.INT64, layout))
 
 
 def uint64_to_registers(value: int, layout: Layout | str = Layout.ABCD) -> tuple[int, ...]:
-    """The four registers holding the unsigned 64-bit *value*."""
+    """The four registers holding the unsigned 64-bit `value`."""
     return encode_value(value, ValueType.UINT64, layout)
 
 
 def registers_to_uint64(registers: Sequence[int], layout: Layout | str = Layout.ABCD) -> int:
-    """The unsigned 64-bit value held in four *registers*."""
+    """The unsigned 64-bit value held in four `registers`."""
     return int(decode_value(registers, ValueType.UINT64, layout))
 
 
 def float32_to_registers(value: float, layout: Layout | str = Layout.ABCD) -> tuple[int, int]:
-    """The two registers holding *value* as an IEEE 754 single (rounded to it)."""
+    """The two registers holding `value` as an IEEE 754 single (rounded to it)."""
     first, second = encode_value(value, ValueType.FLOAT32, layout)
     return first, second
 
 
 def registers_to_float32(registers: Sequence[int], layout: Layout | str = Layout.ABCD) -> float:
-    """The IEEE 754 single held in two *registers*."""
+    """The IEEE 754 single held in two `registers`."""
     return float(decode_value(registers, ValueType.FLOAT32, layout))
 
 
 def float64_to_registers(value: float, layout: Layout | str = Layout.ABCD) -> tuple[int, ...]:
-    """The four registers holding *value* as an IEEE 754 double."""
+    """The four registers holding `value` as an IEEE 754 double."""
     return encode_value(value, ValueType.FLOAT64, layout)
 
 
 def registers_to_float64(registers: Sequence[int], layout: Layout | str = Layout.ABCD) -> float:
-    """The IEEE 754 double held in four *registers*."""
+    """The IEEE 754 double held in four `registers`."""
     return float(decode_value(registers, ValueType.FLOAT64, layout))
 
 
@@ -326,10 +327,10 @@ def string_to_registers(
     encoding: str = "ascii",
     byte_swap: bool = False,
 ) -> tuple[int, ...]:
-    """*text* encoded two bytes per register, the first byte in the high half.
+    """`text` encoded two bytes per register, the first byte in the high half.
 
-    The bytes are padded with NULs to whole registers, or to *register_count* registers
-    when given (a text that does not fit raises InvalidValue). *byte_swap* puts the first
+    The bytes are padded with NULs to whole registers, or to `register_count` registers
+    when given (a text that does not fit raises InvalidValue). `byte_swap` puts the first
     byte of each pair in the low half instead, as some devices do.
     """
     if not isinstance(text, str):
@@ -372,9 +373,9 @@ def registers_to_string(
     byte_swap: bool = False,
     strip: bool = True,
 ) -> str:
-    """The text held in *registers*, two bytes per register, the first in the high half.
+    """The text held in `registers`, two bytes per register, the first in the high half.
 
-    *byte_swap* reads the first byte of each pair from the low half instead. With *strip*,
+    `byte_swap` reads the first byte of each pair from the low half instead. With `strip`,
     trailing NULs and spaces (the usual padding) are removed.
     """
     checked = _check_registers(registers, None)
@@ -402,9 +403,9 @@ def bits_to_bytes(bits: Iterable[bool | int]) -> bytes:
 
 
 def bytes_to_bits(data: bytes | bytearray, count: int | None = None) -> tuple[bool, ...]:
-    """The bits of *data*, least significant first: the first *count*, or all of them.
+    """The bits of `data`, least significant first: the first `count`, or all of them.
 
-    *count* may not exceed the ``8 * len(data)`` bits there are.
+    `count` may not exceed the `8 * len(data)` bits there are.
     """
     bits = unpack_bits(bytes(data))
     if count is None:

@@ -1,8 +1,8 @@
 """One serial line: a byte stream pumped through the receiver with a clock.
 
-The master and the slave are built on :class:`Link`; users rarely need it directly,
-except to watch a line (``role=Role.MONITOR``). :class:`WakeTimer` ends a wait at its
-time rather than on the event loop's next whole millisecond.
+The master and the slave are built on [`Link`][aiortu.line.Link]; users rarely need it directly,
+except to watch a line (`role=Role.MONITOR`). [`WakeTimer`][aiortu.line.WakeTimer] ends a wait at
+its time rather than on the event loop's next whole millisecond.
 """
 
 from __future__ import annotations

@@ -1,43 +1,43 @@
 """One serial line: a byte stream pumped through the receiver with a clock.
 
-A :class:`Link` owns a byte stream (a serial port, a TCP connection to a serial device
+A [`Link`][aiortu.line.Link] owns a byte stream (a serial port, a TCP connection to a serial device
 server, a virtual line). It timestamps every chunk with the link's clock, runs the
-sans-IO :class:`~aiortu.core.receiver.Receiver`, wakes it at its deadlines, and queues
+sans-IO [`Receiver`][aiortu.core.receiver.Receiver], wakes it at its deadlines, and queues
 what it yields: frames, and the bytes it discarded with the reason.
 
-Two ways in. A stream that pushes its bytes (a :class:`~aiortu.transport.PushStream`,
-as the serial port's :class:`~aiortu.transport.SerialStream` is), on an event loop with
-``call_at`` timers (asyncio), hands each chunk to the link from the loop's read callback,
+Two ways in. A stream that pushes its bytes (a [`PushStream`][aiortu.transport.PushStream],
+as the serial port's [`SerialStream`][aiortu.transport.SerialStream] is), on an event loop with
+`call_at` timers (asyncio), hands each chunk to the link from the loop's read callback,
 and the receiver's silence deadline is one event loop timer, armed and cancelled by the
 link; the reader task then only waits for the stream's end, so a chunk costs no task
 wake-up. Any other byte stream (virtual
 lines, TCP, file descriptors), and any stream under trio, is read by the reader task, with
-the deadline as a cancel scope around ``receive()``.
+the deadline as a cancel scope around `receive()`.
 
-:meth:`Link.send` keeps the spec's silence: it first waits until the line has been quiet,
-in both directions, for ``frame_gap`` (t3.5 of the line settings by default; 0 is allowed
-for virtual lines and TCP, where there is no wire to keep quiet), then writes the frame
-and returns when, by the clock, its last byte will have left the wire. The master starts
-its response timeout from that time, not from when ``write()`` returned. Under asyncio
-on Linux the wait ends on a :class:`~aiortu.line._wake_timer.WakeTimer`, at the time itself
-rather than on the loop's next whole millisecond. :meth:`Link.send_now` sends without a
-wait or a yield when the line allows it (a push stream's ``send_nowait``, the gap kept):
-a slave answers from the read callback that way.
+[`Link.send`][aiortu.line.Link.send] keeps the spec's silence: it first waits until the line has
+been quiet, in both directions, for `frame_gap` (t3.5 of the line settings by default; 0 is allowed
+for virtual lines and TCP, where there is no wire to keep quiet), then writes the frame and returns
+when, by the clock, its last byte will have left the wire. The master starts its response timeout
+from that time, not from when `write()` returned. Under asyncio on Linux the wait ends on a
+[`WakeTimer`][aiortu.line.WakeTimer], at the time itself rather than on the loop's next whole
+millisecond. [`Link.send_now`][aiortu.line.Link.send_now] sends without a wait or a yield when the
+line allows it (a push stream's `send_nowait`, the gap kept): a slave answers from the read callback
+that way.
 
-On the push path a master can also tell the link the exact shape of the reply it waits
-for (:meth:`Link.expect`: its first bytes and length); a chunk that is exactly that frame
-with a good CRC goes straight to the master, with no event built or queued. Anything
-else, a split or garbled reply included, takes the usual way through the receiver.
+On the push path a master can also tell the link the exact shape of the reply it waits for
+([`Link.expect`][aiortu.line.Link.expect]: its first bytes and length); a chunk that is exactly that
+frame with a good CRC goes straight to the master, with no event built or queued. Anything else, a
+split or garbled reply included, takes the usual way through the receiver.
 
 The master and the slave are built on this; users rarely need it directly, except to
-watch a line (``role=Role.MONITOR``).
+watch a line (`role=Role.MONITOR`).
 
-Events go to a queue that :meth:`Link.receive` reads, or, while a listener is set
-(:meth:`Link.listen`), straight to that listener from the reader: the master's
-line engine listens, so that a reply reaches the waiting transaction with no task hop in
-between. The hot path avoids work that does nothing: the default clock is bound to the
-running event loop's clock when the link opens, and :meth:`Link.send` yields to the loop
-only when it has to wait (for the silence, for another sender, or for the stream).
+Events go to a queue that [`Link.receive`][aiortu.line.Link.receive] reads, or, while a listener is
+set ([`Link.listen`][aiortu.line.Link.listen]), straight to that listener from the reader: the
+master's line engine listens, so that a reply reaches the waiting transaction with no task hop in
+between. The hot path avoids work that does nothing: the default clock is bound to the running event
+loop's clock when the link opens, and [`Link.send`][aiortu.line.Link.send] yields to the loop only
+when it has to wait (for the silence, for another sender, or for the stream).
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ LinkEvent = FrameReceived | FrameDiscarded
 """What a link delivers: a frame whose CRC checks, or bytes discarded with a reason."""
 
 LinkListener = Callable[[LinkEvent | None], None]
-"""Called by the reader with each event, and with ``None`` once the reader stops."""
+"""Called by the reader with each event, and with `None` once the reader stops."""
 
 _STREAM_ERRORS = (
     anyio.EndOfStream,
@@ -86,10 +86,10 @@ _STREAM_ERRORS = (
 
 
 def _loop_clock(token: anyio.lowlevel.EventLoopToken) -> Callable[[], float]:
-    """The running backend's clock, as cheap to read as it gets: :func:`time.monotonic`
+    """The running backend's clock, as cheap to read as it gets: `time.monotonic`
     under asyncio's own event loops (which tell that time), else the event loop's own
-    ``time`` method where the loop has one that tells the backend's time, else the
-    backend's ``current_time``."""
+    `time` method where the loop has one that tells the backend's time, else the
+    backend's `current_time`."""
     backend_time = token.backend_class.current_time
     native = token.native_token
     loop_time = getattr(native, "time", None)
@@ -107,13 +107,13 @@ def _loop_clock(token: anyio.lowlevel.EventLoopToken) -> Callable[[], float]:
 class Link:
     """One serial line (see the module docstring). Use it as an async context manager.
 
-    *settings* are the line settings (timing for the receiver and the frame gap).
-    *role*, *units*, *timing* and *frame_silence* configure the receiver.
-    *frame_gap* is the silence kept before each transmission: ``None`` for t3.5 of the
-    settings. *clock* returns seconds (default :func:`anyio.current_time`, which the link
+    `settings` are the line settings (timing for the receiver and the frame gap).
+    `role`, `units`, `timing` and `frame_silence` configure the receiver.
+    `frame_gap` is the silence kept before each transmission: `None` for t3.5 of the
+    settings. `clock` returns seconds (default `anyio.current_time`, which the link
     replaces, when it opens, with the running backend's own clock: the same time, read
     without looking the backend up on every call).
-    *queue_size* bounds the events waiting to be received; when it is full the oldest
+    `queue_size` bounds the events waiting to be received; when it is full the oldest
     event is dropped and counted, so a reader that falls behind never stalls the line.
     """
 
@@ -133,7 +133,7 @@ class Link:
         self.stream = stream
         self.settings = settings if settings is not None else LineSettings()
         self.char_time = self.settings.char_time
-        """Seconds one character takes on the wire, from :attr:`settings`."""
+        """Seconds one character takes on the wire, from [`settings`][aiortu.line.Link]."""
         self.frame_gap = self.settings.t3_5 if frame_gap is None else frame_gap
         if self.frame_gap < 0 or math.isnan(self.frame_gap):
             raise ValueError(f"frame_gap must be >= 0 seconds, not {frame_gap}")
@@ -156,11 +156,11 @@ class Link:
         """The async backend the link runs on (set when it opens): its events, cancel
         scopes and clock cost no backend lookup."""
         self.backend_clock = False
-        """Whether :attr:`clock` is the backend's own clock, so that its times can be
+        """Whether [`clock`][aiortu.line.Link] is the backend's own clock, so that its times can be
         used as cancel scope deadlines as they are."""
         self.writes_begun = 0
-        """Writes :meth:`send` has begun: a caller cancelled inside :meth:`send` can tell
-        whether its frame may have gone out."""
+        """Writes [`send`][aiortu.line.Link.send] has begun: a caller cancelled inside
+        [`send`][aiortu.line.Link.send] can tell whether its frame may have gone out."""
         self.last_write_start = -math.inf
         """When the last write began, in the link's clock."""
         self._last_received = -math.inf
@@ -169,15 +169,15 @@ class Link:
         self._closed = anyio.Event()
         self._stopped = False
         self.loop: Any = None
-        """The event loop, where the link reads a stream that pushes its bytes (see
-        :meth:`_push`); ``None`` otherwise. Its futures and :meth:`call_at` timers are the
-        cheapest way to wait for the link there."""
+        """The event loop, where the link reads a stream that pushes its bytes (see `_push`); `None`
+        otherwise. Its futures and [`call_at`][aiortu.line.Link.call_at] timers are the cheapest way
+        to wait for the link there."""
         # Checked once here (an isinstance against a runtime protocol takes microseconds):
         # the chunk and send paths use the bound methods kept.
         self._set_receiver: Callable[..., None] | None = None
-        """A push stream's ``set_receiver``, used where the event loop has ``call_at``."""
+        """A push stream's `set_receiver`, used where the event loop has `call_at`."""
         self._send_nowait: Callable[[bytes], bool] | None = None
-        """A push stream's write without a yield (the serial port's), tried before ``send``."""
+        """A push stream's write without a yield (the serial port's), tried before `send`."""
         if isinstance(stream, PushStream):
             self._set_receiver = stream.set_receiver
             self._send_nowait = stream.send_nowait
@@ -258,14 +258,14 @@ class Link:
         return self._closed.is_set()
 
     async def wait_closed(self) -> None:
-        """Return once the reader has stopped (see :attr:`closed`)."""
+        """Return once the reader has stopped (see [`closed`][aiortu.line.Link.closed])."""
         await self._closed.wait()
 
     def listen(self, listener: LinkListener | None) -> None:
-        """Hand every event to *listener* from now on, instead of queueing it (``None``
+        """Hand every event to `listener` from now on, instead of queueing it (`None`
         queues again). The listener runs in the reader task, or in the event loop's read
         callback for a stream that pushes its bytes, and must not block; it is called with
-        ``None`` once the reader has stopped (at once if it already has)."""
+        `None` once the reader has stopped (at once if it already has)."""
         self._listener = listener
         if listener is not None and self._closed.is_set():
             listener(None)
@@ -273,7 +273,7 @@ class Link:
     async def receive(self) -> LinkEvent:
         """The next frame or discard, oldest first.
 
-        Raises :class:`~aiortu.errors.ConnectionLost` once the stream has failed or closed
+        Raises [`ConnectionLost`][aiortu.errors.ConnectionLost] once the stream has failed or closed
         and every queued event has been received.
         """
         try:
@@ -282,7 +282,7 @@ class Link:
             raise self._connection_lost() from self._error
 
     def receive_nowait(self) -> LinkEvent | None:
-        """The next queued event, or ``None`` if there is none yet."""
+        """The next queued event, or `None` if there is none yet."""
         try:
             return self._receive_events.receive_nowait()
         except anyio.WouldBlock:
@@ -291,7 +291,7 @@ class Link:
             raise self._connection_lost() from self._error
 
     def connection_lost_error(self) -> ConnectionLost:
-        """The :class:`~aiortu.errors.ConnectionLost` that stands for the link's end."""
+        """The [`ConnectionLost`][aiortu.errors.ConnectionLost] that stands for the link's end."""
         return self._connection_lost()
 
     def _connection_lost(self) -> ConnectionLost:
@@ -405,14 +405,15 @@ class Link:
         on_frame: Callable[[bytes, float], None],
         checked: bytes | None = None,
     ) -> None:
-        """Hand the next chunk that is exactly one good frame of *length* bytes starting
-        with *prefix* straight to ``on_frame(frame, end)``, once, instead of to the listener
-        as a :class:`~aiortu.core.receiver.FrameReceived`; :meth:`forget_expected` undoes it.
-        *prefix* and *length* must fit one frame layout (the receiver checks the CRC only).
-        *checked* is a frame of that layout whose CRC is known to be good (the last reply
-        to the same request): a chunk equal to it is not checked again.
+        """Hand the next chunk that is exactly one good frame of `length` bytes starting with
+        `prefix` straight to `on_frame(frame, end)`, once, instead of to the listener as a
+        [`FrameReceived`][aiortu.core.receiver.FrameReceived];
+        [`forget_expected`][aiortu.line.Link.forget_expected] undoes it. `prefix` and `length` must
+        fit one frame layout (the receiver checks the CRC only). `checked` is a frame of that layout
+        whose CRC is known to be good (the last reply to the same request): a chunk equal to it is
+        not checked again.
 
-        Only where the stream pushes its bytes (see :meth:`_push`); anything else takes
+        Only where the stream pushes its bytes (see `_push`); anything else takes
         the usual way. A master waiting for the reply it knows the shape of (a register
         read's) saves the event and the queue this way.
         """
@@ -424,20 +425,20 @@ class Link:
         length: int,
         on_request: Callable[[bytes, float], None] | None,
     ) -> None:
-        """Hand every chunk that is exactly one good request of *length* bytes with one
-        of *function_codes* straight to ``on_request(frame, end)``, from the read
+        """Hand every chunk that is exactly one good request of `length` bytes with one
+        of `function_codes` straight to `on_request(frame, end)`, from the read
         callback, instead of to the listener as a
-        :class:`~aiortu.core.receiver.FrameReceived`; ``None`` stops it. Every request
-        with those function codes must be *length* bytes long (01 to 06 are 8), whatever
+        [`FrameReceived`][aiortu.core.receiver.FrameReceived]; `None` stops it. Every request
+        with those function codes must be `length` bytes long (01 to 06 are 8), whatever
         its unit: the receiver checks the CRC only.
 
-        Like :meth:`expect`, only where the stream pushes its bytes. A slave answers the
-        commonest requests this way without building an event.
+        Like [`expect`][aiortu.line.Link.expect], only where the stream pushes its bytes. A slave
+        answers the commonest requests this way without building an event.
         """
         self._requests = None if on_request is None else (function_codes, length, on_request)
 
     def forget_expected(self) -> None:
-        """Undo :meth:`expect`, if the frame has not come."""
+        """Undo [`expect`][aiortu.line.Link.expect], if the frame has not come."""
         self._expected = None
 
     def _on_timer(self) -> None:
@@ -471,8 +472,8 @@ class Link:
         self._timer = self.call_at(deadline, self._on_timer)
 
     def call_at(self, when: float, callback: Callable[..., object], *args: object) -> Any:
-        """Have the event loop call ``callback(*args)`` at *when* (the link's clock);
-        return a handle with ``cancel()``. Only where :attr:`loop` is set."""
+        """Have the event loop call `callback(*args)` at `when` (the link's clock);
+        return a handle with `cancel()`. Only where [`loop`][aiortu.line.Link.loop] is set."""
         loop = self.loop
         assert loop is not None
         if self.backend_clock:
@@ -500,11 +501,11 @@ class Link:
     # -- sending ---------------------------------------------------------------------
 
     async def send(self, frame: bytes) -> float:
-        """Send *frame* after ``frame_gap`` of silence; return when it will have left the wire.
+        """Send `frame` after `frame_gap` of silence; return when it will have left the wire.
 
         The returned time is in the link's clock: the moment the write began plus the
         frame's wire time at the line's character rate. Raises
-        :class:`~aiortu.errors.ConnectionLost` if the stream fails.
+        [`ConnectionLost`][aiortu.errors.ConnectionLost] if the stream fails.
         """
         # One sender at a time, in order; no yield when nobody else is sending (a
         # master's line has a single sender).
@@ -536,12 +537,13 @@ class Link:
                 self._sending = False
 
     def send_now(self, frame: bytes) -> float | None:
-        """Send *frame* at once if the line lets it go without a wait, else send nothing.
+        """Send `frame` at once if the line lets it go without a wait, else send nothing.
 
-        It goes when nobody else is sending, ``frame_gap`` of silence has already passed,
-        and the stream writes without a yield (the serial port does); then the return is
-        what :meth:`send` returns. ``None`` means nothing was sent: use :meth:`send`. A
-        slave answers this way from the link's read callback, with no task wake-up.
+        It goes when nobody else is sending, `frame_gap` of silence has already passed, and the
+        stream writes without a yield (the serial port does); then the return is what
+        [`send`][aiortu.line.Link.send] returns. `None` means nothing was sent: use
+        [`send`][aiortu.line.Link.send]. A slave answers this way from the link's read callback,
+        with no task wake-up.
         """
         send_nowait = self._send_nowait
         if send_nowait is None or self._sending or self._error is not None or self._stopped:
@@ -557,7 +559,7 @@ class Link:
         return self._sent(frame, start, start)
 
     def _sent(self, frame: bytes, start: float, now: float) -> float:
-        """*frame* began to go out at *start*, and the write returned at *now*."""
+        """`frame` began to go out at `start`, and the write returned at `now`."""
         self.frames_sent += 1
         # The OS may buffer the write, so it returns early; the wire is busy until the
         # last character has gone, whichever is later.
@@ -584,10 +586,10 @@ class Link:
             self._sending = False
 
     async def wait_for_silence(self, silence: float) -> None:
-        """Wait until neither side has used the line for *silence* seconds (no yield when
+        """Wait until neither side has used the line for `silence` seconds (no yield when
         it already has).
 
-        Under asyncio on Linux the wait ends on a :class:`~aiortu.line._wake_timer.WakeTimer`,
+        Under asyncio on Linux the wait ends on a [`WakeTimer`][aiortu.line.WakeTimer],
         at the time itself: the event loop's own timers end on the next whole millisecond,
         a large share of t3.5 at high baud rates. Elsewhere it sleeps on the loop's timers.
         """
@@ -608,7 +610,8 @@ class Link:
                 await self._wait_for_timer(timer, time.monotonic() + remaining)
 
     def _make_silence_timer(self) -> None:
-        """Make the timer :meth:`wait_for_silence` ends on: once per link, on first use."""
+        """Make the timer [`wait_for_silence`][aiortu.line.Link.wait_for_silence] ends on: once per
+        link, on first use."""
         self._silence_timer_tried = True
         timer = create_wake_timer(self._on_silence_timer)
         if timer is not None:
@@ -616,7 +619,7 @@ class Link:
             self._silence_timer = timer
 
     async def _wait_for_timer(self, timer: WakeTimer, when: float) -> None:
-        """Wait until *timer* goes off: at *when* (``time.monotonic()`` seconds), or
+        """Wait until `timer` goes off: at `when` (`time.monotonic()` seconds), or
         earlier for another waiter's deadline, or when the link closes."""
         loop = self._silence_loop
         woken = loop.create_future()

@@ -1,19 +1,20 @@
 """A wake-up timer for asyncio on Linux that fires at the exact time, not on the next millisecond.
 
-asyncio's selector event loops hand their timeout to ``epoll_wait``, which counts whole
+asyncio's selector event loops hand their timeout to `epoll_wait`, which counts whole
 milliseconds, and round it up so as never to wake early: a wait of 1.75 ms ends after 2 ms.
 On a serial line that is a large share of a frame gap (t3.5 is 1.75 ms from 19200 baud
-up), added to every wait. A :class:`WakeTimer` is a Linux ``timerfd`` that the loop
+up), added to every wait. A [`WakeTimer`][aiortu.line.WakeTimer] is a Linux `timerfd` that the loop
 watches as a reader: the kernel makes it readable at the deadline, to the nanosecond,
 and epoll returns at once.
 
-Deadlines are ``time.monotonic()`` seconds, the clock of asyncio's own event loops (both
-are ``CLOCK_MONOTONIC``). :func:`create_wake_timer` returns a timer only where all of that
-holds; elsewhere (other systems, trio, uvloop and other loops with their own clock or
-selector) it returns ``None`` and the caller waits with the event loop's own timers.
+Deadlines are `time.monotonic()` seconds, the clock of asyncio's own event loops (both are
+`CLOCK_MONOTONIC`). [`create_wake_timer`][aiortu.line.create_wake_timer] returns a timer only where
+all of that holds; elsewhere (other systems, trio, uvloop and other loops with their own clock or
+selector) it returns `None` and the caller waits with the event loop's own timers.
 
-The link ends its frame gap on one (:meth:`aiortu.line._link.Link.wait_for_silence`), and a
-paced :class:`~aiortu.testing.VirtualBus` wakes its receivers with one.
+The link ends its frame gap on one
+([`aiortu.line.Link.wait_for_silence`][aiortu.line.Link.wait_for_silence]), and a paced
+[`VirtualBus`][aiortu.testing.VirtualBus] wakes its receivers with one.
 """
 
 from __future__ import annotations
@@ -64,9 +65,9 @@ def _timerfd_libc() -> ctypes.CDLL | None:
 
 
 def create_wake_timer(on_fire: Callable[[], None]) -> WakeTimer | None:
-    """A :class:`WakeTimer` calling *on_fire* (a bound method, held weakly), if the running
-    event loop can watch one: a standard asyncio selector loop on Linux. ``None`` otherwise,
-    also when called outside an asyncio loop (under trio, say)."""
+    """A [`WakeTimer`][aiortu.line.WakeTimer] calling `on_fire` (a bound method, held weakly), if
+    the running event loop can watch one: a standard asyncio selector loop on Linux. `None`
+    otherwise, also when called outside an asyncio loop (under trio, say)."""
     if _timerfd_libc() is None:
         return None
     try:
@@ -84,19 +85,20 @@ def create_wake_timer(on_fire: Callable[[], None]) -> WakeTimer | None:
 
 
 class WakeTimer:
-    """Calls *on_fire* at an exact ``time.monotonic()`` time, in an asyncio event loop.
+    """Calls `on_fire` at an exact `time.monotonic()` time, in an asyncio event loop.
 
-    *on_fire* must be a bound method; it is held weakly, so the timer does not keep its
-    owner alive (the descriptor is closed when the timer is collected, if not by
-    :meth:`close`). The timer is one-shot and shared: each waiter calls :meth:`begin`
-    with its deadline and :meth:`end` when it stops waiting, and the timer is armed for
-    the earliest deadline; the last :meth:`end` disarms it. The loop watches the
-    descriptor from the first :meth:`begin` until :meth:`close` (call it: a timer that
-    is watched is not collected). *on_fire* runs in the loop's reader callback when
-    the timer goes off; waiters with later deadlines look at the clock and begin again.
+    `on_fire` must be a bound method; it is held weakly, so the timer does not keep its owner alive
+    (the descriptor is closed when the timer is collected, if not by
+    [`close`][aiortu.line.WakeTimer.close]). The timer is one-shot and shared: each waiter calls
+    [`begin`][aiortu.line.WakeTimer.begin] with its deadline and [`end`][aiortu.line.WakeTimer.end]
+    when it stops waiting, and the timer is armed for the earliest deadline; the last
+    [`end`][aiortu.line.WakeTimer.end] disarms it. The loop watches the descriptor from the first
+    [`begin`][aiortu.line.WakeTimer.begin] until [`close`][aiortu.line.WakeTimer.close] (call it: a
+    timer that is watched is not collected). `on_fire` runs in the loop's reader callback when the
+    timer goes off; waiters with later deadlines look at the clock and begin again.
 
-    Raises :class:`OSError` where there is no timerfd (see :func:`create_wake_timer`,
-    which checks the event loop too).
+    Raises `OSError` where there is no timerfd (see
+    [`create_wake_timer`][aiortu.line.create_wake_timer], which checks the event loop too).
     """
 
     __slots__ = (
@@ -134,7 +136,7 @@ class WakeTimer:
 
     @property
     def deadline(self) -> float:
-        """When the timer goes off next, in ``time.monotonic()`` seconds (``math.inf``: it
+        """When the timer goes off next, in `time.monotonic()` seconds (`math.inf`: it
         is disarmed)."""
         return self._armed
 
@@ -144,9 +146,9 @@ class WakeTimer:
         return not self._finalizer.alive
 
     def begin(self, loop: asyncio.AbstractEventLoop, deadline: float) -> None:
-        """A waiter starts waiting, until *deadline* at the latest (``math.inf``: no limit).
-        Each call that returns needs one :meth:`end` (in a ``finally``, so that a cancelled
-        wait leaves too); a call that raises has counted no waiter.
+        """A waiter starts waiting, until `deadline` at the latest (`math.inf`: no limit). Each call
+        that returns needs one [`end`][aiortu.line.WakeTimer.end] (in a `finally`, so that a
+        cancelled wait leaves too); a call that raises has counted no waiter.
         """
         self._waiters += 1
         try:
@@ -165,8 +167,9 @@ class WakeTimer:
             self._arm(0.0)
 
     def _watch(self, loop: asyncio.AbstractEventLoop) -> None:
-        """Have *loop* watch the descriptor, from now until :meth:`close`: once, not per
-        wait, since adding and removing a reader costs more than the wait it serves."""
+        """Have `loop` watch the descriptor, from now until [`close`][aiortu.line.WakeTimer.close]:
+        once, not per wait, since adding and removing a reader costs more than the wait it
+        serves."""
         self._unwatch()
         loop.add_reader(self._fd, self._fire)
         self._loop = loop
@@ -205,7 +208,7 @@ class WakeTimer:
 
     def close(self) -> None:
         """Stop watching and close the descriptor; the timer is not used again (a later
-        :meth:`end` does nothing)."""
+        [`end`][aiortu.line.WakeTimer.end] does nothing)."""
         self._unwatch()
         self._waiters = 0
         self._armed = math.inf

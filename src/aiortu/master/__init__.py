@@ -1,8 +1,9 @@
 """The async Modbus RTU master: one line, one transaction at a time, shared by any number
 of coroutines; handles bound to one unit; a poller that reads points in cycles.
 
-:class:`Master` takes any :class:`anyio.abc.ByteStream`; :func:`open_master` opens one
-from a port name or URL first. See ``docs/master.md``.
+[`Master`][aiortu.master.Master] takes any `anyio.abc.ByteStream`;
+[`open_master`][aiortu.master.open_master] opens one from a port name or URL first. See
+`docs/master.md`.
 """
 
 from __future__ import annotations

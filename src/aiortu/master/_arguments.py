@@ -1,9 +1,9 @@
 """Checks of the master's arguments and settings, run in the caller's task before anything
 is queued or sent.
 
-Each check raises :class:`~aiortu.errors.InvalidRequest` (a call's arguments) or
-:class:`~aiortu.errors.InvalidValue` (a master's settings), naming the argument, what
-was given and what is allowed. The common case costs one ``type(x) is int`` test: the
+Each check raises [`InvalidRequest`][aiortu.errors.InvalidRequest] (a call's arguments) or
+[`InvalidValue`][aiortu.errors.InvalidValue] (a master's settings), naming the argument, what
+was given and what is allowed. The common case costs one `type(x) is int` test: the
 master's register read runs them on every call.
 """
 
@@ -48,12 +48,12 @@ _TEXT_TYPES: Final = (str, bytes, bytearray, memoryview)
 
 
 def is_int(value: object) -> bool:
-    """Whether *value* is an ``int`` (an ``IntEnum`` member included), not a ``bool``."""
+    """Whether `value` is an `int` (an `IntEnum` member included), not a `bool`."""
     return type(value) is int or (isinstance(value, int) and not isinstance(value, bool))
 
 
 def check_int(name: str, value: object, allowed: range, error: type[InvalidValue]) -> int:
-    """Return *value* if it is an int within *allowed*, else raise *error* naming *name*."""
+    """Return `value` if it is an int within `allowed`, else raise `error` naming `name`."""
     if not is_int(value):
         raise error(name, value, allowed, "an int is required")
     assert isinstance(value, int)
@@ -63,7 +63,7 @@ def check_int(name: str, value: object, allowed: range, error: type[InvalidValue
 
 
 def check_unit(unit: object) -> int:
-    """Return *unit* if a unicast may go to it, else raise InvalidRequest."""
+    """Return `unit` if a unicast may go to it, else raise InvalidRequest."""
     if type(unit) is int and unit in UNIT_RANGE:
         return unit
     if is_int(unit) and unit == BROADCAST_UNIT:
@@ -72,7 +72,7 @@ def check_unit(unit: object) -> int:
 
 
 def check_priority(priority: object) -> int:
-    """Return *priority* if it is an int (lower goes first), else raise InvalidRequest.
+    """Return `priority` if it is an int (lower goes first), else raise InvalidRequest.
 
     Priorities are compared with each other inside the master's queue, in other callers'
     tasks: one that is not an int must never get there.
@@ -85,7 +85,7 @@ def check_priority(priority: object) -> int:
 def check_seconds(
     name: str, value: object, *, zero: bool = False, error: type[InvalidValue] = InvalidValue
 ) -> float:
-    """Return *value* if it is a finite number of seconds > 0 (>= 0 with *zero*)."""
+    """Return `value` if it is a finite number of seconds > 0 (>= 0 with `zero`)."""
     allowed = "a finite number of seconds >= 0" if zero else "a finite number of seconds > 0"
     if type(value) is not float and not is_int(value):
         raise error(name, value, allowed)
@@ -103,7 +103,7 @@ def check_timeout(timeout: object) -> float:
 
 
 def check_bool(name: str, value: object) -> bool:
-    """Return *value* if it is a bool, else raise InvalidValue naming *name*."""
+    """Return `value` if it is a bool, else raise InvalidValue naming `name`."""
     if not isinstance(value, bool):
         raise InvalidValue(name, value, "True or False")
     return value
@@ -112,7 +112,7 @@ def check_bool(name: str, value: object) -> bool:
 def check_coil(value: object) -> bool:
     """A single coil's state: a bool, 0 or 1, or the spec's 0xFF00 (on) or 0x0000 (off).
 
-    Text and other numbers are refused: ``"off"`` is true to Python.
+    Text and other numbers are refused: `"off"` is true to Python.
     """
     if type(value) is bool:
         return value
@@ -145,7 +145,7 @@ def check_registers(name: str, values: object) -> tuple[int, ...]:
 
 
 def check_items(name: str, values: object, allowed: str) -> tuple[object, ...]:
-    """*values* as a tuple, if it is a sequence (or another iterable) that is not text."""
+    """`values` as a tuple, if it is a sequence (or another iterable) that is not text."""
     if isinstance(values, _TEXT_TYPES) or not isinstance(values, Iterable):
         raise InvalidRequest(name, values, allowed)
     return tuple(values)
@@ -153,7 +153,7 @@ def check_items(name: str, values: object, allowed: str) -> tuple[object, ...]:
 
 def check_retry_on(retry_on: object) -> frozenset[Failure | int] | None:
     """The failures and exception codes a master retries: None (the default), or a
-    collection of :class:`~aiortu.core.master_transaction.Failure` members and
+    collection of [`Failure`][aiortu.core.master_transaction.Failure] members and
     exception codes 1..255."""
     if retry_on is None:
         return None
@@ -178,14 +178,14 @@ def check_function_codes(name: str, codes: object) -> frozenset[int] | None:
 def check_at_least(
     name: str, value: object, minimum: int, error: type[InvalidValue] = InvalidValue
 ) -> int:
-    """Return *value* if it is an int >= *minimum*, else raise *error*."""
+    """Return `value` if it is an int >= `minimum`, else raise `error`."""
     if not is_int(value) or value < minimum:  # type: ignore[operator]  # an int by then
         raise error(name, value, f"an int >= {minimum}")
     return value  # type: ignore[return-value]  # checked above
 
 
 def check_delays(name: str, delays: object) -> tuple[float, float]:
-    """A ``(first, longest)`` pair of finite delays, 0 < first <= longest."""
+    """A `(first, longest)` pair of finite delays, 0 < first <= longest."""
     allowed = "(first, longest): two finite numbers of seconds, 0 < first <= longest"
     if not isinstance(delays, Sequence) or isinstance(delays, _TEXT_TYPES) or len(delays) != 2:
         raise InvalidValue(name, delays, allowed)
@@ -217,7 +217,7 @@ def check_master_settings(
     opener: object = None,
 ) -> None:
     """Raise InvalidValue, naming the setting, for the first of a master's settings that is
-    out of its range (see :class:`~aiortu.master._client.Master`)."""
+    out of its range (see [`Master`][aiortu.master.Master])."""
     check_seconds("timeout", timeout)
     check_at_least("retries", retries, 0)
     check_retry_on(retry_on)

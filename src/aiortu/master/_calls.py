@@ -2,9 +2,9 @@
 # ``timeout=`` here is the Modbus response timeout, counted from the end of transmission
 # by the master; a cancel scope around the call cannot express that.
 """What the master's helpers need of a master, as protocols: the serial-line functions
-(:class:`~aiortu.master._serial_line.SerialLineFunctions`, a base class of
-:class:`~aiortu.master._client.Master`) build on :class:`Requester`; the unit handles
-(:class:`~aiortu.master._handles.UnitHandle`) on :class:`MasterCalls`.
+(`SerialLineFunctions`, a base class of
+[`Master`][aiortu.master.Master]) build on `Requester`; the unit handles
+([`UnitHandle`][aiortu.master.UnitHandle]) on `MasterCalls`.
 
 They live below the client so that the helpers never import the class built on them:
 the master's modules form no import cycle, type-checking imports included.
@@ -30,10 +30,10 @@ __all__ = ("FileRecordLike", "MasterCalls", "RecordRequestLike", "Requester")
 _ResponseT = TypeVar("_ResponseT", bound=Response)
 
 RecordRequestLike = pdu_files.FileRecordRequest | tuple[int, int, int]
-"""A read file record sub-request: the class, or ``(file, record, length)``."""
+"""A read file record sub-request: the class, or `(file, record, length)`."""
 
 FileRecordLike = pdu_files.FileRecord | tuple[int, int, Sequence[int]]
-"""A write file record sub-record: the class, or ``(file, record, values)``."""
+"""A write file record sub-record: the class, or `(file, record, values)`."""
 
 
 class Requester(Protocol):
@@ -49,17 +49,18 @@ class Requester(Protocol):
         priority: int = 0,
         retries: int | None = None,
     ) -> _ResponseT:
-        """See :meth:`aiortu.master._client.Master.request`."""
+        """See [`aiortu.master.Master.request`][aiortu.master.Master.request]."""
         ...
 
     async def send_without_reply(self, unit: int, pdu: Request, *, priority: int = 0) -> None:
-        """See :meth:`aiortu.master._client.Master.send_without_reply`."""
+        """See
+        [`aiortu.master.Master.send_without_reply`][aiortu.master.Master.send_without_reply]."""
         ...
 
 
 class MasterCalls(Requester, Protocol):
     """The master's methods a unit handle binds to one unit (see
-    :class:`~aiortu.master._client.Master` for each)."""
+    [`Master`][aiortu.master.Master] for each)."""
 
     async def read_coils(
         self,

@@ -4,18 +4,17 @@
 """The async Modbus RTU master: one line, one transaction at a time, shared by any number
 of coroutines.
 
-::
-
     async with aiortu.open_master("/dev/ttyUSB0", baudrate=19200, parity="E") as master:
         regs = await master.read_holding_registers(17, 0x6B, 3)
         await master.write_registers(17, 0x10, [1, 2, 3])
         bits = await master.slave(17).read_coils(0x13, 20)
         await master.broadcast.write_register(0x10, 7)
 
-:class:`Master` takes any :class:`anyio.abc.ByteStream`; :func:`open_master` opens one
-from a port name or URL first. The line engine lives in :mod:`aiortu.master._engine`, the
-state machine in :mod:`aiortu.core.master_machine`, the per-unit and broadcast handles in
-:mod:`aiortu.master._handles`.
+[`Master`][aiortu.master.Master] takes any `anyio.abc.ByteStream`;
+[`open_master`][aiortu.master.open_master] opens one from a port name or URL first. The line engine
+lives in [`aiortu.master`][aiortu.master], the state machine in
+[`aiortu.core.master_machine`][aiortu.core.master_machine], the per-unit and broadcast handles in
+[`aiortu.master`][aiortu.master].
 
 Who runs a transaction. The line is owned by one transaction at a time, and that
 transaction runs in its caller's task: on an idle line a call sends its request and
@@ -96,13 +95,13 @@ _STATS_UNITS = range(248)
 """The units a master keeps statistics of: unit 0 counts the broadcasts."""
 
 _READ_CACHE_SIZE = 256
-"""Read requests a master keeps made (see :meth:`Master._read_request`)."""
+"""Read requests a master keeps made (see `Master._read_request`)."""
 
 
 def _answer(
     response: Response | ExceptionPDU | None, pdu: Request, unit: int, expected: type[_ResponseT]
 ) -> _ResponseT:
-    """*response* as the reply to *pdu*; raise ExceptionResponse for an exception reply
+    """`response` as the reply to `pdu`; raise ExceptionResponse for an exception reply
     and MalformedPDU for a reply of another kind."""
     if isinstance(response, ExceptionPDU):
         raise ExceptionResponse(response.exception_code, pdu.function_code, unit)
@@ -112,8 +111,8 @@ def _answer(
 
 
 def _known_form(pdu: object) -> Request:
-    """*pdu* if it is a Request; a :class:`RawPDU` of a function code aiortu has a class
-    for as that class, so that its reply (decoded as that code's) is checked as such."""
+    """`pdu` if it is a Request; a [`RawPDU`][aiortu.core.pdu.RawPDU] of a function code aiortu has
+    a class for as that class, so that its reply (decoded as that code's) is checked as such."""
     if type(pdu) is RawPDU:
         try:
             return decode_request(pdu.encode())
@@ -125,37 +124,36 @@ def _known_form(pdu: object) -> Request:
 
 
 class Master(SerialLineFunctions):
-    """A Modbus RTU master on *stream*; an async context manager.
+    """A Modbus RTU master on `stream`; an async context manager.
 
-    *settings* give the line timing. *timeout* is the response timeout of each attempt,
-    counted from when the request has left the wire; *retries* extra attempts follow a
-    failure listed in *retry_on* (default: timeouts and frame errors, never exception
+    `settings` give the line timing. `timeout` is the response timeout of each attempt,
+    counted from when the request has left the wire; `retries` extra attempts follow a
+    failure listed in `retry_on` (default: timeouts and frame errors, never exception
     responses; add exception codes to retry those), for requests whose function code is
-    in *repeatable* (default
-    :data:`~aiortu.core.master_transaction.SAFE_TO_REPEAT`: reads and the idempotent
-    writes; a request of another code is sent once). *frame_gap* is the silence kept
-    before each request (``None``: t3.5; 0 for virtual lines and TCP gateways).
-    *turnaround_delay* is the wait after a broadcast. Health: *offline_after*
-    consecutive failures mark a unit offline; with *fail_fast_offline* calls to it raise
-    :class:`~aiortu.errors.UnitOffline` except one probe every *probe_interval*
-    seconds. *timing* is the receiver's t1.5 mode.
+    in `repeatable` (default
+    [`SAFE_TO_REPEAT`][aiortu.core.master_transaction.SAFE_TO_REPEAT]: reads and the idempotent
+    writes; a request of another code is sent once). `frame_gap` is the silence kept
+    before each request (`None`: t3.5; 0 for virtual lines and TCP gateways).
+    `turnaround_delay` is the wait after a broadcast. Health: `offline_after`
+    consecutive failures mark a unit offline; with `fail_fast_offline` calls to it raise
+    [`UnitOffline`][aiortu.errors.UnitOffline] except one probe every `probe_interval`
+    seconds. `timing` is the receiver's t1.5 mode.
 
-    Reconnecting (see :mod:`aiortu.master._connection`): when the stream fails, the
-    request in flight and the queued ones raise :class:`~aiortu.errors.ConnectionLost`.
-    A master given only a stream cannot reopen it and stays failed. Given an *opener*
-    (an async function returning a new stream for the same port; :func:`open_master`
-    passes one) and *reconnect* true, it reopens the port, waiting *reconnect_delay*
-    ``(first, longest)`` seconds between attempts, doubling; requests made meanwhile
-    wait up to their timeout for the port and then raise ConnectionLost, or raise it at
-    once with *reconnect_fail_fast*.
+    Reconnecting (see [`aiortu.master`][aiortu.master]): when the stream fails, the request in
+    flight and the queued ones raise [`ConnectionLost`][aiortu.errors.ConnectionLost]. A master
+    given only a stream cannot reopen it and stays failed. Given an `opener` (an async function
+    returning a new stream for the same port; [`open_master`][aiortu.master.open_master] passes one)
+    and `reconnect` true, it reopens the port, waiting `reconnect_delay` `(first, longest)` seconds
+    between attempts, doubling; requests made meanwhile wait up to their timeout for the port and
+    then raise ConnectionLost, or raise it at once with `reconnect_fail_fast`.
 
-    Every method takes the unit first, and ``timeout=`` (this call's response timeout)
-    and ``priority=`` (lower goes first; equal priorities keep their order). Requests
-    outside the spec raise :class:`~aiortu.errors.InvalidRequest` before anything is
-    sent. An exception reply raises :class:`~aiortu.errors.ExceptionResponse`; no reply
-    raises :class:`~aiortu.errors.ResponseTimeout`; bad bytes after the retries raise
-    :class:`~aiortu.errors.FrameError` (:class:`~aiortu.errors.CRCError` for a CRC);
-    a dead line raises :class:`~aiortu.errors.ConnectionLost`.
+    Every method takes the unit first, and `timeout=` (this call's response timeout)
+    and `priority=` (lower goes first; equal priorities keep their order). Requests
+    outside the spec raise [`InvalidRequest`][aiortu.errors.InvalidRequest] before anything is
+    sent. An exception reply raises [`ExceptionResponse`][aiortu.errors.ExceptionResponse]; no reply
+    raises [`ResponseTimeout`][aiortu.errors.ResponseTimeout]; bad bytes after the retries raise
+    [`FrameError`][aiortu.errors.FrameError] ([`CRCError`][aiortu.errors.CRCError] for a CRC);
+    a dead line raises [`ConnectionLost`][aiortu.errors.ConnectionLost].
 
     How a late reply is kept from a later request. RTU frames carry no transaction id,
     so a reply is matched by what it is and when it came:
@@ -166,12 +164,12 @@ class Master(SerialLineFunctions):
        exception form), and pass the request's checks of the reply (byte count, echoed
        address, count and values); anything else is skipped while the wait goes on.
     3. After a transaction in which an attempt failed, the line is kept quiet for
-       *late_reply_guard* seconds (0.1 by default) before the next request, on top of
-       the *frame_gap* silence: a reply that straggles in meanwhile is stale by rule 1.
+       `late_reply_guard` seconds (0.1 by default) before the next request, on top of
+       the `frame_gap` silence: a reply that straggles in meanwhile is stale by rule 1.
 
     The limit: a reply later than that guard, from the same unit, that also passes the
     next request's checks (a read of the same count, say), cannot be told from the real
-    reply. Raise *late_reply_guard* on lines with slow devices, or use per-call timeouts
+    reply. Raise `late_reply_guard` on lines with slow devices, or use per-call timeouts
     longer than the slowest device's reply time.
 
     Cancelling a caller never desynchronises the line: one transaction owns the line at
@@ -276,15 +274,15 @@ class Master(SerialLineFunctions):
 
     @property
     def statistics(self) -> Mapping[int, UnitStats]:
-        """:class:`~aiortu.master._engine.UnitStats` by unit address, for units used so far."""
+        """[`UnitStats`][aiortu.master.UnitStats] by unit address, for units used so far."""
         return self.engine.stats
 
     def unit_stats(self, unit: int) -> UnitStats:
-        """The statistics and health of *unit* (0..247: 0 counts the broadcasts)."""
+        """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
         return self.engine.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
-        """False once *unit* failed ``offline_after`` times in a row, until a success."""
+        """False once `unit` failed `offline_after` times in a row, until a success."""
         return self.unit_stats(unit).online
 
     def slave(self, unit: int) -> UnitHandle:
@@ -296,7 +294,7 @@ class Master(SerialLineFunctions):
     async def execute(
         self, unit: int, pdu: Request, *, timeout: float | None = None, priority: int = 0
     ) -> Response | ExceptionPDU:
-        """Send any request PDU (a :class:`~aiortu.core.pdu.RawPDU` for custom codes) and
+        """Send any request PDU (a [`RawPDU`][aiortu.core.pdu.RawPDU] for custom codes) and
         return the reply as it came, an exception reply included (not raised).
 
         A RawPDU of a function code aiortu has a class for is sent as that class, and
@@ -312,7 +310,7 @@ class Master(SerialLineFunctions):
         return response
 
     async def send_without_reply(self, unit: int, pdu: Request, *, priority: int = 0) -> None:
-        """Send *pdu* to *unit* (0 broadcasts it), then wait the turnaround delay.
+        """Send `pdu` to `unit` (0 broadcasts it), then wait the turnaround delay.
 
         No reply is awaited. Unit 0 takes only requests the spec lets be broadcast.
         """
@@ -345,9 +343,9 @@ class Master(SerialLineFunctions):
         priority: int = 0,
         retries: int | None = None,
     ) -> _ResponseT:
-        """Send *pdu*, raise ExceptionResponse for an exception reply, return the reply.
+        """Send `pdu`, raise ExceptionResponse for an exception reply, return the reply.
 
-        *retries* overrides the master's retry count for this call (a poller probing a
+        `retries` overrides the master's retry count for this call (a poller probing a
         unit that has stopped answering sends once).
         """
         # execute(), inlined: one coroutine less per call.
@@ -371,7 +369,7 @@ class Master(SerialLineFunctions):
         priority: int,
         policy: RetryPolicy | None = None,
     ) -> Awaitable[Response | ExceptionPDU | None]:
-        """The engine's awaitable of *request* (*policy*: the master's retry policy by
+        """The engine's awaitable of `request` (`policy`: the master's retry policy by
         default), the unit and the timeout checked. An awaitable, not a coroutine: a read
         that goes out at once is then one coroutine (the caller's) waiting on the
         engine's future."""
@@ -388,7 +386,7 @@ class Master(SerialLineFunctions):
         return self.engine.submit_request(unit, request, response_timeout, policy, priority)
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
-        """``kind(address, count)``, made once per address and count: a poll loop reads
+        """`kind(address, count)`, made once per address and count: a poll loop reads
         the same blocks again and again, and the master encodes a request object once."""
         if type(address) is not int or type(count) is not int:
             return kind(address, count)  # the constructor says what is wrong (a float...)
@@ -415,7 +413,7 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> list[bool]:
-        """Read *count* (1..2000) coils from *address* (01)."""
+        """Read `count` (1..2000) coils from `address` (01)."""
         request = self._read_request(ReadCoilsRequest, address, count)
         reply = await self.request(
             unit, request, ReadCoilsResponse, timeout=timeout, priority=priority
@@ -431,7 +429,7 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> list[bool]:
-        """Read *count* (1..2000) discrete inputs from *address* (02)."""
+        """Read `count` (1..2000) discrete inputs from `address` (02)."""
         request = self._read_request(ReadDiscreteInputsRequest, address, count)
         reply = await self.request(
             unit, request, ReadCoilsResponse, timeout=timeout, priority=priority
@@ -447,10 +445,10 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """Set the coil at *address* on or off (05); the echo is verified.
+        """Set the coil at `address` on or off (05); the echo is verified.
 
-        *value* is a bool, 1 or 0, or the spec's encoding 0xFF00 or 0x0000; anything
-        else (``"off"`` is true to Python) raises InvalidRequest.
+        `value` is a bool, 1 or 0, or the spec's encoding 0xFF00 or 0x0000; anything
+        else (`"off"` is true to Python) raises InvalidRequest.
         """
         request = WriteSingleCoilRequest(address, check_coil(value))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
@@ -464,7 +462,7 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """Set 1..1968 coils from *address* (0F), each a bool, 1 or 0; the reply's address
+        """Set 1..1968 coils from `address` (0F), each a bool, 1 or 0; the reply's address
         and count are verified."""
         request = WriteMultipleCoilsRequest(address, check_coils(values))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
@@ -480,7 +478,7 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> list[int]:
-        """Read *count* (1..125) holding registers from *address* (03)."""
+        """Read `count` (1..125) holding registers from `address` (03)."""
         request = self._read_request(ReadHoldingRegistersRequest, address, count)
         response = await self._submit(unit, request, timeout, priority)
         return list(_answer(response, request, unit, ReadHoldingRegistersResponse).values)
@@ -494,7 +492,7 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> list[int]:
-        """Read *count* (1..125) input registers from *address* (04)."""
+        """Read `count` (1..125) input registers from `address` (04)."""
         request = self._read_request(ReadInputRegistersRequest, address, count)
         response = await self._submit(unit, request, timeout, priority)
         return list(_answer(response, request, unit, ReadHoldingRegistersResponse).values)
@@ -508,7 +506,7 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """Write *value* (0..65535) to the holding register at *address* (06); echo verified."""
+        """Write `value` (0..65535) to the holding register at `address` (06); echo verified."""
         request = WriteSingleRegisterRequest(address, value)  # checks the value's type
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
@@ -521,7 +519,7 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """Write 1..123 registers from *address* (10); the echoed address and count are checked."""
+        """Write 1..123 registers from `address` (10); the echoed address and count are checked."""
         request = WriteMultipleRegistersRequest(address, check_registers("values", values))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
@@ -535,8 +533,8 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """Mask write the register at *address* (16): it becomes
-        ``(current & and_mask) | (or_mask & ~and_mask)``; the echo is verified."""
+        """Mask write the register at `address` (16): it becomes
+        `(current & and_mask) | (or_mask & ~and_mask)`; the echo is verified."""
         request = MaskWriteRegisterRequest(address, and_mask, or_mask)
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
 
@@ -551,7 +549,7 @@ class Master(SerialLineFunctions):
         timeout: float | None = None,
         priority: int = 0,
     ) -> list[int]:
-        """Write *values* from *write_address*, then read *read_count* registers (17)."""
+        """Write `values` from `write_address`, then read `read_count` registers (17)."""
         request = ReadWriteMultipleRegistersRequest(
             read_address, read_count, write_address, check_registers("values", values)
         )
@@ -563,7 +561,7 @@ class Master(SerialLineFunctions):
     async def read_fifo_queue(
         self, unit: int, address: int, *, timeout: float | None = None, priority: int = 0
     ) -> list[int]:
-        """Read the 0..31 values queued in the FIFO whose pointer is at *address* (18)."""
+        """Read the 0..31 values queued in the FIFO whose pointer is at `address` (18)."""
         request = ReadFifoQueueRequest(address)
         reply = await self.request(
             unit, request, ReadFifoQueueResponse, timeout=timeout, priority=priority
@@ -595,17 +593,17 @@ async def open_master(
     reconnect_fail_fast: bool = False,
     **transport_options: Any,
 ) -> AsyncIterator[Master]:
-    """Open *port_or_url* (a serial device path or ``rtu+tcp://host:port``) and yield a
-    :class:`Master` on it; the port is closed on exit.
+    """Open `port_or_url` (a serial device path or `rtu+tcp://host:port`) and yield a
+    [`Master`][aiortu.master.Master] on it; the port is closed on exit.
 
-    The line settings come from *baudrate*, *parity*, *stopbits* and *bytesize*; the
-    other arguments are :class:`Master`'s, and *transport_options* go to
-    :func:`aiortu.transport.open_stream` (``exclusive``, ``rs485``, ``local_echo``,
-    ``connect_timeout``). Opening errors are :class:`~aiortu.errors.PortError`\\ s.
+    The line settings come from `baudrate`, `parity`, `stopbits` and `bytesize`; the other arguments
+    are [`Master`][aiortu.master.Master]'s, and `transport_options` go to
+    [`aiortu.transport.open_stream`][aiortu.transport.open_stream] (`exclusive`, `rs485`,
+    `local_echo`, `connect_timeout`). Opening errors are [`PortError`][aiortu.errors.PortError]s.
 
-    With *reconnect* (the default) the master reopens the same port with the same
-    settings after it disappears (a USB adapter unplugged); see :class:`Master` for
-    *reconnect_delay* and *reconnect_fail_fast*.
+    With `reconnect` (the default) the master reopens the same port with the same
+    settings after it disappears (a USB adapter unplugged); see [`Master`][aiortu.master.Master] for
+    `reconnect_delay` and `reconnect_fail_fast`.
     """
     from aiortu.transport import open_stream
 

@@ -1,17 +1,17 @@
 """Keeping a master's line up: serve the line on a link, reopen the port when it dies.
 
-A USB serial adapter can vanish under a running program. :class:`LineConnection` runs the
-master's :class:`~aiortu.master._engine.LineEngine` on a :class:`~aiortu.line._link.Link`; when
+A USB serial adapter can vanish under a running program. `LineConnection` runs the
+master's `LineEngine` on a [`Link`][aiortu.line.Link]; when
 the link fails, the request in flight and those queued fail with
-:class:`~aiortu.errors.ConnectionLost`, and then:
+[`ConnectionLost`][aiortu.errors.ConnectionLost], and then:
 
-- without an *opener* (a :class:`~aiortu.master._client.Master` given a bare stream) or with
+- without an `opener` (a [`Master`][aiortu.master.Master] given a bare stream) or with
   reconnecting off, the master stays failed: every later request raises ConnectionLost;
-- with one (``open_master`` passes one that opens the same port with the same settings),
-  the port is reopened with exponential backoff, from ``delay[0]`` doubling up to
-  ``delay[1]`` seconds, until it comes back. Meanwhile requests wait for it within their
+- with one (`open_master` passes one that opens the same port with the same settings),
+  the port is reopened with exponential backoff, from `delay[0]` doubling up to
+  `delay[1]` seconds, until it comes back. Meanwhile requests wait for it within their
   own timeout and raise ConnectionLost if it is not back by then, or at once with
-  ``fail_fast``. Once it is back, requests go out as before; unit health and statistics
+  `fail_fast`. Once it is back, requests go out as before; unit health and statistics
   are kept across the reconnect.
 """
 
@@ -40,9 +40,9 @@ StreamOpener = Callable[[], Awaitable[anyio.abc.ByteStream]]
 class ReconnectPolicy:
     """Whether and how a master reopens its port (see the module docstring).
 
-    *delay* is ``(first, longest)``: seconds before the first attempt to reopen, doubled
-    after each failed attempt up to *longest*. With *fail_fast*, requests made while the
-    port is down raise :class:`~aiortu.errors.ConnectionLost` at once instead of waiting.
+    `delay` is `(first, longest)`: seconds before the first attempt to reopen, doubled
+    after each failed attempt up to *longest*. With `fail_fast`, requests made while the
+    port is down raise [`ConnectionLost`][aiortu.errors.ConnectionLost] at once instead of waiting.
     """
 
     enabled: bool = True
@@ -58,10 +58,10 @@ class ReconnectPolicy:
 
 
 class LineConnection:
-    """Runs *engine* on *link*, and on links over streams from *opener* after it fails.
+    """Runs `engine` on `link`, and on links over streams from `opener` after it fails.
 
-    *make_link* wraps a freshly opened stream in a link with the master's settings.
-    Counters: :attr:`disconnects`, :attr:`reconnects`, :attr:`failed_attempts`.
+    `make_link` wraps a freshly opened stream in a link with the master's settings.
+    Counters: `disconnects`, `reconnects`, `failed_attempts`.
     """
 
     def __init__(

@@ -1,25 +1,25 @@
 """The master's line: one transaction at a time on one line, for any number of callers.
 
-:class:`LineEngine` owns a :class:`~aiortu.line._link.Link` and runs the sans-IO
-:class:`~aiortu.core.master_machine.MasterMachine` on it. Callers hand it
-:class:`~aiortu.core.master_transaction.Transaction` objects through :meth:`LineEngine.submit`.
+`LineEngine` owns a [`Link`][aiortu.line.Link] and runs the sans-IO
+[`MasterMachine`][aiortu.core.master_machine.MasterMachine] on it. Callers hand it
+[`Transaction`][aiortu.core.master_transaction.Transaction] objects through `LineEngine.submit`.
 
 The line belongs to one transaction at a time, and the transaction runs in the task of
 the caller that submitted it: the caller sends the request and waits for the reply
 itself, so a read on an idle line costs no hand-over between tasks. When the line is
-busy, the caller queues (:class:`~aiortu.master._job.JobQueue`: lower *priority* first)
+busy, the caller queues (`JobQueue`: lower *priority* first)
 and waits for its turn; the transaction that ends hands the line straight to the next
-one. The link hands every frame to the engine (:meth:`~aiortu.line._link.Link.listen`),
+one. The link hands every frame to the engine ([`listen`][aiortu.line.Link.listen]),
 which wakes the waiting transaction directly.
 
 A register read on an idle serial line may skip the machine while its reply comes as
-usual: that fast path lives in :mod:`aiortu.master._usual_exchange`, behind one
-predicate; :meth:`LineEngine.submit_request` calls into it.
+usual: that fast path lives in [`aiortu.master`][aiortu.master], behind one
+predicate; `LineEngine.submit_request` calls into it.
 
 Cancellation never leaves the line half way through an exchange. A caller cancelled
 while queued is dropped; one cancelled before its request began to go out gives the line
 up at once; one cancelled after that leaves its transaction to the engine's line task
-(:meth:`LineEngine.serve`), which *adopts* it: it finishes the attempt in flight (its
+(`LineEngine.serve`), which *adopts* it: it finishes the attempt in flight (its
 reply must not reach a later request) without retries, then hands the line on. The line
 task also runs the usual exchanges the machine *took over* (for callers who still wait)
 and notices a dead link. So the exchanges on the line stay strictly one after the other,
@@ -27,18 +27,18 @@ as if one task ran them all. When the line task itself is cancelled (the master 
 the attempt it runs is given up through the machine and the line is not handed on.
 
 After a failed attempt (timeout or frame error) nothing goes out, the retry included,
-until the line has been silent for the late-reply guard (:func:`guard_ends`).
+until the line has been silent for the late-reply guard (`guard_ends`).
 
-It also keeps :class:`UnitStats` per unit and their health: a unit is offline after
-*offline_after* consecutive failed transactions, and online again after a success. With
-*fail_fast_offline*, a request to an offline unit raises :class:`UnitOffline` at once,
-except for one probe every *probe_interval* seconds.
+It also keeps [`UnitStats`][aiortu.master.UnitStats] per unit and their health: a unit is offline
+after *offline_after* consecutive failed transactions, and online again after a success. With
+*fail_fast_offline*, a request to an offline unit raises [`UnitOffline`][aiortu.errors.UnitOffline]
+at once, except for one probe every *probe_interval* seconds.
 
 When the link fails, the request in flight and the queued ones fail with
-ConnectionLost and :meth:`LineEngine.serve` returns; the
-:class:`~aiortu.master._connection.LineConnection` closes the engine for good or serves it
-again on a reopened link, while :meth:`LineEngine.submit` waits for the line within the
-request's timeout or fails at once (see :attr:`LineEngine.wait_for_reconnect`).
+ConnectionLost and `LineEngine.serve` returns; the
+`LineConnection` closes the engine for good or serves it
+again on a reopened link, while `LineEngine.submit` waits for the line within the
+request's timeout or fails at once (see `LineEngine.wait_for_reconnect`).
 """
 
 from __future__ import annotations
@@ -79,10 +79,10 @@ _NO_GUARD = -math.inf
 
 
 def guard_ends(quiet_until: float, last_activity: float, guard: float) -> float:
-    """When the late-reply guard is kept: *guard* seconds of silence on the line after
-    the failure that set *quiet_until* (the failure plus *guard*).
+    """When the late-reply guard is kept: `guard` seconds of silence on the line after
+    the failure that set `quiet_until` (the failure plus `guard`).
 
-    Bytes that arrive meanwhile (*last_activity*: the line's last byte) start the silence
+    Bytes that arrive meanwhile (`last_activity`: the line's last byte) start the silence
     again, at most once over: a line that never falls silent delays a request by two
     guards, not for ever.
     """
@@ -91,14 +91,14 @@ def guard_ends(quiet_until: float, last_activity: float, guard: float) -> float:
 
 class _LateReplyGuard:
     """The silence kept after a failed attempt before anything goes out (see
-    :func:`guard_ends`)."""
+    `guard_ends`)."""
 
     __slots__ = ("seconds", "until")
 
     def __init__(self, seconds: float) -> None:
         self.seconds = seconds
         self.until = _NO_GUARD
-        """The failure plus :attr:`seconds`, until a request has kept the guard."""
+        """The failure plus `seconds`, until a request has kept the guard."""
 
 
 class _Inbox:
@@ -123,10 +123,10 @@ class _Inbox:
 class LineEngine:
     """The master's side of one line (see the module docstring).
 
-    *late_reply_guard* is the silence, in seconds, kept after a failed attempt (timeout
+    `late_reply_guard` is the silence, in seconds, kept after a failed attempt (timeout
     or frame error) before anything goes out, the retry included (see
-    :func:`guard_ends`): a reply that turns up that late is dropped as stale.
-    *frame_error_grace* is how long a wait goes on after bad bytes.
+    `guard_ends`): a reply that turns up that late is dropped as stale.
+    `frame_error_grace` is how long a wait goes on after bad bytes.
     """
 
     def __init__(
@@ -144,12 +144,12 @@ class LineEngine:
         """Statistics by unit address."""
         self.wait_for_reconnect = False
         """Whether requests made while the line is down wait for it to come back (set by
-        :class:`~aiortu.master._connection.LineConnection` when it can reopen the port)."""
+        `LineConnection` when it can reopen the port)."""
         self.fail_fast_reconnect = False
-        """With :attr:`wait_for_reconnect`: raise at once instead of waiting."""
+        """With `wait_for_reconnect`: raise at once instead of waiting."""
         self.usual_exchanges = True
         """Whether register reads may run their usual exchange without the machine (see
-        :mod:`aiortu.master._usual_exchange`); false runs every transaction through it."""
+        [`aiortu.master`][aiortu.master]); false runs every transaction through it."""
         self._guard = _LateReplyGuard(late_reply_guard)
         self._jobs = JobQueue()
         self._open = False
@@ -158,7 +158,7 @@ class LineEngine:
         self._usual: UsualExchange | None = None
         """The usual exchange on the wire."""
         self._for_line_task: Job | None = None
-        """The job the line task runs: adopted, or taken over (see :attr:`Job.taken_over`)."""
+        """The job the line task runs: adopted, or taken over (see `Job.taken_over`)."""
         self._wake = anyio.Event()
         self._failed: ConnectionLost | None = None
         self._connected = anyio.Event()
@@ -187,7 +187,7 @@ class LineEngine:
     # -- the callers' side -----------------------------------------------------------
 
     def unit_stats(self, unit: int) -> UnitStats:
-        """The statistics of *unit* (created empty on first use)."""
+        """The statistics of `unit` (created empty on first use)."""
         stats = self.stats.get(unit)
         if stats is None:
             stats = self.stats[unit] = UnitStats()
@@ -196,12 +196,12 @@ class LineEngine:
     async def submit(
         self, transaction: Transaction, priority: int = 0
     ) -> Response | ExceptionPDU | None:
-        """Run *transaction* when the line is free, and return the reply (``None``
+        """Run `transaction` when the line is free, and return the reply (`None`
         without one).
 
         Raises the transaction's error (ResponseTimeout, FrameError, ConnectionLost) and
-        :class:`UnitOffline` when failing fast. If the caller is cancelled, the request
-        is dropped from the queue or, when in flight, finished without retries.
+        [`UnitOffline`][aiortu.errors.UnitOffline] when failing fast. If the caller is cancelled,
+        the request is dropped from the queue or, when in flight, finished without retries.
         """
         if self._failed is not None:
             raise ConnectionLost(str(self._failed))
@@ -218,7 +218,7 @@ class LineEngine:
         return await self._run(job)
 
     async def _run(self, job: Job) -> Response | ExceptionPDU | None:
-        """Run *job*, which has the line; return its reply."""
+        """Run `job`, which has the line; return its reply."""
         if not job.done:
             try:
                 await self._exchange(job)
@@ -237,10 +237,10 @@ class LineEngine:
         policy: RetryPolicy,
         priority: int = 0,
     ) -> Awaitable[Response | ExceptionPDU | None]:
-        """:meth:`submit` of ``Transaction(unit, request, response_timeout, policy)``, as
+        """`submit` of `Transaction(unit, request, response_timeout, policy)`, as
         an awaitable: where the usual exchange may run (see
-        :mod:`aiortu.master._usual_exchange`), the request goes out now and the return is
-        the future its reply completes; else the coroutine of :meth:`submit`.
+        [`aiortu.master`][aiortu.master]), the request goes out now and the return is
+        the future its reply completes; else the coroutine of `submit`.
         """
         link = self.link
         jobs = self._jobs
@@ -290,7 +290,7 @@ class LineEngine:
         self._leave_to_line_task(take_over(exchange, self.machine, self._jobs))
 
     async def _wait_turn(self, job: Job) -> None:
-        """Queue *job* and wait until it is handed the line (or failed)."""
+        """Queue `job` and wait until it is handed the line (or failed)."""
         backend = self.link.backend
         turn = job.turn = anyio.Event() if backend is None else backend.create_event()
         jobs = self._jobs
@@ -331,7 +331,7 @@ class LineEngine:
             await self._connected.wait()
 
     async def _wait_connected(self, seconds: float) -> None:
-        """Wait up to *seconds* for the line to come back, else raise ConnectionLost."""
+        """Wait up to `seconds` for the line to come back, else raise ConnectionLost."""
         if not self.wait_for_reconnect:
             raise ConnectionLost("the line is down")
         if self.fail_fast_reconnect:
@@ -357,7 +357,7 @@ class LineEngine:
     # -- the line task ---------------------------------------------------------------
 
     async def run(self) -> None:
-        """Serve :attr:`link` until cancelled or the line fails, then fail every request,
+        """Serve `link` until cancelled or the line fails, then fail every request,
         then and later, with ConnectionLost."""
         try:
             self.close(await self.serve(self.link))
@@ -365,13 +365,13 @@ class LineEngine:
             self.close(ConnectionLost("the master is closed"))
 
     async def serve(self, link: Link) -> ConnectionLost:
-        """Serve the line on *link* (entered by the caller) until it fails; return why.
+        """Serve the line on `link` (entered by the caller) until it fails; return why.
 
         This is the line task: it takes the link's events, runs the transactions
         cancelled callers leave behind and the usual exchanges the machine took over,
         and notices a dead link. The request in flight and the queued ones fail with the
-        link's ConnectionLost; requests made afterwards wait for the next :meth:`serve`
-        or fail (see :meth:`submit`).
+        link's ConnectionLost; requests made afterwards wait for the next `serve`
+        or fail (see `submit`).
         """
         self.link = link
         self._inbox.events.clear()
@@ -404,7 +404,7 @@ class LineEngine:
         return lost
 
     def close(self, error: ConnectionLost) -> None:
-        """Fail every queued request, and every later one, with *error* (first error wins)."""
+        """Fail every queued request, and every later one, with `error` (first error wins)."""
         if self._failed is None:
             self._failed = error
         self._open = False
@@ -445,9 +445,9 @@ class LineEngine:
             arrival.set()
 
     async def _exchange(self, job: Job, on_the_wire: bool = False) -> None:
-        """Run *job*'s transaction on the line; the line is the caller's meanwhile.
+        """Run `job`'s transaction on the line; the line is the caller's meanwhile.
 
-        *on_the_wire* is for a usual exchange taken over: the machine has begun the
+        `on_the_wire` is for a usual exchange taken over: the machine has begun the
         transaction and its first attempt is on the wire.
         """
         transaction = job.transaction
@@ -500,7 +500,7 @@ class LineEngine:
         return True
 
     async def _send(self, job: Job) -> None:
-        """Send the machine's frame for *job* once the late-reply guard is kept and the
+        """Send the machine's frame for `job` once the late-reply guard is kept and the
         line lets it go, and tell the machine when it went out."""
         if self._guard.until != _NO_GUARD:
             await self._keep_guard()
@@ -577,11 +577,11 @@ class LineEngine:
             self._release()
 
     def _stop_serving(self, job: Job) -> None:
-        """The line task is cancelled (the master closes) while it runs *job*.
+        """The line task is cancelled (the master closes) while it runs `job`.
 
         The attempt on the wire is given up: the machine goes back to IDLE (through its
-        table, as if the line were lost) and *job* fails. The line is not handed on: a
-        queued caller would begin a transaction nobody can finish; :meth:`close` fails
+        table, as if the line were lost) and `job` fails. The line is not handed on: a
+        queued caller would begin a transaction nobody can finish; `close` fails
         the queue instead.
         """
         self._open = False
@@ -598,7 +598,7 @@ class LineEngine:
 
     async def _keep_guard(self) -> None:
         """Wait until the line has been silent for the late-reply guard after the last
-        failed attempt (see :func:`guard_ends`), then clear the guard."""
+        failed attempt (see `guard_ends`), then clear the guard."""
         link = self.link
         guard = self._guard
         while True:
@@ -655,7 +655,7 @@ class LineEngine:
                 inbox.arrival = None
 
     def _examine(self, event: LinkEvent) -> Outcome:
-        """Feed *event* to the machine."""
+        """Feed `event` to the machine."""
         if isinstance(event, FrameReceived):
             frame = event.frame
             return self.machine.frame_received(frame[0], frame[1:-2], event.start, event.end)

@@ -1,16 +1,16 @@
 # ruff: noqa: ASYNC109
 # ``timeout=`` here is the Modbus response timeout, counted from the end of transmission
 # by the master; a cancel scope around the call cannot express that.
-"""Handles on a :class:`~aiortu.master._client.Master`: one unit, or every unit at once (broadcast).
+"""Handles on a [`Master`][aiortu.master.Master]: one unit, or every unit at once (broadcast).
 
-:class:`UnitHandle` (``master.slave(17)``) has the master's methods without the unit, and
-typed values on top: 32-bit integers, floats and strings in holding or input registers,
-in any word layout (:mod:`aiortu.core.values`), and reads by reference (``"40108"``,
-:mod:`aiortu.core.addressing`).
+[`UnitHandle`][aiortu.master.UnitHandle] (`master.slave(17)`) has the master's methods without the
+unit, and typed values on top: 32-bit integers, floats and strings in holding or input registers, in
+any word layout ([`aiortu.core.values`][aiortu.core.values]), and reads by reference (`"40108"`,
+[`aiortu.core.addressing`][aiortu.core.addressing]).
 
-:class:`BroadcastHandle` (``master.broadcast``) has the writes the spec lets be broadcast:
-each goes to unit 0, no reply is awaited, and the line waits the turnaround delay so that
-the slaves can execute it.
+[`BroadcastHandle`][aiortu.master.BroadcastHandle] (`master.broadcast`) has the writes the spec lets
+be broadcast: each goes to unit 0, no reply is awaited, and the line waits the turnaround delay so
+that the slaves can execute it.
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ _REGISTER_TABLES = {
 
 
 def _fields(name: str, item: object, kind: type, names: tuple[str, str, str]) -> tuple[object, ...]:
-    """The three fields of *item*, an instance of *kind* or a tuple of three."""
+    """The three fields of `item`, an instance of `kind` or a tuple of three."""
     if isinstance(item, kind):
         return tuple(getattr(item, field) for field in names)
     if not isinstance(item, tuple | list) or len(item) != 3:
@@ -83,7 +83,7 @@ def _fields(name: str, item: object, kind: type, names: tuple[str, str, str]) ->
 
 
 def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
-    """A read file record sub-request from the class or a ``(file, record, length)`` tuple."""
+    """A read file record sub-request from the class or a `(file, record, length)` tuple."""
     names = ("file_number", "record_number", "record_length")
     fields = _fields("sub_request", sub, pdu_files.FileRecordRequest, names)
     for name, value in zip(names, fields, strict=True):
@@ -94,7 +94,7 @@ def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
 
 
 def as_file_record(record: FileRecordLike) -> pdu_files.FileRecord:
-    """A write file record sub-record from the class or a ``(file, record, values)`` tuple."""
+    """A write file record sub-record from the class or a `(file, record, values)` tuple."""
     names = ("file_number", "record_number", "values")
     file_number, record_number, values = _fields("record", record, pdu_files.FileRecord, names)
     check_int("file_number", file_number, range(0x10000), InvalidRequest)
@@ -126,31 +126,31 @@ class BroadcastHandle:
         self._master = master
 
     async def write_coil(self, address: int, value: bool, *, priority: int = 0) -> None:
-        """Set the coil at *address* on every unit (05)."""
+        """Set the coil at `address` on every unit (05)."""
         request = WriteSingleCoilRequest(address, check_coil(value))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def write_register(self, address: int, value: int, *, priority: int = 0) -> None:
-        """Write the holding register at *address* on every unit (06)."""
+        """Write the holding register at `address` on every unit (06)."""
         request = WriteSingleRegisterRequest(address, value)
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def write_coils(self, address: int, values: Sequence[bool], *, priority: int = 0) -> None:
-        """Set 1..1968 coils from *address* on every unit (0F)."""
+        """Set 1..1968 coils from `address` on every unit (0F)."""
         request = WriteMultipleCoilsRequest(address, check_coils(values))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def write_registers(
         self, address: int, values: Sequence[int], *, priority: int = 0
     ) -> None:
-        """Write 1..123 registers from *address* on every unit (10)."""
+        """Write 1..123 registers from `address` on every unit (10)."""
         request = WriteMultipleRegistersRequest(address, check_registers("values", values))
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     async def mask_write_register(
         self, address: int, and_mask: int, or_mask: int, *, priority: int = 0
     ) -> None:
-        """Mask write the register at *address* on every unit (16)."""
+        """Mask write the register at `address` on every unit (16)."""
         request = MaskWriteRegisterRequest(address, and_mask, or_mask)
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
@@ -163,9 +163,9 @@ class BroadcastHandle:
 
 
 class UnitHandle:
-    """One unit of a master: ``master.slave(unit)`` (see the module docstring).
+    """One unit of a master: `master.slave(unit)` (see the module docstring).
 
-    Every method takes ``timeout=`` and ``priority=`` as the master's do.
+    Every method takes `timeout=` and `priority=` as the master's do.
     """
 
     def __init__(self, master: MasterCalls, unit: int) -> None:
@@ -177,7 +177,7 @@ class UnitHandle:
     async def read_coils(
         self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
     ) -> list[bool]:
-        """See :meth:`Master.read_coils <aiortu.master._client.Master.read_coils>`."""
+        """See [Master.read_coils][aiortu.master.Master.read_coils]."""
         return await self.master.read_coils(
             self.unit, address, count, timeout=timeout, priority=priority
         )
@@ -185,7 +185,8 @@ class UnitHandle:
     async def read_discrete_inputs(
         self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
     ) -> list[bool]:
-        """See :meth:`aiortu.master._client.Master.read_discrete_inputs`."""
+        """See
+        [`aiortu.master.Master.read_discrete_inputs`][aiortu.master.Master.read_discrete_inputs]."""
         return await self.master.read_discrete_inputs(
             self.unit, address, count, timeout=timeout, priority=priority
         )
@@ -193,7 +194,8 @@ class UnitHandle:
     async def read_holding_registers(
         self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
     ) -> list[int]:
-        """See :meth:`aiortu.master._client.Master.read_holding_registers`."""
+        """See
+        [`aiortu.master.Master.read_holding_registers`][aiortu.master.Master.read_holding_registers]."""
         return await self.master.read_holding_registers(
             self.unit, address, count, timeout=timeout, priority=priority
         )
@@ -201,7 +203,8 @@ class UnitHandle:
     async def read_input_registers(
         self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
     ) -> list[int]:
-        """See :meth:`aiortu.master._client.Master.read_input_registers`."""
+        """See
+        [`aiortu.master.Master.read_input_registers`][aiortu.master.Master.read_input_registers]."""
         return await self.master.read_input_registers(
             self.unit, address, count, timeout=timeout, priority=priority
         )
@@ -209,7 +212,7 @@ class UnitHandle:
     async def write_coil(
         self, address: int, value: bool, *, timeout: float | None = None, priority: int = 0
     ) -> None:
-        """See :meth:`aiortu.master._client.Master.write_coil`."""
+        """See [`aiortu.master.Master.write_coil`][aiortu.master.Master.write_coil]."""
         await self.master.write_coil(self.unit, address, value, timeout=timeout, priority=priority)
 
     async def write_coils(
@@ -220,7 +223,7 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """See :meth:`aiortu.master._client.Master.write_coils`."""
+        """See [`aiortu.master.Master.write_coils`][aiortu.master.Master.write_coils]."""
         await self.master.write_coils(
             self.unit, address, values, timeout=timeout, priority=priority
         )
@@ -228,7 +231,7 @@ class UnitHandle:
     async def write_register(
         self, address: int, value: int, *, timeout: float | None = None, priority: int = 0
     ) -> None:
-        """See :meth:`aiortu.master._client.Master.write_register`."""
+        """See [`aiortu.master.Master.write_register`][aiortu.master.Master.write_register]."""
         await self.master.write_register(
             self.unit, address, value, timeout=timeout, priority=priority
         )
@@ -241,7 +244,7 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """See :meth:`aiortu.master._client.Master.write_registers`."""
+        """See [`aiortu.master.Master.write_registers`][aiortu.master.Master.write_registers]."""
         await self.master.write_registers(
             self.unit, address, values, timeout=timeout, priority=priority
         )
@@ -255,7 +258,8 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """See :meth:`aiortu.master._client.Master.mask_write_register`."""
+        """See
+        [`aiortu.master.Master.mask_write_register`][aiortu.master.Master.mask_write_register]."""
         await self.master.mask_write_register(
             self.unit, address, and_mask, or_mask, timeout=timeout, priority=priority
         )
@@ -270,7 +274,8 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> list[int]:
-        """See :meth:`aiortu.master._client.Master.read_write_registers`."""
+        """See
+        [`aiortu.master.Master.read_write_registers`][aiortu.master.Master.read_write_registers]."""
         return await self.master.read_write_registers(
             self.unit,
             read_address,
@@ -284,7 +289,7 @@ class UnitHandle:
     async def read_fifo_queue(
         self, address: int, *, timeout: float | None = None, priority: int = 0
     ) -> list[int]:
-        """See :meth:`aiortu.master._client.Master.read_fifo_queue`."""
+        """See [`aiortu.master.Master.read_fifo_queue`][aiortu.master.Master.read_fifo_queue]."""
         return await self.master.read_fifo_queue(
             self.unit, address, timeout=timeout, priority=priority
         )
@@ -296,7 +301,7 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> list[list[int]]:
-        """See :meth:`aiortu.master._client.Master.read_file_record`."""
+        """See [`aiortu.master.Master.read_file_record`][aiortu.master.Master.read_file_record]."""
         return await self.master.read_file_record(
             self.unit, sub_requests, timeout=timeout, priority=priority
         )
@@ -308,13 +313,15 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """See :meth:`aiortu.master._client.Master.write_file_record`."""
+        """See
+        [`aiortu.master.Master.write_file_record`][aiortu.master.Master.write_file_record]."""
         await self.master.write_file_record(self.unit, records, timeout=timeout, priority=priority)
 
     async def read_exception_status(
         self, *, timeout: float | None = None, priority: int = 0
     ) -> int:
-        """See :meth:`aiortu.master._client.Master.read_exception_status`."""
+        """See
+        [`aiortu.master.Master.read_exception_status`][aiortu.master.Master.read_exception_status]."""
         return await self.master.read_exception_status(
             self.unit, timeout=timeout, priority=priority
         )
@@ -327,7 +334,7 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> DiagnosticsResponse | None:
-        """See :meth:`aiortu.master._client.Master.diagnostics`."""
+        """See [`aiortu.master.Master.diagnostics`][aiortu.master.Master.diagnostics]."""
         return await self.master.diagnostics(
             self.unit, sub_function, data, timeout=timeout, priority=priority
         )
@@ -335,7 +342,8 @@ class UnitHandle:
     async def get_comm_event_counter(
         self, *, timeout: float | None = None, priority: int = 0
     ) -> GetCommEventCounterResponse:
-        """See :meth:`aiortu.master._client.Master.get_comm_event_counter`."""
+        """See
+        [`aiortu.master.Master.get_comm_event_counter`][aiortu.master.Master.get_comm_event_counter]."""
         return await self.master.get_comm_event_counter(
             self.unit, timeout=timeout, priority=priority
         )
@@ -343,13 +351,14 @@ class UnitHandle:
     async def get_comm_event_log(
         self, *, timeout: float | None = None, priority: int = 0
     ) -> GetCommEventLogResponse:
-        """See :meth:`aiortu.master._client.Master.get_comm_event_log`."""
+        """See
+        [`aiortu.master.Master.get_comm_event_log`][aiortu.master.Master.get_comm_event_log]."""
         return await self.master.get_comm_event_log(self.unit, timeout=timeout, priority=priority)
 
     async def report_server_id(
         self, *, timeout: float | None = None, priority: int = 0
     ) -> ReportServerIdResponse:
-        """See :meth:`aiortu.master._client.Master.report_server_id`."""
+        """See [`aiortu.master.Master.report_server_id`][aiortu.master.Master.report_server_id]."""
         return await self.master.report_server_id(self.unit, timeout=timeout, priority=priority)
 
     async def read_device_identification(
@@ -360,7 +369,8 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> dict[int, bytes]:
-        """See :meth:`aiortu.master._client.Master.read_device_identification`."""
+        """See
+        [`aiortu.master.Master.read_device_identification`][aiortu.master.Master.read_device_identification]."""
         return await self.master.read_device_identification(
             self.unit, read_code, object_id, timeout=timeout, priority=priority
         )
@@ -368,7 +378,7 @@ class UnitHandle:
     async def execute(
         self, pdu: Request, *, timeout: float | None = None, priority: int = 0
     ) -> Response | ExceptionPDU:
-        """See :meth:`aiortu.master._client.Master.execute`."""
+        """See [`aiortu.master.Master.execute`][aiortu.master.Master.execute]."""
         return await self.master.execute(self.unit, pdu, timeout=timeout, priority=priority)
 
     # -- typed values ----------------------------------------------------------------
@@ -383,9 +393,9 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> int | float:
-        """Read one *kind* (``"float32"``, ``"int32"``, ...) from *address* in *layout*.
+        """Read one `kind` (`"float32"`, `"int32"`, ...) from `address` in `layout`.
 
-        *table* is ``"holding"`` (the default) or ``"input"``.
+        `table` is `"holding"` (the default) or `"input"`.
         """
         # Checked before the request goes out: a bad layout must not cost a read.
         kind = as_value_type(kind)
@@ -405,7 +415,7 @@ class UnitHandle:
         timeout: float | None = None,
         priority: int = 0,
     ) -> None:
-        """Write *value* as one *kind* to the holding registers from *address* in *layout*."""
+        """Write `value` as one `kind` to the holding registers from `address` in `layout`."""
         registers = encode_value(value, kind, layout)
         await self.write_registers(address, registers, timeout=timeout, priority=priority)
 
@@ -417,7 +427,7 @@ class UnitHandle:
         table: Table | str = "holding",
         timeout: float | None = None,
     ) -> float:
-        """Read a float32 from two registers at *address* in *layout*."""
+        """Read a float32 from two registers at `address` in `layout`."""
         value = await self.read_value(
             address, ValueType.FLOAT32, layout, table=table, timeout=timeout
         )
@@ -431,7 +441,7 @@ class UnitHandle:
         table: Table | str = "holding",
         timeout: float | None = None,
     ) -> int:
-        """Read a signed 32-bit integer from two registers at *address* in *layout*."""
+        """Read a signed 32-bit integer from two registers at `address` in `layout`."""
         return int(
             await self.read_value(address, ValueType.INT32, layout, table=table, timeout=timeout)
         )
@@ -444,7 +454,7 @@ class UnitHandle:
         table: Table | str = "holding",
         timeout: float | None = None,
     ) -> int:
-        """Read an unsigned 32-bit integer from two registers at *address* in *layout*."""
+        """Read an unsigned 32-bit integer from two registers at `address` in `layout`."""
         return int(
             await self.read_value(address, ValueType.UINT32, layout, table=table, timeout=timeout)
         )
@@ -457,7 +467,7 @@ class UnitHandle:
         *,
         timeout: float | None = None,
     ) -> None:
-        """Write *value* as a float32 to two holding registers at *address*."""
+        """Write `value` as a float32 to two holding registers at `address`."""
         await self.write_value(address, value, ValueType.FLOAT32, layout, timeout=timeout)
 
     async def write_int32(
@@ -468,7 +478,7 @@ class UnitHandle:
         *,
         timeout: float | None = None,
     ) -> None:
-        """Write *value* as a signed 32-bit integer to two holding registers at *address*."""
+        """Write `value` as a signed 32-bit integer to two holding registers at `address`."""
         await self.write_value(address, value, ValueType.INT32, layout, timeout=timeout)
 
     async def write_uint32(
@@ -479,7 +489,7 @@ class UnitHandle:
         *,
         timeout: float | None = None,
     ) -> None:
-        """Write *value* as an unsigned 32-bit integer to two holding registers at *address*."""
+        """Write `value` as an unsigned 32-bit integer to two holding registers at `address`."""
         await self.write_value(address, value, ValueType.UINT32, layout, timeout=timeout)
 
     async def read_string(
@@ -492,7 +502,7 @@ class UnitHandle:
         table: Table | str = "holding",
         timeout: float | None = None,
     ) -> str:
-        """Read text from *register_count* registers, two bytes each, padding stripped."""
+        """Read text from `register_count` registers, two bytes each, padding stripped."""
         check_encoding(encoding)
         registers = await self._read_registers(table, address, register_count, timeout, 0)
         return registers_to_string(registers, encoding, byte_swap)
@@ -507,15 +517,15 @@ class UnitHandle:
         byte_swap: bool = False,
         timeout: float | None = None,
     ) -> None:
-        """Write *text* to holding registers from *address*, NUL-padded to *register_count*."""
+        """Write `text` to holding registers from `address`, NUL-padded to `register_count`."""
         registers = string_to_registers(text, register_count, encoding, byte_swap)  # checks all
         await self.write_registers(address, registers, timeout=timeout)
 
     async def read_reference(
         self, reference: str, count: int = 1, *, timeout: float | None = None
     ) -> list[bool] | list[int]:
-        """Read *count* elements from a reference such as ``"40108"`` (holding register
-        address 107) or ``"100001"`` (discrete input address 0)."""
+        """Read `count` elements from a reference such as `"40108"` (holding register
+        address 107) or `"100001"` (discrete input address 0)."""
         parsed = parse_reference(reference)
         table = parsed.table
         if table is Table.COILS:

@@ -1,12 +1,12 @@
 """A master's unit of work on its line: one transaction, its place in the queue, and
 whoever waits for its result.
 
-:class:`~aiortu.master._engine.LineEngine` queues a :class:`Job` for each transaction
-that must wait for the line (lower *priority* first, then in order of arrival) in its
-:class:`JobQueue`, which hands the line to the first one by setting its
-:attr:`Job.turn`. The job ends with :meth:`Job.finish`, which tells whoever waits: the
+`LineEngine` queues a `Job` for each transaction
+that must wait for the line (lower `priority` first, then in order of arrival) in its
+`JobQueue`, which hands the line to the first one by setting its
+`Job.turn`. The job ends with `Job.finish`, which tells whoever waits: the
 caller's task through the same event, or, for a usual exchange the machine took over,
-the caller's future (:attr:`Job.caller`).
+the caller's future (`Job.caller`).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ class Job:
         self.error: Exception | None = None
         self.caller: asyncio.Future[JobResult] | None = None
         """The future of a usual exchange's caller, for a job the machine took over (see
-        :attr:`taken_over`)."""
+        `taken_over`)."""
 
     def __lt__(self, other: Job) -> bool:
         return (self.priority, self.sequence) < (other.priority, other.sequence)
@@ -64,13 +64,13 @@ class Job:
     @property
     def taken_over(self) -> bool:
         """Whether the job is a usual exchange the machine took over: the line task runs
-        the whole transaction for a caller who awaits :attr:`caller`. Not to be confused
+        the whole transaction for a caller who awaits `caller`. Not to be confused
         with a job *adopted* by the line task, whose caller is gone and whose attempt on
         the wire is only finished, never retried."""
         return self.caller is not None
 
     def take_over(self, caller: asyncio.Future[JobResult]) -> None:
-        """Make this the job of a usual exchange whose caller awaits *caller*."""
+        """Make this the job of a usual exchange whose caller awaits `caller`."""
         self.caller = caller
         if caller.done():
             self.transaction.abandoned = True  # cancelled already: no retries
@@ -78,7 +78,7 @@ class Job:
             caller.add_done_callback(self.on_caller_done)
 
     def finish(self, response: JobResult, error: Exception | None) -> None:
-        """End the job with *response* or *error*, and tell whoever waits for it."""
+        """End the job with `response` or `error`, and tell whoever waits for it."""
         self.response = response
         self.error = error
         self.done = True
@@ -101,7 +101,7 @@ class Job:
 
 
 class JobQueue:
-    """Who holds the line (:attr:`busy`) and who waits for it: lower priority first, then
+    """Who holds the line (`busy`) and who waits for it: lower priority first, then
     in order of arrival."""
 
     __slots__ = ("_sequence", "busy", "waiting")
@@ -115,11 +115,11 @@ class JobQueue:
         task)."""
 
     def new_job(self, transaction: Transaction, priority: int) -> Job:
-        """A job for *transaction*, next in order of arrival among equal priorities."""
+        """A job for `transaction`, next in order of arrival among equal priorities."""
         return Job(transaction, priority, next(self._sequence))
 
     def push(self, job: Job) -> None:
-        """Queue *job* (it has its :attr:`Job.turn`)."""
+        """Queue `job` (it has its `Job.turn`)."""
         heapq.heappush(self.waiting, job)
 
     def grant_next(self) -> None:
@@ -137,7 +137,7 @@ class JobQueue:
         self.busy = False
 
     def fail_all(self, why: str) -> None:
-        """Fail every queued job with ConnectionLost(*why*)."""
+        """Fail every queued job with ConnectionLost(`why`)."""
         heap = self.waiting
         while heap:
             job = heapq.heappop(heap)

@@ -1,7 +1,5 @@
 """Polling many points on many units at given intervals, over one master.
 
-::
-
     points = [
         aiortu.Point.of("temperature", 1, "30001", "int16", scale=0.1),
         aiortu.Point.of("flow", 1, "40108", "float32", layout="CDAB"),
@@ -11,29 +9,30 @@
         async for sample in poller:
             print(sample.name, sample.value)
 
-The points are planned once (:func:`aiortu.core.poll_plan.plan_reads`): neighbours on the
-same unit and table share one read when the gap between them is at most *max_gap*
-elements, within the spec's limits. Points with their own ``interval`` are polled on
-their own schedule; each interval has its own cycle.
+The points are planned once
+([`aiortu.core.poll_plan.plan_reads`][aiortu.core.poll_plan.plan_reads]): neighbours on the same
+unit and table share one read when the gap between them is at most `max_gap` elements, within the
+spec's limits. Points with their own `interval` are polled on their own schedule; each interval has
+its own cycle.
 
-A cycle runs its reads one after the other (the line carries one transaction at a time
-anyway) and delivers one :class:`Sample` per point: a value, or the error that kept it
-from being read. Samples go to the callbacks given as *on_sample* (and *on_cycle*, once
-per cycle with all its samples) and to ``async for sample in poller``; when an iterating
-consumer falls more than *max_pending* samples behind, the oldest are dropped and counted
-in :attr:`Poller.dropped`.
+A cycle runs its reads one after the other (the line carries one transaction at a time anyway) and
+delivers one [`Sample`][aiortu.master.Sample] per point: a value, or the error that kept it from
+being read. Samples go to the callbacks given as `on_sample` (and `on_cycle`, once per cycle with
+all its samples) and to `async for sample in poller`; when an iterating consumer falls more than
+`max_pending` samples behind, the oldest are dropped and counted in
+[`Poller.dropped`][aiortu.master.Poller.dropped].
 
 Dead devices: the poller uses the master's notion of a unit's state
-(:class:`~aiortu.master._stats.UnitState`). A read that fails (no reply, a garbled one;
+([`UnitState`][aiortu.master.UnitState]). A read that fails (no reply, a garbled one;
 not an exception response, which is an answer) makes the unit *suspect*: its other
 reads in that cycle are skipped, so one dead device costs at most one timeout per
 cycle, but it is read again in the next cycle, once, without the master's retries: one
 CRC error on a noisy line costs one sample, not seconds of them. After the master's
-``offline_after`` failures in a row the unit is *offline*: its reads are skipped,
-delivering samples with :class:`UnitSkipped`, except for one probe read every
-*offline_probe_interval* seconds, sent once; a probe that succeeds brings the unit back
+`offline_after` failures in a row the unit is *offline*: its reads are skipped,
+delivering samples with [`UnitSkipped`][aiortu.errors.UnitSkipped], except for one probe read every
+`offline_probe_interval` seconds, sent once; a probe that succeeds brings the unit back
 (the master marks it online) and its other reads go on in the same cycle. At most
-*max_probes_per_cycle* offline units (1 by default; ``None`` for no limit) are probed
+`max_probes_per_cycle` offline units (1 by default; `None` for no limit) are probed
 in one cycle, the one waiting longest first: with many dead devices on a bus, a cycle
 pays for one probe, not for one per dead device, and they take turns.
 """
@@ -90,9 +89,9 @@ Value = bool | int | float
 
 @dataclass(frozen=True, slots=True)
 class Sample:
-    """One point's result in one cycle: its *value*, or the *error* that kept it unread.
+    """One point's result in one cycle: its `value`, or the `error` that kept it unread.
 
-    *time* is when the read finished, on the master's clock; *cycle* counts the cycles
+    `time` is when the read finished, on the master's clock; `cycle` counts the cycles
     of the point's interval from 0.
     """
 
@@ -180,15 +179,15 @@ class _Group:
 
 
 class Poller:
-    """Polls *points* through *master* (see the module docstring); an async context manager.
+    """Polls `points` through `master` (see the module docstring); an async context manager.
 
-    *interval* is the default seconds from the start of one cycle to the start of the
-    next (a cycle that takes longer is followed at once by the next). *max_gap*,
-    *max_bit_gap*, *max_registers* and *max_bits* go to the planner. *timeout* is the
-    response timeout of the poller's reads (None: the master's). *on_sample* and
-    *on_cycle* are callbacks (plain or async functions, or iterables of them).
+    `interval` is the default seconds from the start of one cycle to the start of the
+    next (a cycle that takes longer is followed at once by the next). `max_gap`,
+    `max_bit_gap`, `max_registers` and `max_bits` go to the planner. `timeout` is the
+    response timeout of the poller's reads (None: the master's). `on_sample` and
+    `on_cycle` are callbacks (plain or async functions, or iterables of them).
 
-    Raises :class:`~aiortu.errors.InvalidValue` for an empty point list, duplicate names
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for an empty point list, duplicate names
     or limits outside the spec.
     """
 
@@ -290,7 +289,7 @@ class Poller:
         return report
 
     def _next_probe(self, unit: int, stats: UnitStats) -> float | None:
-        """When *unit* may be probed next: an interval after it went offline or after
+        """When `unit` may be probed next: an interval after it went offline or after
         its last probe; None unless offline."""
         if stats.online:
             return None
@@ -298,20 +297,20 @@ class Poller:
         return last + self.offline_probe_interval
 
     def on_sample(self, callback: SampleCallback) -> Callable[[], None]:
-        """Call *callback* with every sample from now on; return a function that stops it."""
+        """Call `callback` with every sample from now on; return a function that stops it."""
         self._sample_callbacks.append(callback)
         return lambda: self._sample_callbacks.remove(callback)
 
     def on_cycle(self, callback: CycleCallback) -> Callable[[], None]:
-        """Call *callback* after every cycle; return a function that stops it."""
+        """Call `callback` after every cycle; return a function that stops it."""
         self._cycle_callbacks.append(callback)
         return lambda: self._cycle_callbacks.remove(callback)
 
     # -- running ---------------------------------------------------------------------
 
     async def run(self, *, cycles: int | None = None, duration: float | None = None) -> None:
-        """Poll in the current task until cancelled, or until *cycles* cycles of the
-        shortest interval have run, or *duration* seconds have passed. Ends the sample
+        """Poll in the current task until cancelled, or until `cycles` cycles of the
+        shortest interval have run, or `duration` seconds have passed. Ends the sample
         stream when it returns."""
         try:
             with anyio.move_on_after(math.inf if duration is None else duration):
@@ -429,7 +428,7 @@ class Poller:
         return {unit for _, unit in due[: self.max_probes_per_cycle]}
 
     def _gate(self, unit: int) -> UnitSkipped | None:
-        """None if a read of *unit* may go now (online, or due for a probe), else why not."""
+        """None if a read of `unit` may go now (online, or due for a probe), else why not."""
         next_probe = self._next_probe(unit, self.master.unit_stats(unit))
         if next_probe is None:
             return None

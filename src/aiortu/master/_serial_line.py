@@ -3,11 +3,11 @@
 # by the master; a cancel scope around the call cannot express that.
 """The master's file record, serial-line and device identification functions.
 
-:class:`SerialLineFunctions` is a base class of :class:`~aiortu.master._client.Master`; it holds
+`SerialLineFunctions` is a base class of [`Master`][aiortu.master.Master]; it holds
 the function codes beyond the four tables (14, 15, 07, 08, 0B, 0C, 11, 2B/0E), written
-on top of the master's :meth:`~aiortu.master._client.Master.request`, so that ``master.py`` stays
-about the tables, the lifetime and the core of every call. Its methods need of ``self``
-only what :class:`~aiortu.master._calls.Requester` names, so this module never imports the
+on top of the master's [`request`][aiortu.master.Master.request], so that `master.py` stays
+about the tables, the lifetime and the core of every call. Its methods need of `self`
+only what `Requester` names, so this module never imports the
 class built on it.
 """
 
@@ -34,7 +34,7 @@ _MAX_DEVICE_ID_READS = 256
 class SerialLineFunctions:
     """File records, serial-line functions and device identification (see the module).
 
-    Every method takes the unit first, and ``timeout=`` and ``priority=`` as the
+    Every method takes the unit first, and `timeout=` and `priority=` as the
     master's other methods do.
     """
 
@@ -50,8 +50,8 @@ class SerialLineFunctions:
     ) -> list[list[int]]:
         """Read file records (14): one list of values per sub-request, in order.
 
-        Each sub-request is a :class:`~aiortu.core.pdu_files.FileRecordRequest` or a
-        ``(file_number, record_number, record_length)`` tuple.
+        Each sub-request is a [`FileRecordRequest`][aiortu.core.pdu_files.FileRecordRequest] or a
+        `(file_number, record_number, record_length)` tuple.
         """
         request = pdu_files.ReadFileRecordRequest(record_requests(sub_requests))
         reply = await self.request(
@@ -73,8 +73,8 @@ class SerialLineFunctions:
     ) -> None:
         """Write file records (15); the echo is verified.
 
-        Each record is a :class:`~aiortu.core.pdu_files.FileRecord` or a
-        ``(file_number, record_number, values)`` tuple.
+        Each record is a [`FileRecord`][aiortu.core.pdu_files.FileRecord] or a
+        `(file_number, record_number, values)` tuple.
         """
         request = pdu_files.WriteFileRecordRequest(file_records(records))
         await self.request(unit, request, Response, timeout=timeout, priority=priority)
@@ -103,10 +103,10 @@ class SerialLineFunctions:
         timeout: float | None = None,
         priority: int = 0,
     ) -> pdu_serial_line.DiagnosticsResponse | None:
-        """Run diagnostics *sub_function* with *data* (08); return the reply.
+        """Run diagnostics `sub_function` with `data` (08); return the reply.
 
         Force listen-only mode (04) gets no reply: it is sent, followed by the turnaround
-        delay, and ``None`` is returned.
+        delay, and `None` is returned.
         """
         if not isinstance(data, bytes | bytearray | memoryview):
             raise InvalidRequest("data", data, "bytes")
@@ -167,7 +167,7 @@ class SerialLineFunctions:
         timeout: float | None = None,
         priority: int = 0,
     ) -> dict[int, bytes]:
-        """Read the device identification objects (2B/0E) as ``{object id: value}``.
+        """Read the device identification objects (2B/0E) as `{object id: value}`.
 
         Stream reads (basic, regular, extended) follow "more follows" until the device
         has sent everything; an individual read (4) returns the one object.

@@ -1,17 +1,19 @@
 """What happened between a master and each unit, and when a unit counts as offline.
 
-:class:`UnitStats` holds the counters of one unit and updates them as transactions end
-(the engine, :class:`~aiortu.master._engine.LineEngine`, calls its ``count_*`` methods);
-:class:`HealthPolicy` says when a unit counts as offline and what calls to it do then.
+[`UnitStats`][aiortu.master.UnitStats] holds the counters of one unit and updates them as
+transactions end (the engine, `LineEngine`, calls its `count_*` methods);
+[`HealthPolicy`][aiortu.master.HealthPolicy] says when a unit counts as offline and what calls to it
+do then.
 
-A unit is in one of three states (:class:`UnitState`), the same for the master, the poller
-(:meth:`aiortu.Poller.health`) and the ``aiortu poll`` command:
+A unit is in one of three states ([`UnitState`][aiortu.master.UnitState]), the same for the master,
+the poller ([`aiortu.master.Poller.health`][aiortu.master.Poller.health]) and the `aiortu poll`
+command:
 
-- ``ONLINE``: its last transaction got a reply;
-- ``SUSPECT``: its last transactions failed, fewer than ``offline_after`` of them; it is
+- `ONLINE`: its last transaction got a reply;
+- `SUSPECT`: its last transactions failed, fewer than `offline_after` of them; it is
   still asked every time, so one CRC error on a noisy line costs one reading, not seconds;
-- ``OFFLINE``: ``offline_after`` transactions failed in a row; it is only probed, one
-  request every probe interval, from :attr:`UnitStats.last_probe` on.
+- `OFFLINE`: `offline_after` transactions failed in a row; it is only probed, one request every
+  probe interval, from [`UnitStats.last_probe`][aiortu.master.UnitStats.last_probe] on.
 """
 
 from __future__ import annotations
@@ -38,10 +40,10 @@ class UnitState(enum.Enum):
 class HealthPolicy:
     """When a unit counts as offline, and what calls to it do then.
 
-    *offline_after* consecutive failed transactions (timeouts, frame errors) mark a unit
-    offline; a success marks it online. With *fail_fast_offline*, calls to an offline
-    unit raise :class:`~aiortu.errors.UnitOffline` without sending, except one probe every
-    *probe_interval* seconds.
+    `offline_after` consecutive failed transactions (timeouts, frame errors) mark a unit
+    offline; a success marks it online. With `fail_fast_offline`, calls to an offline
+    unit raise [`UnitOffline`][aiortu.errors.UnitOffline] without sending, except one probe every
+    `probe_interval` seconds.
     """
 
     offline_after: int = 3
@@ -53,7 +55,7 @@ class HealthPolicy:
 class UnitStats:
     """What happened between the master and one unit.
 
-    Counters count transactions, except ``timeouts``, ``crc_errors`` and ``frame_errors``,
+    Counters count transactions, except `timeouts`, `crc_errors` and `frame_errors`,
     which count failed attempts (a retried transaction may add several).
     """
 
@@ -82,7 +84,7 @@ class UnitStats:
     consecutive_failures: int = 0
     """Failed transactions since the last success."""
     online: bool = True
-    """False after ``offline_after`` consecutive failures, until a success."""
+    """False after `offline_after` consecutive failures, until a success."""
     last_probe: float = -math.inf
     """When the unit went offline, or a probe was last let through to it since (by the
     master failing fast, or by a poller)."""
@@ -99,8 +101,8 @@ class UnitStats:
         return None if self.online else self.last_probe + probe_interval
 
     def count_success(self, latency: float, *, exception: bool = False) -> None:
-        """A transaction got its reply, *latency* seconds after its request began to go
-        out (*exception*: an exception response, which counts: the unit answered)."""
+        """A transaction got its reply, `latency` seconds after its request began to go
+        out (`exception`: an exception response, which counts: the unit answered)."""
         self.successes += 1
         self.consecutive_failures = 0
         self.online = True
@@ -111,7 +113,7 @@ class UnitStats:
         self.mean_latency = latency if mean is None else mean + (latency - mean) / self.successes
 
     def count_failed_attempt(self, transaction: Transaction) -> None:
-        """An attempt of *transaction* failed: count it by its cause."""
+        """An attempt of `transaction` failed: count it by its cause."""
         error = transaction.frame_error
         if isinstance(error, CRCError):
             self.crc_errors += 1
@@ -121,8 +123,8 @@ class UnitStats:
             self.timeouts += 1
 
     def count_failure(self, health: HealthPolicy, now: float) -> None:
-        """A transaction ended without a usable reply at *now*: the unit goes offline after
-        ``health.offline_after`` of them in a row."""
+        """A transaction ended without a usable reply at `now`: the unit goes offline after
+        `health.offline_after` of them in a row."""
         self.failures += 1
         self.consecutive_failures += 1
         if self.online and self.consecutive_failures >= health.offline_after:

@@ -6,24 +6,24 @@ Run through the master machine, that reply takes SEND_UNICAST, REPLY_RECEIVED an
 and leaves the machine IDLE with nothing to remember, so the engine may run it without
 the machine:
 
-1. :func:`usual_exchange_for` says whether the shortcut may run: every condition is
+1. `usual_exchange_for` says whether the shortcut may run: every condition is
    named there, and nowhere else.
-2. :func:`send_usual_exchange` sends the request at once (no wait, no yield) and returns
-   the :class:`UsualExchange` on the wire, whose :attr:`~UsualExchange.caller` future the
+2. `send_usual_exchange` sends the request at once (no wait, no yield) and returns
+   the `UsualExchange` on the wire, whose `caller` future the
    caller awaits. The engine asks the link to hand the usual reply (its first bytes and
    length) straight from the read callback
-   (:meth:`~aiortu.line._link.Link.expect`).
-3. That reply ends it (:meth:`UsualExchange.on_reply`, called by the link): it is
+   ([`expect`][aiortu.line.Link.expect]).
+3. That reply ends it (`UsualExchange.on_reply`, called by the link): it is
    decoded and counted, the line handed on, and the future completed. The caller's
    task is woken once, and no coroutine of the engine runs.
 4. Anything else (another frame, bad bytes, the response timeout, the line lost) makes
-   the machine take the attempt over (:func:`take_over`): it begins the transaction
+   the machine take the attempt over (`take_over`): it begins the transaction
    and is told the request went out when it did, so it knows everything it would have
    known had it sent the request itself, and the engine's line task runs the rest
    (retries, the late-reply guard, statistics) for the caller.
 
 So a reply ends a transaction by one of two routes: the usual reply here, or the table
-of :class:`~aiortu.core.master_machine.MasterMachine`. The differential tests run the
+of [`MasterMachine`][aiortu.core.master_machine.MasterMachine]. The differential tests run the
 same scenarios with the shortcut on and off and compare results, statistics and bytes on
 the wire.
 """
@@ -55,13 +55,13 @@ class UsualExchange:
 
     caller: asyncio.Future[JobResult]
     """What the caller awaits: completed with the response, or by the line task after
-    :func:`take_over`; cancelled if the caller is."""
+    `take_over`; cancelled if the caller is."""
     known: KnownRequest
     """What the machine remembers of the request: its frame, its reply's shape."""
     stats: UnitStats
     """The unit's statistics (its request is counted already)."""
     timeout: float
-    """The response timeout, from :attr:`end`."""
+    """The response timeout, from `end`."""
     policy: RetryPolicy
     """How a failed attempt is retried, once the machine has taken it over."""
     priority: int
@@ -74,8 +74,8 @@ class UsualExchange:
     """What the engine does once the usual reply came: hand the line on."""
 
     def on_reply(self, frame: bytes, end: float) -> None:
-        """The link's read callback: *frame*, the usual reply (its shape matched, its CRC
-        checked), ended at *end*. Count it, hand the line on, complete the future."""
+        """The link's read callback: `frame`, the usual reply (its shape matched, its CRC
+        checked), ended at `end`. Count it, hand the line on, complete the future."""
         response = MasterMachine.usual_response(self.known, frame)
         self.stats.count_success(end - self.start)
         self.done()
@@ -95,11 +95,11 @@ def usual_exchange_for(
     link: Link,
     machine: MasterMachine,
 ) -> KnownRequest | None:
-    """What the machine remembers of *request* to *unit* where the usual exchange may run
+    """What the machine remembers of `request` to `unit` where the usual exchange may run
     for it; else None, and the transaction goes through the machine.
 
     One more condition is tried rather than asked: the link must let the request go at
-    once (:meth:`~aiortu.line._link.Link.send_now`; see :func:`send_usual_exchange`).
+    once ([`send_now`][aiortu.line.Link.send_now]; see `send_usual_exchange`).
     """
     if not (
         # The engine's switch: off, every transaction goes through the machine.
@@ -133,8 +133,8 @@ def send_usual_exchange(
     priority: int,
     done: Callable[[], None],
 ) -> UsualExchange | None:
-    """Send *known*'s request now and return the exchange on the wire, or None (nothing
-    sent) where the line asks for a wait (see :meth:`~aiortu.line._link.Link.send_now`)."""
+    """Send `known`'s request now and return the exchange on the wire, or None (nothing
+    sent) where the line asks for a wait (see [`send_now`][aiortu.line.Link.send_now])."""
     frame = known.frame
     end = link.send_now(frame)
     if end is None:
@@ -145,8 +145,8 @@ def send_usual_exchange(
 
 
 def take_over(exchange: UsualExchange, machine: MasterMachine, jobs: JobQueue) -> Job:
-    """Hand *exchange*'s attempt, begun and on the wire, to *machine*; return the job the
-    line task runs for the caller (see :attr:`Job.taken_over`).
+    """Hand `exchange`'s attempt, begun and on the wire, to `machine`; return the job the
+    line task runs for the caller (see `Job.taken_over`).
 
     A caller already gone (its future cancelled) leaves the transaction abandoned: the
     attempt is finished, not retried.

@@ -1,8 +1,8 @@
 """The Modbus RTU slave: one or many unit addresses on one line, served from data stores
 by handlers per function code, with routes, hooks and a device description file.
 
-:class:`Slave` takes any :class:`anyio.abc.ByteStream`; :func:`serve` opens a port or a
-URL first. See ``docs/slave.md``.
+[`Slave`][aiortu.slave.Slave] takes any `anyio.abc.ByteStream`; [`serve`][aiortu.slave.serve] opens
+a port or a URL first. See `docs/slave.md`.
 """
 
 from __future__ import annotations

@@ -1,30 +1,30 @@
 """The slave's answer-at-once: the commonest requests answered where they arrive.
 
 A request normally goes the general route: the link hands a
-:class:`~aiortu.core.receiver.FrameReceived` to the slave's listener, the listener queues
+[`FrameReceived`][aiortu.core.receiver.FrameReceived] to the slave's listener, the listener queues
 it, and the serve loop drives the table machine
-(:class:`~aiortu.core.slave_machine.SlaveMachine`) through the handler, the hooks and
+([`SlaveMachine`][aiortu.core.slave_machine.SlaveMachine]) through the handler, the hooks and
 the reply. That costs a task wake-up per request.
 
-This module is the one shortcut around it. Where :meth:`AnswerAtOnce.may_answer` (the
+This module is the one shortcut around it. Where `AnswerAtOnce.may_answer` (the
 one predicate: every condition is a named line there) allows it, a request is answered
 in the callback that got it, with no task wake-up and no request or response object:
 
 - from the link's read callback, for a whole 8-byte request (function codes 01 to 06)
   that arrived as one chunk on a stream that pushes its bytes (the serial port; see
-  ``Link.expect_requests``);
+  `Link.expect_requests`);
 - from the link's listener, for any other request while nothing is pending.
 
-A *fast path* (:data:`FAST_PATHS`) maps the request's bytes to the reply's bytes for the
-built-in :class:`~aiortu.slave._store.MemoryStore`. It gives up (``None``) on anything but
-a well-formed request and a store that answers, before changing anything; the request
-then takes the general route, so the answers are the same either way. A normal reply
-that goes out at once (frame gap 0, or already kept) is counted in one step
-(:meth:`~aiortu.core.slave_machine.SlaveMachine.answered_at_once`, the same counters and
-log entries as the table's four steps); otherwise the machine is driven step by step and
-a reply that must wait for the frame gap is left to the serve loop as a :class:`Taken`.
+A *fast path* (`FAST_PATHS`) maps the request's bytes to the reply's bytes for the built-in
+[`MemoryStore`][aiortu.slave.MemoryStore]. It gives up (`None`) on anything but a well-formed
+request and a store that answers, before changing anything; the request then takes the general
+route, so the answers are the same either way. A normal reply that goes out at once (frame gap 0, or
+already kept) is counted in one step
+([`answered_at_once`][aiortu.core.slave_machine.SlaveMachine.answered_at_once], the same counters
+and log entries as the table's four steps); otherwise the machine is driven step by step and a reply
+that must wait for the frame gap is left to the serve loop as a `Taken`.
 
-``tests/slave/test_fast_path_differential.py`` runs random request sequences with the
+`tests/slave/test_fast_path_differential.py` runs random request sequences with the
 shortcut on and off and compares the bytes on the wire, the stores, the counters and the
 event log.
 """
@@ -54,7 +54,7 @@ __all__ = ("FAST_PATHS", "AnswerAtOnce", "FastPath", "Taken", "exception_pdu")
 
 @dataclass(slots=True)
 class Taken:
-    """A request answered at once whose *reply* PDU must wait for the frame gap: the
+    """A request answered at once whose `reply` PDU must wait for the frame gap: the
     machine has counted it (FORMATTING_REPLY or FORMATTING_ERROR); the serve loop sends it."""
 
     frame: bytes
@@ -62,7 +62,7 @@ class Taken:
 
 
 def exception_pdu(function_code: int, exception_code: int | None) -> bytes:
-    """The exception reply PDU to *function_code* (04 when *exception_code* is None)."""
+    """The exception reply PDU to `function_code` (04 when `exception_code` is None)."""
     # Raw bytes, not ExceptionPDU: a request with code 0 must still get its 01 answer.
     code = ExceptionCode.SERVER_DEVICE_FAILURE if exception_code is None else exception_code
     return bytes((function_code | EXCEPTION_BIT, code & 0xFF))
@@ -71,9 +71,9 @@ def exception_pdu(function_code: int, exception_code: int | None) -> bytes:
 class AnswerAtOnce:
     """The slave's shortcut (see the module docstring), bound to one slave's line.
 
-    *queue* is the serve loop's queue, *before* and *after* its hook lists (the same
-    objects: the predicate sees every change); *serve_later* hands a :class:`Taken` to
-    the serve loop; *to_listener* hands a whole request the shortcut did not answer to
+    `queue` is the serve loop's queue, `before` and `after` its hook lists (the same
+    objects: the predicate sees every change); `serve_later` hands a `Taken` to
+    the serve loop; `to_listener` hands a whole request the shortcut did not answer to
     the slave's listener, as the receiver would have.
     """
 
@@ -120,7 +120,7 @@ class AnswerAtOnce:
         """How many requests were answered at once."""
 
     def may_answer(self, frame: bytes) -> bool:
-        """Whether *frame*, a request with a good CRC, may be answered at once.
+        """Whether `frame`, a request with a good CRC, may be answered at once.
 
         Every condition of the shortcut is here; anything else takes the general route.
         """
@@ -151,7 +151,7 @@ class AnswerAtOnce:
         handlers: Mapping[int, Handler],
         stores: Mapping[int, DataStore | AsyncDataStore],
     ) -> None:
-        """Take the slave's *handlers* (by function code) and *stores* (by unit, routes
+        """Take the slave's `handlers` (by function code) and `stores` (by unit, routes
         applied): the fast paths that stand in for a built-in handler, the units whose
         store they can serve."""
         self._fast_paths = {
@@ -162,25 +162,25 @@ class AnswerAtOnce:
         self._stores = {unit: store for unit, store in stores.items() if type(store) is MemoryStore}
 
     def attach(self) -> None:
-        """Have the link hand whole 8-byte requests to :meth:`on_whole_request`."""
+        """Have the link hand whole 8-byte requests to `on_whole_request`."""
         if self.enabled:
             self._link.expect_requests(EIGHT_BYTE_REQUESTS, 8, self.on_whole_request)
 
     def detach(self) -> None:
-        """Undo :meth:`attach`."""
+        """Undo `attach`."""
         self._link.expect_requests((), 8, None)
 
     def on_whole_request(self, frame: bytes, end: float) -> None:
-        """The link's read callback got *frame*, a whole request with a good CRC ending at
-        *end*: answer it, or hand it to the listener as the receiver would have."""
+        """The link's read callback got `frame`, a whole request with a good CRC ending at
+        `end`: answer it, or hand it to the listener as the receiver would have."""
         if not self.answer(frame):
             start = end - (len(frame) - 1) * self._link.char_time
             self._to_listener(FrameReceived(frame, start, end))
 
     def answer(self, frame: bytes) -> bool:
-        """Answer *frame* if :meth:`may_answer` allows it and its fast path answers.
+        """Answer `frame` if `may_answer` allows it and its fast path answers.
 
-        ``False`` means nothing was done or counted: the general route takes it.
+        `False` means nothing was done or counted: the general route takes it.
         """
         if not self.may_answer(frame):
             return False
@@ -204,7 +204,7 @@ class AnswerAtOnce:
         return True
 
     def _reply_failed(self, frame: bytes, code: int) -> None:
-        """The fast path raised exception *code*, before changing anything."""
+        """The fast path raised exception `code`, before changing anything."""
         machine = self._machine
         machine.frame_received(frame[0], frame[1])
         machine.check_request(supported=True)
@@ -219,9 +219,9 @@ class AnswerAtOnce:
 # -- the fast paths for the built-in MemoryStore -------------------------------------------
 
 FastPath = Callable[[MemoryStore, bytes], bytes | None]
-"""``fast(store, pdu)``: the reply PDU, or ``None`` to leave the request to its handler.
+"""`fast(store, pdu)`: the reply PDU, or `None` to leave the request to its handler.
 
-It raises :class:`~aiortu.errors.ExceptionResponse` only where the store does (an
+It raises [`ExceptionResponse`][aiortu.errors.ExceptionResponse] only where the store does (an
 unmapped address, a read-only range), before anything is written."""
 
 _ADDRESS_SPACE = 0x10000

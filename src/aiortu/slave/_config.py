@@ -1,6 +1,6 @@
-"""Device descriptions in TOML, for ``aiortu serve --config``: units and their data stores.
+"""Device descriptions in TOML, for `aiortu serve --config`: units and their data stores.
 
-The format (every key but ``unit`` is optional)::
+The format (every key but `unit` is optional):
 
     [[slave]]
     unit = 17                          # or units = [17, 18]: several units, one store
@@ -44,9 +44,9 @@ The format (every key but ``unit`` is optional)::
     run = true
     data = "simulated"
 
-:func:`load_config` reads a file and returns the units; any problem raises
-:class:`ConfigError`, whose message is one line naming the file, the key path
-(``slave[0].coils[1].count``) and the problem.
+[`load_config`][aiortu.slave.load_config] reads a file and returns the units; any problem raises
+[`ConfigError`][aiortu.errors.ConfigError], whose message is one line naming the file, the key path
+(`slave[0].coils[1].count`) and the problem.
 """
 
 from __future__ import annotations
@@ -156,7 +156,8 @@ def _kind(value: object) -> str:
 
 
 def load_config(path: str | Path) -> DeviceConfig:
-    """Read the device description at *path*; raise :class:`ConfigError` if it is wrong."""
+    """Read the device description at `path`; raise [`ConfigError`][aiortu.errors.ConfigError] if it
+    is wrong."""
     source = str(path)
     try:
         text = Path(path).read_bytes().decode()
@@ -166,7 +167,7 @@ def load_config(path: str | Path) -> DeviceConfig:
 
 
 def parse_config(text: str, source: str = "<string>") -> DeviceConfig:
-    """Parse a device description from *text*; *source* names it in errors."""
+    """Parse a device description from `text`; `source` names it in errors."""
     reader = _Reader(source)
     try:
         document = tomllib.loads(text)
@@ -236,7 +237,7 @@ def _store(reader: _Reader, entry: dict[str, Any], key: str) -> MemoryStore:
 def _read_only_ranges(
     reader: _Reader, entry: dict[str, Any], key: str, tables: Mapping[str, Any]
 ) -> dict[Table, list[range]]:
-    """The ``[[slave.read_only]]`` ranges by table; each must lie inside the table's blocks
+    """The `[[slave.read_only]]` ranges by table; each must lie inside the table's blocks
     (elsewhere every address answers 02 anyway: such a range is a mistake)."""
     found: dict[Table, list[range]] = {table: [] for table in Table}
     for index, item in enumerate(reader.tables(entry.get("read_only", []), f"{key}.read_only")):
@@ -262,7 +263,7 @@ def _read_only_ranges(
 
 
 def _first_outside(addresses: range, blocks: list[Block] | Table) -> int | None:
-    """The first of *addresses* that no block covers, or None."""
+    """The first of `addresses` that no block covers, or None."""
     address = addresses.start
     if isinstance(blocks, Table):
         return address  # a circle of aliases: MemoryStore says what is wrong

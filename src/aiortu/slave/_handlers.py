@@ -1,12 +1,12 @@
 """The slave's built-in request handlers: one function per public function code it serves.
 
-A handler takes the decoded request and a :class:`RequestContext` (the unit, its data
-store, whether the request was broadcast, the line's state machine) and returns the
-response PDU, a :class:`Reply` (to answer late, as another unit, or not at all), or
-``None`` to send nothing. It raises :class:`~aiortu.errors.ExceptionResponse` for an
-exception reply; the store raises it too (02 for unmapped addresses). User handlers have
-the same shape and may be coroutine functions. :data:`BUILTIN_HANDLERS` maps each
-function code served here to its handler.
+A handler takes the decoded request and a [`RequestContext`][aiortu.slave.RequestContext] (the unit,
+its data store, whether the request was broadcast, the line's state machine) and returns the
+response PDU, a [`Reply`][aiortu.slave.Reply] (to answer late, as another unit, or not at all), or
+`None` to send nothing. It raises [`ExceptionResponse`][aiortu.errors.ExceptionResponse] for an
+exception reply; the store raises it too (02 for unmapped addresses). User handlers have the same
+shape and may be coroutine functions. `BUILTIN_HANDLERS` maps each function code served here to its
+handler.
 
 A store's methods may return awaitables (an async store): the built-in handlers then
 return an awaitable themselves, which the slave awaits; with a sync store they stay
@@ -14,7 +14,7 @@ plain calls.
 
 The commonest requests may instead be answered at once, straight from the bytes of the
 request to the bytes of the reply, while these handlers serve their function codes:
-see :mod:`aiortu.slave._answer_at_once`.
+see [`aiortu.slave`][aiortu.slave].
 """
 
 from __future__ import annotations
@@ -111,9 +111,9 @@ _V = TypeVar("_V")
 
 @dataclass(frozen=True, slots=True)
 class RequestContext:
-    """What a handler knows besides the request: the *unit* asked, its *store*, whether
-    the request was a *broadcast* (then the reply is never sent), and the line's
-    *machine* (its counters, event log and listen-only mode; ``None`` outside a slave)."""
+    """What a handler knows besides the request: the `unit` asked, its `store`, whether
+    the request was a `broadcast` (then the reply is never sent), and the line's
+    `machine` (its counters, event log and listen-only mode; `None` outside a slave)."""
 
     unit: int
     store: DataStore | AsyncDataStore
@@ -125,8 +125,8 @@ class RequestContext:
 class Reply:
     """A handler's answer with a twist, to test masters against odd devices.
 
-    *response* is the PDU to send (``None``: send nothing, a silent device); *delay*
-    seconds pass before it is sent (a slow device); *unit*, when given, is the address
+    `response` is the PDU to send (`None`: send nothing, a silent device); `delay`
+    seconds pass before it is sent (a slow device); `unit`, when given, is the address
     the reply goes out with instead of the unit asked (a confused device).
     """
 
@@ -136,19 +136,19 @@ class Reply:
 
 
 HandlerResult = Response | ExceptionPDU | Reply | None
-"""A handler's answer: the response PDU, an exception PDU, a :class:`Reply`, or ``None``
-to send nothing. Anything else is answered with exception 04 (and logged)."""
+"""A handler's answer: the response PDU, an exception PDU, a [`Reply`][aiortu.slave.Reply], or
+`None` to send nothing. Anything else is answered with exception 04 (and logged)."""
 
 Answer = HandlerResult | Awaitable[HandlerResult]
 """What a handler returns: its answer, or an awaitable of it."""
 
 Handler = Callable[[Any, RequestContext], Answer]
 """A request handler, sync or async. Its first argument is the decoded request (a
-:class:`~aiortu.core.pdu.RawPDU` for codes without a class of their own)."""
+[`RawPDU`][aiortu.core.pdu.RawPDU] for codes without a class of their own)."""
 
 
 def _then(value: _V | Awaitable[_V], build: Callable[[_V], Answer]) -> Answer:
-    """``build(value)``, awaiting *value* first when a store returned an awaitable."""
+    """`build(value)`, awaiting `value` first when a store returned an awaitable."""
     if inspect.isawaitable(value):
         return _await_then(value, build)
     return build(value)
@@ -162,7 +162,7 @@ async def _await_then(value: Awaitable[_V], build: Callable[[_V], Answer]) -> Ha
 
 
 def _all(values: list[Any], build: Callable[[list[Any]], Answer]) -> Answer:
-    """``build(values)``, awaiting those of *values* that are awaitables, in order."""
+    """`build(values)`, awaiting those of `values` that are awaitables, in order."""
     if any(inspect.isawaitable(value) for value in values):
         return _await_all(values, build)
     return build(values)
@@ -177,7 +177,7 @@ async def _await_all(values: list[Any], build: Callable[[list[Any]], Answer]) ->
 
 
 def _capability(store: object, name: str) -> Callable[..., Any]:
-    """The store's method *name*; exception 01 when the store lacks it."""
+    """The store's method `name`; exception 01 when the store lacks it."""
     method: Callable[..., Any] | None = getattr(store, name, None)
     if method is None:
         raise ExceptionResponse(ExceptionCode.ILLEGAL_FUNCTION)

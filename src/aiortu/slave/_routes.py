@@ -1,7 +1,7 @@
 """Range handlers: one function serves an address range of one table for a slave unit.
 
 A range handler stands in for the data store on its addresses, for every function code
-that touches them (01-06, 0F, 10, 16, 17)::
+that touches them (01-06, 0F, 10, 16, 17):
 
     def temperature(access: RangeAccess) -> list[int] | None:
         if access.values is None:                      # a read
@@ -10,10 +10,10 @@ that touches them (01-06, 0F, 10, 16, 17)::
 
     slave.route(Table.INPUT_REGISTERS, range(100, 110), temperature)
 
-It may be a coroutine function. A request that covers part of a routed range and part of
-something else gets exception 02, as a device whose map has a hole there would answer.
-:class:`RoutedStore` is the data store wrapper the slave puts around a unit's store to
-do this; everything else (FIFOs, files, ...) goes to the wrapped store.
+It may be a coroutine function. A request that covers part of a routed range and part of something
+else gets exception 02, as a device whose map has a hole there would answer.
+[`RoutedStore`][aiortu.slave.RoutedStore] is the data store wrapper the slave puts around a unit's
+store to do this; everything else (FIFOs, files, ...) goes to the wrapped store.
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ __all__ = ("RangeAccess", "RangeHandler", "RoutedStore")
 
 @dataclass(frozen=True, slots=True)
 class RangeAccess:
-    """One access a master makes to a routed range: *unit*, *table*, the first *address*
-    and *count*; *values* are what a write stores, ``None`` for a read."""
+    """One access a master makes to a routed range: `unit`, `table`, the first `address`
+    and `count`; `values` are what a write stores, `None` for a read."""
 
     unit: int
     table: Table
@@ -47,12 +47,12 @@ class RangeAccess:
 
 
 RangeHandler = Callable[[RangeAccess], Sequence[int] | Awaitable[Sequence[int] | None] | None]
-"""A range handler: for a read it returns ``count`` values; for a write its result is
-ignored. It may raise :class:`~aiortu.errors.ExceptionResponse`, and be async."""
+"""A range handler: for a read it returns `count` values; for a write its result is
+ignored. It may raise [`ExceptionResponse`][aiortu.errors.ExceptionResponse], and be async."""
 
 
 class RoutedStore:
-    """*store* with some ranges served by range handlers instead (see the module docstring)."""
+    """`store` with some ranges served by range handlers instead (see the module docstring)."""
 
     def __init__(self, store: DataStore | AsyncDataStore, unit: int) -> None:
         self.store = store
@@ -62,7 +62,7 @@ class RoutedStore:
         self._routes: dict[Table, list[tuple[range, RangeHandler]]] = {}
 
     def add(self, table: Table, addresses: range, handler: RangeHandler) -> None:
-        """Serve *addresses* of *table* with *handler*; a later route wins where they overlap."""
+        """Serve `addresses` of `table` with `handler`; a later route wins where they overlap."""
         self._routes.setdefault(table, []).insert(0, (addresses, handler))
 
     def _route(self, table: Table, address: int, count: int) -> RangeHandler | None:

@@ -1,40 +1,40 @@
 """The slave: serves one or many unit addresses on one line from data stores.
 
-:class:`Slave` takes any byte stream (a serial port, a TCP connection to a serial device
-server, a virtual line) and a mapping of unit addresses to data stores::
+[`Slave`][aiortu.slave.Slave] takes any byte stream (a serial port, a TCP connection to a serial
+device server, a virtual line) and a mapping of unit addresses to data stores:
 
     store = aiortu.MemoryStore(holding_registers={0x6B: 3})
     async with aiortu.Slave(stream, {17: store}):
         ...                                   # the slave serves in the background
 
-or ``await slave.serve()`` to serve in the current task. :func:`serve` opens a port or a
-URL first. One line may carry a whole bus of simulated units.
+or `await slave.serve()` to serve in the current task. [`serve`][aiortu.slave.serve] opens a port or
+a URL first. One line may carry a whole bus of simulated units.
 
-Each frame goes through the core's :class:`~aiortu.core.slave_machine.SlaveMachine`,
-which decides what the spec says: frames for other units are dropped and counted, frames
-with a bad CRC never reach it (the link discards and counts them), broadcasts are
-executed by every unit and never answered, and exceptions come in the spec's order
-(01, 03, 02, 04). A request is dispatched by function code to a handler (see
-:mod:`aiortu.slave._handlers`); users register their own with :meth:`Slave.set_handler`,
-including for the user-defined codes 65-72 and 100-110, which arrive as
-:class:`~aiortu.core.pdu.RawPDU`. A handler that raises
-:class:`~aiortu.errors.ExceptionResponse` answers with its code; any other error answers
-04, is logged, and the slave goes on serving. What a handler or hook returns is checked
-here: a response, an :class:`~aiortu.core.pdu.ExceptionPDU`, a valid
-:class:`~aiortu.slave._handlers.Reply` or ``None``; anything else answers 04 and is
-logged once for that handler or hook. The reply goes out after ``frame_gap`` of silence
-on the line (t3.5 by default; the link keeps it).
+Each frame goes through the core's [`SlaveMachine`][aiortu.core.slave_machine.SlaveMachine], which
+decides what the spec says: frames for other units are dropped and counted, frames with a bad CRC
+never reach it (the link discards and counts them), broadcasts are executed by every unit and never
+answered, and exceptions come in the spec's order (01, 03, 02, 04). A request is dispatched by
+function code to a handler (see [`aiortu.slave`][aiortu.slave]); users register their own with
+[`Slave.set_handler`][aiortu.slave.Slave.set_handler], including for the user-defined codes 65-72
+and 100-110, which arrive as [`RawPDU`][aiortu.core.pdu.RawPDU]. A handler that raises
+[`ExceptionResponse`][aiortu.errors.ExceptionResponse] answers with its code; any other error
+answers 04, is logged, and the slave goes on serving. What a handler or hook returns is checked
+here: a response, an [`ExceptionPDU`][aiortu.core.pdu.ExceptionPDU], a valid
+[`Reply`][aiortu.slave.Reply] or `None`; anything else answers 04 and is logged once for that
+handler or hook. The reply goes out after `frame_gap` of silence on the line (t3.5 by default; the
+link keeps it).
 
 That is the general route, through the serve loop. The commonest requests may instead be
 answered at once where they arrive, without a task wake-up: every condition for that is
-in :meth:`~aiortu.slave._answer_at_once.AnswerAtOnce.may_answer`.
+in `may_answer`.
 
-Beyond function codes: :meth:`Slave.route` serves an address range of one table with a
-function (see :mod:`aiortu.slave._routes`); :meth:`Slave.before_request` and
-:meth:`Slave.after_request` add hooks around every request; a handler or hook that
-returns a :class:`~aiortu.slave._handlers.Reply` answers late, as another unit, or not at
-all, to test masters. *trace* sees every frame received and sent; a trace callback that
-raises is logged and detached.
+Beyond function codes: [`Slave.route`][aiortu.slave.Slave.route] serves an address range of one
+table with a function (see [`aiortu.slave`][aiortu.slave]);
+[`Slave.before_request`][aiortu.slave.Slave.before_request] and
+[`Slave.after_request`][aiortu.slave.Slave.after_request] add hooks around every request; a handler
+or hook that returns a [`Reply`][aiortu.slave.Reply] answers late, as another unit, or not at all,
+to test masters. `trace` sees every frame received and sent; a trace callback that raises is logged
+and detached.
 """
 
 from __future__ import annotations
@@ -77,17 +77,17 @@ __all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback", "serve")
 _log = logging.getLogger(__name__)
 
 BeforeHook = Callable[[Any, RequestContext], Answer]
-"""Called before the handler with (request, context): ``None`` goes on to the handler, a
-response or :class:`~aiortu.slave._handlers.Reply` answers instead of it, and raising
-:class:`~aiortu.errors.ExceptionResponse` refuses the request. May be async."""
+"""Called before the handler with (request, context): `None` goes on to the handler, a
+response or [`Reply`][aiortu.slave.Reply] answers instead of it, and raising
+[`ExceptionResponse`][aiortu.errors.ExceptionResponse] refuses the request. May be async."""
 
 AfterHook = Callable[[Any, RequestContext, HandlerResult], Answer]
-"""Called after the handler with (request, context, its answer): ``None`` keeps the
+"""Called after the handler with (request, context, its answer): `None` keeps the
 answer, anything else replaces it. May be async. Not called when the handler raised."""
 
 TraceCallback = Callable[[str, bytes], object]
-"""Sees the line: ``("received", frame)`` for every frame whose CRC checks (for any
-unit), ``("sent", frame)`` for every reply, ``("discarded", data)`` for bytes dropped."""
+"""Sees the line: `("received", frame)` for every frame whose CRC checks (for any
+unit), `("sent", frame)` for every reply, `("discarded", data)` for bytes dropped."""
 
 _UNIT_RANGE = range(1, 248)
 _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
@@ -96,14 +96,14 @@ _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
 class Slave:
     """A Modbus RTU slave on one line (see the module docstring).
 
-    *units* maps each unit address (1..247) to its data store. *settings* are the line
-    settings; *frame_gap* is the silence kept before each reply (``None`` for t3.5 of the
-    settings, 0 for lines without a wire such as TCP). *timing* and *frame_silence*
-    configure the receiver (see :mod:`aiortu.core.receiver`). *handlers* adds or replaces
-    handlers by function code, as :meth:`set_handler` does. *clock* is the link's clock.
-    *trace* sees every frame (see :data:`TraceCallback`).
+    `units` maps each unit address (1..247) to its data store. `settings` are the line settings;
+    `frame_gap` is the silence kept before each reply (`None` for t3.5 of the settings, 0 for lines
+    without a wire such as TCP). `timing` and `frame_silence` configure the receiver (see
+    [`aiortu.core.receiver`][aiortu.core.receiver]). `handlers` adds or replaces handlers by
+    function code, as [`set_handler`][aiortu.slave.Slave.set_handler] does. `clock` is the link's
+    clock. `trace` sees every frame (see [`TraceCallback`][aiortu.slave.TraceCallback]).
 
-    Raises :class:`~aiortu.errors.InvalidValue` for a unit address outside 1..247 or a
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a unit address outside 1..247 or a
     function code outside 1..127.
     """
 
@@ -177,12 +177,12 @@ class Slave:
     # -- handlers --------------------------------------------------------------------
 
     def set_handler(self, function_code: int, handler: Handler | None) -> None:
-        """Serve *function_code* with *handler*; ``None`` removes it (the code then gets 01).
+        """Serve `function_code` with `handler`; `None` removes it (the code then gets 01).
 
-        The handler is called as ``handler(request, context)`` with the decoded request
-        (a :class:`~aiortu.core.pdu.RawPDU` for codes without a class) and a
-        :class:`~aiortu.slave._handlers.RequestContext`; it returns the response PDU, or
-        ``None`` to send nothing, and may be a coroutine function.
+        The handler is called as `handler(request, context)` with the decoded request
+        (a [`RawPDU`][aiortu.core.pdu.RawPDU] for codes without a class) and a
+        [`RequestContext`][aiortu.slave.RequestContext]; it returns the response PDU, or
+        `None` to send nothing, and may be a coroutine function.
         """
         if function_code not in _FUNCTION_CODE_RANGE:
             raise InvalidValue("function_code", function_code, _FUNCTION_CODE_RANGE)
@@ -193,7 +193,7 @@ class Slave:
         self._at_once.configure(self._handlers, self._stores())
 
     def handler(self, function_code: int) -> Callable[[Handler], Handler]:
-        """Decorator form of :meth:`set_handler`."""
+        """Decorator form of [`set_handler`][aiortu.slave.Slave.set_handler]."""
 
         def register(handler: Handler) -> Handler:
             self.set_handler(function_code, handler)
@@ -209,9 +209,9 @@ class Slave:
         *,
         units: Iterable[int] | None = None,
     ) -> None:
-        """Serve *addresses* of *table* with *handler* on *units* (default: every unit).
+        """Serve `addresses` of `table` with `handler` on `units` (default: every unit).
 
-        See :mod:`aiortu.slave._routes`. A later route wins where routes overlap.
+        See [`aiortu.slave`][aiortu.slave]. A later route wins where routes overlap.
         """
         table = Table(table)
         for unit in self.units if units is None else units:
@@ -224,7 +224,7 @@ class Slave:
         self._build_contexts()
 
     def before_request(self, hook: BeforeHook) -> Callable[[], None]:
-        """Call *hook* before each request's handler (see :data:`BeforeHook`).
+        """Call `hook` before each request's handler (see [`BeforeHook`][aiortu.slave.BeforeHook]).
 
         Returns a function that removes the hook.
         """
@@ -232,7 +232,7 @@ class Slave:
         return lambda: self._before.remove(hook) if hook in self._before else None
 
     def after_request(self, hook: AfterHook) -> Callable[[], None]:
-        """Call *hook* after each request's handler (see :data:`AfterHook`).
+        """Call `hook` after each request's handler (see [`AfterHook`][aiortu.slave.AfterHook]).
 
         Returns a function that removes the hook.
         """
@@ -262,8 +262,8 @@ class Slave:
 
     @property
     def trace(self) -> TraceCallback | None:
-        """The trace callback, or ``None`` (see :data:`TraceCallback`). One that raises is
-        logged and detached."""
+        """The trace callback, or `None` (see [`TraceCallback`][aiortu.slave.TraceCallback]). One
+        that raises is logged and detached."""
         return self._trace
 
     @trace.setter
@@ -272,7 +272,7 @@ class Slave:
         self._at_once.trace_set = callback is not None
 
     def _traced(self, kind: str, data: bytes) -> None:
-        """Show *data* to the trace callback; one that raises is logged and detached."""
+        """Show `data` to the trace callback; one that raises is logged and detached."""
         trace = self._trace
         if trace is None:
             return
@@ -301,7 +301,7 @@ class Slave:
     async def serve(self) -> None:
         """Serve until cancelled.
 
-        Raises :class:`~aiortu.errors.ConnectionLost` when the line fails or closes.
+        Raises [`ConnectionLost`][aiortu.errors.ConnectionLost] when the line fails or closes.
         """
         lost: ConnectionLost | None = None
         async with self.link:
@@ -349,10 +349,10 @@ class Slave:
     async def _serve_frames(self) -> None:
         """Take the link's events and answer the requests, until the link closes.
 
-        The link hands its events to :meth:`_on_link_event` (from its reader task, or
+        The link hands its events to `_on_link_event` (from its reader task, or
         its read callback). Discards and frames for other units are dealt with there at
         once when nothing is pending (they only count), and a request may be answered
-        there at once (see :mod:`aiortu.slave._answer_at_once`), so they never wake this
+        there at once (see [`aiortu.slave`][aiortu.slave]), so they never wake this
         task; any other request for one of our units is queued, and this task answers it
         through the machine, the handler and the hooks. It drains the queue before it
         waits again, so a flood of events costs one wake-up per batch, not one per event.
@@ -437,7 +437,7 @@ class Slave:
             wake.set()
 
     def _leave(self, taken: Taken) -> None:
-        """The serve loop sends *taken*'s reply, in order."""
+        """The serve loop sends `taken`'s reply, in order."""
         self._queue.append(taken)
         self._wake_serve_loop()
 
@@ -467,7 +467,7 @@ class Slave:
         await self._send_reply(unit, await self._answer(unit, frame[1:-2]))
 
     async def _send_reply(self, unit: int, reply: bytes | Reply | None) -> None:
-        """Send *reply* (a PDU or a Reply) for *unit*, unless there is none to send."""
+        """Send `reply` (a PDU or a Reply) for `unit`, unless there is none to send."""
         machine = self.machine
         if reply is not None and machine.should_reply:
             if type(reply) is bytes:
@@ -520,7 +520,7 @@ class Slave:
         return exception_pdu(function_code, failure)
 
     async def _execute(self, handler: Handler, request: Request | None, unit: int) -> HandlerResult:
-        """Run *handler* for *unit*, or once per store for a broadcast (no answer then)."""
+        """Run `handler` for `unit`, or once per store for a broadcast (no answer then)."""
         if self.machine.broadcast:
             for context in self._broadcast_contexts:
                 await self._run(handler, request, context)
@@ -562,7 +562,7 @@ class Slave:
 
 
 class _NotAnAnswer(Exception):
-    """A handler or hook (*source*) returned something that is not an answer (*what*)."""
+    """A handler or hook (`source`) returned something that is not an answer (`what`)."""
 
     def __init__(self, source: object, what: str) -> None:
         super().__init__(what)
@@ -571,15 +571,15 @@ class _NotAnAnswer(Exception):
 
 
 async def _resolved(value: Any) -> Any:
-    """*value*, awaited first if it is awaitable (handlers and hooks may be async)."""
+    """`value`, awaited first if it is awaitable (handlers and hooks may be async)."""
     if inspect.isawaitable(value):
         return await value
     return value
 
 
 def _checked(value: object, source: object) -> HandlerResult:
-    """*value*, returned by *source*, if it is an answer: a Response, an ExceptionPDU,
-    a valid Reply or None; else :class:`_NotAnAnswer` (the request then gets 04)."""
+    """`value`, returned by `source`, if it is an answer: a Response, an ExceptionPDU,
+    a valid Reply or None; else `_NotAnAnswer` (the request then gets 04)."""
     if value is None or isinstance(value, (Response, ExceptionPDU)):
         return value
     if isinstance(value, Reply):
@@ -590,8 +590,8 @@ def _checked(value: object, source: object) -> HandlerResult:
 
 
 def _encoded(result: HandlerResult) -> bytes | Reply | None:
-    """What to send for *result*, a checked answer: the PDU's bytes, the Reply (its
-    response encoded once here, so that a broken ``encode`` fails now, not after the
+    """What to send for `result`, a checked answer: the PDU's bytes, the Reply (its
+    response encoded once here, so that a broken `encode` fails now, not after the
     delay), or None for nothing."""
     if result is None:
         return None
@@ -636,13 +636,13 @@ async def serve(
     trace: TraceCallback | None = None,
     **options: Any,
 ) -> AsyncIterator[Slave]:
-    """Open *port_or_url* and serve *units* on it for the duration of the ``async with``.
+    """Open `port_or_url` and serve `units` on it for the duration of the `async with`.
 
-    *port_or_url* is a serial device path or ``rtu+tcp://host:port``; the line settings
-    are the spec's 19200 8E1 by default; *options* go to
-    :func:`aiortu.transport.open_stream` (``exclusive``, ``rs485``, ``local_echo``,
-    ``connect_timeout``). Yields the running :class:`Slave`. Raises the transport's
-    :class:`~aiortu.errors.PortError` subclasses when the port cannot be opened.
+    `port_or_url` is a serial device path or `rtu+tcp://host:port`; the line settings are the spec's
+    19200 8E1 by default; `options` go to
+    [`aiortu.transport.open_stream`][aiortu.transport.open_stream] (`exclusive`, `rs485`,
+    `local_echo`, `connect_timeout`). Yields the running [`Slave`][aiortu.slave.Slave]. Raises the
+    transport's [`PortError`][aiortu.errors.PortError] subclasses when the port cannot be opened.
     """
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     stream = await open_stream(port_or_url, settings, **options)

@@ -1,18 +1,21 @@
 """Data stores: what a slave reads and writes when a master asks, and the in-memory default.
 
-A slave unit serves the four tables of the Modbus data model (coils, discrete inputs,
-input registers, holding registers) from a :class:`DataStore`: a small synchronous
-protocol, :meth:`~DataStore.read` and :meth:`~DataStore.write` on a :class:`Table`,
-raising :class:`~aiortu.errors.ExceptionResponse` with the code the master should get
+A slave unit serves the four tables of the Modbus data model (coils, discrete inputs, input
+registers, holding registers) from a [`DataStore`][aiortu.core.data_model.DataStore]: a small
+synchronous protocol, [`read`][aiortu.core.data_model.DataStore.read] and
+[`write`][aiortu.core.data_model.DataStore.write] on a [`Table`][aiortu.core.addressing.Table],
+raising [`ExceptionResponse`][aiortu.errors.ExceptionResponse] with the code the master should get
 (02 for an address outside the map), plus the optional capabilities
-(:class:`SupportsFifoQueues`, :class:`SupportsExceptionStatus`,
-:class:`SupportsFileRecords`, :class:`SupportsDeviceIdentification`,
-:class:`SupportsServerId`). They are defined in :mod:`aiortu.core.data_model` and
-re-exported here. Any store method may be a coroutine (:class:`AsyncDataStore`, e.g. a
-store that proxies another device, see ``examples/proxy_store.py``); a sync store keeps
-costing nothing extra.
+([`SupportsFifoQueues`][aiortu.core.data_model.SupportsFifoQueues],
+[`SupportsExceptionStatus`][aiortu.core.data_model.SupportsExceptionStatus],
+[`SupportsFileRecords`][aiortu.core.data_model.SupportsFileRecords],
+[`SupportsDeviceIdentification`][aiortu.core.data_model.SupportsDeviceIdentification],
+[`SupportsServerId`][aiortu.core.data_model.SupportsServerId]). They are defined in
+[`aiortu.core.data_model`][aiortu.core.data_model] and re-exported here. Any store method may be a
+coroutine ([`AsyncDataStore`][aiortu.core.data_model.AsyncDataStore], e.g. a store that proxies
+another device, see `examples/proxy_store.py`); a sync store keeps costing nothing extra.
 
-:class:`MemoryStore` is the default store::
+[`MemoryStore`][aiortu.slave.MemoryStore] is the default store:
 
     store = MemoryStore(
         coils={0x130: 37},                                   # start: count
@@ -25,12 +28,13 @@ costing nothing extra.
         server_id=ServerId(b"\x11", True, b"sim"),
     )
 
-Each table is a set of :class:`Block` s with explicit extents; a read or write whose range
-is not entirely inside one block gets exception 02, as a device without those addresses
-answers. Tables alias each other by sharing blocks (pass the same :class:`Block` to both,
-or name the other table). Writes from the master to a read-only range get exception 02
-(or the code given as *read_only_exception*). Observers (:meth:`MemoryStore.observe`
-callbacks and :meth:`MemoryStore.changes` async iterators) see every write a master
+Each table is a set of [`Block`][aiortu.slave.Block]s with explicit extents; a read or write whose
+range is not entirely inside one block gets exception 02, as a device without those addresses
+answers. Tables alias each other by sharing blocks (pass the same [`Block`][aiortu.slave.Block] to
+both, or name the other table). Writes from the master to a read-only range get exception 02 (or the
+code given as `read_only_exception`). Observers
+([`MemoryStore.observe`][aiortu.slave.MemoryStore.observe] callbacks and
+[`MemoryStore.changes`][aiortu.slave.MemoryStore.changes] async iterators) see every write a master
 makes, so an application can react to it. Reading registers is one list slice.
 """
 
@@ -91,9 +95,9 @@ _MAX_OBJECT_LENGTH = 244
 
 @dataclass(frozen=True, slots=True)
 class Change:
-    """A write a master made: the *table*, the first *address*, and the values before and after.
+    """A write a master made: the `table`, the first `address`, and the values before and after.
 
-    Bits are ``bool``, registers ``int``.
+    Bits are `bool`, registers `int`.
     """
 
     table: Table
@@ -108,10 +112,10 @@ class Change:
 
 
 class Block:
-    """A run of *count* consecutive addresses from *start*, with its values.
+    """A run of `count` consecutive addresses from `start`, with its values.
 
-    *values* are the initial values from *start* (the rest are 0); *count* defaults to
-    ``len(values)``. One block may be placed in two tables of the same kind (holding and
+    `values` are the initial values from `start` (the rest are 0); `count` defaults to
+    `len(values)`. One block may be placed in two tables of the same kind (holding and
     input registers, or coils and discrete inputs) to alias them.
     """
 
@@ -132,7 +136,8 @@ class Block:
         self.count = count
         """How many addresses the block covers."""
         self.values: list[int] = initial + [0] * (count - len(initial))
-        """The values, index 0 at :attr:`start` (bits are ``bool`` once placed in a bit table)."""
+        """The values, index 0 at [`start`][aiortu.slave.Block.start] (bits are `bool` once placed
+        in a bit table)."""
 
     @property
     def stop(self) -> int:
@@ -144,8 +149,8 @@ class Block:
 
 
 BlockSpec = Block | Iterable[Block] | Mapping[int, int | Sequence[int]] | Table
-"""How a table is given to :class:`MemoryStore`: a block, blocks, ``{start: count or
-values}``, or another table to alias."""
+"""How a table is given to [`MemoryStore`][aiortu.slave.MemoryStore]: a block, blocks, `{start:
+count or values}`, or another table to alias."""
 
 
 class _TableMap:
@@ -161,7 +166,7 @@ class _TableMap:
 class MemoryStore:
     """A data store in memory (see the module docstring for the arguments).
 
-    A table given as ``None`` serves no address: every access gets exception 02.
+    A table given as `None` serves no address: every access gets exception 02.
     """
 
     def __init__(
@@ -215,24 +220,25 @@ class MemoryStore:
         self.device_objects: dict[int, bytes] | None = (
             None if device_identification is None else _device_objects(device_identification)
         )
-        """Device identification objects by id; ``None`` answers 2B/0E with 01."""
+        """Device identification objects by id; `None` answers 2B/0E with 01."""
         self.server_id: ServerId | None = (
             ServerId(server_id) if isinstance(server_id, bytes) else server_id
         )
-        """What Report Server ID (11) answers; ``None`` answers with the unit address."""
+        """What Report Server ID (11) answers; `None` answers with the unit address."""
         self._observers: list[Callable[[Change], object]] = []
 
     # -- the DataStore protocol -----------------------------------------------------
 
     def read(self, table: Table, address: int, count: int) -> list[int]:
-        """Return *count* values of *table* from *address*; exception 02 outside one block."""
+        """Return `count` values of `table` from `address`; exception 02 outside one block."""
         block, offset = self._locate(table, address, count)
         return block.values[offset : offset + count]
 
     def write(self, table: Table, address: int, values: Sequence[int]) -> None:
-        """Store *values* from *address* on behalf of a master; notify the observers.
+        """Store `values` from `address` on behalf of a master; notify the observers.
 
-        Exception 02 outside one block; a read-only range gets :attr:`read_only_exception`.
+        Exception 02 outside one block; a read-only range gets
+        [`read_only_exception`][aiortu.slave.MemoryStore.read_only_exception].
         """
         count = len(values)
         block, offset = self._locate(table, address, count)
@@ -249,7 +255,7 @@ class MemoryStore:
         self._notify(Change(table, address, tuple(stored[offset : offset + count]), previous))
 
     def read_fifo_queue(self, address: int) -> list[int]:
-        """The values of the FIFO queue at *address*, oldest first (left queued)."""
+        """The values of the FIFO queue at `address`, oldest first (left queued)."""
         queue = self.fifo_queues.get(address)
         if queue is None:
             raise ExceptionResponse(ExceptionCode.ILLEGAL_DATA_ADDRESS)
@@ -260,14 +266,14 @@ class MemoryStore:
         return self.exception_status
 
     def read_file_record(self, file_number: int, record_number: int, count: int) -> list[int]:
-        """*count* records of file *file_number* from *record_number*; 02 if not there."""
+        """`count` records of file `file_number` from `record_number`; 02 if not there."""
         records = self._file(file_number, record_number, count)
         return records[record_number : record_number + count]
 
     def write_file_record(
         self, file_number: int, record_number: int, values: Sequence[int]
     ) -> None:
-        """Store *values* into file *file_number* from *record_number*; 02 if not there."""
+        """Store `values` into file `file_number` from `record_number`; 02 if not there."""
         records = self._file(file_number, record_number, len(values))
         records[record_number : record_number + len(values)] = values
 
@@ -278,20 +284,20 @@ class MemoryStore:
         return self.device_objects
 
     def report_server_id(self) -> ServerId | None:
-        """What Report Server ID (11) answers; ``None`` for the default (the unit, running)."""
+        """What Report Server ID (11) answers; `None` for the default (the unit, running)."""
         return self.server_id
 
     # -- the application's side --------------------------------------------------------
 
     def get(self, table: Table | str, address: int, count: int = 1) -> list[int]:
-        """Return *count* values of *table* from *address*; ExceptionResponse 02 if unmapped."""
+        """Return `count` values of `table` from `address`; ExceptionResponse 02 if unmapped."""
         return self.read(Table(table), address, count)
 
     def set(self, table: Table | str, address: int, values: int | Iterable[int]) -> None:
         """Set values as the device itself: read-only ranges do not apply, observers are not told.
 
-        Raises :class:`~aiortu.errors.InvalidValue` for a value outside the table's range
-        and :class:`~aiortu.errors.ExceptionResponse` (02) for an unmapped address.
+        Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a value outside the table's range
+        and [`ExceptionResponse`][aiortu.errors.ExceptionResponse] (02) for an unmapped address.
         """
         table = Table(table)
         items = [values] if isinstance(values, int) else list(values)
@@ -305,11 +311,11 @@ class MemoryStore:
         block.values[offset : offset + len(items)] = items
 
     def blocks(self, table: Table | str) -> tuple[Block, ...]:
-        """The blocks of *table*, by start address."""
+        """The blocks of `table`, by start address."""
         return tuple(self._maps[Table(table)].blocks)
 
     def observe(self, callback: Callable[[Change], object]) -> Callable[[], None]:
-        """Call *callback* with a :class:`Change` after every write a master makes.
+        """Call `callback` with a [`Change`][aiortu.slave.Change] after every write a master makes.
 
         Returns a function that removes the callback. A callback that raises is logged
         and detached; the write and the reply go on as if it were not there.
@@ -323,7 +329,8 @@ class MemoryStore:
         return remove
 
     def changes(self, max_pending: int = 1024) -> ChangeFeed:
-        """An async iterator of the writes masters make from now on (see :class:`ChangeFeed`)."""
+        """An async iterator of the writes masters make from now on (see
+        [`ChangeFeed`][aiortu.slave.ChangeFeed])."""
         feed = ChangeFeed(max_pending)
         feed._remove = self.observe(feed._push)
         return feed
@@ -358,11 +365,13 @@ class MemoryStore:
 
 
 class ChangeFeed:
-    """An async iterator of :class:`Change` records, from :meth:`MemoryStore.changes`.
+    """An async iterator of [`Change`][aiortu.slave.Change] records, from
+    [`MemoryStore.changes`][aiortu.slave.MemoryStore.changes].
 
-    Changes wait in a queue of at most *max_pending*; when a reader falls behind, the
-    oldest are dropped and counted in :attr:`dropped`, so a slow reader never stalls the
-    slave. Use it in a ``with`` block, or call :meth:`close`, to stop receiving changes.
+    Changes wait in a queue of at most `max_pending`; when a reader falls behind, the oldest are
+    dropped and counted in [`dropped`][aiortu.slave.ChangeFeed.dropped], so a slow reader never
+    stalls the slave. Use it in a `with` block, or call [`close`][aiortu.slave.ChangeFeed.close], to
+    stop receiving changes.
     """
 
     def __init__(self, max_pending: int = 1024) -> None:
@@ -447,7 +456,7 @@ def _blocks_of(table: Table, spec: BlockSpec | None) -> list[Block]:
 
 
 def _prepare(table: Table, block: Block) -> None:
-    """Check (and for bits normalise) a block's values for *table*."""
+    """Check (and for bits normalise) a block's values for `table`."""
     allowed = _BIT_VALUES if table.is_bit else _REGISTER_VALUES
     values = block.values
     if values and (min(values) < allowed.start or max(values) >= allowed.stop):
@@ -463,7 +472,7 @@ def _alias(
     given: Mapping[Table, BlockSpec | None],
     blocks: Mapping[Table, list[Block]],
 ) -> list[Block]:
-    """The blocks of *target*, shared by *table*."""
+    """The blocks of `target`, shared by `table`."""
     if isinstance(given[target], Table):
         raise InvalidValue(table.value, target.value, "a table that is not itself an alias")
     if target.is_bit != table.is_bit:
@@ -472,7 +481,7 @@ def _alias(
 
 
 def _file_of(number: int, spec: int | Sequence[int]) -> list[int]:
-    """The records of file *number*: *spec* records of 0, or the values given."""
+    """The records of file `number`: `spec` records of 0, or the values given."""
     if number not in _FILE_NUMBERS:
         raise InvalidValue("files key", number, _FILE_NUMBERS)
     records = [0] * spec if isinstance(spec, int) else list(spec)

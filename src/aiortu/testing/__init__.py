@@ -1,13 +1,16 @@
 """Test benches for Modbus RTU: virtual serial lines, in memory and over pseudo-terminals.
 
-- :class:`VirtualBus` / :func:`virtual_pair`: in-memory RS-485 buses of
-  :class:`anyio.abc.ByteStream` endpoints, with baud-rate pacing, adapter chunking,
-  collisions and a trace of the wire.
-- :class:`PtyBus`: the same over pseudo-terminals, so that any program can open a port.
-- :class:`FaultPlan` / :class:`FaultInjector`: reproducible noise on a line.
-- The pytest fixtures in :mod:`aiortu.testing.pytest_plugin` (loaded automatically).
+- [`VirtualBus`][aiortu.testing.VirtualBus] / [`virtual_pair`][aiortu.testing.virtual_pair]:
+  in-memory RS-485 buses of `anyio.abc.ByteStream` endpoints, with baud-rate pacing, adapter
+  chunking, collisions and a trace of the wire.
+- [`PtyBus`][aiortu.testing.PtyBus]: the same over pseudo-terminals, so that any program can open a
+  port.
+- [`FaultPlan`][aiortu.testing.FaultPlan] / [`FaultInjector`][aiortu.testing.FaultInjector]:
+  reproducible noise on a line.
+- The pytest fixtures in [`aiortu.testing.pytest_plugin`][aiortu.testing.pytest_plugin] (loaded
+  automatically).
 
-See ``docs/testing.md``.
+See `docs/testing.md`.
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
 """Fault plans: reproducible line noise for virtual serial lines.
 
-A :class:`FaultPlan` says what goes wrong on a line and how often: flipped bits, dropped
-bytes, bursts of garbage, pauses inside frames and extra latency. A :class:`FaultInjector`
-applies a plan to the bytes that go on the wire, draws every decision from its own seeded
-random generators, and counts what it did in :attr:`FaultInjector.stats`.
+A [`FaultPlan`][aiortu.testing.FaultPlan] says what goes wrong on a line and how often: flipped
+bits, dropped bytes, bursts of garbage, pauses inside frames and extra latency. A
+[`FaultInjector`][aiortu.testing.FaultInjector] applies a plan to the bytes that go on the wire,
+draws every decision from its own seeded random generators, and counts what it did in
+[`FaultInjector.stats`][aiortu.testing.FaultInjector].
 
 Reproducibility: the same plan with the same seed, fed the same bytes, gives the same
 faults. Bit errors, drops and gaps are drawn per bit or per byte from generators of their
@@ -41,18 +42,18 @@ def _check_seconds(name: str, value: float) -> None:
 class FaultPlan:
     """What goes wrong on a virtual line, and how often. All rates default to 0 (a clean line).
 
-    - *bit_error_rate*: probability that any one data bit is flipped.
-    - *drop_rate*: probability that a byte is lost; it still takes its time on the wire.
-    - *garbage_rate*: probability per chunk (one send) of inserting 1..*garbage_max* random
+    - `bit_error_rate`: probability that any one data bit is flipped.
+    - `drop_rate`: probability that a byte is lost; it still takes its time on the wire.
+    - `garbage_rate`: probability per chunk (one send) of inserting 1..`garbage_max` random
       bytes at a random position in it.
-    - *gap_rate* and *gap*: probability per byte of a pause of *gap* seconds after it,
-      which breaks a frame when *gap* exceeds t1.5.
-    - *delay*: extra latency in seconds before each chunk goes on the wire, either fixed or
-      drawn uniformly from a ``(min, max)`` pair; a slow device, or a late reply.
-    - *seed*: the seed of the random generators; ``None`` draws a fresh one (see
-      :attr:`FaultInjector.seed` to find out which).
+    - `gap_rate` and `gap`: probability per byte of a pause of `gap` seconds after it,
+      which breaks a frame when `gap` exceeds t1.5.
+    - `delay`: extra latency in seconds before each chunk goes on the wire, either fixed or
+      drawn uniformly from a `(min, max)` pair; a slow device, or a late reply.
+    - `seed`: the seed of the random generators; `None` draws a fresh one (see
+      [`FaultInjector.seed`][aiortu.testing.FaultInjector.seed] to find out which).
 
-    Raises :class:`~aiortu.errors.InvalidValue` (caused by the caller) for a rate outside
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] (caused by the caller) for a rate outside
     0..1, a negative time, or a gap rate without a gap length.
     """
 
@@ -104,7 +105,7 @@ class FaultPlan:
 
 @dataclass(slots=True)
 class FaultStats:
-    """What a :class:`FaultInjector` has done so far."""
+    """What a [`FaultInjector`][aiortu.testing.FaultInjector] has done so far."""
 
     chunks: int = 0
     bytes: int = 0
@@ -117,9 +118,9 @@ class FaultStats:
 
 
 class FaultedChunk(NamedTuple):
-    """One chunk after the faults: what the wire carries, in order, after *delay* seconds.
+    """One chunk after the faults: what the wire carries, in order, after `delay` seconds.
 
-    *items* holds runs of bytes (sent back to back) and pauses (a ``float`` of seconds).
+    `items` holds runs of bytes (sent back to back) and pauses (a `float` of seconds).
     A dropped byte becomes a pause of one character time, as the wire is busy while it
     passes unseen.
     """
@@ -158,7 +159,7 @@ class _Countdown:
         return int(math.log1p(-self._rng.random()) / self._log_keep)
 
     def take(self, length: int) -> list[int]:
-        """Return the event positions within the next *length* positions of the stream."""
+        """Return the event positions within the next `length` positions of the stream."""
         hits: list[int] = []
         position = self._next
         while position < length:
@@ -169,10 +170,12 @@ class _Countdown:
 
 
 class FaultInjector:
-    """Applies a :class:`FaultPlan` to the chunks of one line, reproducibly.
+    """Applies a [`FaultPlan`][aiortu.testing.FaultPlan] to the chunks of one line, reproducibly.
 
-    Feed it every chunk that goes on the wire, in order, with :meth:`apply` (or
-    :meth:`corrupt` when the timing does not matter). :attr:`stats` counts what it did.
+    Feed it every chunk that goes on the wire, in order, with
+    [`apply`][aiortu.testing.FaultInjector.apply] (or
+    [`corrupt`][aiortu.testing.FaultInjector.corrupt] when the timing does not matter).
+    [`stats`][aiortu.testing.FaultInjector] counts what it did.
     """
 
     def __init__(self, plan: FaultPlan) -> None:
@@ -193,9 +196,9 @@ class FaultInjector:
         return float(delay)
 
     def apply(self, data: bytes, char_time: float = 0.0) -> FaultedChunk:
-        """Return what the wire carries for *data*: the bytes after the faults, with pauses.
+        """Return what the wire carries for `data`: the bytes after the faults, with pauses.
 
-        *char_time* is the time of one character on the line, the length of the pause a
+        `char_time` is the time of one character on the line, the length of the pause a
         dropped byte leaves (0 on an unpaced line).
         """
         plan = self.plan
@@ -259,5 +262,5 @@ class FaultInjector:
         return FaultedChunk(delay, items)
 
     def corrupt(self, data: bytes) -> bytes:
-        """Apply the plan to *data* and return only the bytes a receiver would get."""
+        """Apply the plan to `data` and return only the bytes a receiver would get."""
         return self.apply(data).data

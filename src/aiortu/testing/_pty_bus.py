@@ -1,36 +1,35 @@
 """A virtual RS-485 bus over pseudo-terminals, so that any program can sit on it by device path.
 
-:class:`PtyBus` opens one pseudo-terminal per port. Each port's slave device
-(``/dev/pts/N``, in :attr:`PtyBus.paths`) is what other programs open: pyserial,
-pymodbus, mbpoll, C programs using libmodbus. A relay reads what each program writes
-(from the pty master, through :class:`~aiortu.transport._fd.FileDescriptorStream`) and puts
-it on a :class:`~aiortu.testing.VirtualBus`, whose wire model does the pacing, adapter
-chunking, faults, collision counting and trace; what the bus delivers to a port is written
-to that port's master, where the program reads it.
+[`PtyBus`][aiortu.testing.PtyBus] opens one pseudo-terminal per port. Each port's slave device
+(`/dev/pts/N`, in [`PtyBus.paths`][aiortu.testing.PtyBus.paths]) is what other programs open:
+pyserial, pymodbus, mbpoll, C programs using libmodbus. A relay reads what each program writes (from
+the pty master, through [`FileDescriptorStream`][aiortu.transport.FileDescriptorStream]) and puts it
+on a [`VirtualBus`][aiortu.testing.VirtualBus], whose wire model does the pacing, adapter chunking,
+faults, collision counting and trace; what the bus delivers to a port is written to that port's
+master, where the program reads it.
 
 Port lifetime: the relay keeps every slave open itself, so a program that closes its
 port and opens it again finds it working; without that, the last close would hang the
-pty up and reads of the master would fail with ``EIO``.
+pty up and reads of the master would fail with `EIO`.
 
-Who has a port open: on Linux the relay watches the slave devices with inotify and counts
-the opens and closes by other programs. Bytes for a port that no program has open are
-dropped, as on a cable that nobody listens to, so a program that opens a port late never
-reads earlier traffic. When the last program closes a port, the relay flushes the port's
-input and puts back the bus's raw settings. Where inotify is missing, bytes for a port
-nobody has open wait in the pty's kernel buffer and then in the bus's bounded receive
-buffer for the port (oldest dropped first); pyserial discards them on open, and
-:meth:`PtyBus.discard_input` does it by hand. Either way a port that nobody reads never
-stalls the bus or the other ports.
+Who has a port open: on Linux the relay watches the slave devices with inotify and counts the opens
+and closes by other programs. Bytes for a port that no program has open are dropped, as on a cable
+that nobody listens to, so a program that opens a port late never reads earlier traffic. When the
+last program closes a port, the relay flushes the port's input and puts back the bus's raw settings.
+Where inotify is missing, bytes for a port nobody has open wait in the pty's kernel buffer and then
+in the bus's bounded receive buffer for the port (oldest dropped first); pyserial discards them on
+open, and [`PtyBus.discard_input`][aiortu.testing.PtyBus.discard_input] does it by hand. Either way
+a port that nobody reads never stalls the bus or the other ports.
 
-Parity on a pty: Linux ptys have no parity and clear ``PARENB`` from every setting, and
-glibc's ``tcsetattr`` reports ``EINVAL`` when the flags it asked for did not all stick
+Parity on a pty: Linux ptys have no parity and clear `PARENB` from every setting, and
+glibc's `tcsetattr` reports `EINVAL` when the flags it asked for did not all stick
 and nothing else changed. The relay leaves idle ports in raw mode plus two echo flags that
 are inert without ECHO and that raw-mode programs clear, so a program's first
 configuration of a port always succeeds, with any parity. A second configuration with
-the same settings still fails with parity E or O: pyserial's ``timeout`` setter does this
+the same settings still fails with parity E or O: pyserial's `timeout` setter does this
 (and pymodbus's serial server with it), as does closing and at once reopening the port
 before the relay has seen the close. Programs that reconfigure an open port are best run
-with parity N on a pty bus; the bus paces by its own *settings* anyway.
+with parity N on a pty bus; the bus paces by its own `settings` anyway.
 
 Two ways to relay: on an unpaced bus with no adapter model and no faults, under asyncio,
 the relay reads a port's master from an event-loop reader callback, puts the bytes on the
@@ -71,7 +70,7 @@ __all__ = ("PtyBus", "make_raw")
 
 
 def make_raw(fd: int, baudrate: int | None = None) -> None:
-    """Put the terminal *fd* in raw 8-bit mode, and set its nominal speed to *baudrate*.
+    """Put the terminal `fd` in raw 8-bit mode, and set its nominal speed to `baudrate`.
 
     A pty has no real baud rate; the speed is only reported to programs that ask.
     """
@@ -180,7 +179,7 @@ def _set_idle_settings(fd: int, baudrate: int | None) -> None:
     """Raw mode, plus two echo flags that do nothing while ECHO is off.
 
     Programs that set raw mode clear those flags, so their first configuration always
-    changes something, and glibc's ``tcsetattr`` then accepts it even with parity (see
+    changes something, and glibc's `tcsetattr` then accepts it even with parity (see
     the module docs).
     """
     make_raw(fd, baudrate)
@@ -210,17 +209,17 @@ class _Port:
 class PtyBus:
     """A multi-drop serial bus whose ports are pseudo-terminal device paths.
 
-    The options are :class:`~aiortu.testing.VirtualBus`'s; *link_dir*, when given, gets
-    symbolic links ``port0``, ``port1``, ... to the devices, so that scripts can use stable
+    The options are [`VirtualBus`][aiortu.testing.VirtualBus]'s; `link_dir`, when given, gets
+    symbolic links `port0`, `port1`, ... to the devices, so that scripts can use stable
     names (stale links from an earlier run are replaced; the links are removed on close).
 
-    Use it as ``async with PtyBus(ports=2) as bus:`` (the relay runs in a task group of the
+    Use it as `async with PtyBus(ports=2) as bus:` (the relay runs in a task group of the
     calling task) or, from synchronous code and test fixtures, as
-    ``with PtyBus(ports=2).running_in_thread() as bus:`` (the relay runs in an event loop of
+    `with PtyBus(ports=2).running_in_thread() as bus:` (the relay runs in an event loop of
     its own, in a background thread).
 
-    Raises :class:`~aiortu.errors.InvalidValue` (caused by the caller) for bad options,
-    and :class:`OSError` (caused by the environment) when no pty can be opened.
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] (caused by the caller) for bad options,
+    and `OSError` (caused by the environment) when no pty can be opened.
     """
 
     def __init__(
@@ -254,7 +253,7 @@ class PtyBus:
 
     @property
     def paths(self) -> tuple[str, ...]:
-        """The slave device paths (``/dev/pts/N``), one per port; empty until started."""
+        """The slave device paths (`/dev/pts/N`), one per port; empty until started."""
         return tuple(port.path for port in self._ports)
 
     @property
@@ -278,13 +277,13 @@ class PtyBus:
         return tuple(self.bus.trace)
 
     def is_open(self, port: int) -> bool | None:
-        """Whether some program has *port* open; None where the relay cannot tell."""
+        """Whether some program has `port` open; None where the relay cannot tell."""
         if self._watch is None:
             return None
         return self._watch.counts[port] > 0
 
     def discard_input(self, port: int) -> None:
-        """Drop every byte that waits to be read on *port*, in the relay and in the kernel."""
+        """Drop every byte that waits to be read on `port`, in the relay and in the kernel."""
         endpoint = self.bus[port]
         endpoint._buffer.clear()
         self._ports[port].unsent = None
@@ -332,7 +331,7 @@ class PtyBus:
 
     @contextlib.contextmanager
     def running_in_thread(self) -> Iterator[PtyBus]:
-        """Run the relay in a background thread with its own event loop, for the ``with`` block.
+        """Run the relay in a background thread with its own event loop, for the `with` block.
 
         For synchronous code (a pyserial or pymodbus sync client) and for test fixtures
         whose setup and teardown run in different tasks.
@@ -419,7 +418,7 @@ class PtyBus:
                 loop.remove_writer(port.fd)
 
     def _forward(self, index: int) -> None:
-        """Reader callback: carry what the program on port *index* wrote to the other ports."""
+        """Reader callback: carry what the program on port `index` wrote to the other ports."""
         port = self._ports[index]
         try:
             data = os.read(port.fd, 65536)
@@ -443,7 +442,7 @@ class PtyBus:
                 self._drain(other, other_index)
 
     def _drain(self, port: _Port, index: int) -> None:
-        """Write what the bus delivered to *port* (number *index*) to its master, as it fits."""
+        """Write what the bus delivered to `port` (number `index`) to its master, as it fits."""
         endpoint = self.bus.endpoints[index]
         watch = self._watch
         fd = port.fd
@@ -480,14 +479,14 @@ class PtyBus:
             self._loop.remove_writer(fd)
 
     def _resume(self, index: int) -> None:
-        """Writer callback: the master of port *index* has room again."""
+        """Writer callback: the master of port `index` has room again."""
         self._update_open_ports()
         self._drain(self._ports[index], index)
 
     # --- the relay tasks (pacing, adapter model, faults, or an event loop other than asyncio)
 
     async def _pump_in(self, index: int) -> None:
-        """Carry what the program on port *index* writes onto the wire."""
+        """Carry what the program on port `index` writes onto the wire."""
         master = self._ports[index].master
         endpoint = self.bus[index]
         while True:
@@ -525,7 +524,7 @@ class PtyBus:
             self._update_open_ports()
 
     async def _pump_out(self, index: int) -> None:
-        """Carry what the wire delivers to port *index* to the program on it."""
+        """Carry what the wire delivers to port `index` to the program on it."""
         master = self._ports[index].master
         endpoint = self.bus[index]
         while True:

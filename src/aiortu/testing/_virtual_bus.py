@@ -1,41 +1,42 @@
 """In-memory serial buses: RS-485 wires between byte streams, paced, chunked and noisy on demand.
 
-A :class:`VirtualBus` has N endpoints, each an :class:`anyio.abc.ByteStream`. What one
-endpoint sends reaches every other endpoint and is never echoed to its sender, as on a
-two-wire RS-485 bus; a pair (:func:`virtual_pair`) is a bus of two.
+A [`VirtualBus`][aiortu.testing.VirtualBus] has N endpoints, each an `anyio.abc.ByteStream`. What
+one endpoint sends reaches every other endpoint and is never echoed to its sender, as on a two-wire
+RS-485 bus; a pair ([`virtual_pair`][aiortu.testing.virtual_pair]) is a bus of two.
 
 The wire model:
 
-- One shared wire, half duplex. Transmissions go on it one after the other, in the order
-  they were sent. If an endpoint sends while another endpoint's bytes are still on the
-  wire, the bus counts a collision in :attr:`VirtualBus.collisions` and queues the new
-  bytes after the ones on the wire, unchanged, as if the transceiver had waited. A test
-  that wants collisions to garble frames adds a :class:`~aiortu.testing.FaultPlan`.
-- Pacing: with *settings*, bytes leave at the character rate of those line settings:
-  byte k of a transmission starting at t0 arrives at ``t0 + (k + 1) * char_time``. Due
+- One shared wire, half duplex. Transmissions go on it one after the other, in the order they were
+  sent. If an endpoint sends while another endpoint's bytes are still on the wire, the bus counts a
+  collision in [`VirtualBus.collisions`][aiortu.testing.VirtualBus.collisions] and queues the new
+  bytes after the ones on the wire, unchanged, as if the transceiver had waited. A test that wants
+  collisions to garble frames adds a [`FaultPlan`][aiortu.testing.FaultPlan].
+- Pacing: with `settings`, bytes leave at the character rate of those line settings:
+  byte k of a transmission starting at t0 arrives at `t0 + (k + 1) * char_time`. Due
   times are absolute, so a slow scheduler delays single deliveries but never accumulates
-  drift. Without *settings* the line is unpaced and bytes arrive at once.
-- Adapter chunking: *latency* models the receive timer of a USB serial adapter: bytes are
-  held and handed over *latency* seconds after the first of them arrived, at most
-  *chunk_size* bytes at a time (a full chunk goes at once). Every receiver's adapter runs in
+  drift. Without `settings` the line is unpaced and bytes arrive at once.
+- Adapter chunking: `latency` models the receive timer of a USB serial adapter: bytes are
+  held and handed over `latency` seconds after the first of them arrived, at most
+  `chunk_size` bytes at a time (a full chunk goes at once). Every receiver's adapter runs in
   step, so all see the same chunk boundaries.
-- Faults: one :class:`~aiortu.testing.FaultInjector` per bus, applied to each transmission
+- Faults: one [`FaultInjector`][aiortu.testing.FaultInjector] per bus, applied to each transmission
   as it goes on the wire; every receiver sees the same corrupted bytes, as with noise on
   the cable. Faults are reproducible from the plan's seed, for a given sequence of sends.
-- :attr:`VirtualBus.trace` keeps the last *trace_size* transmissions with their paced wire
-  times. A transmission that continues the same sender's previous one without a pause is
-  merged into its entry, so one entry is one burst on the wire.
-- Receive buffers are bounded (*receive_buffer_size* bytes per endpoint). An endpoint
-  that does not read loses its oldest bytes, counted in
-  :attr:`VirtualEndpoint.overrun_bytes`, like a UART overrun; it never stalls the bus.
-- Send buffers: on a paced bus :meth:`VirtualEndpoint.send` returns once the bytes are
-  queued, and waits first while more than *send_buffer_size* bytes are waiting for the
-  wire, like a kernel transmit buffer.
+- [`VirtualBus.trace`][aiortu.testing.VirtualBus.trace] keeps the last `trace_size` transmissions
+  with their paced wire times. A transmission that continues the same sender's previous one without
+  a pause is merged into its entry, so one entry is one burst on the wire.
+- Receive buffers are bounded (`receive_buffer_size` bytes per endpoint). An endpoint that does not
+  read loses its oldest bytes, counted in
+  [`VirtualEndpoint.overrun_bytes`][aiortu.testing.VirtualEndpoint.overrun_bytes], like a UART
+  overrun; it never stalls the bus.
+- Send buffers: on a paced bus [`VirtualEndpoint.send`][aiortu.testing.VirtualEndpoint.send] returns
+  once the bytes are queued, and waits first while more than `send_buffer_size` bytes are waiting
+  for the wire, like a kernel transmit buffer.
 
 Wake-ups: a receiver waiting for paced bytes sleeps until they are due. asyncio's event
 loop waits in whole milliseconds (rounded up), which would hand over the last byte of a
 frame up to a millisecond late; so under asyncio on Linux the bus wakes its receivers
-with a :class:`~aiortu.line._wake_timer.WakeTimer` (a ``timerfd`` at the due time, to the
+with a [`WakeTimer`][aiortu.line.WakeTimer] (a `timerfd` at the due time, to the
 nanosecond) and never before the due time. Bytes in the middle of a transmission are
 handed over at most about a millisecond apart (all that are due at each wake-up, as a
 UART's FIFO would), the last byte of each run of bytes at its due time. Elsewhere (trio,
@@ -43,22 +44,21 @@ other systems) the receivers sleep with the event loop's own timers.
 
 There is no background task: the wire is a schedule computed when bytes are sent, and
 deliveries happen when a receiver (or sender) looks at the clock. The endpoints therefore
-work with or without ``async with``, under asyncio and trio alike; ``async with`` (or
-:meth:`VirtualBus.aclose`) closes every endpoint at the end.
+work with or without `async with`, under asyncio and trio alike; `async with` (or
+[`VirtualBus.aclose`][aiortu.testing.VirtualBus.aclose]) closes every endpoint at the end.
 
-The push extension: on a bus where nothing is ever held on the wire (unpaced, no adapter
-model, no faults: :attr:`VirtualBus.pushes`), the endpoints also have the serial port's
-``set_receiver(receiver, on_lost)`` and ``send_nowait(data)``. The master's and the
-slave's link then take their push path, as on a serial port: a transmission reaches the
-receiving link from one event loop callback in the loop pass after it was sent (never
-inside the sender's call, so no consumer is re-entered), and a link writes without a
-yield; no task wakes up per frame. Paced, chunked and faulted buses keep the plain byte
-stream, which the link reads from a task. Reads through :meth:`VirtualEndpoint.receive`
-work on both.
+The push extension: on a bus where nothing is ever held on the wire (unpaced, no adapter model, no
+faults: [`VirtualBus.pushes`][aiortu.testing.VirtualBus.pushes]), the endpoints also have the serial
+port's `set_receiver(receiver, on_lost)` and `send_nowait(data)`. The master's and the slave's link
+then take their push path, as on a serial port: a transmission reaches the receiving link from one
+event loop callback in the loop pass after it was sent (never inside the sender's call, so no
+consumer is re-entered), and a link writes without a yield; no task wakes up per frame. Paced,
+chunked and faulted buses keep the plain byte stream, which the link reads from a task. Reads
+through [`VirtualEndpoint.receive`][aiortu.testing.VirtualEndpoint.receive] work on both.
 
-Cancellation: :meth:`VirtualEndpoint.receive` is cancelled only before it takes bytes
-off the bus. A reader whose deadline comes due in the loop pass that delivered a frame
-gets the frame on its next call; the bytes are never taken and dropped.
+Cancellation: [`VirtualEndpoint.receive`][aiortu.testing.VirtualEndpoint.receive] is cancelled only
+before it takes bytes off the bus. A reader whose deadline comes due in the loop pass that delivered
+a frame gets the frame on its next call; the bytes are never taken and dropped.
 """
 
 from __future__ import annotations
@@ -94,11 +94,11 @@ _BATCH = 1e-3
 
 @dataclass(frozen=True, slots=True)
 class TraceEntry:
-    """One burst on the wire: *sender* put *data* on it from *start* to *end* (clock seconds).
+    """One burst on the wire: `sender` put `data` on it from `start` to `end` (clock seconds).
 
-    *data* is what went on the wire, after any faults. Times come from
-    :func:`anyio.current_time` and are the paced wire times, including pauses inside the
-    burst; on an unpaced line *start* equals *end*.
+    `data` is what went on the wire, after any faults. Times come from
+    `anyio.current_time` and are the paced wire times, including pauses inside the
+    burst; on an unpaced line `start` equals `end`.
     """
 
     start: float
@@ -108,7 +108,7 @@ class TraceEntry:
 
 
 class _Segment:
-    """A run of bytes sent back to back, starting at *start*; *done* of them have arrived."""
+    """A run of bytes sent back to back, starting at `start`; `done` of them have arrived."""
 
     __slots__ = ("data", "done", "sender", "start")
 
@@ -125,20 +125,22 @@ def _check_int(name: str, value: object, minimum: int) -> None:
 
 
 class VirtualEndpoint(anyio.abc.ByteStream):
-    """One device's connection to a :class:`VirtualBus`. Created by the bus.
+    """One device's connection to a [`VirtualBus`][aiortu.testing.VirtualBus]. Created by the bus.
 
-    :meth:`receive` returns whatever has arrived, up to *max_bytes*; it raises
-    :class:`anyio.EndOfStream` once every other endpoint is closed and everything they sent
-    was received, and :class:`anyio.ClosedResourceError` after :meth:`aclose`. On a bus
-    whose :attr:`~VirtualBus.pushes` is true the endpoints also have ``set_receiver`` and
-    ``send_nowait``, the serial port's push extension (see the module docs).
+    [`receive`][aiortu.testing.VirtualEndpoint.receive] returns whatever has arrived, up to
+    *max_bytes*; it raises `anyio.EndOfStream` once every other endpoint is closed and everything
+    they sent was received, and `anyio.ClosedResourceError` after
+    [`aclose`][aiortu.testing.VirtualEndpoint.aclose]. On a bus whose
+    [`pushes`][aiortu.testing.VirtualBus.pushes] is true the endpoints also have `set_receiver` and
+    `send_nowait`, the serial port's push extension (see the module docs).
     """
 
     def __init__(self, bus: VirtualBus, index: int, buffer_size: int) -> None:
         self.bus = bus
         """The bus this endpoint is on."""
         self.index = index
-        """This endpoint's position on the bus, as used in :attr:`TraceEntry.sender`."""
+        """This endpoint's position on the bus, as used in
+        [`TraceEntry.sender`][aiortu.testing.TraceEntry]."""
         self.overrun_bytes = 0
         """Bytes lost because the receive buffer was full (the oldest go first)."""
         self._buffer = bytearray()
@@ -167,7 +169,7 @@ class VirtualEndpoint(anyio.abc.ByteStream):
             self.overrun_bytes += excess
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
-        """Wait for bytes from the other endpoints and return up to *max_bytes* of them."""
+        """Wait for bytes from the other endpoints and return up to `max_bytes` of them."""
         with self._receive_guard:
             bus = self.bus
             # A cancellation (a reader's deadline) may only end the call before it takes
@@ -188,10 +190,11 @@ class VirtualEndpoint(anyio.abc.ByteStream):
                 await bus._wait(now)
 
     def _take(self, max_bytes: int = 65536) -> bytes:
-        """Return up to *max_bytes* of the bytes that already arrived (``b""`` if none).
+        """Return up to `max_bytes` of the bytes that already arrived (`b""` if none).
 
-        Does not look at the clock: on a paced bus, bytes that are due but not yet
-        delivered stay on the wire. For relays that deliver outside :meth:`receive`.
+        Does not look at the clock: on a paced bus, bytes that are due but not yet delivered stay on
+        the wire. For relays that deliver outside
+        [`receive`][aiortu.testing.VirtualEndpoint.receive].
         """
         buffer = self._buffer
         if not buffer:
@@ -201,7 +204,7 @@ class VirtualEndpoint(anyio.abc.ByteStream):
         return data
 
     async def send(self, item: bytes) -> None:
-        """Put *item* on the wire after what is already there (see the module docs)."""
+        """Put `item` on the wire after what is already there (see the module docs)."""
         await anyio.lowlevel.checkpoint()
         if self._closed:
             raise anyio.ClosedResourceError
@@ -223,7 +226,8 @@ class VirtualEndpoint(anyio.abc.ByteStream):
             endpoint._check_lost()
 
     def _check_lost(self) -> None:
-        """Tell a pushing endpoint's consumer, once, that :meth:`receive` would now raise."""
+        """Tell a pushing endpoint's consumer, once, that
+        [`receive`][aiortu.testing.VirtualEndpoint.receive] would now raise."""
         on_lost = self._on_lost
         if on_lost is None:
             return
@@ -232,7 +236,7 @@ class VirtualEndpoint(anyio.abc.ByteStream):
             on_lost()
 
     async def aclose(self) -> None:
-        """Close this endpoint (see :meth:`close`)."""
+        """Close this endpoint (see [`close`][aiortu.testing.VirtualEndpoint.close])."""
         self.close()
         await anyio.lowlevel.checkpoint()
 
@@ -251,8 +255,8 @@ def _loop_callbacks() -> tuple[Callable[[Callable[[], None]], object], Callable[
 
 class _PushingEndpoint(VirtualEndpoint):
     """An endpoint of a bus where nothing is ever held on the wire (see
-    :attr:`VirtualBus.pushes`): besides the byte stream, the push extension of the serial
-    port (:meth:`set_receiver`, :meth:`send_nowait`), so that a link reads and writes it
+    [`VirtualBus.pushes`][aiortu.testing.VirtualBus.pushes]): besides the byte stream, the push
+    extension of the serial port (`set_receiver`, `send_nowait`), so that a link reads and writes it
     without a task wake-up per frame."""
 
     def __init__(self, bus: VirtualBus, index: int, buffer_size: int) -> None:
@@ -267,15 +271,16 @@ class _PushingEndpoint(VirtualEndpoint):
         receiver: Callable[[bytes], None] | None,
         on_lost: Callable[[], None] | None = None,
     ) -> None:
-        """Hand what arrives to *receiver* from an event loop callback, instead of keeping
-        it for :meth:`receive` (``None`` keeps it again). Call it in the event loop.
+        """Hand what arrives to `receiver` from an event loop callback, instead of keeping it for
+        [`receive`][aiortu.testing.VirtualEndpoint.receive] (`None` keeps it again). Call it in the
+        event loop.
 
-        The callback runs in the loop pass after the bytes were sent, never inside the
-        sender's call, and hands over everything that arrived meanwhile in one chunk: a
-        whole transmission, as a serial port's read would. Bytes already kept go to
-        *receiver* at once. *on_lost* is called once :meth:`receive` would raise (this
-        endpoint closed, or every other one closed and everything they sent handed
-        over), at once if it already would.
+        The callback runs in the loop pass after the bytes were sent, never inside the sender's
+        call, and hands over everything that arrived meanwhile in one chunk: a whole transmission,
+        as a serial port's read would. Bytes already kept go to `receiver` at once. `on_lost` is
+        called once [`receive`][aiortu.testing.VirtualEndpoint.receive] would raise (this endpoint
+        closed, or every other one closed and everything they sent handed over), at once if it
+        already would.
         """
         self._receiver = receiver
         self._on_lost = on_lost if receiver is not None else None
@@ -287,7 +292,7 @@ class _PushingEndpoint(VirtualEndpoint):
         self._check_lost()
 
     def send_nowait(self, item: bytes) -> bool:
-        """Put *item* on the wire now, without a yield; return False (nothing sent) once
+        """Put `item` on the wire now, without a yield; return False (nothing sent) once
         this endpoint is closed. The other endpoints have it when this returns."""
         if self._closed:
             return False
@@ -315,9 +320,9 @@ class _PushingEndpoint(VirtualEndpoint):
 
 
 class VirtualBus:
-    """An in-memory multi-drop serial bus with *ports* endpoints (see the module docs).
+    """An in-memory multi-drop serial bus with `ports` endpoints (see the module docs).
 
-    Raises :class:`~aiortu.errors.InvalidValue` (caused by the caller) for a bad number
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] (caused by the caller) for a bad number
     of ports, chunk size, latency or buffer size.
     """
 
@@ -351,7 +356,7 @@ class VirtualBus:
         self.injector: FaultInjector | None = (
             FaultInjector(faults) if faults is not None and not faults.is_clean else None
         )
-        """The bus's fault injector (None without faults); its ``stats`` count the faults."""
+        """The bus's fault injector (None without faults); its `stats` count the faults."""
         self.collisions = 0
         """Transmissions that started while another endpoint's bytes were on the wire."""
         self.trace: deque[TraceEntry] = deque(maxlen=trace_size)
@@ -382,7 +387,7 @@ class VirtualBus:
     def pushes(self) -> bool:
         """Whether nothing is ever held on the wire (unpaced, no adapter model, no faults):
         then every byte sent is delivered before the send returns, and the endpoints also
-        offer the serial port's push extension (``set_receiver``, ``send_nowait``), which
+        offer the serial port's push extension (`set_receiver`, `send_nowait`), which
         the master and the slave read and write without a task wake-up per frame."""
         return self._pushes
 
@@ -431,7 +436,7 @@ class VirtualBus:
         self._timer = None
 
     async def aclose(self) -> None:
-        """Close every endpoint (see :meth:`close`)."""
+        """Close every endpoint (see [`close`][aiortu.testing.VirtualBus.close])."""
         self.close()
         await anyio.lowlevel.checkpoint()
 
@@ -443,7 +448,7 @@ class VirtualBus:
         return self._event
 
     async def _wait(self, now: float) -> None:
-        """Wait until something changes or the next bytes are due (*now* is the time)."""
+        """Wait until something changes or the next bytes are due (`now` is the time)."""
         event = self._changed()
         timer = self._timer
         if timer is False:
@@ -497,7 +502,7 @@ class VirtualBus:
         self._transmit_now(sender, data, anyio.current_time())
 
     def _transmit_now(self, sender: VirtualEndpoint, data: bytes, now: float) -> None:
-        """Put *data* on the wire at *now*, without waiting for room in the send buffer.
+        """Put `data` on the wire at `now`, without waiting for room in the send buffer.
 
         On an unpaced bus without adapter model or faults, everything is delivered to the
         other endpoints' receive buffers before this returns.
@@ -558,7 +563,7 @@ class VirtualBus:
         return deadline
 
     def _advance(self, now: float) -> None:
-        """Deliver everything due by *now*, in wire order."""
+        """Deliver everything due by `now`, in wire order."""
         delivered = False
         char_time = self._char_time
         while self._segments:
@@ -583,7 +588,7 @@ class VirtualBus:
             self._notify()
 
     def _feed(self, segment: _Segment, first: int, stop: int) -> None:
-        """Pass bytes [first, stop) of *segment* through the adapter model."""
+        """Pass bytes [first, stop) of `segment` through the adapter model."""
         data = segment.data
         if self.chunk_size is None and self.latency == 0:
             self._deliver(segment.sender, data[first:stop])
@@ -634,9 +639,10 @@ def virtual_pair(
     latency: float = 0.0,
     faults: FaultPlan | None = None,
 ) -> tuple[VirtualEndpoint, VirtualEndpoint]:
-    """Return the two endpoints of a new two-port :class:`VirtualBus` (a point-to-point line).
+    """Return the two endpoints of a new two-port [`VirtualBus`][aiortu.testing.VirtualBus] (a
+    point-to-point line).
 
-    The options are the bus's; each endpoint's ``bus`` attribute reaches the bus (for its
+    The options are the bus's; each endpoint's `bus` attribute reaches the bus (for its
     trace, collisions and fault statistics).
     """
     bus = VirtualBus(2, settings=settings, chunk_size=chunk_size, latency=latency, faults=faults)

@@ -1,4 +1,4 @@
-"""Deprecated: moved to :mod:`aiortu.testing`. Importing this module warns once."""
+"""Deprecated: moved to [`aiortu.testing`][aiortu.testing]. Importing this module warns once."""
 
 from aiortu._moved import forward
 

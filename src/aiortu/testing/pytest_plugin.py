@@ -1,14 +1,14 @@
 """The aiortu pytest plugin: fixtures for virtual serial lines, loaded when aiortu is installed.
 
-Registered through the ``pytest11`` entry point, so any suite gets these fixtures:
+Registered through the `pytest11` entry point, so any suite gets these fixtures:
 
-- ``virtual_pair``: the two endpoints of an unpaced in-memory line, ``(a, b)``.
-- ``virtual_bus``: a factory, ``virtual_bus(ports=3, settings=..., faults=...)``, that
-  returns a ready :class:`~aiortu.testing.VirtualBus`, usable at once or with
-  ``async with``.
-- ``pty_bus``: a factory, ``pty_bus(ports=2, settings=..., faults=...)``, that returns a
-  running :class:`~aiortu.testing.PtyBus` (its relay runs in a background thread), whose
-  ``paths`` any program can open.
+- `virtual_pair`: the two endpoints of an unpaced in-memory line, `(a, b)`.
+- `virtual_bus`: a factory, `virtual_bus(ports=3, settings=..., faults=...)`, that
+  returns a ready [`VirtualBus`][aiortu.testing.VirtualBus], usable at once or with
+  `async with`.
+- `pty_bus`: a factory, `pty_bus(ports=2, settings=..., faults=...)`, that returns a
+  running [`PtyBus`][aiortu.testing.PtyBus] (its relay runs in a background thread), whose
+  `paths` any program can open.
 
 Everything the fixtures make is closed at the end of the test.
 
@@ -35,13 +35,14 @@ __all__ = ("PtyBusFactory", "VirtualBusFactory", "pty_bus", "virtual_bus", "virt
 
 
 class VirtualBusFactory(Protocol):
-    """The type of the ``virtual_bus`` fixture: takes :class:`VirtualBus`'s arguments."""
+    """The type of the `virtual_bus` fixture: takes [`VirtualBus`][aiortu.testing.VirtualBus]'s
+    arguments."""
 
     def __call__(self, ports: int = 2, **options: Any) -> VirtualBus: ...
 
 
 class PtyBusFactory(Protocol):
-    """The type of the ``pty_bus`` fixture: takes :class:`PtyBus`'s arguments."""
+    """The type of the `pty_bus` fixture: takes [`PtyBus`][aiortu.testing.PtyBus]'s arguments."""
 
     def __call__(self, ports: int = 2, **options: Any) -> PtyBus: ...
 

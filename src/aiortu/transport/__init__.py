@@ -1,12 +1,12 @@
 """Byte streams that carry RTU frames: serial ports, RTU over TCP, pty file descriptors.
 
-Every transport is an :class:`anyio.abc.ByteStream`, so the link, the master and the
-slave take any of them. A stream that also implements :class:`PushStream` (the serial
-port does) saves the link a task wake-up per chunk read and per frame sent.
-:func:`open_stream` opens one from a port name as users write it: a serial device path,
-or ``rtu+tcp://host:port`` (see :mod:`aiortu.transport._url`).
-Opening errors are :class:`~aiortu.errors.PortError` subclasses naming the port; see
-``docs/transports.md`` for what each means and what to do about it.
+Every transport is an `anyio.abc.ByteStream`, so the link, the master and the slave take any of
+them. A stream that also implements [`PushStream`][aiortu.transport.PushStream] (the serial port
+does) saves the link a task wake-up per chunk read and per frame sent.
+[`open_stream`][aiortu.transport.open_stream] opens one from a port name as users write it: a serial
+device path, or `rtu+tcp://host:port` (see [`aiortu.transport`][aiortu.transport]). Opening errors
+are [`PortError`][aiortu.errors.PortError] subclasses naming the port; see `docs/transports.md` for
+what each means and what to do about it.
 """
 
 from __future__ import annotations
@@ -55,15 +55,15 @@ async def open_stream(
 ) -> ByteStream:
     """Open the transport a port name designates and return it as a byte stream.
 
-    ``rtu+tcp://host:port`` connects to a serial device server
-    (:func:`open_rtu_over_tcp`; option ``connect_timeout``; *settings* are not sent
-    anywhere, as the server's serial side is configured on the server). Anything else is
-    a serial device path (:func:`open_serial`; options ``exclusive``, ``rs485`` and
-    ``local_echo``).
+    `rtu+tcp://host:port` connects to a serial device server
+    ([`open_rtu_over_tcp`][aiortu.transport.open_rtu_over_tcp]; option `connect_timeout`; `settings`
+    are not sent anywhere, as the server's serial side is configured on the server). Anything else
+    is a serial device path ([`open_serial`][aiortu.transport.open_serial]; options `exclusive`,
+    `rs485` and `local_echo`).
 
-    Raises :class:`~aiortu.errors.InvalidValue` for a malformed URL,
-    :class:`TypeError` for an option the transport does not take, and the transport's
-    :class:`~aiortu.errors.PortError` subclasses when it cannot be opened.
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a malformed URL,
+    `TypeError` for an option the transport does not take, and the transport's
+    [`PortError`][aiortu.errors.PortError] subclasses when it cannot be opened.
     """
     address = parse_port_url(port_or_url)
     allowed = _TCP_OPTIONS if isinstance(address, TcpAddress) else _SERIAL_OPTIONS

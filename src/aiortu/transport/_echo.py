@@ -1,25 +1,26 @@
 """Removing the local echo that some RS-485 adapters return.
 
-A half-duplex RS-485 adapter whose receiver stays enabled while it transmits hands every
-byte we send straight back to us, ahead of the device's reply. :class:`LocalEchoFilter`
-remembers what was sent and strips exactly those bytes from the front of the received
-stream, however the echo is split across reads.
+A half-duplex RS-485 adapter whose receiver stays enabled while it transmits hands every byte we
+send straight back to us, ahead of the device's reply.
+[`LocalEchoFilter`][aiortu.transport.LocalEchoFilter] remembers what was sent and strips exactly
+those bytes from the front of the received stream, however the echo is split across reads.
 
-Mismatch policy: when a received byte differs from the next expected echo byte, the echo
-was corrupted (two transmitters collided, or the line is faulty) or the adapter does not
-echo at all. The filter then stops stripping: it forgets the rest of the expected echo,
-passes the mismatching byte and everything after it on unchanged, and counts the event in
-:attr:`LocalEchoFilter.mismatches`. Passing the bytes on, rather than dropping them,
-leaves the decision to the frame receiver, which rejects the garbage on its CRC and
-resynchronises, so the master sees a frame error or a timeout and can retry; nothing is
+Mismatch policy: when a received byte differs from the next expected echo byte, the echo was
+corrupted (two transmitters collided, or the line is faulty) or the adapter does not echo at all.
+The filter then stops stripping: it forgets the rest of the expected echo, passes the mismatching
+byte and everything after it on unchanged, and counts the event in
+[`LocalEchoFilter.mismatches`][aiortu.transport.LocalEchoFilter.mismatches]. Passing the bytes on,
+rather than dropping them, leaves the decision to the frame receiver, which rejects the garbage on
+its CRC and resynchronises, so the master sees a frame error or a timeout and can retry; nothing is
 ever silently swallowed beyond the bytes that did match the echo.
 
-Missing echo: an echo comes back while its bytes are on the wire, ahead of any reply, so
-the echo still expected is at most the frame being sent (256 bytes at most, possibly
-written in several chunks). Bytes expected beyond that are echoes that never came (an
-adapter that dropped them, or does not echo, with a device that left the requests
-unanswered): :meth:`LocalEchoFilter.expect` forgets them and counts them in
-:attr:`LocalEchoFilter.missing`, so that what is expected never grows with the requests.
+Missing echo: an echo comes back while its bytes are on the wire, ahead of any reply, so the echo
+still expected is at most the frame being sent (256 bytes at most, possibly written in several
+chunks). Bytes expected beyond that are echoes that never came (an adapter that dropped them, or
+does not echo, with a device that left the requests unanswered):
+[`LocalEchoFilter.expect`][aiortu.transport.LocalEchoFilter.expect] forgets them and counts them in
+[`LocalEchoFilter.missing`][aiortu.transport.LocalEchoFilter.missing], so that what is expected
+never grows with the requests.
 
 The filter does no I/O and reads no clock, so every case is testable with exact bytes.
 """
@@ -35,8 +36,9 @@ _MAX_ECHO = 256
 class LocalEchoFilter:
     """Strips the echo of our own transmissions from a received byte stream.
 
-    Call :meth:`expect` with every chunk just before it is written, and :meth:`feed`
-    with every received chunk; :meth:`feed` returns what is left once the echo is removed.
+    Call [`expect`][aiortu.transport.LocalEchoFilter.expect] with every chunk just before it is
+    written, and [`feed`][aiortu.transport.LocalEchoFilter.feed] with every received chunk;
+    [`feed`][aiortu.transport.LocalEchoFilter.feed] returns what is left once the echo is removed.
 
     >>> echo = LocalEchoFilter()
     >>> echo.expect(b"\\x11\\x03\\x00\\x6b")
@@ -55,7 +57,8 @@ class LocalEchoFilter:
         self.mismatches = 0
         """Times the received bytes differed from the expected echo (see the module docs)."""
         self.missing = 0
-        """Bytes whose echo never came, forgotten by :meth:`expect` (see the module docs)."""
+        """Bytes whose echo never came, forgotten by
+        [`expect`][aiortu.transport.LocalEchoFilter.expect] (see the module docs)."""
 
     @property
     def pending(self) -> int:
@@ -79,7 +82,7 @@ class LocalEchoFilter:
         self._pending.clear()
 
     def feed(self, received: bytes | bytearray | memoryview) -> bytes:
-        """Return *received* without the echo bytes it starts with."""
+        """Return `received` without the echo bytes it starts with."""
         data = bytes(received)
         if not self._pending or not data:
             return data

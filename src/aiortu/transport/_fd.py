@@ -1,14 +1,14 @@
 """A byte stream over a non-blocking file descriptor, such as either end of a pseudo-terminal.
 
-:class:`FileDescriptorStream` turns a raw descriptor into an :class:`anyio.abc.ByteStream`
-so that the rest of aiortu (the pty test bench, a link over a device node opened by hand)
-can use it like any other transport. It waits for readiness with
-:func:`anyio.wait_readable` / :func:`anyio.wait_writable`, so it runs under asyncio and
-trio alike.
+[`FileDescriptorStream`][aiortu.transport.FileDescriptorStream] turns a raw descriptor into an
+`anyio.abc.ByteStream` so that the rest of aiortu (the pty test bench, a link over a device node
+opened by hand) can use it like any other transport. It waits for readiness with
+`anyio.wait_readable` / `anyio.wait_writable`, so it runs under asyncio and trio alike.
 
-End of stream: when the peer of a pseudo-terminal is gone, Linux reports ``EIO`` on read
-(and some systems return ``b""``). Both end the stream: :meth:`~FileDescriptorStream.receive`
-raises :class:`anyio.EndOfStream`. A failing write raises :class:`anyio.BrokenResourceError`.
+End of stream: when the peer of a pseudo-terminal is gone, Linux reports `EIO` on read (and some
+systems return `b""`). Both end the stream:
+[`receive`][aiortu.transport.FileDescriptorStream.receive] raises `anyio.EndOfStream`. A failing
+write raises `anyio.BrokenResourceError`.
 """
 
 from __future__ import annotations
@@ -28,12 +28,12 @@ _END_OF_STREAM_ERRNOS = frozenset({errno.EIO, errno.ENXIO})
 class FileDescriptorStream(anyio.abc.ByteStream):
     """A byte stream that reads and writes one non-blocking file descriptor.
 
-    *fd* is switched to non-blocking mode. With *owns_fd* (the default) :meth:`aclose`
-    closes the descriptor; otherwise the caller keeps ownership and closing the stream only
-    stops it from being used.
+    `fd` is switched to non-blocking mode. With `owns_fd` (the default)
+    [`aclose`][aiortu.transport.FileDescriptorStream.aclose] closes the descriptor; otherwise the
+    caller keeps ownership and closing the stream only stops it from being used.
 
     One task may receive while another sends; two concurrent receivers (or senders) raise
-    :class:`anyio.BusyResourceError`.
+    `anyio.BusyResourceError`.
     """
 
     def __init__(self, fd: int, *, owns_fd: bool = True) -> None:
@@ -51,7 +51,7 @@ class FileDescriptorStream(anyio.abc.ByteStream):
 
     @property
     def closed(self) -> bool:
-        """True once :meth:`aclose` was called."""
+        """True once [`aclose`][aiortu.transport.FileDescriptorStream.aclose] was called."""
         return self._closed
 
     def _check_open(self) -> None:
@@ -59,11 +59,11 @@ class FileDescriptorStream(anyio.abc.ByteStream):
             raise anyio.ClosedResourceError
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
-        """Wait until the descriptor is readable and return up to *max_bytes* bytes.
+        """Wait until the descriptor is readable and return up to `max_bytes` bytes.
 
-        Raises :class:`anyio.EndOfStream` when the other side is gone (``EIO`` or an empty
-        read), :class:`anyio.BrokenResourceError` on any other read error and
-        :class:`anyio.ClosedResourceError` if this stream was closed, also while waiting.
+        Raises `anyio.EndOfStream` when the other side is gone (`EIO` or an empty
+        read), `anyio.BrokenResourceError` on any other read error and
+        `anyio.ClosedResourceError` if this stream was closed, also while waiting.
         """
         with self._receive_guard:
             while True:
@@ -82,10 +82,10 @@ class FileDescriptorStream(anyio.abc.ByteStream):
                 return data
 
     async def send(self, item: bytes) -> None:
-        """Write all of *item*, waiting for the descriptor to become writable when it is full.
+        """Write all of `item`, waiting for the descriptor to become writable when it is full.
 
-        Raises :class:`anyio.BrokenResourceError` when the write fails (the other side is
-        gone, or any other OS error) and :class:`anyio.ClosedResourceError` if this stream
+        Raises `anyio.BrokenResourceError` when the write fails (the other side is
+        gone, or any other OS error) and `anyio.ClosedResourceError` if this stream
         was closed, also while waiting.
         """
         with self._send_guard:
@@ -110,8 +110,9 @@ class FileDescriptorStream(anyio.abc.ByteStream):
     async def aclose(self) -> None:
         """Close the stream and, if it owns the descriptor, the descriptor.
 
-        Tasks waiting in :meth:`receive` or :meth:`send` get
-        :class:`anyio.ClosedResourceError`. Closing twice is harmless.
+        Tasks waiting in [`receive`][aiortu.transport.FileDescriptorStream.receive] or
+        [`send`][aiortu.transport.FileDescriptorStream.send] get `anyio.ClosedResourceError`.
+        Closing twice is harmless.
         """
         if self._closed:
             return

@@ -1,16 +1,16 @@
 """The push extension: a byte stream that hands over received bytes and writes without a yield.
 
-Any :class:`anyio.abc.ByteStream` carries a line; a stream that also has the two methods
-of :class:`PushStream` lets the :class:`~aiortu.line.Link` skip a task wake-up per chunk
-read and per frame sent. The serial port's :class:`~aiortu.transport.SerialStream`
-implements it. The extension is structural: a stream needs no base class, only both
-methods with these signatures.
+Any `anyio.abc.ByteStream` carries a line; a stream that also has the two methods of
+[`PushStream`][aiortu.transport.PushStream] lets the [`Link`][aiortu.line.Link] skip a task wake-up
+per chunk read and per frame sent. The serial port's [`SerialStream`][aiortu.transport.SerialStream]
+implements it. The extension is structural: a stream needs no base class, only both methods with
+these signatures.
 
-The link checks for it once, when it is made (``isinstance(stream, PushStream)``), and
-keeps the bound methods, so the check costs nothing per chunk. It reads a push stream
-through :meth:`PushStream.set_receiver` only where the running event loop offers
-``call_at`` timers (asyncio); elsewhere (trio) it reads it through ``receive()`` like any
-other stream, so a push stream must keep ``receive()`` and ``send()`` working as well.
+The link checks for it once, when it is made (`isinstance(stream, PushStream)`), and keeps the bound
+methods, so the check costs nothing per chunk. It reads a push stream through
+[`PushStream.set_receiver`][aiortu.transport.PushStream.set_receiver] only where the running event
+loop offers `call_at` timers (asyncio); elsewhere (trio) it reads it through `receive()` like any
+other stream, so a push stream must keep `receive()` and `send()` working as well.
 """
 
 from __future__ import annotations
@@ -34,38 +34,39 @@ class PushStream(Protocol):
         receiver: Callable[[bytes], None] | None,
         on_lost: Callable[[], None] | None = None,
     ) -> None:
-        """Hand every chunk received from now on to *receiver*, instead of keeping it
-        for ``receive()``; ``None`` keeps chunks for ``receive()`` again.
+        """Hand every chunk received from now on to `receiver`, instead of keeping it
+        for `receive()`; `None` keeps chunks for `receive()` again.
 
         Called by the link's reader task when it starts (with its chunk callback) and
-        when it stops (with ``None``). The stream must:
+        when it stops (with `None`). The stream must:
 
-        - call *receiver* with each non-empty chunk, in order, in the event loop's
-          thread: from a callback (the serial port's read callback) or from the task
-          that wrote the bytes (an in-memory line), never from inside this stream's
-          own :meth:`send_nowait`; bytes already kept go to *receiver* at once, before
-          this method returns;
-        - call *on_lost* once when the stream fails or is closed, also at once if it
-          already has; ``receive()`` then raises what ended the stream
-          (:class:`anyio.BrokenResourceError`, :class:`anyio.EndOfStream` or
-          :class:`anyio.ClosedResourceError`);
-        - keep nothing for ``receive()`` while a receiver is set.
+        - call `receiver` with each non-empty chunk, in order, in the event loop's thread: from a
+          callback (the serial port's read callback) or from the task that wrote the bytes (an
+          in-memory line), never from inside this stream's own
+          [`send_nowait`][aiortu.transport.PushStream.send_nowait]; bytes already kept go to
+          `receiver` at once, before this method returns;
+        - call `on_lost` once when the stream fails or is closed, also at once if it
+          already has; `receive()` then raises what ended the stream
+          (`anyio.BrokenResourceError`, `anyio.EndOfStream` or
+          `anyio.ClosedResourceError`);
+        - keep nothing for `receive()` while a receiver is set.
 
-        *receiver* may call :meth:`send_nowait` (a slave answers from there), and may
-        raise only on a bug: the link catches everything in it and ends its reader.
+        `receiver` may call [`send_nowait`][aiortu.transport.PushStream.send_nowait] (a slave
+        answers from there), and may raise only on a bug: the link catches everything in it and ends
+        its reader.
         """
         ...
 
     def send_nowait(self, item: bytes) -> bool:
-        """Write *item* now, without a yield, if the stream can take it; return whether
+        """Write `item` now, without a yield, if the stream can take it; return whether
         it did.
 
-        Called by the link (:meth:`~aiortu.line.Link.send` and
-        :meth:`~aiortu.line.Link.send_now`), from a task or from a *receiver* callback,
-        before it falls back to ``await send(item)``. True means the stream has all of
-        *item*: written, or queued behind nothing and going out as soon as the port can
+        Called by the link ([`send`][aiortu.line.Link.send] and
+        [`send_now`][aiortu.line.Link.send_now]), from a task or from a *receiver* callback,
+        before it falls back to `await send(item)`. True means the stream has all of
+        `item`: written, or queued behind nothing and going out as soon as the port can
         take it, in order. False means nothing was written (closed, failed, or earlier
-        bytes still queued); the caller then uses ``send()``, which waits its turn or
+        bytes still queued); the caller then uses `send()`, which waits its turn or
         raises why.
         """
         ...

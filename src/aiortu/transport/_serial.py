@@ -1,35 +1,36 @@
 """A serial port as an anyio byte stream, over pyserial-asyncio-fast.
 
-:func:`open_serial` opens a device path (``/dev/ttyUSB0``, ``/dev/serial/by-id/...``, a
-pty) with the given :class:`~aiortu.core.timing.LineSettings` and returns a
-:class:`SerialStream`, an :class:`anyio.abc.ByteStream` that the link, the master and the
-slave can use like any other stream.
+[`open_serial`][aiortu.transport.open_serial] opens a device path (`/dev/ttyUSB0`,
+`/dev/serial/by-id/...`, a pty) with the given [`LineSettings`][aiortu.core.timing.LineSettings] and
+returns a [`SerialStream`][aiortu.transport.SerialStream], an `anyio.abc.ByteStream` that the link,
+the master and the slave can use like any other stream.
 
 **asyncio only.** pyserial-asyncio-fast drives the port through the asyncio event loop, so
 this transport runs on anyio's asyncio backend and nowhere else; under trio, use RTU over
-TCP or a pty :class:`~aiortu.transport._fd.FileDescriptorStream` instead.
+TCP or a pty [`FileDescriptorStream`][aiortu.transport.FileDescriptorStream] instead.
 
-pyserial opens, configures (RS-485 mode included) and closes the port; the bytes go
-through the port's file descriptor directly, one non-blocking ``read`` per readiness
-event and one ``write`` per frame (pyserial's own ``read`` adds a ``select`` before and
-after each read), with the transport buffering only what the driver does not take at
-once. :meth:`SerialStream.set_receiver` hands received bytes straight from the event
-loop's read callback to a consumer (the :class:`~aiortu.line._link.Link` uses it), with no task
-wake-up per chunk.
+pyserial opens, configures (RS-485 mode included) and closes the port; the bytes go through the
+port's file descriptor directly, one non-blocking `read` per readiness event and one `write` per
+frame (pyserial's own `read` adds a `select` before and after each read), with the transport
+buffering only what the driver does not take at once.
+[`SerialStream.set_receiver`][aiortu.transport.SerialStream.set_receiver] hands received bytes
+straight from the event loop's read callback to a consumer (the [`Link`][aiortu.line.Link] uses it),
+with no task wake-up per chunk.
 
-Errors while opening are :class:`~aiortu.errors.PortError` subclasses that name the port
-and the cause: :class:`~aiortu.errors.PortNotFound` (no such device, or not a serial
-device), :class:`~aiortu.errors.PortBusy` (another program holds the port),
-:class:`~aiortu.errors.PortPermissionDenied` (EACCES/EPERM: on Linux, join the ``dialout``
-group) and :class:`~aiortu.errors.UnsupportedSettings` (the settings, or RS-485 mode,
-refused by the driver).
+Errors while opening are [`PortError`][aiortu.errors.PortError] subclasses that name the port and
+the cause: [`PortNotFound`][aiortu.errors.PortNotFound] (no such device, or not a serial device),
+[`PortBusy`][aiortu.errors.PortBusy] (another program holds the port),
+[`PortPermissionDenied`][aiortu.errors.PortPermissionDenied] (EACCES/EPERM: on Linux, join the
+`dialout` group) and [`UnsupportedSettings`][aiortu.errors.UnsupportedSettings] (the settings, or
+RS-485 mode, refused by the driver).
 
-Errors while running follow anyio's conventions: when the port fails under us (a USB
-adapter unplugged, the other end of a pty closed), bytes already received are still
-delivered, then :meth:`SerialStream.receive` and :meth:`SerialStream.send` raise
-:class:`anyio.BrokenResourceError`, chained to pyserial's error. A serial port has no
-orderly end, so :class:`anyio.EndOfStream` is never raised. After :meth:`SerialStream.aclose`
-both raise :class:`anyio.ClosedResourceError`.
+Errors while running follow anyio's conventions: when the port fails under us (a USB adapter
+unplugged, the other end of a pty closed), bytes already received are still delivered, then
+[`SerialStream.receive`][aiortu.transport.SerialStream.receive] and
+[`SerialStream.send`][aiortu.transport.SerialStream.send] raise `anyio.BrokenResourceError`, chained
+to pyserial's error. A serial port has no orderly end, so `anyio.EndOfStream` is never raised. After
+[`SerialStream.aclose`][aiortu.transport.SerialStream.aclose] both raise
+`anyio.ClosedResourceError`.
 """
 
 from __future__ import annotations
@@ -92,11 +93,11 @@ _DENIED = frozenset({errno.EACCES, errno.EPERM})
 class RS485Options:
     """Kernel RS-485 mode: the driver switches the transceiver with RTS around each write.
 
-    Passed to pyserial as :class:`serial.rs485.RS485Settings` and applied with the
-    ``TIOCSRS485`` ioctl, so it needs a UART driver with RS-485 support; a pty or a plain
-    RS-232 port refuses it and :func:`open_serial` raises
-    :class:`~aiortu.errors.UnsupportedSettings`. Delays are in seconds (the kernel keeps
-    milliseconds).
+    Passed to pyserial as `serial.rs485.RS485Settings` and applied with the `TIOCSRS485` ioctl, so
+    it needs a UART driver with RS-485 support; a pty or a plain RS-232 port refuses it and
+    [`open_serial`][aiortu.transport.open_serial] raises
+    [`UnsupportedSettings`][aiortu.errors.UnsupportedSettings]. Delays are in seconds (the kernel
+    keeps milliseconds).
     """
 
     rts_level_for_tx: bool = True
@@ -109,7 +110,7 @@ class RS485Options:
     """Seconds between the last bit and releasing RTS; None keeps the driver's value."""
     receive_during_tx: bool = False
     """Keep the receiver on while transmitting: the port then echoes what we send
-    (combine with ``local_echo=True``)."""
+    (combine with `local_echo=True`)."""
 
     def __post_init__(self) -> None:
         for name in ("delay_before_tx", "delay_before_rx"):
@@ -118,7 +119,7 @@ class RS485Options:
                 raise InvalidValue(name, value, "0..65.535 seconds, or None")
 
     def to_pyserial(self) -> Any:
-        """The equivalent :class:`serial.rs485.RS485Settings`."""
+        """The equivalent `serial.rs485.RS485Settings`."""
         return serial.rs485.RS485Settings(
             rts_level_for_tx=self.rts_level_for_tx,
             rts_level_for_rx=self.rts_level_for_rx,
@@ -129,14 +130,15 @@ class RS485Options:
 
 
 class SerialAttribute(anyio.TypedAttributeSet):
-    """Typed attributes a :class:`SerialStream` offers through ``stream.extra(...)``."""
+    """Typed attributes a [`SerialStream`][aiortu.transport.SerialStream] offers through
+    `stream.extra(...)`."""
 
     port: str = anyio.typed_attribute()
     """The device path the stream was opened with."""
     settings: LineSettings = anyio.typed_attribute()
     """The line settings in force."""
     serial: Any = anyio.typed_attribute()
-    """The underlying :class:`serial.Serial`, for modem lines; never read or write it."""
+    """The underlying `serial.Serial`, for modem lines; never read or write it."""
 
 
 _NO_DATA = (
@@ -148,16 +150,17 @@ _NO_DATA = (
 
 class _PortTransport(SerialTransport):
     """pyserial-asyncio-fast's transport, with the port's descriptor read and written
-    directly: one ``read`` system call per readiness event (pyserial's ``read`` selects
-    before and after it) and one ``write`` per frame. pyserial still opens, configures
+    directly: one `read` system call per readiness event (pyserial's `read` selects
+    before and after it) and one `write` per frame. pyserial still opens, configures
     and closes the port; its errors are reported as pyserial reports them.
 
-    The write path is ours from end to end: what the driver does not take at once waits
-    in :attr:`_pending`, and a writer callback of our own is on the descriptor exactly
-    while something waits, taken off in the same call that writes the last byte. (The
-    dependency's own writer stays registered once its buffer is empty, and then fails on
-    every pass of the event loop.) The protocol is paused while anything waits, so that
-    :meth:`SerialStream.send` returns once its bytes are with the driver.
+    The write path is ours from end to end: what the driver does not take at once waits in
+    `_pending`, and a writer callback of our own is on the descriptor exactly while something waits,
+    taken off in the same call that writes the last byte. (The dependency's own writer stays
+    registered once its buffer is empty, and then fails on every pass of the event loop.) The
+    protocol is paused while anything waits, so that
+    [`SerialStream.send`][aiortu.transport.SerialStream.send] returns once its bytes are with the
+    driver.
     """
 
     def __init__(
@@ -169,7 +172,7 @@ class _PortTransport(SerialTransport):
         self._pending = bytearray()
         """Bytes the driver has not taken yet, oldest first."""
         self._watching_writable = False
-        """Whether :meth:`_on_writable` is registered on the descriptor."""
+        """Whether `_on_writable` is registered on the descriptor."""
 
     def _read_ready(self) -> None:
         try:
@@ -189,20 +192,20 @@ class _PortTransport(SerialTransport):
         protocol.data_received(data)
 
     def can_write_now(self) -> bool:
-        """Whether :meth:`write_now` would take data: open, and nothing queued before it."""
+        """Whether `write_now` would take data: open, and nothing queued before it."""
         return not self._pending and not self._closing
 
     def write_now(self, data: bytes) -> bool:
-        """``write()`` straight to the descriptor, where :meth:`can_write_now` says yes
+        """`write()` straight to the descriptor, where `can_write_now` says yes
         (the rest is queued if the driver takes only part of it); else nothing is
-        written. Returns whether *data* was taken."""
+        written. Returns whether `data` was taken."""
         if self._pending or self._closing:
             return False
         self._write_data(data)
         return True
 
     def write(self, data: bytes | bytearray | memoryview) -> None:
-        """Write *data* now, or after the bytes still queued; ignored once closing."""
+        """Write `data` now, or after the bytes still queued; ignored once closing."""
         if self._closing or not data:
             return
         if self._pending:
@@ -266,7 +269,7 @@ class _PortTransport(SerialTransport):
 
     def _write_failed(self, exc: OSError) -> None:
         """The port failed under a write: drop what waits and close with the error, as a
-        failed read does. The stream reports it (``BrokenResourceError`` chained to it);
+        failed read does. The stream reports it (`BrokenResourceError` chained to it);
         an unplugged adapter is no event loop error."""
         self.flush()
         self._abort(serial.SerialException(f"write failed: {exc}"))
@@ -287,7 +290,7 @@ class _PortProtocol(asyncio.Protocol):
         self.error: BaseException | None = None
         self._reading_paused = False
         self.receiver: Callable[[bytes], None] | None = None
-        """While set, received bytes go straight to it instead of to :attr:`buffer`."""
+        """While set, received bytes go straight to it instead of to `buffer`."""
         self.on_lost: Callable[[], None] | None = None
         """Called once the port has failed or closed, while a receiver is set."""
 
@@ -338,13 +341,13 @@ class _PortProtocol(asyncio.Protocol):
 
 
 class SerialStream(ByteStream, PushStream):
-    """An open serial port as a byte stream. Made by :func:`open_serial`.
+    """An open serial port as a byte stream. Made by [`open_serial`][aiortu.transport.open_serial].
 
-    :meth:`receive` returns the bytes as the port delivers them (with the local echo
-    removed when asked); :meth:`send` returns once the transport has handed every byte to
-    the OS driver, which then clocks them out at the baud rate. One task may receive while
-    another sends; two concurrent receivers (or senders) raise
-    :class:`anyio.BusyResourceError`.
+    [`receive`][aiortu.transport.SerialStream.receive] returns the bytes as the port delivers them
+    (with the local echo removed when asked); [`send`][aiortu.transport.SerialStream.send] returns
+    once the transport has handed every byte to the OS driver, which then clocks them out at the
+    baud rate. One task may receive while another sends; two concurrent receivers (or senders) raise
+    `anyio.BusyResourceError`.
     """
 
     def __init__(
@@ -378,12 +381,13 @@ class SerialStream(ByteStream, PushStream):
 
     @property
     def echo(self) -> LocalEchoFilter | None:
-        """The local echo filter with its counters, or None when ``local_echo`` is off."""
+        """The local echo filter with its counters, or None when `local_echo` is off."""
         return self._protocol.echo
 
     @property
     def extra_attributes(self) -> Mapping[Any, Callable[[], Any]]:
-        """The :class:`SerialAttribute` values, for ``stream.extra(...)``."""
+        """The [`SerialAttribute`][aiortu.transport.SerialAttribute] values, for
+        `stream.extra(...)`."""
         return {
             SerialAttribute.port: lambda: self._port,
             SerialAttribute.settings: lambda: self._settings,
@@ -400,14 +404,15 @@ class SerialStream(ByteStream, PushStream):
         receiver: Callable[[bytes], None] | None,
         on_lost: Callable[[], None] | None = None,
     ) -> None:
-        """Hand received bytes to *receiver* as they arrive, from the event loop's read
-        callback, instead of keeping them for :meth:`receive` (``None`` keeps them again).
+        """Hand received bytes to `receiver` as they arrive, from the event loop's read callback,
+        instead of keeping them for [`receive`][aiortu.transport.SerialStream.receive] (`None` keeps
+        them again).
 
-        Bytes already kept go to *receiver* at once. *on_lost* is called once the port has
-        failed or closed (at once if it already has); :meth:`receive` then raises the
-        error. While a receiver is set, nothing is left for :meth:`receive` to return.
-        This is how a :class:`~aiortu.line._link.Link` reads the port without a task wake-up per
-        chunk.
+        Bytes already kept go to `receiver` at once. `on_lost` is called once the port has failed or
+        closed (at once if it already has); [`receive`][aiortu.transport.SerialStream.receive] then
+        raises the error. While a receiver is set, nothing is left for
+        [`receive`][aiortu.transport.SerialStream.receive] to return. This is how a
+        [`Link`][aiortu.line.Link] reads the port without a task wake-up per chunk.
         """
         protocol = self._protocol
         protocol.receiver = receiver
@@ -420,11 +425,11 @@ class SerialStream(ByteStream, PushStream):
             on_lost()
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
-        """Return the next chunk of received bytes, at most *max_bytes*, waiting for one.
+        """Return the next chunk of received bytes, at most `max_bytes`, waiting for one.
 
-        Raises :class:`anyio.BrokenResourceError` once the port has failed and every byte
-        received before the failure was returned, and :class:`anyio.ClosedResourceError`
-        after :meth:`aclose`.
+        Raises `anyio.BrokenResourceError` once the port has failed and every byte
+        received before the failure was returned, and `anyio.ClosedResourceError`
+        after [`aclose`][aiortu.transport.SerialStream.aclose].
         """
         if max_bytes < 1:
             raise ValueError("max_bytes must be at least 1")
@@ -445,15 +450,15 @@ class SerialStream(ByteStream, PushStream):
                 await protocol.data_ready.wait()
 
     def send_nowait(self, item: bytes) -> bool:
-        """Write *item* now, without a yield, if the port can take it; return whether it
+        """Write `item` now, without a yield, if the port can take it; return whether it
         did.
 
-        False means nothing was written: the port is closed or failed, or earlier bytes
-        still wait in the transport; :meth:`send` then says why or waits its turn. True
-        means the transport has the bytes: the driver took them, or the few it could not
+        False means nothing was written: the port is closed or failed, or earlier bytes still wait
+        in the transport; [`send`][aiortu.transport.SerialStream.send] then says why or waits its
+        turn. True means the transport has the bytes: the driver took them, or the few it could not
         take yet follow as soon as it can (a failure there closes the port, as for
-        :meth:`send`). A :class:`~aiortu.line._link.Link` writes its frames this way, in the
-        loop iteration that decided to send them.
+        [`send`][aiortu.transport.SerialStream.send]). A [`Link`][aiortu.line.Link] writes its
+        frames this way, in the loop iteration that decided to send them.
         """
         protocol = self._protocol
         transport = self._transport
@@ -468,15 +473,16 @@ class SerialStream(ByteStream, PushStream):
         return transport.write_now(item)
 
     async def send(self, item: bytes) -> None:
-        """Write all of *item* and wait until the transport has handed it to the driver.
+        """Write all of `item` and wait until the transport has handed it to the driver.
 
         Yields to the event loop only while the driver's buffer is full (the bytes are
         then waiting in the transport); a write the driver takes at once returns without
         a yield.
 
-        If the caller is cancelled while waiting, the bytes still go out: they are already
-        queued. Raises :class:`anyio.BrokenResourceError` if the port has failed and
-        :class:`anyio.ClosedResourceError` after :meth:`aclose` or :meth:`send_eof`.
+        If the caller is cancelled while waiting, the bytes still go out: they are already queued.
+        Raises `anyio.BrokenResourceError` if the port has failed and `anyio.ClosedResourceError`
+        after [`aclose`][aiortu.transport.SerialStream.aclose] or
+        [`send_eof`][aiortu.transport.SerialStream.send_eof].
         """
         with self._send_guard:
             # A cancellation point, but no yield unless the driver's buffer is full: a
@@ -551,7 +557,7 @@ def _errno_of(exc: BaseException) -> int | None:
 
 
 def _open_error(port: str, exc: BaseException, what: str) -> PortError:
-    """Translate an error raised while opening *port* into aiortu's error for it."""
+    """Translate an error raised while opening `port` into aiortu's error for it."""
     number = _errno_of(exc)
     if isinstance(exc, ValueError):
         return UnsupportedSettings(port, f"the port refuses {what}: {exc}")
@@ -576,7 +582,7 @@ def _open_error(port: str, exc: BaseException, what: str) -> PortError:
 def _new_serial(
     port: str, settings: LineSettings, exclusive: bool, rs485: RS485Options | None
 ) -> Any:
-    """A configured but unopened :class:`serial.Serial`."""
+    """A configured but unopened `serial.Serial`."""
     if os.name == "posix" and settings.stopbits == 1.5 and settings.bytesize != 5:
         # termios has no 1.5 stop bits: pyserial would quietly use 2.
         raise UnsupportedSettings(port, "1.5 stop bits exist only with 5 data bits on POSIX")
@@ -596,7 +602,7 @@ def _new_serial(
 
 
 def _applied_format(fd: int) -> str | None:
-    """The character format the tty really has, as ``8E1``; None where termios is missing."""
+    """The character format the tty really has, as `8E1`; None where termios is missing."""
     if _termios is None:
         return None
     cflag = _termios.tcgetattr(fd)[2]
@@ -655,18 +661,18 @@ async def open_serial(
     rs485: RS485Options | None = None,
     local_echo: bool = False,
 ) -> SerialStream:
-    """Open the serial device *port* with *settings* and return it as a byte stream.
+    """Open the serial device `port` with `settings` and return it as a byte stream.
 
-    *exclusive* locks the port (``flock``) so that a second program using the same
-    convention gets :class:`~aiortu.errors.PortBusy` instead of stealing bytes. *rs485*
-    turns on the driver's RS-485 mode. *local_echo* strips the echo of our own
-    transmissions that some RS-485 adapters return (see :mod:`aiortu.transport._echo` for
+    `exclusive` locks the port (`flock`) so that a second program using the same
+    convention gets [`PortBusy`][aiortu.errors.PortBusy] instead of stealing bytes. `rs485`
+    turns on the driver's RS-485 mode. `local_echo` strips the echo of our own
+    transmissions that some RS-485 adapters return (see [`aiortu.transport`][aiortu.transport] for
     what happens when the echo does not match).
 
-    Raises :class:`~aiortu.errors.PortNotFound`, :class:`~aiortu.errors.PortBusy`,
-    :class:`~aiortu.errors.PortPermissionDenied` or
-    :class:`~aiortu.errors.UnsupportedSettings`, each naming the port and the cause, and
-    :class:`RuntimeError` when not running on asyncio.
+    Raises [`PortNotFound`][aiortu.errors.PortNotFound], [`PortBusy`][aiortu.errors.PortBusy],
+    [`PortPermissionDenied`][aiortu.errors.PortPermissionDenied] or
+    [`UnsupportedSettings`][aiortu.errors.UnsupportedSettings], each naming the port and the cause,
+    and `RuntimeError` when not running on asyncio.
     """
     loop = _running_loop()
     instance = _new_serial(port, settings, exclusive, rs485)

@@ -4,18 +4,18 @@ A serial device server (a "serial-to-Ethernet" box in transparent mode) relays t
 of a TCP connection to its serial port and back. The frames travel exactly as on the wire,
 unit address and CRC included, with no MBAP header: this is not Modbus TCP.
 
-:func:`open_rtu_over_tcp` returns anyio's TCP stream, with Nagle's algorithm off because
-RTU frames are small and every millisecond of delay adds to each transaction. It runs on
-any anyio backend.
+[`open_rtu_over_tcp`][aiortu.transport.open_rtu_over_tcp] returns anyio's TCP stream, with Nagle's
+algorithm off because RTU frames are small and every millisecond of delay adds to each transaction.
+It runs on any anyio backend.
 
-Errors while connecting are :class:`~aiortu.errors.PortNotFound`, whatever the cause
+Errors while connecting are [`PortNotFound`][aiortu.errors.PortNotFound], whatever the cause
 (unknown host, connection refused, unreachable network, or no answer within
-*connect_timeout*), with a message that says which host and port and why: for the caller
+`connect_timeout`), with a message that says which host and port and why: for the caller
 they all mean the same thing, that there is no device server at that address now, and
 that trying again later may work. While running, anyio's stream raises
-:class:`anyio.EndOfStream` from ``receive()`` when the server closes the connection and
-:class:`anyio.BrokenResourceError` when it is reset; the link turns both into
-:class:`~aiortu.errors.ConnectionLost`.
+`anyio.EndOfStream` from `receive()` when the server closes the connection and
+`anyio.BrokenResourceError` when it is reset; the link turns both into
+[`ConnectionLost`][aiortu.errors.ConnectionLost].
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ __all__ = ("open_rtu_over_tcp", "format_tcp_url")
 
 
 def format_tcp_url(host: str, port: int) -> str:
-    """The ``rtu+tcp://host:port`` URL of a device server, with IPv6 hosts in brackets."""
+    """The `rtu+tcp://host:port` URL of a device server, with IPv6 hosts in brackets."""
     if ":" in host:
         return f"rtu+tcp://[{host}]:{port}"
     return f"rtu+tcp://{host}:{port}"
@@ -53,11 +53,11 @@ def _describe_failure(exc: OSError) -> str:
 
 
 async def open_rtu_over_tcp(host: str, port: int, *, connect_timeout: float = 5.0) -> SocketStream:
-    """Connect to the serial device server at *host*:*port* and return the connection.
+    """Connect to the serial device server at `host`:`port` and return the connection.
 
-    Raises :class:`~aiortu.errors.PortNotFound` when the host is unknown, the connection
-    is refused or fails, or nothing answers within *connect_timeout* seconds, and
-    :class:`~aiortu.errors.InvalidValue` for a port outside 1..65535 or a timeout that
+    Raises [`PortNotFound`][aiortu.errors.PortNotFound] when the host is unknown, the connection
+    is refused or fails, or nothing answers within `connect_timeout` seconds, and
+    [`InvalidValue`][aiortu.errors.InvalidValue] for a port outside 1..65535 or a timeout that
     is not positive.
     """
     if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:

@@ -1,13 +1,14 @@
-"""Port names: a serial device path, or ``rtu+tcp://host:port`` for RTU over TCP.
+"""Port names: a serial device path, or `rtu+tcp://host:port` for RTU over TCP.
 
-:func:`parse_port_url` turns the text a user gives (on the command line, in
-``open_master``) into a :class:`SerialAddress` or a :class:`TcpAddress`, or raises
-:class:`~aiortu.errors.InvalidValue` saying what is wrong with it.
+[`parse_port_url`][aiortu.transport.parse_port_url] turns the text a user gives (on the command
+line, in `open_master`) into a [`SerialAddress`][aiortu.transport.SerialAddress] or a
+[`TcpAddress`][aiortu.transport.TcpAddress], or raises [`InvalidValue`][aiortu.errors.InvalidValue]
+saying what is wrong with it.
 
-The URL form is ``rtu+tcp://HOST:PORT``, optionally with a trailing ``/``. HOST is a
-name, an IPv4 address, or an IPv6 address in brackets (``rtu+tcp://[::1]:5020``); PORT
+The URL form is `rtu+tcp://HOST:PORT`, optionally with a trailing `/`. HOST is a
+name, an IPv4 address, or an IPv6 address in brackets (`rtu+tcp://[::1]:5020`); PORT
 is required (there is no standard port for RTU over TCP). Anything else containing
-``://`` is refused, so that a typing mistake does not end up as a device path. Any other
+`://` is refused, so that a typing mistake does not end up as a device path. Any other
 text is taken as a serial device path, unchanged.
 """
 
@@ -28,7 +29,7 @@ _URL_FORM = "a serial device path or rtu+tcp://host:port"
 
 @dataclass(frozen=True, slots=True)
 class SerialAddress:
-    """A serial device path such as ``/dev/ttyUSB0`` or ``COM3``."""
+    """A serial device path such as `/dev/ttyUSB0` or `COM3`."""
 
     path: str
 
@@ -50,7 +51,7 @@ class TcpAddress:
 
 
 PortAddress = SerialAddress | TcpAddress
-"""What :func:`parse_port_url` returns."""
+"""What [`parse_port_url`][aiortu.transport.parse_port_url] returns."""
 
 
 def _bad(text: str, detail: str) -> InvalidValue:
@@ -98,15 +99,15 @@ def _parse_tcp(text: str, rest: str) -> TcpAddress:
 
 
 def parse_port_url(text: str) -> PortAddress:
-    """Parse a port name: a serial device path, or ``rtu+tcp://host:port``.
+    """Parse a port name: a serial device path, or `rtu+tcp://host:port`.
 
     >>> parse_port_url("/dev/ttyUSB0")
     SerialAddress(path='/dev/ttyUSB0')
     >>> parse_port_url("rtu+tcp://[::1]:5020")
     TcpAddress(host='::1', port=5020)
 
-    Raises :class:`~aiortu.errors.InvalidValue` for an empty name, a scheme other than
-    ``rtu+tcp``, or an ``rtu+tcp`` URL without a valid host and port.
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for an empty name, a scheme other than
+    `rtu+tcp`, or an `rtu+tcp` URL without a valid host and port.
     """
     if not isinstance(text, str):
         raise InvalidValue("port", text, _URL_FORM, "not a string")
