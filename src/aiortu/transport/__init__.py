@@ -16,21 +16,27 @@ from typing import Any
 from anyio.abc import ByteStream
 
 from aiortu.core.timing import LineSettings
+from aiortu.errors import InvalidValue
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
 from aiortu.transport._tcp import open_rtu_over_tcp
 from aiortu.transport._url import (
+    ListenAddress,
+    ModbusTcpAddress,
     PortAddress,
     SerialAddress,
     TcpAddress,
+    parse_listen_url,
     parse_port_url,
 )
 
 __all__ = (
     "FileDescriptorStream",
+    "ListenAddress",
     "LocalEchoFilter",
+    "ModbusTcpAddress",
     "PortAddress",
     "PushStream",
     "RS485Options",
@@ -41,6 +47,7 @@ __all__ = (
     "open_rtu_over_tcp",
     "open_serial",
     "open_stream",
+    "parse_listen_url",
     "parse_port_url",
 )
 
@@ -61,11 +68,22 @@ async def open_stream(
     a serial device path (:func:`open_serial`; options ``exclusive``, ``rs485`` and
     ``local_echo``).
 
+    ``tcp://host:port`` (Modbus TCP) is not a byte stream of RTU frames; it raises
+    :class:`~aiortu.errors.InvalidValue` here (:func:`aiortu.serve` listens on it).
+
     Raises :class:`~aiortu.errors.InvalidValue` for a malformed URL,
     :class:`TypeError` for an option the transport does not take, and the transport's
     :class:`~aiortu.errors.PortError` subclasses when it cannot be opened.
     """
     address = parse_port_url(port_or_url)
+    if isinstance(address, ModbusTcpAddress):
+        raise InvalidValue(
+            "port",
+            port_or_url,
+            "a serial device path or rtu+tcp://host:port",
+            "a master cannot open Modbus TCP (tcp://) yet, only aiortu.serve listens on it; "
+            "for RTU framing over TCP write rtu+tcp://",
+        )
     allowed = _TCP_OPTIONS if isinstance(address, TcpAddress) else _SERIAL_OPTIONS
     unknown = sorted(set(options) - allowed)
     if unknown:
