@@ -32,7 +32,7 @@ from aiortu.slave._handlers import (
 )
 from aiortu.slave._routes import RangeHandler, RoutedStore
 
-__all__ = ("AfterHook", "BeforeHook", "Dispatcher")
+__all__ = ("RESTART_COMMUNICATIONS", "AfterHook", "BeforeHook", "Dispatcher")
 
 _log = logging.getLogger(__name__)
 
@@ -46,6 +46,9 @@ AfterHook = Callable[[Any, RequestContext, HandlerResult], Answer]
 answer, anything else replaces it. May be async. Not called when the handler raised."""
 
 _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
+
+RESTART_COMMUNICATIONS = bytes((0x08, 0x00, 0x01))
+"""Diagnostics, restart communications: the one request served in listen-only mode."""
 
 
 class Dispatcher:

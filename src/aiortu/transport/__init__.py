@@ -21,8 +21,10 @@ from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
-from aiortu.transport._tcp import open_rtu_over_tcp
+from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp
 from aiortu.transport._url import (
+    MODBUS_TCP_SCHEME,
+    TCP_SCHEME,
     ListenAddress,
     ModbusTcpAddress,
     PortAddress,
@@ -33,6 +35,8 @@ from aiortu.transport._url import (
 )
 
 __all__ = (
+    "MODBUS_TCP_SCHEME",
+    "TCP_SCHEME",
     "FileDescriptorStream",
     "ListenAddress",
     "LocalEchoFilter",
@@ -44,6 +48,7 @@ __all__ = (
     "SerialAttribute",
     "SerialStream",
     "TcpAddress",
+    "listen_tcp",
     "open_rtu_over_tcp",
     "open_serial",
     "open_stream",
