@@ -169,3 +169,30 @@ async def test_mbpoll_tcp_reads_and_writes() -> None:
         await run("-t", "0", "-r", "12", values=("1", "0", "1"))  # 0F
         assert store.get(Table.HOLDING_REGISTERS, 10, 3) == [4660, 1, 2]
         assert store.get(Table.COILS, 11, 3) == [1, 0, 1]
+
+
+@pytest.mark.skipif(MBPOLL is None, reason="mbpoll is not installed")
+async def test_mbpoll_against_the_serve_command() -> None:
+    import re
+    import signal
+    import subprocess
+    import sys
+
+    assert MBPOLL is not None
+    command = [sys.executable, "-m", "aiortu", "serve", "tcp://127.0.0.1:0"]
+    command += ["--config", "examples/devices.toml"]
+    async with await anyio.open_process(command, stderr=subprocess.PIPE) as process:
+        assert process.stderr is not None
+        banner = b""
+        with anyio.fail_after(20):
+            while b"\n" not in banner:
+                banner += await process.stderr.receive()
+        found = re.search(rb"\(port (\d+)\)", banner)
+        assert found is not None, banner
+        port = found[1].decode()
+        poll = [MBPOLL, "-m", "tcp", "-a", "17", "-r", "108", "-c", "3", "-1", "-p", port]
+        result = await anyio.run_process([*poll, "127.0.0.1"], check=False)
+        assert result.returncode == 0, result.stdout + result.stderr
+        assert b"[108]: \t-20927" in result.stdout or b"[108]: \t44609" in result.stdout
+        process.send_signal(signal.SIGTERM)
+        assert await process.wait() == 0

@@ -19,6 +19,7 @@ import anyio
 from aiortu.cli import CommandFailed, Subparsers
 from aiortu.cli._arguments import seconds_or_zero
 from aiortu.core.bus_decoder import describe_frame
+from aiortu.core.frame import encode_frame
 from aiortu.errors import PortError
 from aiortu.slave._config import ConfigError, load_config
 from aiortu.slave._server import serve
@@ -34,6 +35,10 @@ examples:
       8N2 (as on a pty bus), logging every frame with its meaning
   aiortu serve rtu+tcp://10.0.0.7:4001 --config devices.toml --frame-gap 0
       behind a serial device server, no silence kept before replies
+  aiortu serve tcp://0.0.0.0:1502 --config devices.toml
+      Modbus TCP on every interface, many clients at once
+  aiortu serve rtu+tcp://0.0.0.0:5020 --config devices.toml
+      RTU framing over TCP, listening (a wildcard host listens, any other connects)
 
 several processes can share one bus, each with its own units:
   aiortu virtual-bus --ports 3 --parity N --stopbits 2     # prints three paths
@@ -54,12 +59,17 @@ def register(subparsers: Subparsers) -> None:
         description=(
             "Serve the units a TOML device description defines (tables, read-only ranges, "
             "FIFOs, files, device identification, server id) on a serial port or an "
-            "rtu+tcp:// URL, until interrupted (SIGINT or SIGTERM). See docs/slave.md."
+            "rtu+tcp:// URL, or listening for Modbus TCP on a tcp:// URL, until interrupted "
+            "(SIGINT or SIGTERM). See docs/slave.md."
         ),
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("port", metavar="PORT", help="serial device path or rtu+tcp://host:port")
+    parser.add_argument(
+        "port",
+        metavar="PORT",
+        help="serial device path, rtu+tcp://host:port, or tcp://host:port to listen on",
+    )
     parser.add_argument(
         "--config", required=True, metavar="FILE.toml", help="the device description"
     )
@@ -90,6 +100,11 @@ def run(args: argparse.Namespace) -> int:
     return anyio.run(_serve, args, config.units)
 
 
+def _trace_mbap(kind: str, data: bytes) -> None:
+    # A Modbus TCP ADU: shown with the meaning of the same request over RTU.
+    _trace(kind, encode_frame(data[6], data[7:]))
+
+
 def _trace(kind: str, data: bytes) -> None:
     stamp = time.strftime("%H:%M:%S")
     if kind == "discarded":
@@ -113,10 +128,16 @@ async def _serve(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> 
                 parity=args.parity,
                 stopbits=args.stopbits,
                 frame_gap=args.frame_gap,
-                trace=_trace if args.trace else None,
+                trace=(_trace_mbap if args.port.lower().startswith("tcp:") else _trace)
+                if args.trace
+                else None,
             ) as slave:
                 listing = ", ".join(str(unit) for unit in sorted(units))
-                sys.stderr.write(f"aiortu serve: units {listing} on {args.port}\n")
+                where = args.port
+                local = getattr(slave, "local_address", None)
+                if local is not None:  # listening: say the port, which may have been 0
+                    where = f"{args.port} (port {local[1]})"
+                sys.stderr.write(f"aiortu serve: units {listing} on {where}\n")
                 sys.stderr.flush()
                 async with anyio.create_task_group() as group:
 
