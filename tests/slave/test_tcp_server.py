@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import logging
 import random
+from collections.abc import Awaitable, Callable
 
 import anyio
 import anyio.lowlevel
 import pytest
 
 from aiortu.core.pdu import RawPDU
+from aiortu.errors import InvalidValue
 from aiortu.slave._handlers import Reply, RequestContext
 from aiortu.slave._server import RtuOverTcpServer, serve
 from aiortu.slave._store import MemoryStore, Table
@@ -254,3 +256,17 @@ async def test_rtu_over_tcp_listens_and_serves_each_connection_as_a_line() -> No
                 reply = await stream.receive()
                 assert decode_frame(reply).pdu == bytes.fromhex(f"06 00 09 00 {value:02X}")
     assert store.get(Table.HOLDING_REGISTERS, 9) == [6]
+
+
+async def test_listen_is_for_urls_only() -> None:
+    with pytest.raises(InvalidValue, match="only a URL listens"):
+        async with serve("/dev/ttyUSB0", {UNIT: device()}, listen=True):
+            pass
+
+
+@pytest.mark.parametrize(
+    "scenario",
+    [test_replies_carry_the_transaction_and_unit_id, test_many_connections_at_once],
+)
+def test_under_trio(scenario: Callable[[], Awaitable[None]]) -> None:
+    anyio.run(scenario, backend="trio")

@@ -242,6 +242,9 @@ class ModbusTcpServer(Dispatcher):
         self.counters.connections_accepted += 1
         try:
             await self.serve_connection(stream)
+        except Exception:
+            # One connection's failure never ends the others, nor the server.
+            _log.exception("Modbus TCP: serving %s failed; connection closed", _peer(stream))
         finally:
             self._connections -= 1
             self._refusing = False
