@@ -270,3 +270,24 @@ async def test_listen_is_for_urls_only() -> None:
 )
 def test_under_trio(scenario: Callable[[], Awaitable[None]]) -> None:
     anyio.run(scenario, backend="trio")
+
+
+async def test_rtu_over_tcp_hooks_reach_lines_connected_before_and_after() -> None:
+    from aiortu.core.frame import encode_frame
+
+    seen: list[str] = []
+    async with serve("rtu+tcp://127.0.0.1:0", {UNIT: device()}) as server:
+        assert isinstance(server, RtuOverTcpServer)
+        async with await anyio.connect_tcp("127.0.0.1", server.port) as early:
+            await early.send(encode_frame(UNIT, bytes.fromhex("03 00 00 00 01")))
+            await early.receive()
+            remove = server.before_request(lambda request, context: seen.append("early"))
+            await early.send(encode_frame(UNIT, bytes.fromhex("03 00 00 00 01")))
+            await early.receive()
+        async with await anyio.connect_tcp("127.0.0.1", server.port) as late:
+            await late.send(encode_frame(UNIT, bytes.fromhex("03 00 00 00 01")))
+            await late.receive()
+            remove()
+            await late.send(encode_frame(UNIT, bytes.fromhex("03 00 00 00 01")))
+            await late.receive()
+    assert seen == ["early", "early"]

@@ -8,7 +8,11 @@ server, a virtual line) and a mapping of unit addresses to data stores::
         ...                                   # the slave serves in the background
 
 or ``await slave.serve()`` to serve in the current task. :func:`serve` opens a port or a
-URL first. One line may carry a whole bus of simulated units.
+URL first, or listens on one: ``tcp://`` for Modbus TCP
+(:class:`~aiortu.slave._tcp_server.ModbusTcpServer`), ``rtu+tcp://`` for RTU framing
+over TCP (:class:`RtuOverTcpServer`, a :class:`Slave` per connection). One line may carry
+a whole bus of simulated units. The general route of a request (checks, handler, hooks)
+is :class:`~aiortu.slave._dispatch.Dispatcher`, shared with the Modbus TCP server.
 
 Each frame goes through the core's :class:`~aiortu.core.slave_machine.SlaveMachine`,
 which decides what the spec says: frames for other units are dropped and counted, frames
@@ -92,6 +96,7 @@ TraceCallback = Callable[[str, bytes], object]
 unit), ``("sent", frame)`` for every reply, ``("discarded", data)`` for bytes dropped."""
 
 _UNIT_RANGE = range(1, 248)
+_FUNCTION_CODE_RANGE = range(1, 128)
 
 
 class Slave(Dispatcher):
@@ -430,8 +435,12 @@ class RtuOverTcpServer:
         self._trace = trace
         self._setup: list[Callable[[Slave], object]] = []
         self._stopped = anyio.Event()
-        Slave(_NoStream(), self.units, settings, handlers=handlers)  # checks units, codes
+        for unit in self.units:
+            if unit not in _UNIT_RANGE:
+                raise InvalidValue("unit", unit, _UNIT_RANGE)
         for function_code, handler in (handlers or {}).items():
+            if function_code not in _FUNCTION_CODE_RANGE:
+                raise InvalidValue("function_code", function_code, _FUNCTION_CODE_RANGE)
             self.set_handler(function_code, handler)
 
     @property
@@ -518,22 +527,6 @@ class RtuOverTcpServer:
         finally:
             self.slaves.discard(slave)
             await stream.aclose()
-
-
-class _NoStream(anyio.abc.ByteStream):
-    """A stream never used: lets a Slave check its arguments before any line exists."""
-
-    async def receive(self, max_bytes: int = 65536) -> bytes:
-        raise anyio.EndOfStream
-
-    async def send(self, item: bytes) -> None:
-        raise anyio.ClosedResourceError
-
-    async def send_eof(self) -> None:
-        pass
-
-    async def aclose(self) -> None:
-        pass
 
 
 Server = Slave | ModbusTcpServer | RtuOverTcpServer
