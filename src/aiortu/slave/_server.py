@@ -524,6 +524,9 @@ class RtuOverTcpServer:
             await slave.serve()
         except ConnectionLost:
             pass
+        except Exception:
+            # One line's failure never ends the others, nor the server.
+            _log.exception("RTU over TCP: a line failed; it is closed")
         finally:
             self.slaves.discard(slave)
             await stream.aclose()
