@@ -291,3 +291,23 @@ async def test_rtu_over_tcp_hooks_reach_lines_connected_before_and_after() -> No
             await late.send(encode_frame(UNIT, bytes.fromhex("03 00 00 00 01")))
             await late.receive()
     assert seen == ["early", "early"]
+
+
+async def test_trace_sees_each_request_and_reply_adu() -> None:
+    seen: list[tuple[str, str]] = []
+    trace = lambda kind, data: seen.append((kind, data.hex(" ")))  # noqa: E731
+    async with tcp_server(trace=trace) as server, connect(server) as client:
+        await client.request("03 00 01 00 01", transaction_id=7)
+    assert seen == [
+        ("received", "00 07 00 00 00 06 11 03 00 01 00 01"),
+        ("sent", "00 07 00 00 00 05 11 03 02 ab cd"),
+    ]
+
+
+async def test_a_port_in_use_is_one_port_error() -> None:
+    from aiortu.errors import PortBusy
+
+    async with tcp_server() as server:
+        with pytest.raises(PortBusy, match="in use"):
+            async with serve(f"tcp://127.0.0.1:{server.port}", {UNIT: device()}):
+                pass
