@@ -311,3 +311,48 @@ async def test_a_port_in_use_is_one_port_error() -> None:
         with pytest.raises(PortBusy, match="in use"):
             async with serve(f"tcp://127.0.0.1:{server.port}", {UNIT: device()}):
                 pass
+
+
+def _random_request(rng: random.Random) -> str:
+    """A request of a code served over TCP, well framed, its fields often out of range."""
+    code = rng.choice([1, 2, 3, 4, 5, 6, 0x0F, 0x10, 0x16, 0x17, 0x18])
+    address = rng.choice([0, 1, 5, 14, 15, 16, 0xFFF0])
+    if code in (1, 2, 3, 4):
+        count = rng.choice([0, 1, 3, 16, 17, 125, 126, 2000, 2001])
+        fields = bytes((code,)) + address.to_bytes(2, "big") + count.to_bytes(2, "big")
+    elif code in (5, 6):
+        value = rng.choice([0xFF00, 0x0000, 0x1234])
+        fields = bytes((code,)) + address.to_bytes(2, "big") + value.to_bytes(2, "big")
+    elif code in (0x0F, 0x10):
+        count = rng.randint(1, 10)
+        size = (count + 7) // 8 if code == 0x0F else 2 * count
+        data = bytes(rng.randrange(256) for _ in range(size))
+        head = bytes((code,)) + address.to_bytes(2, "big") + count.to_bytes(2, "big")
+        fields = head + bytes((size,)) + data
+    elif code == 0x16:
+        masks = bytes(rng.randrange(256) for _ in range(4))
+        fields = bytes((code,)) + address.to_bytes(2, "big") + masks
+    elif code == 0x17:
+        count = rng.randint(1, 4)
+        read = address.to_bytes(2, "big") + rng.choice([0, 2, 126]).to_bytes(2, "big")
+        write = rng.choice([0, 3]).to_bytes(2, "big") + count.to_bytes(2, "big")
+        data = bytes(rng.randrange(256) for _ in range(2 * count))
+        fields = bytes((code,)) + read + write + bytes((2 * count,)) + data
+    else:
+        fields = bytes((code,)) + rng.choice([0x04DE, 0x0001]).to_bytes(2, "big")
+    return fields.hex(" ")
+
+
+async def test_random_requests_answered_as_on_a_serial_line() -> None:
+    seed = random.randrange(2**32)
+    rng = random.Random(seed)
+    requests = [_random_request(rng) for _ in range(120)]
+    tcp_store, serial_store = device(), device()
+    async with tcp_server({UNIT: tcp_store}) as server, connect(server) as client:
+        tcp = [await client.request(pdu, transaction_id=n) for n, pdu in enumerate(requests)]
+    async with slave_line({UNIT: serial_store}) as (master, _):
+        serial = [await master.request(UNIT, pdu) for pdu in requests]
+    for request, over_tcp, over_serial in zip(requests, tcp, serial, strict=True):
+        assert over_tcp == over_serial, f"seed {seed}: {request}"
+    for table in (Table.COILS, Table.HOLDING_REGISTERS):
+        assert tcp_store.get(table, 0, 16) == serial_store.get(table, 0, 16), f"seed {seed}"
