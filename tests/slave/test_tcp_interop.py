@@ -180,7 +180,7 @@ async def test_mbpoll_against_the_serve_command() -> None:
 
     assert MBPOLL is not None
     command = [sys.executable, "-m", "aiortu", "serve", "tcp://127.0.0.1:0"]
-    command += ["--config", "examples/devices.toml"]
+    command += ["--config", "examples/devices.toml", "--trace"]
     async with await anyio.open_process(command, stderr=subprocess.PIPE) as process:
         assert process.stderr is not None
         banner = b""
@@ -194,5 +194,10 @@ async def test_mbpoll_against_the_serve_command() -> None:
         result = await anyio.run_process([*poll, "127.0.0.1"], check=False)
         assert result.returncode == 0, result.stdout + result.stderr
         assert b"[108]: \t-20927" in result.stdout or b"[108]: \t44609" in result.stdout
+        with anyio.fail_after(20):
+            while b"->" not in banner:
+                banner += await process.stderr.receive()
+        # The trace shows each ADU's request with its meaning, as over RTU.
+        assert b"00 00 00 06 11 03 00 6b 00 03  unit 17 read holding registers 107..109" in banner
         process.send_signal(signal.SIGTERM)
         assert await process.wait() == 0

@@ -101,17 +101,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _trace_mbap(kind: str, data: bytes) -> None:
-    # A Modbus TCP ADU: shown with the meaning of the same request over RTU.
-    _trace(kind, encode_frame(data[6], data[7:]))
+    # A Modbus TCP ADU, with the meaning of the same request as an RTU frame.
+    _trace(kind, data, encode_frame(data[6], data[7:]))
 
 
-def _trace(kind: str, data: bytes) -> None:
+def _trace(kind: str, data: bytes, frame: bytes | None = None) -> None:
     stamp = time.strftime("%H:%M:%S")
     if kind == "discarded":
         meaning = f"discarded {len(data)} bytes"
     else:
         direction = "reply" if kind == "sent" else None
-        meaning = describe_frame(data, direction=direction)
+        meaning = describe_frame(data if frame is None else frame, direction=direction)
     arrow = {"received": "<-", "sent": "->"}.get(kind, "xx")
     sys.stderr.write(f"{stamp} {arrow} {data.hex(' ')}  {meaning}\n")
     sys.stderr.flush()
