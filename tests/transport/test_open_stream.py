@@ -13,10 +13,14 @@ from hypothesis import strategies as st
 from aiortu.core.timing import LineSettings
 from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.transport import (
+    ListenAddress,
+    ModbusTcpAddress,
+    PortAddress,
     SerialAddress,
     SerialStream,
     TcpAddress,
     open_stream,
+    parse_listen_url,
     parse_port_url,
 )
 from tests.transport.ptys import LINE, open_pty, read_master
@@ -37,9 +41,11 @@ from tests.transport.ptys import LINE, open_pty, read_master
         ("rtu+tcp://[::1]:5020", TcpAddress("::1", 5020)),
         ("rtu+tcp://[fe80::1%eth0]:502", TcpAddress("fe80::1%eth0", 502)),
         ("rtu+tcp://localhost:65535", TcpAddress("localhost", 65535)),
+        ("tcp://plc.local:502", ModbusTcpAddress("plc.local", 502)),
+        ("TCP://[::1]:1502/", ModbusTcpAddress("::1", 1502)),
     ],
 )
-def test_parse_valid(text: str, expected: SerialAddress | TcpAddress) -> None:
+def test_parse_valid(text: str, expected: PortAddress) -> None:
     assert parse_port_url(text) == expected
 
 
@@ -48,7 +54,9 @@ def test_parse_valid(text: str, expected: SerialAddress | TcpAddress) -> None:
     [
         ("", "empty"),
         ("   ", "empty"),
-        ("tcp://host:502", "unknown scheme 'tcp'"),
+        ("udp://host:502", "unknown scheme 'udp'"),
+        ("tcp://host:0", "outside 1..65535"),
+        ("tcp://::1:502", "tcp://[::1]:5020"),
         ("socket://host:502", "unknown scheme"),
         ("rtu+udp://host:502", "unknown scheme"),
         ("rtu+tcp://host", "port is missing"),
@@ -73,6 +81,39 @@ def test_parse_invalid(text: str, reason: str) -> None:
         parse_port_url(text)
     assert reason in str(info.value)
     assert info.value.value == text
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("tcp://0.0.0.0:1502", ListenAddress("tcp", "0.0.0.0", 1502)),
+        ("tcp://127.0.0.1:0", ListenAddress("tcp", "127.0.0.1", 0)),
+        ("RTU+TCP://[::]:5020", ListenAddress("rtu+tcp", "::", 5020)),
+    ],
+)
+def test_parse_listen_url(text: str, expected: ListenAddress) -> None:
+    assert parse_listen_url(text) == expected
+    assert parse_listen_url(str(expected)) == expected
+
+
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("/dev/ttyUSB0", "listens on a tcp:// or rtu+tcp:// URL"),
+        ("udp://0.0.0.0:502", "listens on a tcp:// or rtu+tcp:// URL"),
+        ("tcp://0.0.0.0", "port is missing (tcp://host:port)"),
+        ("tcp://0.0.0.0:65536", "outside 0..65535"),
+    ],
+)
+def test_parse_listen_url_refuses(text: str, reason: str) -> None:
+    with pytest.raises(InvalidValue) as info:
+        parse_listen_url(text)
+    assert reason in str(info.value)
+
+
+async def test_a_master_cannot_open_modbus_tcp_yet() -> None:
+    with pytest.raises(InvalidValue, match=r"cannot open Modbus TCP \(tcp://\) yet"):
+        await open_stream("tcp://127.0.0.1:502")
 
 
 hosts = st.one_of(

@@ -23,6 +23,7 @@ from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import add_line_settings, resolve_line_settings, seconds_or_zero
 from aiortu.cli._messages import config_problem, line_failure, port_failure
 from aiortu.core.bus_decoder import describe_frame
+from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
 from aiortu.core.receiver import TimingMode
 from aiortu.errors import ConnectionLost, ModbusError, PortError
@@ -40,6 +41,10 @@ examples:
       8N2 (as on a pty bus), logging every frame with its meaning
   aiortu serve rtu+tcp://10.0.0.7:4001 --config devices.toml --frame-gap 0
       behind a serial device server, no silence kept before replies
+  aiortu serve tcp://0.0.0.0:1502 --config devices.toml
+      Modbus TCP on every interface, many clients at once
+  aiortu serve rtu+tcp://0.0.0.0:5020 --config devices.toml
+      RTU framing over TCP, listening (a wildcard host listens, any other connects)
 
 several processes can share one bus, each with its own units:
   aiortu virtual-bus --ports 3 --parity N --stopbits 2     # prints three paths
@@ -64,12 +69,17 @@ def register(subparsers: Subparsers) -> None:
         description=(
             "Serve the units a TOML device description defines (tables, read-only ranges, "
             "FIFOs, files, device identification, server id) on a serial port or an "
-            "rtu+tcp:// URL, until interrupted (SIGINT or SIGTERM). See docs/slave.md."
+            "rtu+tcp:// URL, or listening for Modbus TCP on a tcp:// URL, until interrupted "
+            "(SIGINT or SIGTERM). See docs/slave.md."
         ),
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("port", metavar="PORT", help="serial device path or rtu+tcp://host:port")
+    parser.add_argument(
+        "port",
+        metavar="PORT",
+        help="serial device path, rtu+tcp://host:port, or tcp://host:port to listen on",
+    )
     parser.add_argument(
         "--config", required=True, metavar="FILE.toml", help="the device description"
     )
@@ -122,22 +132,27 @@ def run(args: argparse.Namespace) -> int:
 
 class Tracer:
     """Writes each frame the slave sees or sends on stderr, a reply described with the
-    request it answers (so that a read of 3 coils shows 3, not the 8 of its byte)."""
+    request it answers (so that a read of 3 coils shows 3, not the 8 of its byte).
 
-    def __init__(self) -> None:
+    With `mbap`, what it sees are Modbus TCP ADUs: each is shown as it came, with the
+    meaning of the same request or reply as an RTU frame."""
+
+    def __init__(self, *, mbap: bool = False) -> None:
         self.request: Request | None = None
+        self.mbap = mbap
 
     def __call__(self, kind: str, data: bytes) -> None:
         now = time.time()
         stamp = time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now * 1000) % 1000:03d}"
+        frame = encode_frame(data[6], data[7:]) if self.mbap and kind != "discarded" else data
         if kind == "discarded":
             meaning = f"discarded {len(data)} bytes"
         elif kind == "sent":
-            meaning = describe_frame(data, direction="reply", request=self.request)
+            meaning = describe_frame(frame, direction="reply", request=self.request)
         else:
-            meaning = describe_frame(data, direction="request")
+            meaning = describe_frame(frame, direction="request")
             try:
-                self.request = decode_request(data[1:-2])
+                self.request = decode_request(frame[1:-2])
             except ModbusError:
                 self.request = None
         arrow = {"received": "<-", "sent": "->"}.get(kind, "xx")
@@ -170,7 +185,7 @@ async def _serve(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> 
 
 async def _serve_until_stopped(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> None:
     """Serve; after the line fails, reopen the port (backing off) unless told not to."""
-    tracer = Tracer() if args.trace else None
+    tracer = Tracer(mbap=args.port.lower().startswith("tcp:")) if args.trace else None
     backoff = _Backoff()
     opened = False
     while True:
@@ -205,11 +220,19 @@ async def _serve_once(
         trace=tracer,
     ) as slave:
         listing = ", ".join(str(unit) for unit in sorted(units))
-        settings = f"{args.baudrate} 8{args.parity}{args.stopbits}"
         which = "unit" if len(units) == 1 else "units"
-        _say(f"{which} {listing} on {args.port} at {settings}; Ctrl-C to stop")
+        local = getattr(slave, "local_address", None)
+        if local is not None:  # listening: say the port, which may have been 0
+            where = f"{args.port} (port {local[1]})"
+        else:
+            where = f"{args.port} at {args.baudrate} 8{args.parity}{args.stopbits}"
+        _say(f"{which} {listing} on {where}; Ctrl-C to stop")
         await slave.wait_stopped()
-    return slave.connection_error or ConnectionLost("the line closed")
+    error = slave.connection_error
+    if isinstance(error, ConnectionLost):
+        return error
+    # A listener that stopped: say why in the same terms as a line that failed.
+    return ConnectionLost("the line closed" if error is None else str(error))
 
 
 def _say(message: str) -> None:

@@ -2,7 +2,9 @@
 by handlers per function code, with routes, hooks and a device description file.
 
 [`Slave`][aiortu.slave.Slave] takes any `anyio.abc.ByteStream`; [`serve`][aiortu.slave.serve] opens
-a port or a URL first. See `docs/slave.md`.
+a port or a URL first, or listens on a `tcp://` (Modbus TCP,
+[`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]) or `rtu+tcp://`
+([`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer]) URL. See `docs/slave.md`.
 """
 
 from __future__ import annotations
@@ -10,7 +12,15 @@ from __future__ import annotations
 from aiortu.slave._config import ConfigError, DeviceConfig, load_config, parse_config
 from aiortu.slave._handlers import Handler, HandlerResult, Reply, RequestContext
 from aiortu.slave._routes import RangeAccess, RangeHandler, RoutedStore
-from aiortu.slave._server import AfterHook, BeforeHook, Slave, TraceCallback, serve
+from aiortu.slave._server import (
+    AfterHook,
+    BeforeHook,
+    RtuOverTcpServer,
+    Server,
+    Slave,
+    TraceCallback,
+    serve,
+)
 from aiortu.slave._store import (
     AsyncDataStore,
     Block,
@@ -26,6 +36,7 @@ from aiortu.slave._store import (
     SupportsServerId,
     Table,
 )
+from aiortu.slave._tcp_server import ModbusTcpServer, TcpServerCounters
 
 __all__ = (
     "AfterHook",
@@ -40,11 +51,14 @@ __all__ = (
     "Handler",
     "HandlerResult",
     "MemoryStore",
+    "ModbusTcpServer",
     "RangeAccess",
     "RangeHandler",
     "Reply",
     "RequestContext",
     "RoutedStore",
+    "RtuOverTcpServer",
+    "Server",
     "ServerId",
     "Slave",
     "SupportsDeviceIdentification",
@@ -53,6 +67,7 @@ __all__ = (
     "SupportsFileRecords",
     "SupportsServerId",
     "Table",
+    "TcpServerCounters",
     "TraceCallback",
     "load_config",
     "parse_config",

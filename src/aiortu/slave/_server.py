@@ -8,7 +8,11 @@ device server, a virtual line) and a mapping of unit addresses to data stores:
         ...                                   # the slave serves in the background
 
 or `await slave.serve()` to serve in the current task. [`serve`][aiortu.slave.serve] opens a port or
-a URL first. One line may carry a whole bus of simulated units.
+a URL first, or listens on one: `tcp://` for Modbus TCP
+([`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]), `rtu+tcp://` for RTU framing over TCP
+([`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer], a [`Slave`][aiortu.slave.Slave] per
+connection). One line may carry a whole bus of simulated units. The general route of a request
+(checks, handler, hooks) is `Dispatcher`, shared with the Modbus TCP server.
 
 Each frame goes through the core's [`SlaveMachine`][aiortu.core.slave_machine.SlaveMachine], which
 decides what the spec says: frames for other units are dropped and counted, frames with a bad CRC
@@ -39,11 +43,9 @@ and detached.
 
 from __future__ import annotations
 
-import inspect
 import logging
-import math
 from collections import deque
-from collections.abc import AsyncIterator, Callable, Iterable, Mapping
+from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import asynccontextmanager
 from types import TracebackType
 from typing import Any, Self
@@ -51,49 +53,53 @@ from typing import Any, Self
 import anyio
 import anyio.abc
 
-from aiortu.core.codes import BROADCAST_UNIT, EXCEPTION_BIT, ExceptionCode
+from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.data_model import AsyncDataStore, DataStore, Table
 from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_request
 from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
 from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine, SlaveState
 from aiortu.core.timing import LineSettings
-from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue, MalformedPDU
+from aiortu.errors import ConnectionLost, InvalidValue
 from aiortu.line._link import Link, LinkEvent
-from aiortu.slave._answer_at_once import AnswerAtOnce, Taken, exception_pdu
+from aiortu.slave._answer_at_once import AnswerAtOnce, Taken
+from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, AfterHook, BeforeHook, Dispatcher
 from aiortu.slave._handlers import (
     BUILTIN_HANDLERS,
-    Answer,
     Handler,
-    HandlerResult,
     Reply,
-    RequestContext,
 )
-from aiortu.slave._routes import RangeHandler, RoutedStore
-from aiortu.transport import open_stream
+from aiortu.slave._routes import RangeHandler
+from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS, ModbusTcpServer, listening_address
+from aiortu.transport import (
+    MODBUS_TCP_SCHEME,
+    TCP_SCHEME,
+    ListenAddress,
+    listen_tcp,
+    open_stream,
+    parse_listen_url,
+)
 
-__all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback", "serve")
+__all__ = (
+    "AfterHook",
+    "BeforeHook",
+    "RtuOverTcpServer",
+    "Server",
+    "Slave",
+    "TraceCallback",
+    "serve",
+)
 
 _log = logging.getLogger(__name__)
-
-BeforeHook = Callable[[Any, RequestContext], Answer]
-"""Called before the handler with (request, context): `None` goes on to the handler, a
-response or [`Reply`][aiortu.slave.Reply] answers instead of it, and raising
-[`ExceptionResponse`][aiortu.errors.ExceptionResponse] refuses the request. May be async."""
-
-AfterHook = Callable[[Any, RequestContext, HandlerResult], Answer]
-"""Called after the handler with (request, context, its answer): `None` keeps the
-answer, anything else replaces it. May be async. Not called when the handler raised."""
 
 TraceCallback = Callable[[str, bytes], object]
 """Sees the line: `("received", frame)` for every frame whose CRC checks (for any
 unit), `("sent", frame)` for every reply, `("discarded", data)` for bytes dropped."""
 
 _UNIT_RANGE = range(1, 248)
-_FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
+_FUNCTION_CODE_RANGE = range(1, 128)
 
 
-class Slave:
+class Slave(Dispatcher):
     """A Modbus RTU slave on one line (see the module docstring).
 
     `units` maps each unit address (1..247) to its data store. `settings` are the line settings;
@@ -123,13 +129,12 @@ class Slave:
         for unit in units:
             if unit not in _UNIT_RANGE:
                 raise InvalidValue("unit", unit, _UNIT_RANGE)
-        self.units: dict[int, DataStore | AsyncDataStore] = dict(units)
-        """The data store of each unit served."""
+        stores: dict[int, DataStore | AsyncDataStore] = dict(units)
         self.link = Link(
             stream,
             settings,
             role=Role.SLAVE,
-            units=self.units,
+            units=stores,
             timing=timing,
             frame_silence=frame_silence,
             frame_gap=frame_gap,
@@ -138,13 +143,10 @@ class Slave:
         """The line this slave serves (its counters say what the receiver discarded)."""
         self.counters = SerialLineCounters()
         """The spec's diagnostic counters of this line."""
-        self.machine = SlaveMachine(self.units, self.counters)
-        """The state machine that decides what to answer."""
+        self._init_dispatch(stores, SlaveMachine(stores, self.counters), BUILTIN_HANDLERS)
         self.connection_error: ConnectionLost | None = None
         """Why the background serve loop ended, when it ended because the line failed."""
         self._queue: deque[LinkEvent | Taken] = deque()
-        self._before: list[BeforeHook] = []
-        self._after: list[AfterHook] = []
         self._at_once = AnswerAtOnce(
             self.machine,
             self.link,
@@ -156,16 +158,9 @@ class Slave:
         )
         self._trace: TraceCallback | None = None
         self.trace = trace
-        self._handlers: dict[int, Handler] = dict(BUILTIN_HANDLERS)
-        self._routed: dict[int, RoutedStore] = {}
-        self._contexts: dict[int, RequestContext] = {}
-        self._broadcast_contexts: list[RequestContext] = []
         self._build_contexts()
         for function_code, handler in (handlers or {}).items():
             self.set_handler(function_code, handler)
-        self._misbehaved: dict[int, object] = {}
-        """Handlers and hooks logged for returning what is not an answer, by id (kept, so
-        that no other object takes their id)."""
         self._task_group: anyio.abc.TaskGroup | None = None
         self._stopped = anyio.Event()
         self._served = frozenset((BROADCAST_UNIT, *self.units))
@@ -174,91 +169,12 @@ class Slave:
         """The event loop future the serve loop waits on, where the link has a loop."""
         self._link_closed = False
 
-    # -- handlers --------------------------------------------------------------------
-
-    def set_handler(self, function_code: int, handler: Handler | None) -> None:
-        """Serve `function_code` with `handler`; `None` removes it (the code then gets 01).
-
-        The handler is called as `handler(request, context)` with the decoded request
-        (a [`RawPDU`][aiortu.core.pdu.RawPDU] for codes without a class) and a
-        [`RequestContext`][aiortu.slave.RequestContext]; it returns the response PDU, or
-        `None` to send nothing, and may be a coroutine function.
-        """
-        if function_code not in _FUNCTION_CODE_RANGE:
-            raise InvalidValue("function_code", function_code, _FUNCTION_CODE_RANGE)
-        if handler is None:
-            self._handlers.pop(function_code, None)
-        else:
-            self._handlers[function_code] = handler
-        self._at_once.configure(self._handlers, self._stores())
-
-    def handler(self, function_code: int) -> Callable[[Handler], Handler]:
-        """Decorator form of [`set_handler`][aiortu.slave.Slave.set_handler]."""
-
-        def register(handler: Handler) -> Handler:
-            self.set_handler(function_code, handler)
-            return handler
-
-        return register
-
-    def route(
+    def _configured(
         self,
-        table: Table | str,
-        addresses: range,
-        handler: RangeHandler,
-        *,
-        units: Iterable[int] | None = None,
+        handlers: Mapping[int, Handler],
+        stores: Mapping[int, DataStore | AsyncDataStore],
     ) -> None:
-        """Serve `addresses` of `table` with `handler` on `units` (default: every unit).
-
-        See [`aiortu.slave`][aiortu.slave]. A later route wins where routes overlap.
-        """
-        table = Table(table)
-        for unit in self.units if units is None else units:
-            if unit not in self.units:
-                raise InvalidValue("unit", unit, sorted(self.units))
-            routed = self._routed.get(unit)
-            if routed is None:
-                routed = self._routed[unit] = RoutedStore(self.units[unit], unit)
-            routed.add(table, addresses, handler)
-        self._build_contexts()
-
-    def before_request(self, hook: BeforeHook) -> Callable[[], None]:
-        """Call `hook` before each request's handler (see [`BeforeHook`][aiortu.slave.BeforeHook]).
-
-        Returns a function that removes the hook.
-        """
-        self._before.append(hook)
-        return lambda: self._before.remove(hook) if hook in self._before else None
-
-    def after_request(self, hook: AfterHook) -> Callable[[], None]:
-        """Call `hook` after each request's handler (see [`AfterHook`][aiortu.slave.AfterHook]).
-
-        Returns a function that removes the hook.
-        """
-        self._after.append(hook)
-        return lambda: self._after.remove(hook) if hook in self._after else None
-
-    def _stores(self) -> dict[int, DataStore | AsyncDataStore]:
-        """The store of each unit, with its routes."""
-        return {unit: self._routed.get(unit, store) for unit, store in self.units.items()}
-
-    def _build_contexts(self) -> None:
-        machine = self.machine
-        stores = self._stores()
-        self._contexts = {
-            unit: RequestContext(unit, store, machine=machine) for unit, store in stores.items()
-        }
-        self._at_once.configure(self._handlers, stores)
-        # A broadcast runs once per store: units that share one store run it once.
-        seen: set[int] = set()
-        self._broadcast_contexts = []
-        for unit, store in stores.items():
-            if id(self.units[unit]) not in seen:
-                seen.add(id(self.units[unit]))
-                self._broadcast_contexts.append(
-                    RequestContext(unit, store, broadcast=True, machine=machine)
-                )
+        self._at_once.configure(handlers, stores)
 
     @property
     def trace(self) -> TraceCallback | None:
@@ -281,11 +197,6 @@ class Slave:
         except Exception:
             _log.exception("the trace callback failed; it is detached")
             self.trace = None
-
-    @property
-    def function_codes(self) -> frozenset[int]:
-        """The function codes this slave serves."""
-        return frozenset(self._handlers)
 
     # -- lifetime --------------------------------------------------------------------
 
@@ -456,7 +367,7 @@ class Slave:
         machine = self.machine
         if not machine.frame_received(frame[0], frame[1]):
             return False
-        if machine.listen_only and frame[1:4] != _RESTART_COMMUNICATIONS:
+        if machine.listen_only and frame[1:4] != RESTART_COMMUNICATIONS:
             machine.ignore()
             return False
         return True
@@ -485,140 +396,188 @@ class Slave:
         else:
             machine.no_reply()
 
-    async def _answer(self, unit: int, pdu: bytes) -> bytes | Reply | None:
-        """Check and execute one request; return the reply PDU (or a Reply), or None."""
-        machine = self.machine
-        function_code = pdu[0]
-        handler = self._handlers.get(function_code)
-        request: Request | None = None
-        violation: int | None = None
-        if handler is not None:
-            try:
-                request = decode_request(pdu)
-            except MalformedPDU as error:
-                violation = error.exception_code
-        if not machine.check_request(supported=handler is not None, violation=violation):
-            return exception_pdu(function_code, machine.exception_code)
-        assert handler is not None
-        failure: int = ExceptionCode.SERVER_DEVICE_FAILURE
+
+class RtuOverTcpServer:
+    """RTU framing over TCP, listening: each connection is a line served by its own
+    [`Slave`][aiortu.slave.Slave] (`frame_gap` 0, its own machine and counters), all on the same
+    `units`' stores. For serial device servers that connect in.
+
+    [`set_handler`][aiortu.slave.RtuOverTcpServer.set_handler],
+    [`route`][aiortu.slave.RtuOverTcpServer.route],
+    [`before_request`][aiortu.slave.RtuOverTcpServer.before_request] and
+    [`after_request`][aiortu.slave.RtuOverTcpServer.after_request] apply to the lines connected now
+    and to every later one. At most `max_connections` lines at once; more are closed at once. There
+    is no idle timeout: a line is quiet whenever no master polls.
+    """
+
+    def __init__(
+        self,
+        units: Mapping[int, DataStore | AsyncDataStore],
+        settings: LineSettings | None = None,
+        *,
+        timing: TimingMode | str = TimingMode.TOLERANT,
+        handlers: Mapping[int, Handler] | None = None,
+        trace: TraceCallback | None = None,
+        max_connections: int = DEFAULT_MAX_CONNECTIONS,
+    ) -> None:
+        if type(max_connections) is not int or max_connections < 1:
+            raise InvalidValue("max_connections", max_connections, "an int of at least 1")
+        self.units: dict[int, DataStore | AsyncDataStore] = dict(units)
+        """The data store of each unit served."""
+        self.slaves: set[Slave] = set()
+        """The slave of each line connected now."""
+        self.max_connections = max_connections
+        """Lines served at once; more are closed at once."""
+        self.local_address: tuple[str, int] | None = None
+        """The host and port [`serve`][aiortu.slave.RtuOverTcpServer.serve] listens on, once it
+        does."""
+        self.connection_error: Exception | None = None
+        """Why [`serve`][aiortu.slave.RtuOverTcpServer.serve] stopped, when the listener failed."""
+        self._settings = settings
+        self._timing = timing
+        self._trace = trace
+        self._setup: list[Callable[[Slave], object]] = []
+        self._stopped = anyio.Event()
+        for unit in self.units:
+            if unit not in _UNIT_RANGE:
+                raise InvalidValue("unit", unit, _UNIT_RANGE)
+        for function_code, handler in (handlers or {}).items():
+            if function_code not in _FUNCTION_CODE_RANGE:
+                raise InvalidValue("function_code", function_code, _FUNCTION_CODE_RANGE)
+            self.set_handler(function_code, handler)
+
+    @property
+    def port(self) -> int:
+        """The port [`serve`][aiortu.slave.RtuOverTcpServer.serve] listens on (useful after asking
+        for port 0)."""
+        if self.local_address is None:
+            raise RuntimeError("the server is not listening yet")
+        return self.local_address[1]
+
+    def _apply(self, call: Callable[[Slave], object]) -> None:
+        self._setup.append(call)
+        for slave in self.slaves:
+            call(slave)
+
+    def set_handler(self, function_code: int, handler: Handler | None) -> None:
+        """As [`Slave.set_handler`][aiortu.slave.Slave.set_handler], on every line."""
+        self._apply(lambda slave: slave.set_handler(function_code, handler))
+
+    def route(self, table: Table | str, addresses: range, handler: RangeHandler) -> None:
+        """As [`Slave.route`][aiortu.slave.Slave.route] (every unit), on every line."""
+        self._apply(lambda slave: slave.route(table, addresses, handler))
+
+    def before_request(self, hook: BeforeHook) -> Callable[[], None]:
+        """As [`Slave.before_request`][aiortu.slave.Slave.before_request], on every line; returns
+        the remover."""
+        return self._hook(lambda slave: slave.before_request(hook))
+
+    def after_request(self, hook: AfterHook) -> Callable[[], None]:
+        """As [`Slave.after_request`][aiortu.slave.Slave.after_request], on every line; returns the
+        remover."""
+        return self._hook(lambda slave: slave.after_request(hook))
+
+    def _hook(self, add: Callable[[Slave], Callable[[], None]]) -> Callable[[], None]:
+        removers: list[Callable[[], None]] = []
+
+        def add_to(slave: Slave) -> None:
+            removers.append(add(slave))
+
+        def remove() -> None:
+            if add_to in self._setup:
+                self._setup.remove(add_to)
+            for remover in removers:
+                remover()
+
+        self._apply(add_to)
+        return remove
+
+    async def wait_stopped(self) -> None:
+        """Wait until [`serve`][aiortu.slave.RtuOverTcpServer.serve] has ended (the listener failed
+        or closed)."""
+        await self._stopped.wait()
+
+    async def serve(
+        self,
+        listener: anyio.abc.Listener[anyio.abc.ByteStream],
+        *,
+        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
+    ) -> None:
+        """Accept lines from `listener` and serve each, until cancelled."""
         try:
-            result = await self._execute(handler, request, unit)
-            reply = _encoded(result)
-        except ExceptionResponse as error:
-            failure = error.code
-        except _NotAnAnswer as error:
-            self._log_not_an_answer(unit, function_code, error)
-        except Exception:
-            _log.exception("unit %d: the handler of function 0x%02X failed", unit, function_code)
-        else:
-            if isinstance(result, ExceptionPDU):
-                machine.processing_failed(result.exception_code)
-            else:
-                machine.processed()
-            return reply
-        machine.processing_failed(failure)
-        return exception_pdu(function_code, failure)
+            self.local_address = listening_address(listener)
+            task_status.started()
+            async with listener:
+                await listener.serve(self.serve_connection)
+        except Exception as error:
+            self.connection_error = error
+            _log.error("RTU over TCP: the listener failed: %s", error)
+        finally:
+            self._stopped.set()
 
-    async def _execute(self, handler: Handler, request: Request | None, unit: int) -> HandlerResult:
-        """Run `handler` for `unit`, or once per store for a broadcast (no answer then)."""
-        if self.machine.broadcast:
-            for context in self._broadcast_contexts:
-                await self._run(handler, request, context)
-            return None
-        return await self._run(handler, request, self._contexts[unit])
-
-    async def _run(
-        self, handler: Handler, request: Request | None, context: RequestContext
-    ) -> HandlerResult:
-        """The handler's answer, with the hooks around it, each checked (see _checked)."""
-        if not (self._before or self._after):
-            return _checked(await _resolved(handler(request, context)), handler)
-        for before in tuple(self._before):
-            early = _checked(await _resolved(before(request, context)), before)
-            if early is not None:
-                return early
-        result = _checked(await _resolved(handler(request, context)), handler)
-        for after in tuple(self._after):
-            replaced = _checked(await _resolved(after(request, context, result)), after)
-            if replaced is not None:
-                result = replaced
-        return result
-
-    def _log_not_an_answer(self, unit: int, function_code: int, error: _NotAnAnswer) -> None:
-        """Log a handler or hook that returned what is not an answer, once for each."""
-        source = error.source
-        if id(source) in self._misbehaved:
+    async def serve_connection(self, stream: anyio.abc.ByteStream) -> None:
+        """Serve one line until it closes."""
+        if len(self.slaves) >= self.max_connections:
+            _log.warning("RTU over TCP: %d lines connected, the most allowed", len(self.slaves))
+            await stream.aclose()
             return
-        self._misbehaved[id(source)] = source
-        name = getattr(source, "__qualname__", type(source).__name__)
-        _log.error(
-            "unit %d, function 0x%02X: %s returned %s, not a response, an exception PDU, "
-            "a Reply or None; answered with exception 04 (logged once for it)",
-            unit,
-            function_code,
-            name,
-            error.what,
+        slave = Slave(
+            stream, self.units, self._settings, frame_gap=0, timing=self._timing, trace=self._trace
         )
+        for call in self._setup:
+            call(slave)
+        self.slaves.add(slave)
+        try:
+            await slave.serve()
+        except ConnectionLost:
+            pass
+        except Exception:
+            # One line's failure never ends the others, nor the server.
+            _log.exception("RTU over TCP: a line failed; it is closed")
+        finally:
+            self.slaves.discard(slave)
+            await stream.aclose()
 
 
-class _NotAnAnswer(Exception):
-    """A handler or hook (`source`) returned something that is not an answer (`what`)."""
+Server = Slave | ModbusTcpServer | RtuOverTcpServer
+"""What [`serve`][aiortu.slave.serve] yields: a [`Slave`][aiortu.slave.Slave] on a port, a server on
+a listen URL."""
 
-    def __init__(self, source: object, what: str) -> None:
-        super().__init__(what)
-        self.source = source
-        self.what = what
+_WILDCARDS = frozenset({"0.0.0.0", "::"})
 
 
-async def _resolved(value: Any) -> Any:
-    """`value`, awaited first if it is awaitable (handlers and hooks may be async)."""
-    if inspect.isawaitable(value):
-        return await value
-    return value
-
-
-def _checked(value: object, source: object) -> HandlerResult:
-    """`value`, returned by `source`, if it is an answer: a Response, an ExceptionPDU,
-    a valid Reply or None; else `_NotAnAnswer` (the request then gets 04)."""
-    if value is None or isinstance(value, (Response, ExceptionPDU)):
-        return value
-    if isinstance(value, Reply):
-        if _valid_reply(value):
-            return value
-        return _fail(source, "a Reply with a bad response, delay or unit")
-    return _fail(source, f"a {type(value).__name__}")
-
-
-def _encoded(result: HandlerResult) -> bytes | Reply | None:
-    """What to send for `result`, a checked answer: the PDU's bytes, the Reply (its
-    response encoded once here, so that a broken `encode` fails now, not after the
-    delay), or None for nothing."""
-    if result is None:
+def _listen_address(port_or_url: str, listen: bool | None) -> ListenAddress | None:
+    """Where `port_or_url` listens, or None when it is a port to open (see serve)."""
+    scheme = port_or_url.partition("://")[0].lower() if "://" in port_or_url else ""
+    if scheme == MODBUS_TCP_SCHEME:
+        return parse_listen_url(port_or_url)
+    if scheme == TCP_SCHEME:
+        address = parse_listen_url(port_or_url)
+        if listen or (listen is None and (address.port == 0 or address.host in _WILDCARDS)):
+            return address
         return None
-    if isinstance(result, Reply):
-        if result.response is None:
-            return None
-        result.response.encode()
-        return result
-    return result.encode()
+    if listen:
+        raise InvalidValue(
+            "port", port_or_url, "tcp://host:port or rtu+tcp://host:port", "only a URL listens"
+        )
+    return None
 
 
-def _fail(source: object, what: str) -> HandlerResult:
-    raise _NotAnAnswer(source, what)
-
-
-def _valid_reply(reply: Reply) -> bool:
-    response, delay, unit = reply.response, reply.delay, reply.unit
-    return (
-        (response is None or isinstance(response, (Response, ExceptionPDU)))
-        and type(delay) in (int, float)
-        and 0 <= delay < math.inf
-        and (unit is None or (type(unit) is int and 0 <= unit <= 0xFF))
-    )
-
-
-_RESTART_COMMUNICATIONS = bytes((0x08, 0x00, 0x01))
-"""Diagnostics, restart communications: the one request served in listen-only mode."""
+@asynccontextmanager
+async def _running(
+    server: ModbusTcpServer | RtuOverTcpServer, address: ListenAddress, url: str
+) -> AsyncIterator[None]:
+    """Listen on `address` and run `server` for the duration of the `async with`."""
+    listener = await listen_tcp(address.host, address.port, url=url)
+    group = anyio.create_task_group()
+    await group.__aenter__()
+    try:
+        await group.start(server.serve, listener)
+        yield
+    finally:
+        group.cancel_scope.cancel()
+        # The body's own exception propagates as it is, not wrapped in an ExceptionGroup.
+        await group.__aexit__(None, None, None)
 
 
 @asynccontextmanager
@@ -634,17 +593,41 @@ async def serve(
     timing: TimingMode | str = TimingMode.TOLERANT,
     handlers: Mapping[int, Handler] | None = None,
     trace: TraceCallback | None = None,
+    listen: bool | None = None,
     **options: Any,
-) -> AsyncIterator[Slave]:
-    """Open `port_or_url` and serve `units` on it for the duration of the `async with`.
+) -> AsyncIterator[Server]:
+    """Open `port_or_url`, or listen on it, and serve `units` for the duration of the
+    `async with`.
 
-    `port_or_url` is a serial device path or `rtu+tcp://host:port`; the line settings are the spec's
-    19200 8E1 by default; `options` go to
-    [`aiortu.transport.open_stream`][aiortu.transport.open_stream] (`exclusive`, `rs485`,
-    `local_echo`, `connect_timeout`). Yields the running [`Slave`][aiortu.slave.Slave]. Raises the
-    transport's [`PortError`][aiortu.errors.PortError] subclasses when the port cannot be opened.
+    - A serial device path, or `rtu+tcp://host:port` to connect to a serial device server: yields
+      the running [`Slave`][aiortu.slave.Slave]. The line settings are the spec's 19200 8E1 by
+      default; `options` go to [`aiortu.transport.open_stream`][aiortu.transport.open_stream]
+      (`exclusive`, `rs485`, `local_echo`, `connect_timeout`).
+    - `tcp://host:port`: listens for Modbus TCP and yields the running
+      [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]; `options` go to it
+      (`max_connections`, `idle_timeout`, `unit_aliases`, `answer_unknown_units`,
+      `serial_line_codes`).
+    - `rtu+tcp://host:port` with `listen` true, or with a wildcard host (`0.0.0.0`, `[::]`) or port
+      0 (addresses nobody can connect to): listens for RTU framing over TCP and yields the running
+      [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (option `max_connections`).
+
+    Port 0 asks the system for a free port (see the server's `port`). Raises the
+    transport's [`PortError`][aiortu.errors.PortError] subclasses when the port cannot be
+    opened or listened on.
     """
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
+    address = _listen_address(port_or_url, listen)
+    if address is not None:
+        server: ModbusTcpServer | RtuOverTcpServer
+        if address.scheme == MODBUS_TCP_SCHEME:
+            server = ModbusTcpServer(units, handlers=handlers, trace=trace, **options)
+        else:
+            server = RtuOverTcpServer(
+                units, settings, timing=timing, handlers=handlers, trace=trace, **options
+            )
+        async with _running(server, address, port_or_url):
+            yield server
+        return
     stream = await open_stream(port_or_url, settings, **options)
     try:
         slave = Slave(

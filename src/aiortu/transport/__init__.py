@@ -16,21 +16,31 @@ from typing import Any
 from anyio.abc import ByteStream
 
 from aiortu.core.timing import LineSettings
+from aiortu.errors import InvalidValue
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
-from aiortu.transport._tcp import open_rtu_over_tcp
+from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp
 from aiortu.transport._url import (
+    MODBUS_TCP_SCHEME,
+    TCP_SCHEME,
+    ListenAddress,
+    ModbusTcpAddress,
     PortAddress,
     SerialAddress,
     TcpAddress,
+    parse_listen_url,
     parse_port_url,
 )
 
 __all__ = (
+    "MODBUS_TCP_SCHEME",
+    "TCP_SCHEME",
     "FileDescriptorStream",
+    "ListenAddress",
     "LocalEchoFilter",
+    "ModbusTcpAddress",
     "PortAddress",
     "PushStream",
     "RS485Options",
@@ -38,9 +48,11 @@ __all__ = (
     "SerialAttribute",
     "SerialStream",
     "TcpAddress",
+    "listen_tcp",
     "open_rtu_over_tcp",
     "open_serial",
     "open_stream",
+    "parse_listen_url",
     "parse_port_url",
 )
 
@@ -61,11 +73,23 @@ async def open_stream(
     is a serial device path ([`open_serial`][aiortu.transport.open_serial]; options `exclusive`,
     `rs485` and `local_echo`).
 
+    `tcp://host:port` (Modbus TCP) is not a byte stream of RTU frames; it raises
+    [`InvalidValue`][aiortu.errors.InvalidValue] here ([`aiortu.slave.serve`][aiortu.slave.serve]
+    listens on it).
+
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a malformed URL,
     `TypeError` for an option the transport does not take, and the transport's
     [`PortError`][aiortu.errors.PortError] subclasses when it cannot be opened.
     """
     address = parse_port_url(port_or_url)
+    if isinstance(address, ModbusTcpAddress):
+        raise InvalidValue(
+            "port",
+            port_or_url,
+            "a serial device path or rtu+tcp://host:port",
+            "a master cannot open Modbus TCP (tcp://) yet, only aiortu.serve listens on it; "
+            "for RTU framing over TCP write rtu+tcp://",
+        )
     allowed = _TCP_OPTIONS if isinstance(address, TcpAddress) else _SERIAL_OPTIONS
     unknown = sorted(set(options) - allowed)
     if unknown:

@@ -20,14 +20,16 @@ that trying again later may work. While running, anyio's stream raises
 
 from __future__ import annotations
 
+import errno
 import socket
 
 import anyio
+import anyio.abc
 from anyio.abc import SocketAttribute, SocketStream
 
-from aiortu.errors import InvalidValue, PortNotFound
+from aiortu.errors import InvalidValue, PortBusy, PortError, PortNotFound, PortPermissionDenied
 
-__all__ = ("open_rtu_over_tcp", "format_tcp_url")
+__all__ = ("format_tcp_url", "listen_tcp", "open_rtu_over_tcp")
 
 
 def format_tcp_url(host: str, port: int) -> str:
@@ -83,3 +85,33 @@ async def open_rtu_over_tcp(host: str, port: int, *, connect_timeout: float = 5.
         await stream.aclose()
         raise
     return stream
+
+
+async def listen_tcp(
+    host: str, port: int, *, url: str | None = None
+) -> anyio.abc.Listener[SocketStream]:
+    """Listen on `host`:`port` (0: a free port the system picks) and return the listener.
+
+    Its connections have Nagle's algorithm off (anyio does that for accepted sockets). `url` names
+    the listener in errors. Raises [`PortBusy`][aiortu.errors.PortBusy] when the port is taken,
+    [`PortPermissionDenied`][aiortu.errors.PortPermissionDenied] when it needs privileges (below
+    1024), and [`PortNotFound`][aiortu.errors.PortNotFound] for an address that is not this
+    machine's.
+    """
+    where = url or f"{host}:{port}"
+    try:
+        return await anyio.create_tcp_listener(local_host=host, local_port=port)
+    except socket.gaierror as exc:
+        raise PortNotFound(where, f"unknown host {host!r} ({exc.strerror})") from exc
+    except OSError as exc:
+        raise _listen_error(where, exc) from exc
+
+
+def _listen_error(where: str, exc: OSError) -> PortError:
+    if exc.errno == errno.EADDRINUSE:
+        return PortBusy(where, "the port is in use by another program")
+    if exc.errno == errno.EACCES:
+        return PortPermissionDenied(where, "ports below 1024 need privileges; try 1502")
+    if exc.errno == errno.EADDRNOTAVAIL:
+        return PortNotFound(where, "that address is not one of this machine's")
+    return PortNotFound(where, f"cannot listen: {exc.strerror or exc}")

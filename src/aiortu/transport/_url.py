@@ -1,15 +1,19 @@
-"""Port names: a serial device path, or `rtu+tcp://host:port` for RTU over TCP.
+"""Port names: a serial device path, `rtu+tcp://host:port` for RTU over TCP, or
+`tcp://host:port` for Modbus TCP.
 
 [`parse_port_url`][aiortu.transport.parse_port_url] turns the text a user gives (on the command
-line, in `open_master`) into a [`SerialAddress`][aiortu.transport.SerialAddress] or a
-[`TcpAddress`][aiortu.transport.TcpAddress], or raises [`InvalidValue`][aiortu.errors.InvalidValue]
-saying what is wrong with it.
+line, in `open_master`) into a [`SerialAddress`][aiortu.transport.SerialAddress], a
+[`TcpAddress`][aiortu.transport.TcpAddress] or a
+[`ModbusTcpAddress`][aiortu.transport.ModbusTcpAddress], or raises
+[`InvalidValue`][aiortu.errors.InvalidValue] saying what is wrong with it.
+[`parse_listen_url`][aiortu.transport.parse_listen_url] does the same for the address a server
+listens on (`serve`), where port 0 asks the system for a free port.
 
-The URL form is `rtu+tcp://HOST:PORT`, optionally with a trailing `/`. HOST is a
+The URL form is `SCHEME://HOST:PORT`, optionally with a trailing `/`. HOST is a
 name, an IPv4 address, or an IPv6 address in brackets (`rtu+tcp://[::1]:5020`); PORT
-is required (there is no standard port for RTU over TCP). Anything else containing
-`://` is refused, so that a typing mistake does not end up as a device path. Any other
-text is taken as a serial device path, unchanged.
+is required (there is no standard port for RTU over TCP, and 502 needs privileges).
+Anything else containing `://` is refused, so that a typing mistake does not end up as
+a device path. Any other text is taken as a serial device path, unchanged.
 """
 
 from __future__ import annotations
@@ -19,12 +23,26 @@ from dataclasses import dataclass
 
 from aiortu.errors import InvalidValue
 
-__all__ = ("PortAddress", "SerialAddress", "TCP_SCHEME", "TcpAddress", "parse_port_url")
+__all__ = (
+    "MODBUS_TCP_SCHEME",
+    "ListenAddress",
+    "ModbusTcpAddress",
+    "PortAddress",
+    "SerialAddress",
+    "TCP_SCHEME",
+    "TcpAddress",
+    "parse_listen_url",
+    "parse_port_url",
+)
 
 TCP_SCHEME = "rtu+tcp"
 """The URL scheme of RTU over TCP."""
 
-_URL_FORM = "a serial device path or rtu+tcp://host:port"
+MODBUS_TCP_SCHEME = "tcp"
+"""The URL scheme of Modbus TCP (MBAP framing)."""
+
+_URL_FORM = "a serial device path, rtu+tcp://host:port or tcp://host:port"
+_LISTEN_FORM = "tcp://host:port or rtu+tcp://host:port"
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,56 +68,92 @@ class TcpAddress:
         return f"{TCP_SCHEME}://{host}:{self.port}"
 
 
-PortAddress = SerialAddress | TcpAddress
+@dataclass(frozen=True, slots=True)
+class ModbusTcpAddress:
+    """A Modbus TCP device or server (MBAP framing)."""
+
+    host: str
+    """A host name, an IPv4 address, or an IPv6 address without brackets."""
+    port: int
+
+    def __str__(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{MODBUS_TCP_SCHEME}://{host}:{self.port}"
+
+
+@dataclass(frozen=True, slots=True)
+class ListenAddress:
+    """Where a server listens: `scheme` `tcp` (Modbus TCP) or `rtu+tcp` (RTU framing
+    over TCP), a `host` to bind (`0.0.0.0` or `::` for every interface) and a `port`
+    (0: a free port the system picks)."""
+
+    scheme: str
+    host: str
+    port: int
+
+    def __str__(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{self.scheme}://{host}:{self.port}"
+
+
+PortAddress = SerialAddress | TcpAddress | ModbusTcpAddress
 """What [`parse_port_url`][aiortu.transport.parse_port_url] returns."""
 
 
-def _bad(text: str, detail: str) -> InvalidValue:
-    return InvalidValue("port", text, _URL_FORM, detail)
+def _bad(text: str, detail: str, form: str = _URL_FORM) -> InvalidValue:
+    return InvalidValue("port", text, form, detail)
 
 
-def _parse_tcp(text: str, rest: str) -> TcpAddress:
+def _parse_host_port(
+    text: str, rest: str, scheme: str, lowest_port: int = 1, form: str = _URL_FORM
+) -> tuple[str, int]:
+    """The host and port of `scheme://host:port` (`rest` is what follows `://`)."""
+
+    def bad(detail: str) -> InvalidValue:
+        return _bad(text, detail, form)
+
     netloc, _, tail = rest.partition("/")
     if tail or any(mark in netloc for mark in "?#"):
-        raise _bad(text, "an rtu+tcp URL has no path, query or fragment")
+        raise bad(f"a {scheme} URL has no path, query or fragment")
     if "@" in netloc:
-        raise _bad(text, "an rtu+tcp URL has no user name or password")
+        raise bad(f"a {scheme} URL has no user name or password")
     if netloc.startswith("["):
         closing = netloc.find("]")
         if closing < 0:
-            raise _bad(text, "an IPv6 address opened with '[' needs a closing ']'")
+            raise bad("an IPv6 address opened with '[' needs a closing ']'")
         host, after = netloc[1:closing], netloc[closing + 1 :]
         try:
             ipaddress.IPv6Address(host)
         except ValueError:
-            raise _bad(text, f"{host!r} in brackets is not an IPv6 address") from None
+            raise bad(f"{host!r} in brackets is not an IPv6 address") from None
         if not after:
-            raise _bad(text, "the port is missing (rtu+tcp://[host]:port)")
+            raise bad(f"the port is missing ({scheme}://[host]:port)")
         if not after.startswith(":"):
-            raise _bad(text, "expected ':port' after the IPv6 address")
+            raise bad("expected ':port' after the IPv6 address")
         port_text = after[1:]
     else:
         host, colon, port_text = netloc.rpartition(":")
         if not colon:
-            raise _bad(text, "the port is missing (rtu+tcp://host:port)")
+            raise bad(f"the port is missing ({scheme}://host:port)")
         if ":" in host:
-            raise _bad(text, "write an IPv6 address in brackets: rtu+tcp://[::1]:5020")
+            raise bad(f"write an IPv6 address in brackets: {scheme}://[::1]:5020")
     if not host:
-        raise _bad(text, "the host is missing")
+        raise bad("the host is missing")
     if any(char.isspace() or char in "[]" for char in host):
-        raise _bad(text, f"{host!r} is not a host name or address")
+        raise bad(f"{host!r} is not a host name or address")
     if not port_text:
-        raise _bad(text, "the port is missing")
+        raise bad("the port is missing")
     if not (port_text.isascii() and port_text.isdigit()):
-        raise _bad(text, f"the port {port_text!r} is not a number")
+        raise bad(f"the port {port_text!r} is not a number")
     port = int(port_text)
-    if not 1 <= port <= 65535:
-        raise _bad(text, f"the port {port} is outside 1..65535")
-    return TcpAddress(host, port)
+    if not lowest_port <= port <= 65535:
+        raise bad(f"the port {port} is outside {lowest_port}..65535")
+    return host, port
 
 
 def parse_port_url(text: str) -> PortAddress:
-    """Parse a port name: a serial device path, or `rtu+tcp://host:port`.
+    """Parse a port name: a serial device path, `rtu+tcp://host:port` or
+    `tcp://host:port`.
 
     >>> parse_port_url("/dev/ttyUSB0")
     SerialAddress(path='/dev/ttyUSB0')
@@ -107,7 +161,7 @@ def parse_port_url(text: str) -> PortAddress:
     TcpAddress(host='::1', port=5020)
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for an empty name, a scheme other than
-    `rtu+tcp`, or an `rtu+tcp` URL without a valid host and port.
+    `rtu+tcp` and `tcp`, or a URL without a valid host and port (1..65535).
     """
     if not isinstance(text, str):
         raise InvalidValue("port", text, _URL_FORM, "not a string")
@@ -116,6 +170,32 @@ def parse_port_url(text: str) -> PortAddress:
     scheme, separator, rest = text.partition("://")
     if not separator:
         return SerialAddress(text)
-    if scheme.lower() != TCP_SCHEME:
-        raise _bad(text, f"unknown scheme {scheme!r}: only {TCP_SCHEME}:// is supported")
-    return _parse_tcp(text, rest)
+    scheme = scheme.lower()
+    if scheme == MODBUS_TCP_SCHEME:
+        return ModbusTcpAddress(*_parse_host_port(text, rest, scheme))
+    if scheme != TCP_SCHEME:
+        raise _bad(
+            text,
+            f"unknown scheme {scheme!r}: only {TCP_SCHEME}:// and {MODBUS_TCP_SCHEME}:// "
+            "are supported",
+        )
+    return TcpAddress(*_parse_host_port(text, rest, scheme))
+
+
+def parse_listen_url(text: str) -> ListenAddress:
+    """Parse the address a server listens on: `tcp://host:port` (Modbus TCP) or
+    `rtu+tcp://host:port` (RTU framing over TCP); port 0 asks for a free port.
+
+    >>> parse_listen_url("tcp://0.0.0.0:1502")
+    ListenAddress(scheme='tcp', host='0.0.0.0', port=1502)
+
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for another scheme, a device path, or a
+    URL without a valid host and port (0..65535).
+    """
+    if not isinstance(text, str):
+        raise InvalidValue("port", text, _LISTEN_FORM, "not a string")
+    scheme, separator, rest = text.partition("://")
+    scheme = scheme.lower()
+    if not separator or scheme not in (MODBUS_TCP_SCHEME, TCP_SCHEME):
+        raise _bad(text, "a server listens on a tcp:// or rtu+tcp:// URL", _LISTEN_FORM)
+    return ListenAddress(scheme, *_parse_host_port(text, rest, scheme, 0, _LISTEN_FORM))
