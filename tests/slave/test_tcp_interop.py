@@ -111,17 +111,20 @@ async def test_async_client_gets_01_for_serial_line_codes_and_0B_for_other_units
             client.close()
 
 
-def _sync_session(port: int) -> list[int]:
+def _sync_session(port: int, session: int) -> list[int]:
+    # Each session writes registers and a coil of its own, so that what it reads back
+    # depends on its own requests alone, however the sessions interleave.
     client = pymodbus_client.ModbusTcpClient("127.0.0.1", port=port, timeout=3, retries=0)
+    address, coil = 4 + 4 * session, 12 + session
     try:
         assert client.connect()
-        assert not client.write_registers(8, [4, 5, 6], **UNIT_ID).isError()
-        assert not client.write_coil(9, True, **UNIT_ID).isError()
-        assert client.read_coils(9, count=1, **UNIT_ID).bits[0]
+        assert not client.write_registers(address, [4, 5, 6], **UNIT_ID).isError()
+        assert not client.write_coil(coil, True, **UNIT_ID).isError()
+        assert client.read_coils(coil, count=1, **UNIT_ID).bits[0]
         assert not client.mask_write_register(
-            address=8, and_mask=0, or_mask=0x10, **UNIT_ID
+            address=address, and_mask=0, or_mask=0x10, **UNIT_ID
         ).isError()
-        registers: list[int] = client.read_holding_registers(8, count=3, **UNIT_ID).registers
+        registers: list[int] = client.read_holding_registers(address, count=3, **UNIT_ID).registers
         return registers
     finally:
         client.close()
@@ -132,12 +135,12 @@ async def test_sync_clients_at_once() -> None:
     async with tcp_server({UNIT: store}) as server:
         results: list[list[int]] = []
 
-        async def one() -> None:
-            results.append(await anyio.to_thread.run_sync(_sync_session, server.port))
+        async def one(session: int) -> None:
+            results.append(await anyio.to_thread.run_sync(_sync_session, server.port, session))
 
         async with anyio.create_task_group() as group:
-            for _ in range(3):
-                group.start_soon(one)
+            for session in range(3):
+                group.start_soon(one, session)
     assert results == [[0x10, 5, 6]] * 3
     assert server.counters.connections_accepted == 3
 
