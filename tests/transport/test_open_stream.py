@@ -15,6 +15,8 @@ from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.transport import (
     ListenAddress,
     ModbusTcpAddress,
+    ModbusTcpCounters,
+    ModbusTcpStream,
     PortAddress,
     SerialAddress,
     SerialStream,
@@ -111,9 +113,18 @@ def test_parse_listen_url_refuses(text: str, reason: str) -> None:
     assert reason in str(info.value)
 
 
-async def test_a_master_cannot_open_modbus_tcp_yet() -> None:
-    with pytest.raises(InvalidValue, match=r"cannot open Modbus TCP \(tcp://\) yet"):
-        await open_stream("tcp://127.0.0.1:502")
+async def test_modbus_tcp_opens_a_stream_of_whole_frames() -> None:
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+    port = listener.extra(SocketAttribute.local_port)
+    async with listener:
+        counters = ModbusTcpCounters(next_transaction_id=7)
+        stream = await open_stream(f"tcp://127.0.0.1:{port}", counters=counters)
+        async with stream:
+            assert isinstance(stream, ModbusTcpStream)
+            assert stream.counters is counters
+            assert stream.whole_frames
+    with pytest.raises(TypeError, match="Modbus TCP takes no option rs485"):
+        await open_stream(f"tcp://127.0.0.1:{port}", rs485=True)
 
 
 hosts = st.one_of(

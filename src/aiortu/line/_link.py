@@ -67,7 +67,7 @@ from aiortu.core.receiver import (
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost
 from aiortu.line._wake_timer import WakeTimer, create_wake_timer
-from aiortu.transport import PushStream
+from aiortu.transport import FramedStream, PushStream
 
 __all__ = ("Link", "LinkEvent", "LinkListener")
 
@@ -113,6 +113,10 @@ class Link:
     settings. `clock` returns seconds (default `anyio.current_time`, which the link
     replaces, when it opens, with the running backend's own clock: the same time, read
     without looking the backend up on every call).
+    A stream of whole frames (a [`FramedStream`][aiortu.transport.FramedStream] such as
+    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream]) has no wire: its frame gap and
+    `frame_silence` default to 0 (each chunk is a frame that ends at once, whatever its
+    function code) and its wire time is 0, so a response timeout starts when the write returned.
     `queue_size` bounds the events waiting to be received; when it is full the oldest
     event is dropped and counted, so a reader that falls behind never stalls the line.
     """
@@ -132,9 +136,20 @@ class Link:
     ) -> None:
         self.stream = stream
         self.settings = settings if settings is not None else LineSettings()
-        self.char_time = self.settings.char_time
-        """Seconds one character takes on the wire, from [`settings`][aiortu.line.Link]."""
-        self.frame_gap = self.settings.t3_5 if frame_gap is None else frame_gap
+        # A stream that hands over whole frames (Modbus TCP) has no wire: nothing to keep
+        # quiet, no wire time, and each chunk is a frame that ends at once.
+        whole_frames = isinstance(stream, FramedStream) and stream.whole_frames
+        self.whole_frames = whole_frames
+        """Whether each chunk the stream delivers is one whole frame (see
+        [`FramedStream`][aiortu.transport.FramedStream])."""
+        self.char_time = 0.0 if whole_frames else self.settings.char_time
+        """Seconds one character takes on the wire, from [`settings`][aiortu.line.Link] (0 for a
+        stream of whole frames)."""
+        if frame_gap is None:
+            frame_gap = 0.0 if whole_frames else self.settings.t3_5
+        if whole_frames and frame_silence is None:
+            frame_silence = 0.0
+        self.frame_gap = frame_gap
         if self.frame_gap < 0 or math.isnan(self.frame_gap):
             raise ValueError(f"frame_gap must be >= 0 seconds, not {frame_gap}")
         self.clock = clock

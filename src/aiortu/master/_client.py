@@ -593,19 +593,26 @@ async def open_master(
     reconnect_fail_fast: bool = False,
     **transport_options: Any,
 ) -> AsyncIterator[Master]:
-    """Open `port_or_url` (a serial device path or `rtu+tcp://host:port`) and yield a
-    [`Master`][aiortu.master.Master] on it; the port is closed on exit.
+    """Open `port_or_url` (a serial device path, `rtu+tcp://host:port`, or `tcp://host:port` for
+    Modbus TCP) and yield a [`Master`][aiortu.master.Master] on it; the port is closed on exit.
 
     The line settings come from `baudrate`, `parity`, `stopbits` and `bytesize`; the other arguments
     are [`Master`][aiortu.master.Master]'s, and `transport_options` go to
     [`aiortu.transport.open_stream`][aiortu.transport.open_stream] (`exclusive`, `rs485`,
     `local_echo`, `connect_timeout`). Opening errors are [`PortError`][aiortu.errors.PortError]s.
 
+    Over Modbus TCP the line settings are not used, no silence is kept before a request
+    (`frame_gap` 0), each request carries the next transaction id and a reply with another id is
+    dropped, and the response timeout starts when the request was written (see
+    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream]). The transaction ids and the counters
+    ([`ModbusTcpCounters`][aiortu.transport.ModbusTcpCounters], at `master.link.stream.counters`)
+    go on across reconnects.
+
     With `reconnect` (the default) the master reopens the same port with the same
     settings after it disappears (a USB adapter unplugged); see [`Master`][aiortu.master.Master] for
     `reconnect_delay` and `reconnect_fail_fast`.
     """
-    from aiortu.transport import open_stream
+    from aiortu.transport import ModbusTcpAddress, ModbusTcpCounters, open_stream, parse_port_url
 
     options: dict[str, Any] = {
         "timeout": timeout, "retries": retries, "retry_on": retry_on, "repeatable": repeatable,
@@ -617,6 +624,9 @@ async def open_master(
     }  # fmt: skip
     check_master_settings(**options)  # before the port is opened: a bad one leaves it shut
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
+    if isinstance(parse_port_url(port_or_url), ModbusTcpAddress):
+        # One set of counters for every connection: ids go on after a reconnect.
+        transport_options.setdefault("counters", ModbusTcpCounters())
     stream = await open_stream(port_or_url, settings, **transport_options)
     master = Master(
         stream,

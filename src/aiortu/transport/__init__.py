@@ -1,12 +1,13 @@
-"""Byte streams that carry RTU frames: serial ports, RTU over TCP, pty file descriptors.
+"""Byte streams that carry RTU frames: serial ports, RTU over TCP, Modbus TCP (translated to
+and from RTU frames), pty file descriptors.
 
 Every transport is an `anyio.abc.ByteStream`, so the link, the master and the slave take any of
 them. A stream that also implements [`PushStream`][aiortu.transport.PushStream] (the serial port
 does) saves the link a task wake-up per chunk read and per frame sent.
 [`open_stream`][aiortu.transport.open_stream] opens one from a port name as users write it: a serial
-device path, or `rtu+tcp://host:port` (see [`aiortu.transport`][aiortu.transport]). Opening errors
-are [`PortError`][aiortu.errors.PortError] subclasses naming the port; see `docs/transports.md` for
-what each means and what to do about it.
+device path, `rtu+tcp://host:port`, or `tcp://host:port` (see
+[`aiortu.transport`][aiortu.transport]). Opening errors are [`PortError`][aiortu.errors.PortError]
+subclasses naming the port; see `docs/transports.md` for what each means and what to do about it.
 """
 
 from __future__ import annotations
@@ -16,9 +17,14 @@ from typing import Any
 from anyio.abc import ByteStream
 
 from aiortu.core.timing import LineSettings
-from aiortu.errors import InvalidValue
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
+from aiortu.transport._mbap_stream import (
+    FramedStream,
+    ModbusTcpCounters,
+    ModbusTcpStream,
+    open_modbus_tcp,
+)
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
 from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp
@@ -38,9 +44,12 @@ __all__ = (
     "MODBUS_TCP_SCHEME",
     "TCP_SCHEME",
     "FileDescriptorStream",
+    "FramedStream",
     "ListenAddress",
     "LocalEchoFilter",
     "ModbusTcpAddress",
+    "ModbusTcpCounters",
+    "ModbusTcpStream",
     "PortAddress",
     "PushStream",
     "RS485Options",
@@ -49,6 +58,7 @@ __all__ = (
     "SerialStream",
     "TcpAddress",
     "listen_tcp",
+    "open_modbus_tcp",
     "open_rtu_over_tcp",
     "open_serial",
     "open_stream",
@@ -58,6 +68,7 @@ __all__ = (
 
 _SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo"})
 _TCP_OPTIONS = frozenset({"connect_timeout"})
+_MODBUS_TCP_OPTIONS = frozenset({"connect_timeout", "counters"})
 
 
 async def open_stream(
@@ -69,13 +80,13 @@ async def open_stream(
 
     `rtu+tcp://host:port` connects to a serial device server
     ([`open_rtu_over_tcp`][aiortu.transport.open_rtu_over_tcp]; option `connect_timeout`; `settings`
-    are not sent anywhere, as the server's serial side is configured on the server). Anything else
-    is a serial device path ([`open_serial`][aiortu.transport.open_serial]; options `exclusive`,
-    `rs485` and `local_echo`).
-
-    `tcp://host:port` (Modbus TCP) is not a byte stream of RTU frames; it raises
-    [`InvalidValue`][aiortu.errors.InvalidValue] here ([`aiortu.slave.serve`][aiortu.slave.serve]
-    listens on it).
+    are not sent anywhere, as the server's serial side is configured on the server).
+    `tcp://host:port` connects to a Modbus TCP server and returns a
+    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream], which carries RTU frames as MBAP ADUs
+    ([`open_modbus_tcp`][aiortu.transport.open_modbus_tcp]; options `connect_timeout` and
+    `counters`; `settings` are not used). Anything else is a serial device path
+    ([`open_serial`][aiortu.transport.open_serial]; options `exclusive`, `rs485` and
+    `local_echo`).
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a malformed URL,
     `TypeError` for an option the transport does not take, and the transport's
@@ -83,21 +94,19 @@ async def open_stream(
     """
     address = parse_port_url(port_or_url)
     if isinstance(address, ModbusTcpAddress):
-        raise InvalidValue(
-            "port",
-            port_or_url,
-            "a serial device path or rtu+tcp://host:port",
-            "a master cannot open Modbus TCP (tcp://) yet, only aiortu.serve listens on it; "
-            "for RTU framing over TCP write rtu+tcp://",
-        )
-    allowed = _TCP_OPTIONS if isinstance(address, TcpAddress) else _SERIAL_OPTIONS
+        kind, allowed = "Modbus TCP", _MODBUS_TCP_OPTIONS
+    elif isinstance(address, TcpAddress):
+        kind, allowed = "RTU over TCP", _TCP_OPTIONS
+    else:
+        kind, allowed = "a serial port", _SERIAL_OPTIONS
     unknown = sorted(set(options) - allowed)
     if unknown:
-        kind = "RTU over TCP" if isinstance(address, TcpAddress) else "a serial port"
         raise TypeError(
             f"{port_or_url}: {kind} takes no option {', '.join(unknown)} "
             f"(it takes {', '.join(sorted(allowed))})"
         )
+    if isinstance(address, ModbusTcpAddress):
+        return await open_modbus_tcp(address.host, address.port, **options)
     if isinstance(address, TcpAddress):
         return await open_rtu_over_tcp(address.host, address.port, **options)
     return await open_serial(address.path, settings, **options)

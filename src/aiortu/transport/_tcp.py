@@ -29,14 +29,14 @@ from anyio.abc import SocketAttribute, SocketStream
 
 from aiortu.errors import InvalidValue, PortBusy, PortError, PortNotFound, PortPermissionDenied
 
-__all__ = ("format_tcp_url", "listen_tcp", "open_rtu_over_tcp")
+__all__ = ("format_tcp_url", "listen_tcp", "open_rtu_over_tcp", "open_tcp_connection")
 
 
-def format_tcp_url(host: str, port: int) -> str:
-    """The `rtu+tcp://host:port` URL of a device server, with IPv6 hosts in brackets."""
+def format_tcp_url(host: str, port: int, scheme: str = "rtu+tcp") -> str:
+    """The `scheme://host:port` URL of a server, with IPv6 hosts in brackets."""
     if ":" in host:
-        return f"rtu+tcp://[{host}]:{port}"
-    return f"rtu+tcp://{host}:{port}"
+        return f"{scheme}://[{host}]:{port}"
+    return f"{scheme}://{host}:{port}"
 
 
 def _leaf_errors(exc: BaseException) -> list[BaseException]:
@@ -62,11 +62,20 @@ async def open_rtu_over_tcp(host: str, port: int, *, connect_timeout: float = 5.
     [`InvalidValue`][aiortu.errors.InvalidValue] for a port outside 1..65535 or a timeout that
     is not positive.
     """
+    return await open_tcp_connection(host, port, connect_timeout=connect_timeout)
+
+
+async def open_tcp_connection(
+    host: str, port: int, *, connect_timeout: float = 5.0, scheme: str = "rtu+tcp"
+) -> SocketStream:
+    """Connect to `host`:`port` with Nagle's algorithm off, as
+    [`open_rtu_over_tcp`][aiortu.transport.open_rtu_over_tcp] describes; errors name the server
+    as `scheme://host:port`."""
     if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
         raise InvalidValue("port", port, range(1, 65536))
     if not connect_timeout > 0:
         raise InvalidValue("connect_timeout", connect_timeout, "a positive number of seconds")
-    where = format_tcp_url(host, port)
+    where = format_tcp_url(host, port, scheme)
     try:
         with anyio.fail_after(connect_timeout):
             stream = await anyio.connect_tcp(host, port)

@@ -1,0 +1,178 @@
+"""Modbus TCP for a master: a byte stream of RTU frames carried as MBAP ADUs.
+
+The master, its engine and its state machine speak RTU frames (unit, PDU, CRC). Rather than
+teach each of them a second framing, [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream]
+translates at the edge, as a byte stream over a TCP connection:
+
+- each frame written goes out as one ADU: the unit and the PDU behind an MBAP header with the
+  next transaction id, the CRC dropped (TCP checks the bytes);
+- each ADU received whose transaction id is the one outstanding comes back from `receive()` as
+  one RTU frame, its CRC computed; any other ADU (a late reply to a request that timed out, an
+  id never sent) is dropped and counted in
+  [`ModbusTcpCounters`][aiortu.transport.ModbusTcpCounters]. A late reply therefore never
+  reaches a later request, whatever it looks like.
+
+Every `receive()` returns exactly one whole frame, and there is no wire to keep quiet: the
+stream says so by [`whole_frames`][aiortu.transport.FramedStream], and the
+[`Link`][aiortu.line.Link] then ends each frame at once (even of a function code whose length
+cannot be told from its first bytes), keeps no t3.5 before a request, and starts the response
+timeout when the write returned. Function codes meant for serial lines only (diagnostics,
+the comm event counter) go out as asked: whether the server answers them is the server's choice.
+
+A header that breaks the spec (protocol id other than 0, a bad length) leaves no way to find
+where the next ADU starts: the stream closes and `receive()` raises
+`anyio.BrokenResourceError`, which a master takes as a lost connection and reconnects.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import anyio
+import anyio.abc
+import anyio.lowlevel
+
+from aiortu.core.crc import crc16
+from aiortu.core.mbap import AduDecoder, MalformedHeader, encode_adu
+from aiortu.transport._tcp import open_tcp_connection
+
+__all__ = ("FramedStream", "ModbusTcpCounters", "ModbusTcpStream", "open_modbus_tcp")
+
+_log = logging.getLogger(__name__)
+
+_NONE_OUTSTANDING = -1
+
+
+@runtime_checkable
+class FramedStream(Protocol):
+    """A byte stream that knows where its frames end.
+
+    Where `whole_frames` is true, every `receive()` returns exactly one whole frame, and
+    `send()` carries a frame with no wire time to wait for. [`Link`][aiortu.line.Link] checks for
+    it once, when it is made.
+    """
+
+    @property
+    def whole_frames(self) -> bool:
+        """Whether each `receive()` returns exactly one whole frame."""
+        ...
+
+
+@dataclass(slots=True)
+class ModbusTcpCounters:
+    """What a [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] sent and received.
+
+    One object may be shared by the streams of successive connections to the same server
+    (a master's reconnects do): the counts go on, and so do the transaction ids, so that a
+    reply to a request sent before a reconnect cannot match one sent after it.
+    """
+
+    next_transaction_id: int = 0
+    """The transaction id of the next request (0..65535, wrapping)."""
+    requests: int = 0
+    """ADUs sent."""
+    replies: int = 0
+    """ADUs received with the outstanding transaction id, handed on."""
+    dropped: int = 0
+    """ADUs received with another transaction id (stale or unknown), dropped."""
+
+
+class ModbusTcpStream(anyio.abc.ByteStream):
+    """RTU frames over Modbus TCP on `stream` (see the module docstring).
+
+    `send()` takes one whole RTU frame (unit, PDU, CRC) per call; `receive()` returns one
+    RTU frame per call. `counters` are shared with other streams to the same server, or new.
+    """
+
+    def __init__(
+        self, stream: anyio.abc.ByteStream, counters: ModbusTcpCounters | None = None
+    ) -> None:
+        self.stream = stream
+        self.counters = counters if counters is not None else ModbusTcpCounters()
+        """Requests, replies and dropped ADUs (see
+        [`ModbusTcpCounters`][aiortu.transport.ModbusTcpCounters])."""
+        self._decoder = AduDecoder()
+        self._ready: deque[bytes] = deque()
+        self._outstanding = _NONE_OUTSTANDING
+
+    @property
+    def whole_frames(self) -> bool:
+        """True: each `receive()` returns exactly one RTU frame."""
+        return True
+
+    @property
+    def extra_attributes(self) -> Any:
+        return self.stream.extra_attributes
+
+    async def send(self, item: bytes) -> None:
+        """Send the RTU frame `item` as one ADU with the next transaction id."""
+        if len(item) < 4:
+            raise ValueError(f"an RTU frame has at least 4 bytes, not {len(item)}")
+        counters = self.counters
+        transaction_id = counters.next_transaction_id
+        counters.next_transaction_id = (transaction_id + 1) & 0xFFFF
+        # Outstanding before the write: a fast reply may be read while send() yields.
+        self._outstanding = transaction_id
+        self._ready.clear()  # a new request: nothing that came before answers it
+        counters.requests += 1
+        await self.stream.send(encode_adu(transaction_id, item[0], bytes(item[1:-2])))
+
+    async def receive(self, max_bytes: int = 65536) -> bytes:
+        """The next reply to the request outstanding, as an RTU frame (`max_bytes` is ignored:
+        a frame is never split)."""
+        # Always a checkpoint, so that a caller's expired deadline takes effect before the
+        # next frame is handed over.
+        await anyio.lowlevel.checkpoint()
+        while not self._ready:
+            data = await self.stream.receive()
+            try:
+                adus = self._decoder.feed(data)
+            except MalformedHeader as error:
+                _log.warning("closing the Modbus TCP connection: %s", error)
+                await self.stream.aclose()
+                raise anyio.BrokenResourceError(str(error)) from error
+            for adu in adus:
+                if adu.transaction_id != self._outstanding:
+                    self.counters.dropped += 1
+                    _log.debug(
+                        "dropped a reply with transaction id %d (waiting for %d)",
+                        adu.transaction_id,
+                        self._outstanding,
+                    )
+                    continue
+                self._outstanding = _NONE_OUTSTANDING  # one reply per request
+                self.counters.replies += 1
+                frame = bytes((adu.unit,)) + adu.pdu
+                crc = crc16(frame)
+                self._ready.append(frame + bytes((crc & 0xFF, crc >> 8)))
+        return self._ready.popleft()
+
+    async def send_eof(self) -> None:
+        await self.stream.send_eof()
+
+    async def aclose(self) -> None:
+        await self.stream.aclose()
+
+
+async def open_modbus_tcp(
+    host: str,
+    port: int,
+    *,
+    connect_timeout: float = 5.0,
+    counters: ModbusTcpCounters | None = None,
+) -> ModbusTcpStream:
+    """Connect to the Modbus TCP server at `host`:`port` and return the connection as a
+    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] of RTU frames.
+
+    `counters` continue those of an earlier connection (see
+    [`ModbusTcpCounters`][aiortu.transport.ModbusTcpCounters]). Raises
+    [`PortNotFound`][aiortu.errors.PortNotFound] when the host is unknown, the connection is
+    refused or fails, or nothing answers within `connect_timeout` seconds, and
+    [`InvalidValue`][aiortu.errors.InvalidValue] for a port outside 1..65535 or a timeout that
+    is not positive.
+    """
+    stream = await open_tcp_connection(host, port, connect_timeout=connect_timeout, scheme="tcp")
+    return ModbusTcpStream(stream, counters)
