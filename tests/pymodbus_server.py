@@ -1,7 +1,9 @@
-"""pymodbus's RTU server with all four tables, for the interop tests.
+"""pymodbus's RTU server with all four tables, for the interop tests, and its Modbus TCP server.
 
 ``python pymodbus_server.py PORT`` serves unit 1 at 19200 8N2 (ptys keep no parity; see
 aiortu.testing._pty_bus) and prints ``ready`` once the port is open. Runs until killed.
+``python pymodbus_server.py tcp`` serves the same unit over Modbus TCP on an ephemeral port of
+127.0.0.1 and prints ``ready PORT`` once it listens (:func:`running_tcp`).
 The initial values are :data:`COILS`, :data:`DISCRETE_INPUTS`, :data:`INPUT_REGISTERS`
 and :data:`HOLDING_REGISTERS` from protocol address 0. Tests start it with
 :func:`running`.
@@ -21,7 +23,7 @@ from pymodbus.datastore import (
     ModbusSequentialDataBlock,
     ModbusServerContext,
 )
-from pymodbus.server import ModbusSerialServer
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 COILS = [bool(i % 3 == 0) for i in range(40)]
 DISCRETE_INPUTS = [bool(i % 4 == 1) for i in range(40)]
@@ -34,7 +36,7 @@ def _connected(up: bool) -> None:
         print("ready", flush=True)
 
 
-async def serve(port: str) -> None:
+def _context() -> ModbusServerContext:
     # pymodbus's device context shifts addresses by one: a block starting at 1 serves
     # protocol address 0.
     device = ModbusDeviceContext(
@@ -43,8 +45,20 @@ async def serve(port: str) -> None:
         ir=ModbusSequentialDataBlock(1, INPUT_REGISTERS),
         hr=ModbusSequentialDataBlock(1, HOLDING_REGISTERS),
     )
+    return ModbusServerContext(devices={1: device}, single=False)
+
+
+async def serve_tcp() -> None:
+    server = ModbusTcpServer(_context(), address=("127.0.0.1", 0))
+    await server.serve_forever(background=True)
+    port = server.transport.sockets[0].getsockname()[1]  # type: ignore[union-attr]
+    print(f"ready {port}", flush=True)
+    await server.serving
+
+
+async def serve(port: str) -> None:
     server = ModbusSerialServer(
-        ModbusServerContext(devices={1: device}, single=False),
+        _context(),
         framer=FramerType.RTU,
         port=port,
         baudrate=19200,
@@ -54,6 +68,25 @@ async def serve(port: str) -> None:
         trace_connect=_connected,
     )
     await server.serve_forever()
+
+
+@contextlib.contextmanager
+def running_tcp() -> Iterator[int]:
+    """Run the Modbus TCP server in a subprocess for the ``with`` block; yield its port."""
+    server = subprocess.Popen(
+        [sys.executable, "-W", "ignore", __file__, "tcp"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        assert server.stdout is not None
+        ready, port = server.stdout.readline().split()
+        assert ready == "ready"
+        yield int(port)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
 
 
 @contextlib.contextmanager
@@ -75,4 +108,4 @@ def running(port: str) -> Iterator[None]:
 
 
 if __name__ == "__main__":
-    asyncio.run(serve(sys.argv[1]))
+    asyncio.run(serve_tcp() if sys.argv[1] == "tcp" else serve(sys.argv[1]))
