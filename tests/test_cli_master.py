@@ -183,3 +183,28 @@ def test_poll_shows_an_offline_unit(silent_port: str) -> None:
     assert blocks[1][3] == "unit 5: suspect, 2 failures in a row"
     assert blocks[2][3].startswith("unit 5: OFFLINE, 3 failures in a row, next probe in ")
     assert blocks[3][2] == "40001               5  -- UnitSkipped"
+
+
+@pytest.fixture(scope="module")
+def tcp_url() -> Iterator[str]:
+    """The URL of pymodbus's Modbus TCP server (unit 1)."""
+    with pymodbus_server.running_tcp() as tcp_port:
+        yield f"tcp://127.0.0.1:{tcp_port}"
+
+
+def test_read_write_and_poll_over_modbus_tcp(tcp_url: str) -> None:
+    text = aiortu("read", tcp_url, "--unit", "1", "--table", "holding", "--address", "0",
+                  "--count", "3")  # fmt: skip
+    assert (text.returncode, text.stdout, text.stderr) == (0, "0 4660\n1 43981\n2 7\n", "")
+    written = aiortu("write", tcp_url, "--unit", "1", "--ref", "40021", "--values", "5,6")
+    assert (written.returncode, written.stdout, written.stderr) == (0, "20 5\n21 6\n", "")
+    polled = aiortu("poll", tcp_url, "--unit", "1", "--ref", "40021", "--count", "2",
+                    "--cycles", "1")  # fmt: skip
+    assert polled.returncode == 0, polled.stderr
+    assert polled.stdout.splitlines()[1:4] == [
+        "POINT            UNIT  VALUE",
+        "40021               1  5",
+        "40022               1  6",
+    ]
+    refused = aiortu("read", tcp_url, "--unit", "1", "--ref", "41001", "--count", "2")
+    assert refused.returncode == 4

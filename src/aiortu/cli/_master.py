@@ -95,7 +95,11 @@ TABLE_NAMES: dict[Table, str] = {table: name for name, table in TABLES.items()}
 
 def add_line_options(parser: argparse.ArgumentParser) -> None:
     """Add the port argument and `--baudrate --parity --stopbits --timeout --retries`."""
-    parser.add_argument("port", metavar="PORT", help="a serial device path or rtu+tcp://host:port")
+    parser.add_argument(
+        "port",
+        metavar="PORT",
+        help="a serial device path, rtu+tcp://host:port, or tcp://host:port (Modbus TCP)",
+    )
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
     line.add_argument(

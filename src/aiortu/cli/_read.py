@@ -40,6 +40,8 @@ examples:
       16 coils as one JSON object
   aiortu read rtu+tcp://10.0.0.5:4001 --unit 2 --table input --address 0 --count 4
       through a serial device server
+  aiortu read tcp://10.0.0.7:502 --unit 1 --table holding --address 0 --count 10
+      from a Modbus TCP device (the line settings are not used)
 
 the same reads with mbpoll:
   aiortu read ... --table coils      mbpoll -t 0
