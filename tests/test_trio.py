@@ -59,6 +59,11 @@ REUSED = {
         "test_requests_in_flight_fail_when_the_line_dies",
         "test_priority_goes_first",
     ),
+    "tests.master.test_tcp_master": (
+        "test_every_master_method_against_the_modbus_tcp_server",
+        "test_a_reply_with_another_transaction_id_is_dropped_and_counted",
+        "test_the_master_reconnects_when_the_server_closes_the_connection",
+    ),
     "tests.master.test_poller": (
         "test_the_requests_on_the_wire_are_the_merged_ranges_and_values_decode",
         "test_samples_reach_callbacks_and_the_async_iterator",
@@ -202,6 +207,36 @@ def test_master_over_tcp_to_a_slave(anyio_backend: str) -> None:
             async with aiortu.open_master(url, frame_gap=0, retries=0) as master:
                 await _exercise(master, store)
             tg.cancel_scope.cancel()
+
+    run(anyio_backend, scenario)
+
+
+def test_master_over_modbus_tcp_to_a_slave(anyio_backend: str) -> None:
+    async def scenario() -> None:
+        with anyio.fail_after(10):
+            await _modbus_tcp_scenario()
+
+    async def _modbus_tcp_scenario() -> None:
+        store = _store()
+        async with (
+            aiortu.serve("tcp://127.0.0.1:0", {17: store}) as server,
+            aiortu.open_master(f"tcp://127.0.0.1:{server.port}", retries=0) as master,
+        ):
+            await master.write_registers(17, 0, [1, 2, 3])
+            assert await master.read_holding_registers(17, 0, 3) == [1, 2, 3]
+            await master.write_coil(17, 5, True)
+            assert await master.read_coils(17, 4, 3) == [False, True, False]
+            with pytest.raises(aiortu.ExceptionResponse) as refused:
+                await master.read_holding_registers(17, 99, 5)
+            assert refused.value.code == 2
+            # Unit 0 reaches the one unit served; its reply never answers the next read.
+            await master.broadcast.write_register(10, 0xBEEF)
+            assert await master.read_holding_registers(17, 10, 1) == [0xBEEF]
+            # A unit the server does not serve: exception 0B (no target), not a timeout.
+            with pytest.raises(aiortu.ExceptionResponse) as refused:
+                await master.read_holding_registers(18, 0, 1)
+            assert refused.value.code == 0x0B
+        assert store.get(Table.HOLDING_REGISTERS, 0, 3) == [1, 2, 3]
 
     run(anyio_backend, scenario)
 
