@@ -180,6 +180,21 @@ def test_a_bad_port_is_one_line_and_exit_1(port):
     assert result.stderr.startswith(f"aiortu monitor: cannot open the port: {port}")
 
 
+def test_modbus_tcp_is_refused_as_nothing_to_monitor():
+    result = subprocess.run(
+        [sys.executable, "-m", "aiortu", "monitor", "tcp://127.0.0.1:1"],
+        capture_output=True,
+        text=True,
+        timeout=20,
+        check=False,
+    )
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == (
+        "aiortu monitor: error: PORT must be a serial device path or rtu+tcp://host:port, "
+        "not tcp://127.0.0.1:1\n"
+    )
+
+
 @pytest.mark.parametrize(
     "argv",
     [

@@ -28,9 +28,9 @@ from aiortu.cli._messages import line_failure, port_failure
 from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
 from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
-from aiortu.errors import ConnectionLost, PortError
+from aiortu.errors import ConnectionLost, InvalidValue, PortError
 from aiortu.line._link import Link
-from aiortu.transport import open_stream
+from aiortu.transport import ModbusTcpAddress, open_stream, parse_port_url
 
 __all__ = ("FramePrinter", "register", "run")
 
@@ -163,6 +163,13 @@ def run(args: argparse.Namespace) -> int:
 async def _monitor(args: argparse.Namespace) -> int:
     resolve_line_settings(args)
     settings = LineSettings(args.baudrate, parity=args.parity, stopbits=args.stopbits)
+    if isinstance(parse_port_url(args.port), ModbusTcpAddress):
+        raise InvalidValue(
+            "PORT",
+            args.port,
+            "a serial device path or rtu+tcp://host:port",
+            "a Modbus TCP connection carries only its own requests and replies",
+        )
     # The handlers go in first, so that a signal while the port opens still ends cleanly.
     with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
         try:

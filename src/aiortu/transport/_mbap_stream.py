@@ -37,6 +37,7 @@ import anyio.lowlevel
 
 from aiortu.core.crc import crc16
 from aiortu.core.mbap import AduDecoder, MalformedHeader, encode_adu
+from aiortu.errors import InvalidValue
 from aiortu.transport._tcp import open_tcp_connection
 
 __all__ = ("FramedStream", "ModbusTcpCounters", "ModbusTcpStream", "open_modbus_tcp")
@@ -110,7 +111,7 @@ class ModbusTcpStream(anyio.abc.ByteStream):
     async def send(self, item: bytes) -> None:
         """Send the RTU frame `item` as one ADU with the next transaction id."""
         if len(item) < 4:
-            raise ValueError(f"an RTU frame has at least 4 bytes, not {len(item)}")
+            raise InvalidValue("len(item)", len(item), "at least 4 (unit, PDU and CRC)")
         counters = self.counters
         transaction_id = counters.next_transaction_id
         counters.next_transaction_id = (transaction_id + 1) & 0xFFFF
