@@ -254,3 +254,21 @@ async def test_nothing_listening_is_a_port_error() -> None:
     with pytest.raises(PortNotFound, match=r"\btcp://127\.0\.0\.1:\d+: connection refused"):
         async with aiortu.open_master(url(port)):
             pass
+
+
+async def test_many_callers_share_one_connection() -> None:
+    store = aiortu.MemoryStore(holding_registers={0: list(range(100, 164))})
+    results: dict[int, list[int]] = {}
+
+    async def read(master: aiortu.Master, address: int) -> None:
+        results[address] = await master.read_holding_registers(UNIT, address, 2)
+
+    async with (
+        tcp_server({UNIT: store}) as server,
+        aiortu.open_master(url(server.port), **FAST) as master,
+    ):
+        async with anyio.create_task_group() as group:
+            for address in range(0, 60, 3):
+                group.start_soon(read, master, address)
+        assert counters(master).requests == 20
+    assert results == {address: [100 + address, 101 + address] for address in range(0, 60, 3)}
