@@ -23,7 +23,7 @@ from tests.slave.tcp_helpers import UNIT, device, tcp_server
 
 pytestmark = pytest.mark.timeout(30)
 
-FAST = {"timeout": 0.5, "retries": 0, "reconnect_delay": (0.01, 0.05)}
+FAST = {"timeout": 2.0, "retries": 0, "reconnect_delay": (0.01, 0.05)}
 
 
 def url(port: int) -> str:
