@@ -133,7 +133,8 @@ class Master(SerialLineFunctions):
     in `repeatable` (default
     [`SAFE_TO_REPEAT`][aiortu.core.master_transaction.SAFE_TO_REPEAT]: reads and the idempotent
     writes; a request of another code is sent once). `frame_gap` is the silence kept
-    before each request (`None`: t3.5; 0 for virtual lines and TCP gateways).
+    before each request (`None`: t3.5, or 0 on a stream of whole frames such as Modbus TCP's
+    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream]; 0 for virtual lines and TCP gateways).
     `turnaround_delay` is the wait after a broadcast. Health: `offline_after`
     consecutive failures mark a unit offline; with `fail_fast_offline` calls to it raise
     [`UnitOffline`][aiortu.errors.UnitOffline] except one probe every `probe_interval`
