@@ -416,6 +416,10 @@ class LineEngine:
         job = self._adopted
         if job is not None and not job.done:
             job.finish(None, ConnectionLost(str(self._failed)))
+        # Nothing waits any more: a closed master leaves no timer armed on the loop.
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer, self._timer_at = None, math.inf
         self._connected.set()
 
     def _on_link_event(self, event: LinkEvent | None) -> None:
