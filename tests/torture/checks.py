@@ -21,10 +21,12 @@ __all__ = ("Ledger", "Leftovers", "Report", "check_t3_5", "logged_errors")
 
 @dataclass
 class Report:
-    """What one scenario did: *operations* calls, their *outcomes* by kind (``ok``,
-    ``cancelled``, or the aiortu error's class name), and every *violations* found."""
+    """What one scenario (*kind* ``master`` or ``slave``) did: *operations* calls, their
+    *outcomes* by kind (``ok``, ``cancelled``, or the aiortu error's class name), and
+    every *violations* found."""
 
     seed: int
+    kind: str
     description: str
     operations: int = 0
     outcomes: Counter[str] = field(default_factory=Counter)
@@ -39,7 +41,7 @@ class Report:
         shown = "\n  ".join(self.violations[:10])
         more = len(self.violations) - 10
         return (
-            f"torture seed {self.seed} ({self.description}); rerun with "
+            f"torture {self.kind} seed {self.seed} ({self.description}); rerun with "
             f"AIORTU_TORTURE_SEED={self.seed} pytest tests/torture\n  {shown}"
             + (f"\n  ... and {more} more" if more > 0 else "")
         )
@@ -61,8 +63,9 @@ class Ledger:
         for offset, value in enumerate(values):
             at = address + offset
             if CONSTANT <= at < CONSTANT + CONSTANTS:
-                if value != constant(unit, at - CONSTANT):
-                    return f"unit {unit} register {at} read {value}, holds {constant(unit, at - CONSTANT)}"
+                holds = constant(unit, at - CONSTANT)
+                if value != holds:
+                    return f"unit {unit} register {at} read {value}, holds {holds}"
             elif OWN <= at < OWN + MAX_CALLERS:
                 owner, sequence = divmod(value, 256)
                 if value != 0 and (owner != at - OWN or sequence not in self.begun.get(owner, ())):
@@ -125,6 +128,9 @@ class Leftovers:
 
     def new(self) -> list[str]:
         """What is left: tasks still running and timers still armed that were not there."""
-        left = [f"task {task.get_name()}: {task.get_coro()!r}" for task in asyncio.all_tasks() - self.tasks]
+        left = [
+            f"task {task.get_name()}: {task.get_coro()!r}"
+            for task in asyncio.all_tasks() - self.tasks
+        ]
         left += [f"timer {handle!r}" for handle in self._timers() if handle not in self.timers]
         return left

@@ -127,7 +127,9 @@ async def _typed(master: aiortu.Master, caller: int, sequence: int, call: Call) 
         return type(error).__name__, None
 
 
-async def _outcome(master: aiortu.Master, caller: int, sequence: int, call: Call) -> tuple[str, Any]:
+async def _outcome(
+    master: aiortu.Master, caller: int, sequence: int, call: Call
+) -> tuple[str, Any]:
     """Make *call* under its cancellation; the outcome's name and what a read read."""
     if call.cancel == "move_on":
         with anyio.move_on_after(call.cancel_after) as scope:
@@ -165,7 +167,9 @@ async def _run_caller(
         report.outcomes[outcome] += 1
         elapsed = anyio.current_time() - started
         if elapsed > bound:
-            report.violation(f"caller {caller.index} call {number} took {elapsed:.3f} s > {bound:.3f} s")
+            report.violation(
+                f"caller {caller.index} call {number} took {elapsed:.3f} s > {bound:.3f} s"
+            )
         if read is not None:
             wrong = ledger.check_read(call.unit, call.address, read)
             if wrong is not None:
@@ -236,7 +240,9 @@ async def _slaves(
         units = {unit: _store(unit) for unit in good}
         await stack.enter_async_context(aiortu.Slave(streams[0], units, settings, frame_gap=gap))
         for device, stream in zip(odd, streams[1:], strict=False):
-            slave = aiortu.Slave(stream, {device.unit: _store(device.unit)}, settings, frame_gap=gap)
+            slave = aiortu.Slave(
+                stream, {device.unit: _store(device.unit)}, settings, frame_gap=gap
+            )
             slave.after_request(_odd_hook(device))
             await stack.enter_async_context(slave)
         yield
@@ -273,7 +279,7 @@ async def _on_virtual_bus(scenario: MasterScenario, report: Report) -> None:
     async with bus, _slaves(scenario, list(ports[1 : 1 + slaves])):
         async with _master(scenario, ports[0], plug.open) as master:
             await _storm(scenario, master, report, plug)
-        report.outcomes["collisions"] += bus.collisions
+        report.outcomes["bus_collisions"] += bus.collisions
         if scenario.baudrate and scenario.faults is None:
             broken = check_t3_5(bus.trace, scenario.settings.t3_5)
             if broken:
@@ -314,7 +320,7 @@ async def _on_pty_bus(scenario: MasterScenario, report: Report) -> None:
 
 async def run_master_scenario(scenario: MasterScenario) -> Report:
     """Run *scenario* and return its report (the violations found, if any)."""
-    report = Report(scenario.seed, scenario.describe())
+    report = Report(scenario.seed, "master", scenario.describe())
     leftovers = Leftovers()
     limit = scenario_bound(scenario) + HARD_LIMIT_SLACK
     run = _on_virtual_bus if scenario.line == "virtual" else _on_pty_bus

@@ -156,7 +156,9 @@ class SlaveScenario:
     """One storm against a slave: *rogues* other masters send *frames* each (garbage,
     requests to other units and to ours, broadcasts, other slaves' replies) while a
     master checks the slave's answers; the slave's serve task is cancelled at each of
-    *restarts* (seconds from the start) and a new slave takes over the same stores."""
+    *restarts* (seconds from the start; with *in_request*, at the first request after
+    it, from inside the request) and a new slave takes over the same stores. A
+    before-request hook sleeps *slow_hook* seconds (0: no hook, the fast paths serve)."""
 
     seed: int
     baudrate: int | None
@@ -164,6 +166,7 @@ class SlaveScenario:
     rogues: int
     frames: int
     restarts: tuple[float, ...]
+    in_request: bool
     slow_hook: float
     checks: int
 
@@ -177,6 +180,7 @@ class SlaveScenario:
         return (
             f"seed={self.seed} slave baud={self.baudrate or 'unpaced'} units={self.units} "
             f"rogues={self.rogues}x{self.frames} restarts={len(self.restarts)} "
+            f"in_request={self.in_request} "
             f"slow_hook={self.slow_hook:.3f} checks={self.checks}"
         )
 
@@ -201,7 +205,9 @@ def _reply_time(settings: LineSettings | None) -> float:
     return settings.t3_5 + settings.wire_time(11)
 
 
-def _devices(generator: random.Random, base: float, timeout: float, late: bool) -> tuple[Device, ...]:
+def _devices(
+    generator: random.Random, base: float, timeout: float, late: bool
+) -> tuple[Device, ...]:
     """Unit 1 always good; up to four odd devices on units 2..; a few more good ones."""
     devices = [Device(1, "good")]
     unit = 2
@@ -300,7 +306,9 @@ def master_scenario(seed: int) -> MasterScenario:
         odd_share=min(0.3, 10 / (callers * (steps + 1) / 2)),
     )
     population = tuple(
-        Caller(index, tuple(_call(generator, index, draw) for _ in range(generator.randint(1, steps))))
+        Caller(
+            index, tuple(_call(generator, index, draw) for _ in range(generator.randint(1, steps)))
+        )
         for index in range(callers)
     )
     noisy = line == "virtual" and generator.random() < 0.25
@@ -347,6 +355,7 @@ def slave_scenario(seed: int) -> SlaveScenario:
         rogues=generator.randint(1, 4),
         frames=generator.randint(5, 40),
         restarts=restarts,
-        slow_hook=generator.choice((0.0, 0.0, generator.uniform(0.001, 0.02))),
+        in_request=generator.random() < 0.5,
+        slow_hook=generator.choice((0.0, 0.0, generator.uniform(0.001, 0.01))),
         checks=generator.randint(5, 30),
     )
