@@ -264,6 +264,25 @@ def _call(generator: random.Random, index: int, line: _Line) -> Call:
     )
 
 
+def _troubles(
+    generator: random.Random, seed: int, line: str, timeout: float
+) -> tuple[FaultPlan | None, tuple[float, ...]]:
+    """Noise on the line, and when the master's port is pulled (in memory only)."""
+    faults = None
+    if line == "virtual" and generator.random() < 0.25:
+        faults = FaultPlan(
+            bit_error_rate=generator.choice((1e-4, 1e-3)),
+            drop_rate=generator.choice((0.0, 1e-3)),
+            seed=seed,
+        )
+    unplugs: tuple[float, ...] = ()
+    if line == "virtual" and generator.random() < 0.2:
+        unplugs = tuple(
+            sorted(generator.uniform(0, 4 * timeout) for _ in range(generator.randint(1, 2)))
+        )
+    return faults, unplugs
+
+
 @dataclass(frozen=True, slots=True)
 class _Line:
     """What drawing a call needs to know about the line."""
@@ -311,21 +330,7 @@ def master_scenario(seed: int) -> MasterScenario:
         )
         for index in range(callers)
     )
-    noisy = line == "virtual" and generator.random() < 0.25
-    faults = (
-        FaultPlan(
-            bit_error_rate=generator.choice((1e-4, 1e-3)),
-            drop_rate=generator.choice((0.0, 1e-3)),
-            seed=seed,
-        )
-        if noisy
-        else None
-    )
-    unplugs: tuple[float, ...] = ()
-    if line == "virtual" and generator.random() < 0.2:
-        unplugs = tuple(
-            sorted(generator.uniform(0, 4 * timeout) for _ in range(generator.randint(1, 2)))
-        )
+    faults, unplugs = _troubles(generator, seed, line, timeout)
     return MasterScenario(
         seed=seed,
         line=line,

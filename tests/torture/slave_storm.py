@@ -183,9 +183,13 @@ async def _check(
         await anyio.sleep(generator.uniform(0, 0.005))
 
 
-async def _after_storm(master: aiortu.Master, generations: _Generations, report: Report) -> None:
+async def _after_storm(
+    master: aiortu.Master, generations: _Generations, bus: VirtualBus, report: Report
+) -> None:
     """On a quiet line, every unit answers a write and reads it back; the machine idles."""
-    await anyio.sleep(0.05)
+    # Quiet: the other masters' last bytes have left the wire (a paced bus queues them).
+    last = bus.trace[-1].end if bus.trace else 0.0
+    await anyio.sleep_until(max(last, anyio.current_time()) + 0.05)
     for unit in generations.scenario.units:
         value = encode(0, 255)
         try:
@@ -225,9 +229,12 @@ async def _slave_storm(scenario: SlaveScenario, report: Report) -> None:
             storm.start_soon(_check, master, scenario, Ledger(), report)
             if scenario.restarts:
                 await anyio.sleep(scenario.restarts[-1] + 0.01)
+        # A restart still waiting for a request mid-request does not happen after the
+        # storm: the checks below would lose their request to it.
+        generations.restart_at = float("inf")
         report.outcomes["rogue_frames"] += rogues * scenario.frames
         report.operations += rogues * scenario.frames
-        await _after_storm(master, generations, report)
+        await _after_storm(master, generations, bus, report)
         serving.cancel_scope.cancel()
 
 
