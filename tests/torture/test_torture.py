@@ -24,7 +24,7 @@ def _seeds(count: int) -> list[int]:
     return [int(chosen)] if chosen else list(range(count))
 
 
-@pytest.mark.parametrize("seed", _seeds(30))
+@pytest.mark.parametrize("seed", _seeds(20))
 async def test_the_master_survives_a_storm(seed: int) -> None:
     scenario = master_scenario(seed)
     report = await run_master_scenario(scenario)
@@ -33,7 +33,7 @@ async def test_the_master_survives_a_storm(seed: int) -> None:
     assert report.operations == scenario.operations, report.message()
 
 
-@pytest.mark.parametrize("seed", _seeds(15))
+@pytest.mark.parametrize("seed", _seeds(10))
 async def test_the_slave_survives_a_storm(seed: int) -> None:
     report = await run_slave_scenario(slave_scenario(seed))
     assert not report.violations, report.message()
