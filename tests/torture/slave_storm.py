@@ -89,7 +89,7 @@ def _checking_timeout(scenario: SlaveScenario, frames: list[list[bytes]]) -> flo
     """A response timeout no reply of the slave can miss unless the slave is gone.
 
     The slave answers one request at a time: a request of the checking master may wait
-    behind every request the other masters send our units (each a hook's sleep and a
+    behind every request the other masters send our units or broadcast (each a hook's sleep and a
     transaction on the wire). A reply later than the timeout and the guard would be
     taken for the next read of the same shape (RTU's documented limit), so the timeout
     and the late-reply guard (the same) cover them all. On a paced bus they also cover
@@ -97,9 +97,9 @@ def _checking_timeout(scenario: SlaveScenario, frames: list[list[bytes]]) -> flo
     one on the wire, so a request may leave the wire that much later than its master
     reckons.
     """
-    ours = sum(
-        1 for sent in frames for frame in sent if len(frame) == 8 and frame[0] in scenario.units
-    )
+    served = {0, *scenario.units}  # broadcasts too: the slave runs them, hook and all
+    ours = sum(1 for sent in frames for frame in sent if len(frame) == 8 and frame[0] in served)
+
     wire = scenario.settings.transaction_time(8, 15) if scenario.baudrate else 0.0
     backlog = sum(len(frame) for sent in frames for frame in sent)
     char_time = scenario.settings.char_time if scenario.baudrate else 0.0
