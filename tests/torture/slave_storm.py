@@ -27,7 +27,16 @@ from aiortu.core.slave_machine import SlaveState
 from aiortu.testing import VirtualBus, VirtualEndpoint
 
 from .checks import Ledger, Leftovers, Report, logged_errors
-from .scenarios import CONSTANT, CONSTANTS, MAX_CALLERS, OWN, SlaveScenario, constant, encode
+from .scenarios import (
+    CONSTANT,
+    CONSTANTS,
+    LOAD_MARGIN,
+    MAX_CALLERS,
+    OWN,
+    SlaveScenario,
+    constant,
+    encode,
+)
 
 __all__ = ("run_slave_scenario",)
 
@@ -92,10 +101,10 @@ def _checking_timeout(scenario: SlaveScenario, frames: list[list[bytes]]) -> flo
     behind every request the other masters send our units or broadcast (each a hook's sleep and a
     transaction on the wire). A reply later than the timeout and the guard would be
     taken for the next read of the same shape (RTU's documented limit), so the timeout
-    and the late-reply guard (the same) cover them all. On a paced bus they also cover
-    every byte the others send: the bus queues a transmission that collides behind the
-    one on the wire, so a request may leave the wire that much later than its master
-    reckons.
+    and the late-reply guard (the same, plus LOAD_MARGIN) cover them all. On a paced
+    bus they also cover every byte the others send: the bus queues a transmission that
+    collides behind the one on the wire, so a request may leave the wire that much later
+    than its master reckons.
     """
     served = {0, *scenario.units}  # broadcasts too: the slave runs them, hook and all
     ours = sum(1 for sent in frames for frame in sent if len(frame) == 8 and frame[0] in served)
@@ -193,8 +202,9 @@ async def _after_storm(
     for unit in generations.scenario.units:
         value = encode(0, 255)
         try:
-            await master.write_register(unit, OWN, value)
-            read = await master.read_holding_registers(unit, OWN, 1)
+            # Timeouts no reply misses on a quiet line, however loaded the machine.
+            await master.write_register(unit, OWN, value, timeout=2.0)
+            read = await master.read_holding_registers(unit, OWN, 1, timeout=2.0)
         except aiortu.ModbusError as error:
             report.violation(f"unit {unit} after the storm: {error!r}")
             continue
@@ -219,7 +229,7 @@ async def _slave_storm(scenario: SlaveScenario, report: Report) -> None:
         timeout=timeout,
         retries=1,
         frame_gap=gap,
-        late_reply_guard=timeout,
+        late_reply_guard=timeout + LOAD_MARGIN,
     )
     async with bus, master, anyio.create_task_group() as serving:
         serving.start_soon(generations.serve, ports[1 + rogues :])
