@@ -164,7 +164,9 @@ class SlaveScenario:
     master checks the slave's answers; the slave's serve task is cancelled at each of
     *restarts* (seconds from the start; with *in_request*, at the first request after
     it, from inside the request) and a new slave takes over the same stores. A
-    before-request hook sleeps *slow_hook* seconds (0: no hook, the fast paths serve)."""
+    before-request hook sleeps *slow_hook* seconds (0: no hook, the fast paths serve).
+    *line* is ``virtual`` (a VirtualBus) or ``pty`` (a PtyBus: every party opens its
+    port as a serial device, and the slave answers from the read callback)."""
 
     seed: int
     baudrate: int | None
@@ -175,6 +177,7 @@ class SlaveScenario:
     in_request: bool
     slow_hook: float
     checks: int
+    line: str = "virtual"
 
     @property
     def settings(self) -> LineSettings:
@@ -184,7 +187,8 @@ class SlaveScenario:
     def describe(self) -> str:
         """One line that says what the scenario is."""
         return (
-            f"seed={self.seed} slave baud={self.baudrate or 'unpaced'} units={self.units} "
+            f"seed={self.seed} slave line={self.line} baud={self.baudrate or 'unpaced'} "
+            f"units={self.units} "
             f"rogues={self.rogues}x{self.frames} restarts={len(self.restarts)} "
             f"in_request={self.in_request} "
             f"slow_hook={self.slow_hook:.3f} checks={self.checks}"
@@ -369,4 +373,6 @@ def slave_scenario(seed: int) -> SlaveScenario:
         in_request=generator.random() < 0.5,
         slow_hook=generator.choice((0.0, 0.0, generator.uniform(0.001, 0.01))),
         checks=generator.randint(5, 30),
+        # Drawn last, so that the draws above stay those of the seeds reported before.
+        line="pty" if generator.random() < 0.25 else "virtual",
     )

@@ -11,12 +11,18 @@ the slave's machine is back in IDLE; no task or timer is left behind.
 
 from __future__ import annotations
 
+import contextlib
 import random
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
 from typing import Any
 
 import anyio
+import anyio.abc
 
 import aiortu
+import aiortu.transport
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu_registers import (
     ReadHoldingRegistersRequest,
@@ -24,7 +30,7 @@ from aiortu.core.pdu_registers import (
     WriteSingleRegisterRequest,
 )
 from aiortu.core.slave_machine import SlaveState
-from aiortu.testing import VirtualBus, VirtualEndpoint
+from aiortu.testing import PtyBus, TraceEntry, VirtualBus
 
 from .checks import Ledger, Leftovers, Report, logged_errors
 from .scenarios import (
@@ -87,7 +93,7 @@ def _rogue_frames(scenario: SlaveScenario) -> list[list[bytes]]:
     ]
 
 
-async def _rogue(port: VirtualEndpoint, frames: list[bytes], seed: int) -> None:
+async def _rogue(port: anyio.abc.ByteStream, frames: list[bytes], seed: int) -> None:
     generator = random.Random(seed)
     for frame in frames:
         await anyio.sleep(generator.uniform(0, 0.01))
@@ -137,13 +143,11 @@ class _Generations:
         if self.scenario.slow_hook:
             await anyio.sleep(self.scenario.slow_hook)
 
-    async def serve(self, ports: list[VirtualEndpoint]) -> None:
+    async def serve(self, ports: _Ports) -> None:
         scenario, start = self.scenario, anyio.current_time()
         gap = None if scenario.baudrate else 0.0
-        for generation, port in enumerate(ports):
-            # A device plugged in late hears nothing of what went before.
-            while port._take():
-                pass
+        for generation in range(len(scenario.restarts) + 1):
+            port = await ports.open_slave_port(generation)
             slave = aiortu.Slave(port, self.stores, scenario.settings, frame_gap=gap)
             if scenario.slow_hook or scenario.in_request:
                 slave.before_request(self.hook)
@@ -193,11 +197,12 @@ async def _check(
 
 
 async def _after_storm(
-    master: aiortu.Master, generations: _Generations, bus: VirtualBus, report: Report
+    master: aiortu.Master, generations: _Generations, ports: _Ports, report: Report
 ) -> None:
     """On a quiet line, every unit answers a write and reads it back; the machine idles."""
     # Quiet: the other masters' last bytes have left the wire (a paced bus queues them).
-    last = bus.trace[-1].end if bus.trace else 0.0
+    trace = ports.trace()
+    last = trace[-1].end if trace else 0.0
     await anyio.sleep_until(max(last, anyio.current_time()) + 0.05)
     for unit in generations.scenario.units:
         value = encode(0, 255)
@@ -215,37 +220,80 @@ async def _after_storm(
         report.violation(f"the slave's machine is {state.name} after the storm")
 
 
-async def _slave_storm(scenario: SlaveScenario, report: Report) -> None:
+@dataclass
+class _Ports:
+    """The line's ports: the checking master's, the other masters', and a function that
+    opens the port of the slave of each generation (a device plugged in late hears
+    nothing of what went before)."""
+
+    checker: anyio.abc.ByteStream
+    rogues: Sequence[anyio.abc.ByteStream]
+    open_slave_port: Callable[[int], Awaitable[anyio.abc.ByteStream]]
+    trace: Callable[[], Sequence[TraceEntry]]
+
+
+@asynccontextmanager
+async def _virtual_line(scenario: SlaveScenario) -> AsyncIterator[_Ports]:
     rogues, slaves = scenario.rogues, len(scenario.restarts) + 1
     bus = VirtualBus(1 + rogues + slaves, settings=scenario.settings if scenario.baudrate else None)
     ports = list(bus.endpoints)
-    generations = _Generations(scenario, report)
-    gap = None if scenario.baudrate else 0.0
-    frames = _rogue_frames(scenario)
-    timeout = _checking_timeout(scenario, frames)
-    master = aiortu.Master(
-        ports[0],
-        scenario.settings,
-        timeout=timeout,
-        retries=1,
-        frame_gap=gap,
-        late_reply_guard=timeout + LOAD_MARGIN,
-    )
-    async with bus, master, anyio.create_task_group() as serving:
-        serving.start_soon(generations.serve, ports[1 + rogues :])
-        async with anyio.create_task_group() as storm:
-            for index in range(rogues):
-                storm.start_soon(_rogue, ports[1 + index], frames[index], scenario.seed + index)
-            storm.start_soon(_check, master, scenario, Ledger(), report)
-            if scenario.restarts:
-                await anyio.sleep(scenario.restarts[-1] + 0.01)
-        # A restart still waiting for a request mid-request does not happen after the
-        # storm: the checks below would lose their request to it.
-        generations.restart_at = float("inf")
-        report.outcomes["rogue_frames"] += rogues * scenario.frames
-        report.operations += rogues * scenario.frames
-        await _after_storm(master, generations, bus, report)
-        serving.cancel_scope.cancel()
+
+    async def open_slave_port(generation: int) -> anyio.abc.ByteStream:
+        port = ports[1 + rogues + generation]
+        while port._take():
+            pass
+        return port
+
+    async with bus:
+        yield _Ports(ports[0], ports[1 : 1 + rogues], open_slave_port, lambda: bus.trace)
+
+
+@asynccontextmanager
+async def _pty_line(scenario: SlaveScenario) -> AsyncIterator[_Ports]:
+    rogues, slaves, settings = scenario.rogues, len(scenario.restarts) + 1, scenario.settings
+    bus = PtyBus(1 + rogues + slaves, settings=settings if scenario.baudrate else None)
+    async with bus, contextlib.AsyncExitStack() as streams:
+
+        async def open_port(index: int) -> anyio.abc.ByteStream:
+            bus.discard_input(index)
+            stream = await aiortu.transport.open_stream(bus.paths[index], settings)
+            streams.push_async_callback(stream.aclose)
+            return stream
+
+        checker = await open_port(0)
+        others = [await open_port(1 + index) for index in range(rogues)]
+        yield _Ports(checker, others, lambda g: open_port(1 + rogues + g), lambda: bus.trace)
+
+
+async def _slave_storm(scenario: SlaveScenario, report: Report) -> None:
+    line = _virtual_line if scenario.line == "virtual" else _pty_line
+    async with line(scenario) as ports:
+        generations = _Generations(scenario, report)
+        frames = _rogue_frames(scenario)
+        timeout = _checking_timeout(scenario, frames)
+        master = aiortu.Master(
+            ports.checker,
+            scenario.settings,
+            timeout=timeout,
+            retries=1,
+            frame_gap=None if scenario.baudrate else 0.0,
+            late_reply_guard=timeout + LOAD_MARGIN,
+        )
+        async with master, anyio.create_task_group() as serving:
+            serving.start_soon(generations.serve, ports)
+            async with anyio.create_task_group() as storm:
+                for index, rogue in enumerate(ports.rogues):
+                    storm.start_soon(_rogue, rogue, frames[index], scenario.seed + index)
+                storm.start_soon(_check, master, scenario, Ledger(), report)
+                if scenario.restarts:
+                    await anyio.sleep(scenario.restarts[-1] + 0.01)
+            # A restart still waiting for a request mid-request does not happen after
+            # the storm: the checks below would lose their request to it.
+            generations.restart_at = float("inf")
+            report.outcomes["rogue_frames"] += scenario.rogues * scenario.frames
+            report.operations += scenario.rogues * scenario.frames
+            await _after_storm(master, generations, ports, report)
+            serving.cancel_scope.cancel()
 
 
 async def run_slave_scenario(scenario: SlaveScenario) -> Report:
