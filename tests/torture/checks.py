@@ -114,7 +114,8 @@ def logged_errors() -> Iterator[list[logging.LogRecord]]:
 
 class Leftovers:
     """The asyncio tasks and timers that exist when made; :meth:`new` tells what a
-    scenario left behind."""
+    scenario left behind. Timers are the armed handles in the event loop's timer heap
+    (``loop._scheduled``, CPython's asyncio): a ``call_at`` nobody cancelled."""
 
     def __init__(self) -> None:
         self.tasks = asyncio.all_tasks()
