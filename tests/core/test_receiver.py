@@ -772,9 +772,29 @@ def test_reset_forgets_the_partial_frame() -> None:
     receiver.feed(b"\x11\x03\x06\xae", 1.0)
     receiver.reset(2.0)
     assert receiver.state is S.INIT
-    assert receiver.next_deadline() == 2.0 + receiver.frame_silence
+    # INIT waits t3.5, as the spec has it, even where frames end on a longer silence.
+    assert receiver.frame_silence > line.t3_5
+    assert receiver.next_deadline() == 2.0 + line.t3_5
     out = receiver.feed(H("11 03 06 AE 41 56 52 43 40 49 AD"), 3.0)
     assert [r.frame for r in received(out)] == [H("11 03 06 AE 41 56 52 43 40 49 AD")]
+
+
+def test_init_ends_on_t3_5_of_a_busy_line() -> None:
+    """A slave that starts listening on a line never quiet for the tolerant frame
+    silence (other masters polling back to back) syncs on the first t3.5 gap: a request
+    it heard while in INIT is handed on then, not when the line first rests 20 ms (by
+    then its master has long given up, and the late reply confuses it)."""
+    line = LineSettings(9600)
+    receiver = Receiver(line, role=Role.SLAVE, units=[1], now=0.0)
+    request = H("01 03 00 00 00 01 84 0A")
+    gap = 2 * line.t3_5  # far shorter than the tolerant 20 ms
+    assert not received(receiver.feed(request, 0.001))
+    out = receiver.feed(b"\xff\x00", 0.001 + gap)
+    assert [r.frame for r in received(out)] == [request]
+    assert receiver.state is not S.INIT
+    later = H("01 03 00 01 00 01 D5 CA")
+    out = receiver.feed(later, 0.001 + 3 * gap) + receiver.expire(1.0)
+    assert [r.frame for r in received(out)] == [later]
 
 
 def test_bad_frame_silence_is_refused() -> None:

@@ -44,7 +44,9 @@ The t1.5 rule comes in two modes. `strict` follows the spec: a gap of more than 
 discards it, and t3.5 of silence ends a frame. `tolerant` (the default) ignores gaps inside frames,
 because USB adapters and virtual lines deliver bytes in bursts, and ends a frame only after a longer
 silence ([`TOLERANT_FRAME_SILENCE`][aiortu.core.receiver.TOLERANT_FRAME_SILENCE], or t3.5 when that
-is longer).
+is longer). INIT ends on t3.5 of silence in both modes, as the spec says: on a line that is never
+quiet for the longer bound (a master polling back to back), a receiver that started listening would
+otherwise stay deaf, then hand on frames it had gathered as noise long after they came.
 """
 
 from __future__ import annotations
@@ -253,6 +255,7 @@ class Receiver:
         self.timing = TimingMode(timing)
         self.char_time = self.settings.char_time
         self.t1_5 = self.settings.t1_5
+        self.t3_5 = self.settings.t3_5
         if frame_silence is None:
             frame_silence = self.settings.t3_5
             if self.timing is TimingMode.TOLERANT:
@@ -311,8 +314,9 @@ class Receiver:
             silence = first_arrival - char_time - last
             # (IDLE, SILENCE) does nothing (see TRANSITIONS), and IDLE is where each frame
             # of a poll loop finds the receiver: no need to fire it there.
-            if silence >= self.frame_silence and self.state is not _S.IDLE:
-                self._fire(ReceiverEvent.SILENCE, b"", 0, last + self.frame_silence)
+            needed = self._silence_needed()
+            if silence >= needed and self.state is not _S.IDLE:
+                self._fire(ReceiverEvent.SILENCE, b"", 0, last + needed)
         else:
             silence = float("inf")
         state = self.state
@@ -374,7 +378,15 @@ class Receiver:
         no timer runs."""
         if self.state is ReceiverState.IDLE or self._last is None:
             return None
-        return self._last + self.frame_silence
+        return self._last + self._silence_needed()
+
+    def _silence_needed(self) -> float:
+        """The silence that fires SILENCE now: t3.5 in INIT, as the spec has it (the
+        tolerant bound would keep a receiver that starts on a busy line deaf, then have
+        it hand on old frames gathered as noise), else the frame silence."""
+        if self.state is _S.INIT:
+            return min(self.t3_5, self.frame_silence)
+        return self.frame_silence
 
     def reset(self, now: float) -> None:
         """Forget any partial frame and wait for silence from `now` (after reopening a port)."""

@@ -223,7 +223,11 @@ class Link:
             self.backend_clock = True
         else:
             self.backend_clock = self.clock == backend.current_time
-        self.receiver.reset(self.clock())
+        now = self.clock()
+        self.receiver.reset(now)
+        # A port just opened has heard nothing: someone may be mid-frame (a master whose
+        # port came back after an unplug), so the first frame waits frame_gap too.
+        self._last_received = max(self._last_received, now)
         self._task_group = anyio.create_task_group()
         await self._task_group.__aenter__()
         set_receiver = self._set_receiver

@@ -421,6 +421,11 @@ class LineEngine:
         job = self._for_line_task
         if job is not None and not job.done:
             job.finish(None, ConnectionLost(why))
+        # Nothing waits any more: a closed master leaves no timer armed on the loop.
+        inbox = self._inbox
+        if inbox.timer is not None:
+            inbox.timer.cancel()
+            inbox.timer, inbox.timer_at = None, math.inf
         self._connected.set()
 
     def _on_link_event(self, event: LinkEvent | None) -> None:

@@ -52,6 +52,7 @@ from typing import Any, Self
 
 import anyio
 import anyio.abc
+import anyio.lowlevel
 
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.data_model import AsyncDataStore, DataStore, Table
@@ -223,6 +224,9 @@ class Slave(Dispatcher):
                 # ExceptionGroup on the way out.
                 lost = error
         if lost is not None:
+            # A link that closed because this task is being cancelled is the
+            # cancellation, not a lost line.
+            await anyio.lowlevel.checkpoint_if_cancelled()
             raise lost
 
     async def __aenter__(self) -> Self:
