@@ -628,19 +628,29 @@ async def serve(
         async with _running(server, address, port_or_url):
             yield server
         return
-    stream = await open_stream(port_or_url, settings, **options)
-    try:
-        slave = Slave(
-            stream,
-            units,
-            settings,
-            frame_gap=frame_gap,
-            timing=timing,
-            handlers=handlers,
+
+    def make(stream: anyio.abc.ByteStream) -> Slave:
+        return Slave(
+            stream, units, settings, frame_gap=frame_gap, timing=timing, handlers=handlers,
             trace=trace,
-        )
+        )  # fmt: skip
+
+    slave = await _on_port(port_or_url, settings, options, make)
+    async with slave:
+        yield slave
+
+
+async def _on_port(
+    port: str,
+    settings: LineSettings,
+    options: dict[str, Any],
+    make: Callable[[anyio.abc.ByteStream], Slave],
+) -> Slave:
+    """`make`'s [`Slave`][aiortu.slave.Slave] on `port`, opened with `settings` and the
+    transport's `options`; the port is closed again if the slave cannot be made."""
+    stream = await open_stream(port, settings, **options)
+    try:
+        return make(stream)
     except BaseException:
         await stream.aclose()
         raise
-    async with slave:
-        yield slave
