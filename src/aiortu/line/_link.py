@@ -66,6 +66,7 @@ from aiortu.core.receiver import (
 )
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost
+from aiortu.line._native import NativeWaits, native_waits
 from aiortu.line._push_reader import PushReader, ReplyTap, RequestTap
 from aiortu.line._sender import LineActivity, SendTurns, SilenceWaits
 from aiortu.transport import PushStream
@@ -181,6 +182,9 @@ class Link:
         """The event loop, where the link reads a stream that pushes its bytes (see `_push`); `None`
         otherwise. Its futures and [`call_at`][aiortu.line.Link.call_at] timers are the cheapest way
         to wait for the link there."""
+        self.waits: NativeWaits | None = None
+        """The running backend's cheapest waits (set when the link opens): a
+        [`Waiter`][aiortu.line.Waiter] is what a listener sets to wake a task."""
         self._error: BaseException | None = None
         self._closed = anyio.Event()
         self._stopped = False
@@ -229,10 +233,10 @@ class Link:
         self.receiver.reset(self.clock())
         self._task_group = anyio.create_task_group()
         await self._task_group.__aenter__()
-        native = token.native_token
+        waits = self.waits = native_waits()
         # Push only where the loop has call_at timers for the receiver's deadline (asyncio).
-        if self._push_reader is not None and callable(getattr(native, "call_at", None)):
-            self.loop = native
+        if self._push_reader is not None and waits.call_at is not None:
+            self.loop = waits.loop
             self._task_group.start_soon(self._push, name="aiortu link reader")
         else:
             self._task_group.start_soon(self._pump, name="aiortu link reader")

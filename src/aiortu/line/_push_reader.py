@@ -15,12 +15,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Container
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
-if TYPE_CHECKING:
-    import anyio
+import anyio
+import anyio.abc
 
-    from aiortu.line._link import Link
+from aiortu.core.receiver import FrameDiscarded, FrameReceived, Receiver
+from aiortu.line._sender import LineActivity
 
 __all__ = ("PushReader", "ReplyTap", "RequestTap")
 
@@ -53,12 +54,27 @@ class RequestTap:
     on_request: FrameTaker
 
 
+class _Link(Protocol):
+    """What the push reader uses of its [`Link`][aiortu.line.Link]."""
+
+    stream: anyio.abc.ByteStream
+    clock: Callable[[], float]
+    receiver: Receiver
+    backend: type[anyio.abc.AsyncBackend] | None
+    frames_received: int
+    _activity: LineActivity
+
+    def _deliver(self, events: list[FrameReceived | FrameDiscarded]) -> None: ...
+
+    def call_at(self, when: float, callback: Callable[..., object], *args: object) -> Any: ...
+
+
 class PushReader:
     """Takes the chunks a push stream hands over, for one link."""
 
     __slots__ = ("error", "link", "lost", "reply_tap", "request_tap", "timer", "timer_deadline")
 
-    def __init__(self, link: Link) -> None:
+    def __init__(self, link: _Link) -> None:
         self.link = link
         self.reply_tap: ReplyTap | None = None
         self.request_tap: RequestTap | None = None

@@ -60,7 +60,7 @@ from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
 from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine, SlaveState
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue
-from aiortu.line._link import Link, LinkEvent
+from aiortu.line import Link, LinkEvent, Waiter
 from aiortu.slave._answer_at_once import AnswerAtOnce, Taken
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, AfterHook, BeforeHook, Dispatcher
 from aiortu.slave._handlers import (
@@ -164,9 +164,8 @@ class Slave(Dispatcher):
         self._task_group: anyio.abc.TaskGroup | None = None
         self._stopped = anyio.Event()
         self._served = frozenset((BROADCAST_UNIT, *self.units))
-        self._wake: anyio.Event | None = None
-        self._waiter: Any = None
-        """The event loop future the serve loop waits on, where the link has a loop."""
+        self._waiter: Waiter | None = None
+        """What the serve loop waits on while its queue is empty."""
         self._link_closed = False
 
     def _configured(
@@ -269,7 +268,8 @@ class Slave(Dispatcher):
         waits again, so a flood of events costs one wake-up per batch, not one per event.
         """
         link = self.link
-        backend = link.backend
+        assert link.waits is not None  # the link is open
+        new_waiter = link.waits.waiter
         queue = self._queue
         queue.clear()
         self._link_closed = False
@@ -285,14 +285,9 @@ class Slave(Dispatcher):
                 if not queue:
                     if self._link_closed:
                         raise link.connection_lost_error()
-                    if link.loop is not None:
-                        # The link's stream pushes its bytes on this event loop: one of
-                        # its futures is the cheapest wait.
-                        waiter = self._waiter = link.loop.create_future()
-                        await waiter
-                        continue
-                    wake = self._wake = anyio.Event() if backend is None else backend.create_event()
-                    await wake.wait()
+                    # The backend's cheapest wake-up (an event loop future under asyncio).
+                    waiter = self._waiter = new_waiter()
+                    await waiter
                     continue
                 event = queue.popleft()
                 if type(event) is FrameReceived:
@@ -303,7 +298,7 @@ class Slave(Dispatcher):
                 else:
                     self._take_discard(event)  # type: ignore[arg-type]
         finally:
-            self._wake = self._waiter = None
+            self._waiter = None
             self._at_once.detach()
             link.listen(None)
 
@@ -342,10 +337,6 @@ class Slave(Dispatcher):
             self._waiter = None
             if not waiter.done():
                 waiter.set_result(None)
-        wake = self._wake
-        if wake is not None:
-            self._wake = None
-            wake.set()
 
     def _leave(self, taken: Taken) -> None:
         """The serve loop sends `taken`'s reply, in order."""
