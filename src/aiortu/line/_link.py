@@ -32,6 +32,12 @@ split or garbled reply included, takes the usual way through the receiver.
 The master and the slave are built on this; users rarely need it directly, except to
 watch a line (`role=Role.MONITOR`).
 
+Three modules beside this one hold the link's parts: `_push_reader.py` the push path (the chunk
+callback, its timer, and the taps of [`expect`][aiortu.line.Link.expect] and
+[`expect_requests`][aiortu.line.Link.expect_requests]), `_sender.py` the send turns and the
+silence waits, and `_native.py` the backend's cheapest waits
+([`native_waits`][aiortu.line.native_waits]).
+
 Events go to a queue that [`Link.receive`][aiortu.line.Link.receive] reads, or, while a listener is
 set ([`Link.listen`][aiortu.line.Link.listen]), straight to that listener from the reader: the
 master's line engine listens, so that a reply reaches the waiting transaction with no task hop in
