@@ -570,6 +570,17 @@ class Master(SerialLineFunctions):
         return list(reply.values)
 
 
+def _opener(port_or_url: str, settings: LineSettings, options: dict[str, Any]) -> StreamOpener:
+    """Opens `port_or_url` with `settings` and the transport's `options`: the first time, and
+    again when the master reconnects."""
+    from aiortu.transport import ModbusTcpAddress, ModbusTcpCounters, open_stream, parse_port_url
+
+    if isinstance(parse_port_url(port_or_url), ModbusTcpAddress):
+        # One set of counters for every connection: ids go on after a reconnect.
+        options.setdefault("counters", ModbusTcpCounters())
+    return lambda: open_stream(port_or_url, settings, **options)
+
+
 @contextlib.asynccontextmanager
 async def open_master(
     port_or_url: str,
@@ -613,8 +624,6 @@ async def open_master(
     settings after it disappears (a USB adapter unplugged); see [`Master`][aiortu.master.Master] for
     `reconnect_delay` and `reconnect_fail_fast`.
     """
-    from aiortu.transport import ModbusTcpAddress, ModbusTcpCounters, open_stream, parse_port_url
-
     options: dict[str, Any] = {
         "timeout": timeout, "retries": retries, "retry_on": retry_on, "repeatable": repeatable,
         "frame_gap": frame_gap, "turnaround_delay": turnaround_delay,
@@ -625,16 +634,9 @@ async def open_master(
     }  # fmt: skip
     check_master_settings(**options)  # before the port is opened: a bad one leaves it shut
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
-    if isinstance(parse_port_url(port_or_url), ModbusTcpAddress):
-        # One set of counters for every connection: ids go on after a reconnect.
-        transport_options.setdefault("counters", ModbusTcpCounters())
-    stream = await open_stream(port_or_url, settings, **transport_options)
-    master = Master(
-        stream,
-        settings,
-        opener=lambda: open_stream(port_or_url, settings, **transport_options),
-        **options,
-    )
+    opener = _opener(port_or_url, settings, transport_options)
+    stream = await opener()
+    master = Master(stream, settings, opener=opener, **options)
     try:
         async with master:
             yield master

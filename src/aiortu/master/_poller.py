@@ -178,6 +178,48 @@ class _Group:
     cycle: int = 0
 
 
+def _checked_points(points: Iterable[Point]) -> tuple[Point, ...]:
+    """`points` as a tuple, checked: at least one, and no name twice."""
+    checked = tuple(points)
+    if not checked:
+        raise InvalidValue("points", checked, "at least one point")
+    names = [p.name for p in checked]
+    if len(set(names)) != len(names):
+        duplicate = next(n for n in names if names.count(n) > 1)
+        raise InvalidValue("points", duplicate, "unique names", "a name is used twice")
+    return checked
+
+
+def _planned_groups(
+    points: tuple[Point, ...],
+    interval: float,
+    *,
+    max_gap: int,
+    max_bit_gap: int | None,
+    max_registers: int,
+    max_bits: int,
+) -> list[_Group]:
+    """The reads that poll `points`, one group per interval (a point's own, else
+    `interval`), shortest first; the limits go to the planner."""
+    by_interval: dict[float, list[Point]] = {}
+    for point in points:
+        by_interval.setdefault(point.interval or interval, []).append(point)
+    return [
+        _Group(
+            every,
+            plan_reads(
+                members,
+                max_gap=max_gap,
+                max_bit_gap=max_bit_gap,
+                max_registers=max_registers,
+                max_bits=max_bits,
+            ),
+            CycleStats(every),
+        )
+        for every, members in sorted(by_interval.items())
+    ]
+
+
 class Poller:
     """Polls `points` through `master` (see the module docstring); an async context manager.
 
@@ -209,14 +251,8 @@ class Poller:
         max_pending: int = 1024,
     ) -> None:
         self.master = master
-        self.points: tuple[Point, ...] = tuple(points)
+        self.points: tuple[Point, ...] = _checked_points(points)
         """The points polled."""
-        if not self.points:
-            raise InvalidValue("points", self.points, "at least one point")
-        names = [p.name for p in self.points]
-        if len(set(names)) != len(names):
-            duplicate = next(n for n in names if names.count(n) > 1)
-            raise InvalidValue("points", duplicate, "unique names", "a name is used twice")
         if not interval > 0:
             raise InvalidValue("interval", interval, "seconds > 0")
         if not offline_probe_interval >= 0:
@@ -227,23 +263,14 @@ class Poller:
         self.offline_probe_interval = offline_probe_interval
         self.max_probes_per_cycle = max_probes_per_cycle
         self.timeout = timeout
-        by_interval: dict[float, list[Point]] = {}
-        for point in self.points:
-            by_interval.setdefault(point.interval or interval, []).append(point)
-        self._groups = [
-            _Group(
-                every,
-                plan_reads(
-                    members,
-                    max_gap=max_gap,
-                    max_bit_gap=max_bit_gap,
-                    max_registers=max_registers,
-                    max_bits=max_bits,
-                ),
-                CycleStats(every),
-            )
-            for every, members in sorted(by_interval.items())
-        ]
+        self._groups = _planned_groups(
+            self.points,
+            interval,
+            max_gap=max_gap,
+            max_bit_gap=max_bit_gap,
+            max_registers=max_registers,
+            max_bits=max_bits,
+        )
         self._sample_callbacks = _as_list(on_sample)
         self._cycle_callbacks = _as_list(on_cycle)
         self._last_probe: dict[int, float] = {}

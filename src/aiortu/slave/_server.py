@@ -61,7 +61,7 @@ from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
 from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine, SlaveState
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue
-from aiortu.line._link import Link, LinkEvent
+from aiortu.line import Link, LinkEvent, Waiter
 from aiortu.slave._answer_at_once import AnswerAtOnce, Taken
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, AfterHook, BeforeHook, Dispatcher
 from aiortu.slave._handlers import (
@@ -165,9 +165,8 @@ class Slave(Dispatcher):
         self._task_group: anyio.abc.TaskGroup | None = None
         self._stopped = anyio.Event()
         self._served = frozenset((BROADCAST_UNIT, *self.units))
-        self._wake: anyio.Event | None = None
-        self._waiter: Any = None
-        """The event loop future the serve loop waits on, where the link has a loop."""
+        self._waiter: Waiter | None = None
+        """What the serve loop waits on while its queue is empty."""
         self._link_closed = False
 
     def _configured(
@@ -273,7 +272,8 @@ class Slave(Dispatcher):
         waits again, so a flood of events costs one wake-up per batch, not one per event.
         """
         link = self.link
-        backend = link.backend
+        assert link.waits is not None  # the link is open
+        new_waiter = link.waits.waiter
         queue = self._queue
         queue.clear()
         self._link_closed = False
@@ -289,14 +289,9 @@ class Slave(Dispatcher):
                 if not queue:
                     if self._link_closed:
                         raise link.connection_lost_error()
-                    if link.loop is not None:
-                        # The link's stream pushes its bytes on this event loop: one of
-                        # its futures is the cheapest wait.
-                        waiter = self._waiter = link.loop.create_future()
-                        await waiter
-                        continue
-                    wake = self._wake = anyio.Event() if backend is None else backend.create_event()
-                    await wake.wait()
+                    # The backend's cheapest wake-up (an event loop future under asyncio).
+                    waiter = self._waiter = new_waiter()
+                    await waiter
                     continue
                 event = queue.popleft()
                 if type(event) is FrameReceived:
@@ -307,7 +302,7 @@ class Slave(Dispatcher):
                 else:
                     self._take_discard(event)  # type: ignore[arg-type]
         finally:
-            self._wake = self._waiter = None
+            self._waiter = None
             self._at_once.detach()
             link.listen(None)
 
@@ -346,10 +341,6 @@ class Slave(Dispatcher):
             self._waiter = None
             if not waiter.done():
                 waiter.set_result(None)
-        wake = self._wake
-        if wake is not None:
-            self._wake = None
-            wake.set()
 
     def _leave(self, taken: Taken) -> None:
         """The serve loop sends `taken`'s reply, in order."""
@@ -632,19 +623,29 @@ async def serve(
         async with _running(server, address, port_or_url):
             yield server
         return
-    stream = await open_stream(port_or_url, settings, **options)
-    try:
-        slave = Slave(
-            stream,
-            units,
-            settings,
-            frame_gap=frame_gap,
-            timing=timing,
-            handlers=handlers,
+
+    def make(stream: anyio.abc.ByteStream) -> Slave:
+        return Slave(
+            stream, units, settings, frame_gap=frame_gap, timing=timing, handlers=handlers,
             trace=trace,
-        )
+        )  # fmt: skip
+
+    slave = await _on_port(port_or_url, settings, options, make)
+    async with slave:
+        yield slave
+
+
+async def _on_port(
+    port: str,
+    settings: LineSettings,
+    options: dict[str, Any],
+    make: Callable[[anyio.abc.ByteStream], Slave],
+) -> Slave:
+    """`make`'s [`Slave`][aiortu.slave.Slave] on `port`, opened with `settings` and the
+    transport's `options`; the port is closed again if the slave cannot be made."""
+    stream = await open_stream(port, settings, **options)
+    try:
+        return make(stream)
     except BaseException:
         await stream.aclose()
         raise
-    async with slave:
-        yield slave

@@ -169,6 +169,37 @@ class _Countdown:
         return hits
 
 
+class _Wire:
+    """What the wire carries for one chunk, built in order: runs of bytes and pauses."""
+
+    __slots__ = ("_items", "run")
+
+    def __init__(self) -> None:
+        self._items: list[bytes | float] = []
+        self.run = bytearray()
+        """The bytes since the last pause."""
+
+    def pause(self, seconds: float) -> None:
+        """The line falls silent for `seconds` here (pauses in a row add up)."""
+        if seconds <= 0:
+            return
+        items = self._items
+        if self.run:
+            items.append(bytes(self.run))
+            self.run.clear()
+        if items and isinstance(items[-1], float):
+            items[-1] += seconds
+        else:
+            items.append(seconds)
+
+    def items(self) -> list[bytes | float]:
+        """The runs and pauses, the last run included."""
+        if self.run:
+            self._items.append(bytes(self.run))
+            self.run.clear()
+        return self._items
+
+
 class FaultInjector:
     """Applies a [`FaultPlan`][aiortu.testing.FaultPlan] to the chunks of one line, reproducibly.
 
@@ -201,7 +232,6 @@ class FaultInjector:
         `char_time` is the time of one character on the line, the length of the pause a
         dropped byte leaves (0 on an unpaced line).
         """
-        plan = self.plan
         stats = self.stats
         stats.chunks += 1
         stats.bytes += len(data)
@@ -211,55 +241,48 @@ class FaultInjector:
         for bit in flipped:
             buffer[bit // 8] ^= 1 << (bit % 8)
         stats.bits_flipped += len(flipped)
+        # The draws keep their order (bits, drops, gaps, garbage, delay): a seed replays
+        # the same faults.
         drops = set(self._drops.take(length))
         gaps = set(self._gaps.take(length))
-        garbage_at = -1
-        garbage = b""
-        if plan.garbage_rate > 0 and self._chunk_rng.random() < plan.garbage_rate:
-            garbage_at = self._chunk_rng.randint(0, length)
-            count = self._chunk_rng.randint(1, plan.garbage_max)
-            garbage = bytes(self._chunk_rng.getrandbits(8) for _ in range(count))
-            stats.garbage_insertions += 1
-            stats.garbage_bytes += count
+        garbage_at, garbage = self._draw_garbage(length)
         delay = self._draw_delay()
         if delay > 0:
             stats.delays += 1
         stats.bytes_dropped += len(drops)
         stats.gaps += len(gaps)
-
-        items: list[bytes | float] = []
-        run = bytearray()
-
-        def pause(seconds: float) -> None:
-            if seconds <= 0:
-                return
-            if run:
-                items.append(bytes(run))
-                run.clear()
-            if items and isinstance(items[-1], float):
-                items[-1] += seconds
-            else:
-                items.append(seconds)
-
+        wire = _Wire()
         marks = sorted(drops | gaps | ({garbage_at} if garbage_at >= 0 else set()))
         done = 0
         for mark in marks:
-            run += buffer[done:mark]
+            wire.run += buffer[done:mark]
             done = mark
             if mark == garbage_at:
-                run += garbage
+                wire.run += garbage
             if mark < length:
                 if mark in drops:
-                    pause(char_time)
+                    wire.pause(char_time)
                 else:
-                    run.append(buffer[mark])
+                    wire.run.append(buffer[mark])
                 done = mark + 1
                 if mark in gaps:
-                    pause(plan.gap)
-        run += buffer[done:]
-        if run:
-            items.append(bytes(run))
-        return FaultedChunk(delay, items)
+                    wire.pause(self.plan.gap)
+        wire.run += buffer[done:]
+        return FaultedChunk(delay, wire.items())
+
+    def _draw_garbage(self, length: int) -> tuple[int, bytes]:
+        """Where garbage goes into a chunk of `length` bytes, and the garbage (-1 and none,
+        mostly)."""
+        plan = self.plan
+        rng = self._chunk_rng
+        if plan.garbage_rate <= 0 or rng.random() >= plan.garbage_rate:
+            return -1, b""
+        at = rng.randint(0, length)
+        count = rng.randint(1, plan.garbage_max)
+        garbage = bytes(rng.getrandbits(8) for _ in range(count))
+        self.stats.garbage_insertions += 1
+        self.stats.garbage_bytes += count
+        return at, garbage
 
     def corrupt(self, data: bytes) -> bytes:
         """Apply the plan to `data` and return only the bytes a receiver would get."""

@@ -76,7 +76,7 @@ import anyio.lowlevel
 
 from aiortu.core.timing import LineSettings
 from aiortu.errors import InvalidValue
-from aiortu.line._wake_timer import WakeTimer, create_wake_timer
+from aiortu.line import WakeTimer, create_wake_timer, native_waits
 from aiortu.testing._faults import FaultedChunk, FaultInjector, FaultPlan
 
 __all__ = ("TraceEntry", "VirtualBus", "VirtualEndpoint", "virtual_pair")
@@ -241,18 +241,6 @@ class VirtualEndpoint(anyio.abc.ByteStream):
         await anyio.lowlevel.checkpoint()
 
 
-def _loop_callbacks() -> tuple[Callable[[Callable[[], None]], object], Callable[[], float]]:
-    """The running event loop's "call this soon" and its clock (asyncio's own, else
-    trio's, read through anyio for the backend's time)."""
-    try:
-        loop = asyncio.get_running_loop()
-    except RuntimeError:
-        native = anyio.lowlevel.current_token().native_token
-        run_sync_soon: Callable[[Callable[[], None]], object] = native.run_sync_soon  # type: ignore[attr-defined]  # trio's token
-        return run_sync_soon, anyio.current_time
-    return loop.call_soon, loop.time
-
-
 class _PushingEndpoint(VirtualEndpoint):
     """An endpoint of a bus where nothing is ever held on the wire (see
     [`VirtualBus.pushes`][aiortu.testing.VirtualBus.pushes]): besides the byte stream, the push
@@ -262,7 +250,7 @@ class _PushingEndpoint(VirtualEndpoint):
     def __init__(self, bus: VirtualBus, index: int, buffer_size: int) -> None:
         super().__init__(bus, index, buffer_size)
         self._receiver: Callable[[bytes], None] | None = None
-        self._call_soon: Callable[[Callable[[], None]], object] | None = None
+        self._call_soon: Callable[[Callable[[], object]], object] | None = None
         self._clock: Callable[[], float] = anyio.current_time
         self._handing_over = False
 
@@ -286,7 +274,8 @@ class _PushingEndpoint(VirtualEndpoint):
         self._on_lost = on_lost if receiver is not None else None
         if receiver is None:
             return
-        self._call_soon, self._clock = _loop_callbacks()
+        waits = native_waits()  # the event loop's own call_soon and clock under asyncio
+        self._call_soon, self._clock = waits.call_soon, waits.time
         if self._buffer:
             receiver(self._take(len(self._buffer)))
         self._check_lost()
