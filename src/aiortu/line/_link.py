@@ -255,7 +255,8 @@ class Link:
         self.receiver.reset(now)
         # A port just opened has heard nothing: someone may be mid-frame (a master whose
         # port came back after an unplug), so the first frame waits frame_gap too.
-        self._last_received = max(self._last_received, now)
+        activity = self._activity
+        activity.last_received = max(activity.last_received, now)
         self._task_group = anyio.create_task_group()
         await self._task_group.__aenter__()
         waits = self.waits = native_waits()
