@@ -74,14 +74,27 @@ async def test_poll_says_the_line_is_down_and_goes_on_once_the_port_is_back(
             seen = await out.wait_for(value)
             await device.unplug()
             seen = await out.wait_for("line down, reopening", after=seen)
-            assert "-- ConnectionLost" in out.text[seen - 300 : seen]
+            assert "-- line lost" in out.text[seen - 300 : seen]
             await device.plug()
             await out.wait_for(value, after=seen)
             process.terminate()
             with anyio.fail_after(10):
                 assert await process.wait() == 0
+            assert process.stderr is not None
+            errors = await _rest(process.stderr)
         await device.unplug()
         tasks.cancel_scope.cancel()
+    # The table says the line is down; the library's own log stays out of stderr.
+    assert errors == ""
+
+
+async def _rest(stream: anyio.abc.ByteReceiveStream) -> str:
+    """Everything left on a finished process's pipe."""
+    text = b""
+    with contextlib.suppress(anyio.EndOfStream):
+        while True:
+            text += await stream.receive()
+    return text.decode()
 
 
 async def test_poll_with_no_reconnect_exits_1_with_one_line(tmp_path: Path) -> None:

@@ -69,7 +69,7 @@ async def test_serve_passes_its_timing_to_the_slave(
 def test_a_point_refused_by_the_device_shows_the_exception_code() -> None:
     point = Point.of("a", 1, "40001")
     refused = Sample(point, None, 0.0, 0, ExceptionResponse(2, 3, 1))
-    assert _format_value(refused) == "-- ExceptionResponse 02"
+    assert _format_value(refused) == "-- exception 02 (illegal data address)"
 
 
 def test_a_json_sample_names_a_lost_line_in_words() -> None:

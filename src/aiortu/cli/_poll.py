@@ -17,6 +17,7 @@ import argparse
 import json
 import signal
 import sys
+from enum import Enum
 from typing import TextIO
 
 import anyio
@@ -39,7 +40,16 @@ from aiortu.cli._messages import line_failure
 from aiortu.core.addressing import Reference, format_reference
 from aiortu.core.poll_plan import Point
 from aiortu.core.values import Layout, ValueType
-from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue
+from aiortu.errors import (
+    ConnectionLost,
+    CRCError,
+    ExceptionResponse,
+    FrameError,
+    InvalidValue,
+    ResponseTimeout,
+    UnitOffline,
+    UnitSkipped,
+)
 from aiortu.master._poller import CycleReport, Poller, Sample, UnitHealth
 from aiortu.master._stats import UnitState
 
@@ -188,12 +198,33 @@ def _reference_name(reference: Reference) -> str:
     return format_reference(reference, 5 if reference.number <= 9999 else 6)
 
 
-def _format_value(sample: Sample) -> str:
-    error = sample.error
+_FAILURES: tuple[tuple[type[Exception], str], ...] = (
+    (UnitSkipped, "skipped, unit offline"),
+    (UnitOffline, "unit offline"),
+    (ResponseTimeout, "no reply"),
+    (CRCError, "bad CRC"),
+    (FrameError, "bad reply"),
+    (ConnectionLost, "line lost"),
+)
+"""What the table shows for a point that could not be read, by error (first match)."""
+
+
+def _failure(error: Exception) -> str:
+    """Why a point has no value, in a few words: `no reply`, `exception 02 (illegal data
+    address)`, `line lost`."""
     if isinstance(error, ExceptionResponse):
-        return f"-- ExceptionResponse {int(error.code):02X}"
-    if error is not None:
-        return f"-- {type(error).__name__}"
+        code = error.code
+        meaning = f" ({code.name.lower().replace('_', ' ')})" if isinstance(code, Enum) else ""
+        return f"exception {int(code):02X}{meaning}"
+    for kind, words in _FAILURES:
+        if isinstance(error, kind):
+            return words
+    return "failed"
+
+
+def _format_value(sample: Sample) -> str:
+    if sample.error is not None:
+        return f"-- {_failure(sample.error)}"
     value = sample.value
     if isinstance(value, bool):
         return "1" if value else "0"

@@ -115,7 +115,7 @@ class LineConnection:
                 if not self.can_reconnect:
                     self.engine.close(error)
                     return
-                _log.warning("the line failed (%s); reopening it", error)
+                _log.warning("%s; reopening it", error)  # says "the line failed: why"
                 link = self.link = self._make_link(await self._reopen())
                 self.reconnects += 1
                 _log.info("the line is back after %d failed attempts", self.failed_attempts)

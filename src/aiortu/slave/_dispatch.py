@@ -283,7 +283,16 @@ def _checked(value: object, source: object) -> HandlerResult:
         if _valid_reply(value):
             return value
         return _fail(source, "a Reply with a bad response, delay or unit")
-    return _fail(source, f"a {type(value).__name__}")
+    return _fail(source, _described(value))
+
+
+def _described(value: object) -> str:
+    """`value` as a log names it: `12345 (an int)` for a number, else its type (`a str`)."""
+    name = type(value).__name__
+    kind = f"{'an' if name[0] in 'aeiouAEIOU' else 'a'} {name}"
+    if isinstance(value, int | float):
+        return f"{value} ({kind})"
+    return kind
 
 
 def _encoded(result: HandlerResult) -> bytes | Reply | None:
