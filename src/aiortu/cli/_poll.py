@@ -23,7 +23,7 @@ from typing import TextIO
 import anyio
 
 from aiortu.cli import SUMMARIES, Subparsers
-from aiortu.cli._arguments import plural
+from aiortu.cli._arguments import add_no_reconnect, add_timing, plural
 from aiortu.cli._arguments import unit as unit_address
 from aiortu.cli._master import (
     EXIT_CODES_HELP,
@@ -93,6 +93,7 @@ def register(subparsers: Subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_line_options(parser)
+    add_timing(parser)
     what = parser.add_argument_group("what to poll")
     what.add_argument(
         "--unit", help="unit address(es) for --ref: 1..247, comma-separated for several"
@@ -130,12 +131,7 @@ def register(subparsers: Subparsers) -> None:
         help="seconds between probes of an offline unit (5.0)",
     )
     parser.add_argument("--json", action="store_true", help="one JSON object per sample")
-    parser.add_argument(
-        "--no-reconnect",
-        dest="reconnect",
-        action="store_false",
-        help="exit 1 when the port is lost, instead of reopening it",
-    )
+    add_no_reconnect(parser)
     parser.set_defaults(run=run)
 
 
@@ -321,7 +317,7 @@ def run(args: argparse.Namespace) -> int:
 
     async def body() -> int:
         points = points_from_args(args)
-        async with open_from_args(args, reconnect=args.reconnect) as master:
+        async with open_from_args(args, reconnect=args.reconnect, timing=args.timing) as master:
             poller = Poller(
                 master,
                 points,

@@ -20,12 +20,17 @@ from collections.abc import Mapping
 import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
-from aiortu.cli._arguments import add_line_settings, resolve_line_settings, seconds_or_zero
+from aiortu.cli._arguments import (
+    add_line_settings,
+    add_no_reconnect,
+    add_timing,
+    resolve_line_settings,
+    seconds_or_zero,
+)
 from aiortu.cli._messages import config_problem, line_failure, port_failure
 from aiortu.core.bus_decoder import describe_frame
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
-from aiortu.core.receiver import TimingMode
 from aiortu.errors import ConnectionLost, ModbusError, PortError
 from aiortu.slave._config import ConfigError, load_config
 from aiortu.slave._server import serve
@@ -92,26 +97,11 @@ def register(subparsers: Subparsers) -> None:
         metavar="SECONDS",
         help="silence kept before each reply (t3.5 of the line settings)",
     )
-    line.add_argument(
-        "--timing",
-        choices=[mode.value for mode in TimingMode],
-        default=TimingMode.TOLERANT.value,
-        help=(
-            "strict: a gap over t1.5 inside a frame breaks it, and a request whose length "
-            "the function code does not tell ends after t3.5; tolerant: only a silence of "
-            "t3.5 or 20 ms, whichever is longer, ends a frame, for USB adapters and virtual "
-            "lines (tolerant)"
-        ),
-    )
+    add_timing(line)
     parser.add_argument(
         "--trace", action="store_true", help="log every frame on stderr, in hex, with its meaning"
     )
-    parser.add_argument(
-        "--no-reconnect",
-        dest="reconnect",
-        action="store_false",
-        help="exit 1 when the port is lost, instead of reopening it",
-    )
+    add_no_reconnect(parser)
     parser.set_defaults(run=run)
 
 
