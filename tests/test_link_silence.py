@@ -10,7 +10,7 @@ import anyio
 import anyio.abc
 import pytest
 
-import aiortu.line._link
+import aiortu.line._sender
 from aiortu.core.frame import encode_frame
 from aiortu.core.receiver import FrameReceived
 from aiortu.core.timing import LineSettings
@@ -46,7 +46,7 @@ async def _timer_made(link: Link, far: anyio.abc.ByteStream) -> WakeTimer:
     t3.5 at 115200 may be over before the wait begins), and return its timer."""
     await _receive_a_frame(link, far)
     await link.wait_for_silence(GAP)
-    timer = link._silence_timer
+    timer = link._silence.timer
     assert timer is not None, "the link waited without its precise timer"
     return timer
 
@@ -74,10 +74,10 @@ async def test_one_timer_per_link_made_on_first_use() -> None:
     near, far = virtual_pair()
     async with Link(near, FAST, frame_gap=0) as link:
         await _settle()
-        assert link._silence_timer is None
+        assert link._silence.timer is None
         timer = await _timer_made(link, far)
         await _timer_made(link, far)
-        assert link._silence_timer is timer
+        assert link._silence.timer is timer
 
 
 async def test_bytes_arriving_meanwhile_restart_the_wait() -> None:
@@ -116,19 +116,19 @@ async def test_a_cancelled_wait_leaves_the_timer_disarmed() -> None:
             assert timer.deadline < math.inf  # the wait is on the timer
             tg.cancel_scope.cancel()
         assert timer.deadline == math.inf
-        assert link._silence_waiters == []
+        assert link._silence.waiters == []
         # The timer still serves the next wait.
         await _receive_a_frame(link, far)
         quiet_at = link.last_activity + FAST.t3_5
         await link.wait_for_silence(FAST.t3_5)
         assert link.clock() >= quiet_at
-        assert link._silence_timer is timer
+        assert link._silence.timer is timer
 
 
 async def test_falls_back_to_the_loop_timers_without_the_precise_timer(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(aiortu.line._link, "create_wake_timer", lambda on_fire: None)
+    monkeypatch.setattr(aiortu.line._sender, "create_wake_timer", lambda on_fire: None)
     near, far = virtual_pair()
     async with Link(near, FAST, frame_gap=0) as link:
         await _settle()
@@ -137,7 +137,7 @@ async def test_falls_back_to_the_loop_timers_without_the_precise_timer(
             quiet_at = link.last_activity + FAST.t3_5
             await link.wait_for_silence(FAST.t3_5)
             assert link.clock() >= quiet_at
-        assert link._silence_timer is None
+        assert link._silence.timer is None
 
 
 @needs_timer
@@ -148,7 +148,7 @@ async def test_the_timer_is_closed_when_the_link_stops() -> None:
         timer = await _timer_made(link, far)
         assert not timer.closed
     assert timer.closed
-    assert link._silence_timer is None
+    assert link._silence.timer is None
 
 
 @needs_timer

@@ -66,7 +66,8 @@ from aiortu.core.receiver import (
 )
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost
-from aiortu.line._wake_timer import WakeTimer, create_wake_timer
+from aiortu.line._push_reader import PushReader, ReplyTap, RequestTap
+from aiortu.line._sender import LineActivity, SendTurns, SilenceWaits
 from aiortu.transport import PushStream
 
 __all__ = ("Link", "LinkEvent", "LinkListener")
@@ -102,6 +103,26 @@ def _loop_clock(token: anyio.lowlevel.EventLoopToken) -> Callable[[], float]:
             if abs(float(loop_time()) - backend_time()) < 0.1:
                 return cast(Callable[[], float], loop_time)
     return backend_time
+
+
+def _describe(error: BaseException) -> str:
+    """Why the stream ended, in words: what happened to the port, then the detail it gave."""
+    if isinstance(error, anyio.EndOfStream):
+        return "the port closed"
+    if isinstance(error, anyio.ClosedResourceError):
+        return "the port was closed"
+    detail = _detail(error)
+    return f"the port is gone ({detail})" if detail else "the port is gone"
+
+
+def _detail(error: BaseException | None) -> str:
+    """What `error` says, without its class name; its cause's words where it says nothing."""
+    if error is None:
+        return ""
+    if isinstance(error, OSError) and error.strerror:
+        name = error.filename
+        return f"{name}: {error.strerror}" if name is not None else error.strerror
+    return str(error) or _detail(error.__cause__ or error.__context__)
 
 
 class Link:
@@ -150,53 +171,50 @@ class Link:
         )
         self._task_group: anyio.abc.TaskGroup | None = None
         self._listener: LinkListener | None = None
-        self._sending = False
-        self._send_waiters: list[anyio.Event] = []
         self.backend: type[anyio.abc.AsyncBackend] | None = None
         """The async backend the link runs on (set when it opens): its events, cancel
         scopes and clock cost no backend lookup."""
         self.backend_clock = False
         """Whether [`clock`][aiortu.line.Link] is the backend's own clock, so that its times can be
         used as cancel scope deadlines as they are."""
+        self.loop: Any = None
+        """The event loop, where the link reads a stream that pushes its bytes (see `_push`); `None`
+        otherwise. Its futures and [`call_at`][aiortu.line.Link.call_at] timers are the cheapest way
+        to wait for the link there."""
+        self._error: BaseException | None = None
+        self._closed = anyio.Event()
+        self._stopped = False
+        self._init_sender(stream)
+        self._init_counters()
+
+    def _init_sender(self, stream: anyio.abc.ByteStream) -> None:
+        """The sender's state, and the push reader where the stream pushes its bytes."""
+        self._activity = LineActivity()
+        self._turns = SendTurns()
+        self._silence = SilenceWaits()
         self.writes_begun = 0
         """Writes [`send`][aiortu.line.Link.send] has begun: a caller cancelled inside
         [`send`][aiortu.line.Link.send] can tell whether its frame may have gone out."""
         self.last_write_start = -math.inf
         """When the last write began, in the link's clock."""
-        self._last_received = -math.inf
-        self._transmit_end = -math.inf
-        self._error: BaseException | None = None
-        self._closed = anyio.Event()
-        self._stopped = False
-        self.loop: Any = None
-        """The event loop, where the link reads a stream that pushes its bytes (see `_push`); `None`
-        otherwise. Its futures and [`call_at`][aiortu.line.Link.call_at] timers are the cheapest way
-        to wait for the link there."""
         # Checked once here (an isinstance against a runtime protocol takes microseconds):
-        # the chunk and send paths use the bound methods kept.
-        self._set_receiver: Callable[..., None] | None = None
-        """A push stream's `set_receiver`, used where the event loop has `call_at`."""
+        # the chunk and send paths use what is kept.
+        self._push_reader: PushReader | None = None
         self._send_nowait: Callable[[bytes], bool] | None = None
         """A push stream's write without a yield (the serial port's), tried before `send`."""
         if isinstance(stream, PushStream):
-            self._set_receiver = stream.set_receiver
+            self._push_reader = PushReader(self)
             self._send_nowait = stream.send_nowait
-        self._timer: Any = None
-        self._timer_deadline = -math.inf
-        self._expected: tuple[bytes, int, Callable[[bytes, float], None], bytes | None] | None = (
-            None
-        )
-        self._requests: tuple[Container[int], int, Callable[[bytes, float], None]] | None = None
-        self._push_lost: anyio.Event | None = None
-        self._push_error: BaseException | None = None
+
+    def _init_counters(self) -> None:
         self.frames_received = 0
+        """Frames received whose CRC checks."""
         self.frames_sent = 0
+        """Frames sent."""
         self.discarded: Counter[DiscardReason] = Counter()
+        """Discards by reason."""
         self.events_dropped = 0
-        self._silence_timer: WakeTimer | None = None
-        self._silence_timer_tried = False
-        self._silence_loop: Any = None
-        self._silence_waiters: list[Any] = []
+        """Events dropped because the queue was full."""
 
     # -- lifetime --------------------------------------------------------------------
 
@@ -211,12 +229,11 @@ class Link:
         self.receiver.reset(self.clock())
         self._task_group = anyio.create_task_group()
         await self._task_group.__aenter__()
-        set_receiver = self._set_receiver
         native = token.native_token
         # Push only where the loop has call_at timers for the receiver's deadline (asyncio).
-        if set_receiver is not None and callable(getattr(native, "call_at", None)):
+        if self._push_reader is not None and callable(getattr(native, "call_at", None)):
             self.loop = native
-            self._task_group.start_soon(self._push, set_receiver, name="aiortu link reader")
+            self._task_group.start_soon(self._push, name="aiortu link reader")
         else:
             self._task_group.start_soon(self._pump, name="aiortu link reader")
         return self
@@ -240,7 +257,7 @@ class Link:
         """Stop reading and close the stream."""
         if self._task_group is not None:
             self._task_group.cancel_scope.cancel()
-        self._close_silence_timer()
+        self._silence.close()
         self._send_events.close()
         with anyio.CancelScope(shield=True):
             await self.stream.aclose()
@@ -250,7 +267,8 @@ class Link:
     @property
     def last_activity(self) -> float:
         """When the line was last busy: the later of the last byte received and the last sent."""
-        return max(self._last_received, self._transmit_end)
+        activity = self._activity
+        return max(activity.last_received, activity.transmit_end)
 
     @property
     def closed(self) -> bool:
@@ -291,15 +309,23 @@ class Link:
             raise self._connection_lost() from self._error
 
     def connection_lost_error(self) -> ConnectionLost:
-        """The [`ConnectionLost`][aiortu.errors.ConnectionLost] that stands for the link's end."""
+        """The [`ConnectionLost`][aiortu.errors.ConnectionLost] that stands for the link's end.
+
+        Its message says what happened to the port in words; the stream's own error is its
+        `__cause__`.
+        """
         return self._connection_lost()
 
     def _connection_lost(self) -> ConnectionLost:
-        if self._error is None:
+        error = self._error
+        if error is None:
             return ConnectionLost("the link is closed")
-        return ConnectionLost(f"the line failed: {self._error!r}")
+        lost = ConnectionLost(f"the line failed: {_describe(error)}")
+        lost.__cause__ = error
+        return lost
 
     async def _pump(self) -> None:
+        """The reader task for a stream read with `receive()`."""
         receiver = self.receiver
         clock = self.clock
         stream = self.stream
@@ -308,6 +334,7 @@ class Link:
         cancel_scope = backend.create_cancel_scope
         backend_time = backend.current_time
         native = self.backend_clock
+        activity = self._activity
         try:
             while True:
                 deadline = receiver.next_deadline()
@@ -321,82 +348,33 @@ class Link:
                         chunk = await stream.receive()
                 now = clock()
                 if chunk:
-                    self._last_received = now
-                    # The line is half duplex: a byte received proves our own frame has
-                    # left it, even where the wire time estimate says otherwise (virtual
-                    # lines deliver faster than the baud rate).
-                    self._transmit_end = min(self._transmit_end, now)
+                    activity.received(now)
                     self._deliver(receiver.feed(chunk, now))
                 else:
                     self._deliver(receiver.expire(now))
         except _STREAM_ERRORS as error:
             self._error = error
         finally:
-            self._send_events.close()
-            self._stopped = True
-            self._closed.set()
-            if self._listener is not None:
-                self._listener(None)
+            self._reader_stopped()
 
-    # The push path: a PushStream (the serial port) calls :meth:`_on_chunk` from the event
-    # loop's read callback, and the receiver's silence deadline is one loop timer
-    # (:meth:`_arm_timer`). The reader task only waits for the stream's end, so a chunk
-    # costs no task wake-up.
-
-    async def _push(self, set_receiver: Callable[..., None]) -> None:
-        backend = self.backend
-        assert backend is not None
-        lost = self._push_lost = backend.create_event()
+    async def _push(self) -> None:
+        """The reader task for a stream that pushes its bytes: it waits for the stream's end
+        (see `PushReader`)."""
+        assert self._push_reader is not None
+        set_receiver = cast(PushStream, self.stream).set_receiver
         try:
-            set_receiver(self._on_chunk, lost.set)
-            self._arm_timer()
-            await lost.wait()
-            if self._push_error is not None:
-                raise self._push_error
-            await self.stream.receive()  # raises why the stream ended
+            await self._push_reader.run(set_receiver)
         except _STREAM_ERRORS as error:
             self._error = error
         finally:
-            set_receiver(None)
-            if self._timer is not None:
-                self._timer.cancel()
-                self._timer = None
-            self._send_events.close()
-            self._stopped = True
-            self._closed.set()
-            if self._listener is not None:
-                self._listener(None)
+            self._reader_stopped()
 
-    def _on_chunk(self, chunk: bytes) -> None:
-        try:
-            now = self.clock()
-            self._last_received = now
-            # Half duplex: see _pump.
-            self._transmit_end = min(self._transmit_end, now)
-            # A chunk of the layout the master expects (once) or the slave takes (each
-            # time) goes straight to them once the receiver has checked its CRC.
-            expected = self._expected
-            requests = self._requests
-            take = checked = None
-            if expected is not None and len(chunk) == expected[1] and chunk.startswith(expected[0]):
-                take = expected[2]
-                checked = expected[3]
-            elif requests is not None and len(chunk) == requests[1] and chunk[1] in requests[0]:
-                take = requests[2]
-            if take is not None and self.receiver.take_expected_frame(chunk, now, checked):
-                if expected is not None and take is expected[2]:
-                    self._expected = None  # expect() hands over one frame only
-                self.frames_received += 1
-                take(chunk, now)
-                if self._timer is None:
-                    return  # an idle receiver has no deadline: no timer to arm
-            else:
-                events = self.receiver.feed(chunk, now)
-                if events:
-                    self._deliver(events)
-            self._arm_timer()
-        except BaseException as error:  # a bug: the reader task raises it
-            self._fail_push(error)
+    def _reader_stopped(self) -> None:
+        self._send_events.close()
+        self._stopped = True
+        self._closed.set()
+        if self._listener is not None:
+            self._listener(None)
 
     def expect(
         self,
@@ -417,7 +395,8 @@ class Link:
         the usual way. A master waiting for the reply it knows the shape of (a register
         read's) saves the event and the queue this way.
         """
-        self._expected = (prefix, length, on_frame, checked)
+        if self._push_reader is not None:
+            self._push_reader.reply_tap = ReplyTap(prefix, length, on_frame, checked)
 
     def expect_requests(
         self,
@@ -435,41 +414,14 @@ class Link:
         Like [`expect`][aiortu.line.Link.expect], only where the stream pushes its bytes. A slave
         answers the commonest requests this way without building an event.
         """
-        self._requests = None if on_request is None else (function_codes, length, on_request)
+        if self._push_reader is not None:
+            tap = None if on_request is None else RequestTap(function_codes, length, on_request)
+            self._push_reader.request_tap = tap
 
     def forget_expected(self) -> None:
         """Undo [`expect`][aiortu.line.Link.expect], if the frame has not come."""
-        self._expected = None
-
-    def _on_timer(self) -> None:
-        self._timer = None
-        try:
-            events = self.receiver.expire(self.clock())
-            if events:
-                self._deliver(events)
-            self._arm_timer()
-        except BaseException as error:
-            self._fail_push(error)
-
-    def _fail_push(self, error: BaseException) -> None:
-        if self._push_error is None:
-            self._push_error = error
-        if self._push_lost is not None:
-            self._push_lost.set()
-
-    def _arm_timer(self) -> None:
-        """Keep one loop timer at the receiver's next deadline (none without one)."""
-        deadline = self.receiver.next_deadline()
-        timer = self._timer
-        if timer is not None:
-            if deadline == self._timer_deadline:
-                return
-            timer.cancel()
-            self._timer = None
-        if deadline is None:
-            return
-        self._timer_deadline = deadline
-        self._timer = self.call_at(deadline, self._on_timer)
+        if self._push_reader is not None:
+            self._push_reader.reply_tap = None
 
     def call_at(self, when: float, callback: Callable[..., object], *args: object) -> Any:
         """Have the event loop call `callback(*args)` at `when` (the link's clock);
@@ -509,15 +461,16 @@ class Link:
         """
         # One sender at a time, in order; no yield when nobody else is sending (a
         # master's line has a single sender).
-        if self._sending:
-            await self._wait_turn_to_send()
+        turns = self._turns
+        if turns.busy:
+            await turns.wait(self.backend)
         else:
-            self._sending = True
+            turns.busy = True
         try:
             clock = self.clock
-            last = max(self._last_received, self._transmit_end)
-            if last + self.frame_gap > clock():
-                await self.wait_for_silence(self.frame_gap)
+            activity = self._activity
+            if max(activity.last_received, activity.transmit_end) + self.frame_gap > clock():
+                await self._silence.wait(activity, clock, self.frame_gap)
             if self._error is not None or self._stopped:
                 raise self._connection_lost()
             start = self.last_write_start = clock()
@@ -531,10 +484,7 @@ class Link:
                     raise self._connection_lost() from error
             return self._sent(frame, start, self.clock())
         finally:
-            if self._send_waiters:
-                self._pass_turn_to_send()
-            else:
-                self._sending = False
+            turns.pass_on()
 
     def send_now(self, frame: bytes) -> float | None:
         """Send `frame` at once if the line lets it go without a wait, else send nothing.
@@ -546,10 +496,11 @@ class Link:
         with no task wake-up.
         """
         send_nowait = self._send_nowait
-        if send_nowait is None or self._sending or self._error is not None or self._stopped:
+        if send_nowait is None or self._turns.busy or self._error is not None or self._stopped:
             return None
         start = self.clock()
-        if max(self._last_received, self._transmit_end) + self.frame_gap > start:
+        activity = self._activity
+        if max(activity.last_received, activity.transmit_end) + self.frame_gap > start:
             return None
         if not send_nowait(frame):
             return None
@@ -564,26 +515,8 @@ class Link:
         # The OS may buffer the write, so it returns early; the wire is busy until the
         # last character has gone, whichever is later.
         end = max(start + len(frame) * self.char_time, now)
-        self._transmit_end = end
+        self._activity.transmit_end = end
         return end
-
-    async def _wait_turn_to_send(self) -> None:
-        turn = anyio.Event() if self.backend is None else self.backend.create_event()
-        self._send_waiters.append(turn)
-        try:
-            await turn.wait()
-        except BaseException:
-            if turn.is_set():
-                self._pass_turn_to_send()  # handed the turn, yet gone: pass it on
-            else:
-                self._send_waiters.remove(turn)
-            raise
-
-    def _pass_turn_to_send(self) -> None:
-        if self._send_waiters:
-            self._send_waiters.pop(0).set()  # the turn passes; _sending stays true
-        else:
-            self._sending = False
 
     async def wait_for_silence(self, silence: float) -> None:
         """Wait until neither side has used the line for `silence` seconds (no yield when
@@ -593,54 +526,4 @@ class Link:
         at the time itself: the event loop's own timers end on the next whole millisecond,
         a large share of t3.5 at high baud rates. Elsewhere it sleeps on the loop's timers.
         """
-        while True:
-            # Bytes that arrive meanwhile move the end of the silence: look again on waking.
-            quiet_at = max(self._last_received, self._transmit_end) + silence
-            remaining = quiet_at - self.clock()
-            if remaining <= 0:
-                return
-            if not self._silence_timer_tried:
-                self._make_silence_timer()
-            timer = self._silence_timer
-            if timer is None:
-                await anyio.sleep(remaining)
-            elif self.clock is time.monotonic:
-                await self._wait_for_timer(timer, quiet_at)
-            else:
-                await self._wait_for_timer(timer, time.monotonic() + remaining)
-
-    def _make_silence_timer(self) -> None:
-        """Make the timer [`wait_for_silence`][aiortu.line.Link.wait_for_silence] ends on: once per
-        link, on first use."""
-        self._silence_timer_tried = True
-        timer = create_wake_timer(self._on_silence_timer)
-        if timer is not None:
-            self._silence_loop = anyio.lowlevel.current_token().native_token
-            self._silence_timer = timer
-
-    async def _wait_for_timer(self, timer: WakeTimer, when: float) -> None:
-        """Wait until `timer` goes off: at `when` (`time.monotonic()` seconds), or
-        earlier for another waiter's deadline, or when the link closes."""
-        loop = self._silence_loop
-        woken = loop.create_future()
-        timer.begin(loop, when)
-        self._silence_waiters.append(woken)
-        try:
-            await woken
-        finally:
-            self._silence_waiters.remove(woken)
-            timer.end()
-
-    def _on_silence_timer(self) -> None:
-        for woken in self._silence_waiters:
-            if not woken.done():
-                woken.set_result(None)
-
-    def _close_silence_timer(self) -> None:
-        timer = self._silence_timer
-        self._silence_timer = None
-        self._silence_timer_tried = True  # a closing link makes no new one
-        if timer is not None:
-            timer.close()
-            # Whoever waits on it finishes the wait on the event loop's timers.
-            self._on_silence_timer()
+        await self._silence.wait(self._activity, self.clock, silence)
