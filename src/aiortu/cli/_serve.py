@@ -27,7 +27,7 @@ from aiortu.cli._arguments import (
     resolve_line_settings,
     seconds_or_zero,
 )
-from aiortu.cli._messages import config_problem, line_failure, port_failure
+from aiortu.cli._messages import port_failure
 from aiortu.core.bus_decoder import describe_frame
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
@@ -113,8 +113,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
     except ConfigError as error:
-        problem = config_problem(error.problem)
-        print(f"aiortu serve: error: {error.source}: {error.key}: {problem}", file=sys.stderr)
+        print(f"aiortu serve: error: {error}", file=sys.stderr)
         return 2
     resolve_line_settings(args)
     return anyio.run(_serve, args, config.units)
@@ -189,8 +188,8 @@ async def _serve_until_stopped(args: argparse.Namespace, units: Mapping[int, Mem
             continue
         opened = True
         if not args.reconnect:
-            raise CommandFailed(line_failure(error))
-        _say(f"{line_failure(error)}; reopening {args.port}")
+            raise CommandFailed(str(error))
+        _say(f"{error}; reopening {args.port}")
         backoff.reset()
         await backoff.wait()
 

@@ -87,7 +87,7 @@ async def open_stream(
             "port",
             port_or_url,
             "a serial device path or rtu+tcp://host:port",
-            "a master cannot open Modbus TCP (tcp://) yet, only aiortu.serve listens on it; "
+            "a master cannot open Modbus TCP (tcp://) yet, only a slave listens on it; "
             "for RTU framing over TCP write rtu+tcp://",
         )
     allowed = _TCP_OPTIONS if isinstance(address, TcpAddress) else _SERIAL_OPTIONS
