@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import re
 from collections.abc import AsyncIterator
 from typing import Any
@@ -82,3 +83,23 @@ def test_a_json_sample_gives_the_error_as_the_library_words_it() -> None:
         "value": None,
         "error": "the line failed: the port closed",
     }
+
+
+def test_the_librarys_warnings_show_as_one_line_each_while_serving(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from aiortu.cli._messages import library_warnings_on_stderr
+
+    log = logging.getLogger("aiortu.slave")
+    with library_warnings_on_stderr("serve"):
+        log.info("not shown")
+        log.warning("RTU over TCP: %d lines connected, the most allowed", 8)
+        try:
+            raise OSError("the peer reset the connection")
+        except OSError:
+            log.exception("RTU over TCP: a line failed; it is closed")
+    log.warning("after the command: not shown")
+    assert capsys.readouterr().err == (
+        "aiortu serve: RTU over TCP: 8 lines connected, the most allowed\n"
+        "aiortu serve: RTU over TCP: a line failed; it is closed (the peer reset the connection)\n"
+    )

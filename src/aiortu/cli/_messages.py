@@ -7,10 +7,15 @@ which flags to use. It never parses the library's text.
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import sys
+from collections.abc import Iterator
+
 from aiortu.cli._arguments import PTY_LINE, is_pty
 from aiortu.errors import InvalidValue, PortError, UnsupportedSettings
 
-__all__ = ("invalid_value", "port_failure")
+__all__ = ("invalid_value", "library_warnings_on_stderr", "port_failure")
 
 _OPTIONS = {
     "address": "--address",
@@ -54,3 +59,33 @@ def port_failure(error: PortError) -> str:
     if isinstance(error, UnsupportedSettings) and is_pty(error.port):
         message += f"; a pseudo-terminal keeps no parity: use {PTY_LINE}, or leave both out"
     return message
+
+
+class _OneLine(logging.Formatter):
+    """A record as one line of the command's: `aiortu serve: MESSAGE (ERROR)`, no traceback."""
+
+    def __init__(self, command: str) -> None:
+        super().__init__()
+        self.command = command
+
+    def format(self, record: logging.LogRecord) -> str:
+        message = record.getMessage()
+        error = record.exc_info[1] if record.exc_info else None
+        if error is not None and str(error):
+            message = f"{message} ({error})"
+        return f"aiortu {self.command}: {message}"
+
+
+@contextlib.contextmanager
+def library_warnings_on_stderr(command: str) -> Iterator[None]:
+    """Show the library's warnings and errors on stderr while a long-running command runs,
+    one line each (the library itself logs to nobody until told)."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(_OneLine(command))
+    logger = logging.getLogger("aiortu")
+    logger.addHandler(handler)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)

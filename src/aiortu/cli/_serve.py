@@ -27,7 +27,7 @@ from aiortu.cli._arguments import (
     resolve_line_settings,
     seconds_or_zero,
 )
-from aiortu.cli._messages import port_failure
+from aiortu.cli._messages import library_warnings_on_stderr, port_failure
 from aiortu.core.bus_decoder import describe_frame
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"aiortu serve: error: {error}", file=sys.stderr)
         return 2
     resolve_line_settings(args)
-    return anyio.run(_serve, args, config.units)
+    with library_warnings_on_stderr("serve"):
+        return anyio.run(_serve, args, config.units)
 
 
 class Tracer:
