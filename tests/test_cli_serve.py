@@ -15,7 +15,15 @@ from aiortu.cli import _serve, build_parser
 from aiortu.cli._poll import _format_value, _json_sample
 from aiortu.core.frame import encode_frame
 from aiortu.core.poll_plan import Point
-from aiortu.errors import ConnectionLost, ExceptionResponse
+from aiortu.errors import (
+    ConnectionLost,
+    CRCError,
+    ExceptionResponse,
+    FrameError,
+    ResponseTimeout,
+    UnitOffline,
+    UnitSkipped,
+)
 from aiortu.master._poller import Sample
 
 STAMP = r"\d\d:\d\d:\d\d\.\d{3}"
@@ -71,6 +79,27 @@ def test_a_point_refused_by_the_device_shows_the_exception_code() -> None:
     point = Point.of("a", 1, "40001")
     refused = Sample(point, None, 0.0, 0, ExceptionResponse(2, 3, 1))
     assert _format_value(refused) == "-- exception 02 (illegal data address)"
+
+
+@pytest.mark.parametrize(
+    ("error", "shown"),
+    [
+        (ResponseTimeout("no reply from unit 1"), "-- no reply"),
+        (UnitSkipped(1, 4.2), "-- skipped, unit offline"),
+        (UnitOffline(1, 3), "-- unit offline"),
+        (CRCError(0x1234, 0x4321), "-- bad CRC"),
+        (FrameError("the reply is not one to this request"), "-- bad reply"),
+        (ConnectionLost("the line failed: the port is gone"), "-- line lost"),
+        (
+            ExceptionResponse(0x0B, 3, 1),
+            "-- exception 0B (gateway target device failed to respond)",
+        ),
+        (ExceptionResponse(0x42, 3, 1), "-- exception 42"),
+    ],
+)
+def test_a_point_without_a_value_says_why_in_words(error: Exception, shown: str) -> None:
+    sample = Sample(Point.of("a", 1, "40001"), None, 0.0, 0, error)
+    assert _format_value(sample) == shown
 
 
 def test_a_json_sample_gives_the_error_as_the_library_words_it() -> None:
