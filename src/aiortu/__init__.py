@@ -9,7 +9,6 @@ See the README and `docs/` for the guides; the names they use are re-exported he
 from __future__ import annotations
 
 import importlib
-import logging
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -100,10 +99,6 @@ _LAZY: dict[str, str] = {
 }
 """Where each public name lives: imported on first use, so that `import aiortu` (and
 the `aiortu` command's `--help`) does not pay for the whole package."""
-
-# Until the application configures logging, the library's records go nowhere: without a
-# handler of our own, logging's last resort would print each warning on stderr.
-logging.getLogger("aiortu").addHandler(logging.NullHandler())
 
 __version__ = "0.1.0"
 

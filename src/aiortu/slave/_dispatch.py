@@ -12,11 +12,11 @@ both dispatchers; they differ only in how requests arrive and replies leave.
 from __future__ import annotations
 
 import inspect
-import logging
 import math
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+from aiortu._log import get_logger
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode
 from aiortu.core.data_model import AsyncDataStore, DataStore, Table
 from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_request
@@ -34,7 +34,7 @@ from aiortu.slave._routes import RangeHandler, RoutedStore
 
 __all__ = ("RESTART_COMMUNICATIONS", "AfterHook", "BeforeHook", "Dispatcher")
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 BeforeHook = Callable[[Any, RequestContext], Answer]
 """Called before the handler with (request, context): `None` goes on to the handler, a

@@ -43,7 +43,6 @@ and detached.
 
 from __future__ import annotations
 
-import logging
 from collections import deque
 from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import asynccontextmanager
@@ -53,6 +52,7 @@ from typing import Any, Self
 import anyio
 import anyio.abc
 
+from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.data_model import AsyncDataStore, DataStore, Table
 from aiortu.core.frame import encode_frame
@@ -89,7 +89,7 @@ __all__ = (
     "serve",
 )
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 TraceCallback = Callable[[str, bytes], object]
 """Sees the line: `("received", frame)` for every frame whose CRC checks (for any
