@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import anyio
 
 import aiortu
-from aiortu.slave._store import MemoryStore, Table
+from aiortu.slave import MemoryStore, Table
 from aiortu.testing import virtual_pair
 
 

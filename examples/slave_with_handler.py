@@ -8,8 +8,7 @@ from __future__ import annotations
 import anyio
 
 import aiortu
-from aiortu.slave._routes import RangeAccess
-from aiortu.slave._store import Change, MemoryStore, Table
+from aiortu.slave import Change, MemoryStore, RangeAccess, Table
 from aiortu.testing import virtual_pair
 
 

@@ -175,14 +175,14 @@ def test_poll_shows_an_offline_unit(silent_port: str) -> None:
                     "--interval", "0.05", "--timeout", "0.1", *LINE)  # fmt: skip
     assert result.returncode == 0, result.stderr
     blocks = [block.splitlines() for block in result.stdout.strip("\n").split("\n\n")]
-    assert blocks[0][2] == "40001               5  -- ResponseTimeout"
+    assert blocks[0][2] == "40001               5  -- no reply"
     # Suspect after one failed read, and still read; offline after three in a row (the
     # master's offline_after), then skipped until a probe is due.
     assert blocks[0][3] == "unit 5: suspect, 1 failure in a row"
-    assert blocks[1][2] == "40001               5  -- ResponseTimeout"
+    assert blocks[1][2] == "40001               5  -- no reply"
     assert blocks[1][3] == "unit 5: suspect, 2 failures in a row"
     assert blocks[2][3].startswith("unit 5: OFFLINE, 3 failures in a row, next probe in ")
-    assert blocks[3][2] == "40001               5  -- UnitSkipped"
+    assert blocks[3][2] == "40001               5  -- skipped, unit offline"
 
 
 @pytest.fixture(scope="module")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import re
 from collections.abc import AsyncIterator
 from typing import Any
@@ -14,7 +15,15 @@ from aiortu.cli import _serve, build_parser
 from aiortu.cli._poll import _format_value, _json_sample
 from aiortu.core.frame import encode_frame
 from aiortu.core.poll_plan import Point
-from aiortu.errors import ConnectionLost, ExceptionResponse
+from aiortu.errors import (
+    ConnectionLost,
+    CRCError,
+    ExceptionResponse,
+    FrameError,
+    ResponseTimeout,
+    UnitOffline,
+    UnitSkipped,
+)
 from aiortu.master._poller import Sample
 
 STAMP = r"\d\d:\d\d:\d\d\.\d{3}"
@@ -45,7 +54,7 @@ async def test_serve_passes_its_timing_to_the_slave(
     seen: dict[str, Any] = {}
 
     class Stopped:
-        connection_error = ConnectionLost("the line failed: EndOfStream()")
+        connection_error = ConnectionLost("the line failed: the port closed")
 
         async def wait_stopped(self) -> None:
             pass
@@ -63,18 +72,39 @@ async def test_serve_passes_its_timing_to_the_slave(
     error = await _serve._serve_once(args, {}, None)
     assert seen["timing"] == timing
     assert (seen["parity"], seen["stopbits"]) == ("E", 1)
-    assert _serve.line_failure(error) == "the line failed: the port closed"
+    assert error is Stopped.connection_error
 
 
 def test_a_point_refused_by_the_device_shows_the_exception_code() -> None:
     point = Point.of("a", 1, "40001")
     refused = Sample(point, None, 0.0, 0, ExceptionResponse(2, 3, 1))
-    assert _format_value(refused) == "-- ExceptionResponse 02"
+    assert _format_value(refused) == "-- exception 02 (illegal data address)"
 
 
-def test_a_json_sample_names_a_lost_line_in_words() -> None:
+@pytest.mark.parametrize(
+    ("error", "shown"),
+    [
+        (ResponseTimeout("no reply from unit 1"), "-- no reply"),
+        (UnitSkipped(1, 4.2), "-- skipped, unit offline"),
+        (UnitOffline(1, 3), "-- unit offline"),
+        (CRCError(0x1234, 0x4321), "-- bad CRC"),
+        (FrameError("the reply is not one to this request"), "-- bad reply"),
+        (ConnectionLost("the line failed: the port is gone"), "-- line lost"),
+        (
+            ExceptionResponse(0x0B, 3, 1),
+            "-- exception 0B (gateway target device failed to respond)",
+        ),
+        (ExceptionResponse(0x42, 3, 1), "-- exception 42"),
+    ],
+)
+def test_a_point_without_a_value_says_why_in_words(error: Exception, shown: str) -> None:
+    sample = Sample(Point.of("a", 1, "40001"), None, 0.0, 0, error)
+    assert _format_value(sample) == shown
+
+
+def test_a_json_sample_gives_the_error_as_the_library_words_it() -> None:
     point = Point.of("a", 1, "40001")
-    lost = Sample(point, None, 0.0, 4, ConnectionLost("the line failed: EndOfStream()"))
+    lost = Sample(point, None, 0.0, 4, ConnectionLost("the line failed: the port closed"))
     assert json.loads(_json_sample(lost)) == {
         "cycle": 5,
         "name": "a",
@@ -82,3 +112,23 @@ def test_a_json_sample_names_a_lost_line_in_words() -> None:
         "value": None,
         "error": "the line failed: the port closed",
     }
+
+
+def test_the_librarys_warnings_show_as_one_line_each_while_serving(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from aiortu.cli._messages import library_warnings_on_stderr
+
+    log = logging.getLogger("aiortu.slave")
+    with library_warnings_on_stderr("serve"):
+        log.info("not shown")
+        log.warning("RTU over TCP: %d lines connected, the most allowed", 8)
+        try:
+            raise OSError("the peer reset the connection")
+        except OSError:
+            log.exception("RTU over TCP: a line failed; it is closed")
+    log.warning("after the command: not shown")
+    assert capsys.readouterr().err == (
+        "aiortu serve: RTU over TCP: 8 lines connected, the most allowed\n"
+        "aiortu serve: RTU over TCP: a line failed; it is closed (the peer reset the connection)\n"
+    )

@@ -45,7 +45,7 @@ def names_in(page: Path) -> set[str]:
 def _is_forwarding(origin: str | None) -> bool:
     """Whether a module's file is a deprecated module that forwards to a new home."""
     source = Path(origin or "").read_text(encoding="utf-8")
-    return "from aiortu._moved import forward" in source
+    return "from aiortu._moved import " in source
 
 
 def why_not_public(dotted: str) -> str | None:

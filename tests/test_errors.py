@@ -97,3 +97,10 @@ def test_a_value_error_may_carry_its_own_sentence() -> None:
     error = InvalidValue("coils", 3, "blocks", message="coils: the block at 3..4 overlaps")
     assert str(error) == "coils: the block at 3..4 overlaps"
     assert (error.field, error.value, error.allowed) == ("coils", 3, "blocks")
+
+
+def test_a_value_errors_detail_is_kept_apart_from_its_sentence() -> None:
+    error = InvalidValue("unit", 0, range(1, 248), "0 is the broadcast address")
+    assert error.detail == "0 is the broadcast address"
+    assert str(error).endswith(": 0 is the broadcast address")
+    assert InvalidValue("unit", 0, range(1, 248)).detail == ""

@@ -29,7 +29,7 @@ def _forwards(name: str) -> bool:
     spec = importlib.util.find_spec(name)
     assert spec is not None
     assert spec.origin is not None
-    return "from aiortu._moved import forward" in Path(spec.origin).read_text(encoding="utf-8")
+    return "from aiortu._moved import " in Path(spec.origin).read_text(encoding="utf-8")
 
 
 DEPRECATED_MODULES = sorted(name for name in ALL_MODULES if _forwards(name))

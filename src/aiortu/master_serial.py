@@ -1,5 +1,10 @@
-"""Deprecated: moved to [`aiortu.master`][aiortu.master]. Importing this module warns once."""
+"""Deprecated: internal now; its methods are on [`aiortu.master.Master`][aiortu.master.Master].
+Importing this module warns once."""
 
-from aiortu._moved import forward
+from aiortu._moved import forward_internal
 
-__getattr__ = forward(__name__, "aiortu.master._serial_line", "aiortu.master")
+__getattr__ = forward_internal(
+    __name__,
+    "aiortu.master._serial_line",
+    "its methods are on aiortu.master.Master and aiortu.master.UnitHandle",
+)

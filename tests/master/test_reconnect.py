@@ -4,6 +4,7 @@ adapter unplugged) and comes back under the same name (a symlink we re-point).""
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 from pathlib import Path
 
@@ -117,7 +118,10 @@ async def test_requests_fail_while_the_port_is_gone_then_recover(tmp_path: Path)
         tasks.cancel_scope.cancel()
 
 
-async def test_fail_fast_while_reconnecting(tmp_path: Path) -> None:
+async def test_fail_fast_while_reconnecting(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, logger="aiortu")
     async with anyio.create_task_group() as tasks:
         device = Device(tmp_path / "ttyRTU", tasks)
         await device.plug()
@@ -134,6 +138,14 @@ async def test_fail_fast_while_reconnecting(tmp_path: Path) -> None:
             assert len(await master.read_coils(1, 0, 3)) == 3
             await device.unplug()
         tasks.cancel_scope.cancel()
+    # A warning each time the port went (the last unplug may come too late to be seen),
+    # worded once: why it failed, then what happens.
+    reopening = [r.getMessage() for r in caplog.records if "reopening" in r.getMessage()]
+    assert 1 <= len(reopening) <= 2, reopening
+    for message in reopening:
+        assert message.startswith("the line failed: ")
+        assert message.endswith("; reopening it")
+        assert message.count("the line failed") == 1
 
 
 async def test_without_reconnect_the_master_stays_failed(tmp_path: Path) -> None:

@@ -43,7 +43,7 @@ async def test_a_handler_returning_a_number_gets_04_logged_once(
         assert await master.request(OTHER_UNIT, "03 00 00 00 01") == "03 02 00 2A"
         assert await master.request(UNIT, "03 00 6B 00 01") == "03 02 AE 41"
     assert slave.counters.bus_exception_error_count == 2
-    messages = _logged(caplog, "returned a int")
+    messages = _logged(caplog, "returned 12345 (an int), not a response")
     assert len(messages) == 1, messages
     assert "function 0x41" in messages[0]
     assert "exception 04" in messages[0]
@@ -68,7 +68,7 @@ async def test_a_before_hook_returning_7_gets_04_until_removed(
         assert await master.request(OTHER_UNIT, "06 00 00 00 05") == "86 04"
         remove()
         assert await master.request(OTHER_UNIT, "03 00 00 00 01") == "03 02 00 2A"
-    assert len(_logged(caplog, "returned a int")) == 1
+    assert len(_logged(caplog, "returned 7 (an int), not a response")) == 1
 
 
 async def test_an_after_hook_and_an_async_handler_are_checked_too(

@@ -12,6 +12,8 @@ import stat
 __all__ = (
     "PTY_LINE",
     "add_line_settings",
+    "add_no_reconnect",
+    "add_timing",
     "address",
     "is_pty",
     "parity",
@@ -127,6 +129,30 @@ def add_line_settings(group: argparse._ArgumentGroup) -> None:
         choices=(1, 2),
         default=None,
         help="stop bits (2 with parity N, else 1, as the spec says)",
+    )
+
+
+def add_timing(group: argparse._ActionsContainer) -> None:
+    """Add `--timing strict|tolerant`, the receiver's t1.5 mode (`args.timing`)."""
+    group.add_argument(
+        "--timing",
+        choices=("strict", "tolerant"),  # TimingMode's values; the core is not imported yet
+        default="tolerant",
+        help=(
+            "strict: a gap over t1.5 inside a frame breaks it and t3.5 ends it, as the spec "
+            "says; tolerant: only a silence of t3.5 or 20 ms, whichever is longer, ends a "
+            "frame, for USB adapters and virtual lines (tolerant)"
+        ),
+    )
+
+
+def add_no_reconnect(parser: argparse.ArgumentParser) -> None:
+    """Add `--no-reconnect`: `args.reconnect` is True unless it is given."""
+    parser.add_argument(
+        "--no-reconnect",
+        dest="reconnect",
+        action="store_false",
+        help="exit 1 when the port is lost, instead of reopening it",
     )
 
 

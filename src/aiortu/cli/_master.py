@@ -29,7 +29,7 @@ from aiortu.cli._arguments import (
     seconds,
     unit,
 )
-from aiortu.cli._messages import invalid_value, line_failure, no_reply, port_failure
+from aiortu.cli._messages import invalid_value, port_failure
 from aiortu.core.addressing import Reference, Table, parse_reference
 from aiortu.errors import (
     ConnectionLost,
@@ -156,9 +156,9 @@ def _describe(error: BaseException) -> tuple[int, str]:
     if isinstance(error, PortError):
         return 1, port_failure(error)
     if isinstance(error, ConnectionLost):
-        return 1, line_failure(error)
+        return 1, str(error)
     if isinstance(error, ResponseTimeout):
-        return 3, no_reply(error)
+        return 3, str(error)
     if isinstance(error, ExceptionResponse):
         return 4, str(error)
     if isinstance(error, FrameError):

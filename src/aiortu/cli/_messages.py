@@ -1,24 +1,21 @@
 """Failures as the `aiortu` command shows them: one sentence each, for people.
 
-The library's errors name Python arguments (`count`) and carry exception reprs from the
-layers below (`EndOfStream()`); the command shows the option a user typed (`--count`)
-and what happened to the port, without doubling a prefix the message already has.
+The library words its errors for people; the command only names an argument as the user
+typed it (`--count`, not `count`) and, on a pseudo-terminal that refuses a parity, says
+which flags to use. It never parses the library's text.
 """
 
 from __future__ import annotations
 
-import re
+import contextlib
+import logging
+import sys
+from collections.abc import Iterator
 
 from aiortu.cli._arguments import PTY_LINE, is_pty
-from aiortu.errors import (
-    ConnectionLost,
-    InvalidValue,
-    PortError,
-    ResponseTimeout,
-    UnsupportedSettings,
-)
+from aiortu.errors import InvalidValue, PortError, UnsupportedSettings
 
-__all__ = ("config_problem", "invalid_value", "line_failure", "no_reply", "port_failure")
+__all__ = ("invalid_value", "library_warnings_on_stderr", "port_failure")
 
 _OPTIONS = {
     "address": "--address",
@@ -35,15 +32,6 @@ _OPTIONS = {
 }
 """The command's name for an argument the library names."""
 
-_CAUSES = {
-    "EndOfStream": "the port closed",
-    "BrokenResourceError": "the port is gone",
-    "ClosedResourceError": "the port was closed",
-}
-
-_REPR = re.compile(r"\b([A-Z]\w*)\((.*)\)")
-_FAILED = "the line failed: "
-
 
 def invalid_value(error: InvalidValue) -> str:
     """`error` as one sentence: what was given, what is allowed, under the option's name."""
@@ -51,20 +39,9 @@ def invalid_value(error: InvalidValue) -> str:
     allowed = error.allowed
     if isinstance(allowed, range):
         allowed = f"{allowed.start}..{allowed.stop - 1}"
-    detail = _detail(error)
     given = _plain(error.value)
     sentence = f"{field} must be {allowed}" + (f", not {given}" if given is not None else "")
-    return f"{sentence} ({detail})" if detail else sentence
-
-
-def _detail(error: InvalidValue) -> str:
-    """The detail after the library's own wording, if its message has one."""
-    text = str(error)
-    _, colon, rest = text.partition(" is outside the allowed range ")
-    if not colon:
-        return ""
-    _, separator, detail = rest.partition(": ")
-    return detail if separator else ""
+    return f"{sentence} ({error.detail})" if error.detail else sentence
 
 
 def _plain(value: object) -> str | None:
@@ -76,22 +53,6 @@ def _plain(value: object) -> str | None:
     return None
 
 
-_TEMPLATE = re.compile(
-    r"(?P<field>[\w.\[\] +]+) = (?P<value>.+?) is outside the allowed range (?P<allowed>.+?)"
-    r"(?:: (?P<detail>.*))?"
-)
-
-
-def config_problem(problem: str) -> str:
-    """The problem a device description has, without the library's range template."""
-    found = _TEMPLATE.fullmatch(problem)
-    if found is None:
-        return problem
-    field, value, allowed = found["field"], found["value"].strip("'\""), found["allowed"]
-    sentence = f"{field} must be {allowed}, not {value}"
-    return f"{sentence} ({found['detail']})" if found["detail"] else sentence
-
-
 def port_failure(error: PortError) -> str:
     """A port that could not be opened; on a pty refusing a parity, which flags to use."""
     message = str(error)
@@ -100,23 +61,31 @@ def port_failure(error: PortError) -> str:
     return message
 
 
-def line_failure(error: ConnectionLost) -> str:
-    """A line that failed under a command: `the line failed: WHY`, once."""
-    text = str(error)
-    while text.startswith(_FAILED):
-        text = text[len(_FAILED) :]
-    text = _REPR.sub(_cause, text)
-    return f"{_FAILED}{text}"
+class _OneLine(logging.Formatter):
+    """A record as one line of the command's: `aiortu serve: MESSAGE (ERROR)`, no traceback."""
+
+    def __init__(self, command: str) -> None:
+        super().__init__()
+        self.command = command
+
+    def format(self, record: logging.LogRecord) -> str:
+        message = record.getMessage()
+        error = record.exc_info[1] if record.exc_info else None
+        if error is not None and str(error):
+            message = f"{message} ({error})"
+        return f"aiortu {self.command}: {message}"
 
 
-def _cause(match: re.Match[str]) -> str:
-    name, inside = match.group(1), match.group(2).strip("'\"")
-    if name in _CAUSES:
-        return _CAUSES[name] + (f" ({inside})" if inside else "")
-    return inside or name
-
-
-def no_reply(error: ResponseTimeout) -> str:
-    """No reply in time: `no reply ...` once."""
-    text = str(error)
-    return text if text.startswith("no reply") else f"no reply: {text}"
+@contextlib.contextmanager
+def library_warnings_on_stderr(command: str) -> Iterator[None]:
+    """Show the library's warnings and errors on stderr while a long-running command runs,
+    one line each (the library itself logs to nobody until told)."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(_OneLine(command))
+    logger = logging.getLogger("aiortu")
+    logger.addHandler(handler)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)

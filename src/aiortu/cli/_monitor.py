@@ -23,10 +23,10 @@ from typing import TextIO
 import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
-from aiortu.cli._arguments import add_line_settings, resolve_line_settings
-from aiortu.cli._messages import line_failure, port_failure
+from aiortu.cli._arguments import add_line_settings, add_timing, resolve_line_settings
+from aiortu.cli._messages import port_failure
 from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
-from aiortu.core.receiver import Role, TimingMode
+from aiortu.core.receiver import Role
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue, PortError
 from aiortu.line._link import Link
@@ -80,15 +80,7 @@ def register(subparsers: Subparsers) -> None:
     parser.add_argument("port", metavar="PORT", help="a serial device path or rtu+tcp://host:port")
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
-    line.add_argument(
-        "--timing",
-        choices=[mode.value for mode in TimingMode],
-        default=TimingMode.TOLERANT.value,
-        help=(
-            "strict: a gap over t1.5 inside a frame breaks it, as the spec says; tolerant: "
-            "only a longer silence ends a frame, for USB adapters and virtual lines (tolerant)"
-        ),
-    )
+    add_timing(line)
     output = parser.add_argument_group("output")
     output.add_argument(
         "--json", action="store_true", help="one JSON object per line instead of text"
@@ -199,7 +191,7 @@ async def _monitor(args: argparse.Namespace) -> int:
                     try:
                         event = await link.receive()
                     except ConnectionLost as exc:
-                        failure = line_failure(exc)
+                        failure = str(exc)
                         group.cancel_scope.cancel()
                         break
                     try:

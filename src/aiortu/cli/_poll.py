@@ -17,12 +17,13 @@ import argparse
 import json
 import signal
 import sys
+from enum import Enum
 from typing import TextIO
 
 import anyio
 
 from aiortu.cli import SUMMARIES, Subparsers
-from aiortu.cli._arguments import plural
+from aiortu.cli._arguments import add_no_reconnect, add_timing, plural
 from aiortu.cli._arguments import unit as unit_address
 from aiortu.cli._master import (
     EXIT_CODES_HELP,
@@ -35,11 +36,19 @@ from aiortu.cli._master import (
     run_master,
     seconds,
 )
-from aiortu.cli._messages import line_failure
 from aiortu.core.addressing import Reference, format_reference
 from aiortu.core.poll_plan import Point
 from aiortu.core.values import Layout, ValueType
-from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue
+from aiortu.errors import (
+    ConnectionLost,
+    CRCError,
+    ExceptionResponse,
+    FrameError,
+    InvalidValue,
+    ResponseTimeout,
+    UnitOffline,
+    UnitSkipped,
+)
 from aiortu.master._poller import CycleReport, Poller, Sample, UnitHealth
 from aiortu.master._stats import UnitState
 
@@ -83,6 +92,7 @@ def register(subparsers: Subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_line_options(parser)
+    add_timing(parser)
     what = parser.add_argument_group("what to poll")
     what.add_argument(
         "--unit", help="unit address(es) for --ref: 1..247, comma-separated for several"
@@ -120,12 +130,7 @@ def register(subparsers: Subparsers) -> None:
         help="seconds between probes of an offline unit (5.0)",
     )
     parser.add_argument("--json", action="store_true", help="one JSON object per sample")
-    parser.add_argument(
-        "--no-reconnect",
-        dest="reconnect",
-        action="store_false",
-        help="exit 1 when the port is lost, instead of reopening it",
-    )
+    add_no_reconnect(parser)
     parser.set_defaults(run=run)
 
 
@@ -188,12 +193,33 @@ def _reference_name(reference: Reference) -> str:
     return format_reference(reference, 5 if reference.number <= 9999 else 6)
 
 
-def _format_value(sample: Sample) -> str:
-    error = sample.error
+_FAILURES: tuple[tuple[type[Exception], str], ...] = (
+    (UnitSkipped, "skipped, unit offline"),
+    (UnitOffline, "unit offline"),
+    (ResponseTimeout, "no reply"),
+    (CRCError, "bad CRC"),
+    (FrameError, "bad reply"),
+    (ConnectionLost, "line lost"),
+)
+"""What the table shows for a point that could not be read, by error (first match)."""
+
+
+def _failure(error: Exception) -> str:
+    """Why a point has no value, in a few words: `no reply`, `exception 02 (illegal data
+    address)`, `line lost`."""
     if isinstance(error, ExceptionResponse):
-        return f"-- ExceptionResponse {int(error.code):02X}"
-    if error is not None:
-        return f"-- {type(error).__name__}"
+        code = error.code
+        meaning = f" ({code.name.lower().replace('_', ' ')})" if isinstance(code, Enum) else ""
+        return f"exception {int(code):02X}{meaning}"
+    for kind, words in _FAILURES:
+        if isinstance(error, kind):
+            return words
+    return "failed"
+
+
+def _format_value(sample: Sample) -> str:
+    if sample.error is not None:
+        return f"-- {_failure(sample.error)}"
     value = sample.value
     if isinstance(value, bool):
         return "1" if value else "0"
@@ -268,11 +294,6 @@ def _fail_on_lost_line(report: CycleReport) -> None:
             raise sample.error
 
 
-def _error_text(error: Exception) -> str:
-    """What kept a point unread, in words (a lost line without the stream's repr)."""
-    return line_failure(error) if isinstance(error, ConnectionLost) else str(error)
-
-
 def _json_sample(sample: Sample) -> str:
     # Cycles are numbered from 1, as in the table.
     document = {
@@ -280,7 +301,7 @@ def _json_sample(sample: Sample) -> str:
         "name": sample.name,
         "unit": sample.unit,
         "value": sample.value,
-        "error": None if sample.error is None else _error_text(sample.error),
+        "error": None if sample.error is None else str(sample.error),
     }
     return json.dumps(document)
 
@@ -290,7 +311,7 @@ def run(args: argparse.Namespace) -> int:
 
     async def body() -> int:
         points = points_from_args(args)
-        async with open_from_args(args, reconnect=args.reconnect) as master:
+        async with open_from_args(args, reconnect=args.reconnect, timing=args.timing) as master:
             poller = Poller(
                 master,
                 points,

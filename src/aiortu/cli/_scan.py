@@ -33,7 +33,7 @@ import anyio.abc
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import is_pty, plural
-from aiortu.cli._messages import line_failure, port_failure
+from aiortu.cli._messages import port_failure
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import ExceptionPDU, decode_response
@@ -520,7 +520,7 @@ async def _scan(args: argparse.Namespace) -> int:
             except PortError as error:
                 failure = f"cannot open the port: {port_failure(error)}"
             except ConnectionLost as error:
-                failure = line_failure(error)
+                failure = str(error)
             group.cancel_scope.cancel()
     # Raised out here, not wrapped in the task group's ExceptionGroup.
     if failure is not None:

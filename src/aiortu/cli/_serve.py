@@ -20,12 +20,17 @@ from collections.abc import Mapping
 import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
-from aiortu.cli._arguments import add_line_settings, resolve_line_settings, seconds_or_zero
-from aiortu.cli._messages import config_problem, line_failure, port_failure
+from aiortu.cli._arguments import (
+    add_line_settings,
+    add_no_reconnect,
+    add_timing,
+    resolve_line_settings,
+    seconds_or_zero,
+)
+from aiortu.cli._messages import library_warnings_on_stderr, port_failure
 from aiortu.core.bus_decoder import describe_frame
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
-from aiortu.core.receiver import TimingMode
 from aiortu.errors import ConnectionLost, ModbusError, PortError
 from aiortu.slave._config import ConfigError, load_config
 from aiortu.slave._server import serve
@@ -92,26 +97,11 @@ def register(subparsers: Subparsers) -> None:
         metavar="SECONDS",
         help="silence kept before each reply (t3.5 of the line settings)",
     )
-    line.add_argument(
-        "--timing",
-        choices=[mode.value for mode in TimingMode],
-        default=TimingMode.TOLERANT.value,
-        help=(
-            "strict: a gap over t1.5 inside a frame breaks it, and a request whose length "
-            "the function code does not tell ends after t3.5; tolerant: only a silence of "
-            "t3.5 or 20 ms, whichever is longer, ends a frame, for USB adapters and virtual "
-            "lines (tolerant)"
-        ),
-    )
+    add_timing(line)
     parser.add_argument(
         "--trace", action="store_true", help="log every frame on stderr, in hex, with its meaning"
     )
-    parser.add_argument(
-        "--no-reconnect",
-        dest="reconnect",
-        action="store_false",
-        help="exit 1 when the port is lost, instead of reopening it",
-    )
+    add_no_reconnect(parser)
     parser.set_defaults(run=run)
 
 
@@ -123,11 +113,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
     except ConfigError as error:
-        problem = config_problem(error.problem)
-        print(f"aiortu serve: error: {error.source}: {error.key}: {problem}", file=sys.stderr)
+        print(f"aiortu serve: error: {error}", file=sys.stderr)
         return 2
     resolve_line_settings(args)
-    return anyio.run(_serve, args, config.units)
+    with library_warnings_on_stderr("serve"):
+        return anyio.run(_serve, args, config.units)
 
 
 class Tracer:
@@ -199,8 +189,8 @@ async def _serve_until_stopped(args: argparse.Namespace, units: Mapping[int, Mem
             continue
         opened = True
         if not args.reconnect:
-            raise CommandFailed(line_failure(error))
-        _say(f"{line_failure(error)}; reopening {args.port}")
+            raise CommandFailed(str(error))
+        _say(f"{error}; reopening {args.port}")
         backoff.reset()
         await backoff.wait()
 

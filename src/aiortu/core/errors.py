@@ -76,7 +76,7 @@ class InvalidValue(ModbusError, ValueError):
     Raised while building a request, a response or line settings, before any byte exists.
     [`field`][aiortu.errors.InvalidValue] names the field, [`value`][aiortu.errors.InvalidValue] is
     what was given and [`allowed`][aiortu.errors.InvalidValue] describes what the spec permits (a
-    `range` or a short text).
+    `range` or a short text); [`detail`][aiortu.errors.InvalidValue] says more, or is empty.
     """
 
     def __init__(
@@ -91,6 +91,7 @@ class InvalidValue(ModbusError, ValueError):
         self.field = field
         self.value = value
         self.allowed = allowed
+        self.detail = detail
         if message is None:
             message = _sentence(field, _show(value), allowed)
         if detail:

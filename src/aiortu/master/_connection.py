@@ -17,20 +17,20 @@ the link fails, the request in flight and those queued fail with
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 
 import anyio
 import anyio.abc
 
+from aiortu._log import get_logger
 from aiortu.errors import ConnectionLost, InvalidValue, ModbusError
 from aiortu.line._link import Link
 from aiortu.master._engine import LineEngine
 
 __all__ = ("LineConnection", "ReconnectPolicy", "StreamOpener")
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 StreamOpener = Callable[[], Awaitable[anyio.abc.ByteStream]]
 """An async function that opens the line's byte stream again (the same port and settings)."""
@@ -115,7 +115,7 @@ class LineConnection:
                 if not self.can_reconnect:
                     self.engine.close(error)
                     return
-                _log.warning("the line failed (%s); reopening it", error)
+                _log.warning("%s; reopening it", error)  # says "the line failed: why"
                 link = self.link = self._make_link(await self._reopen())
                 self.reconnects += 1
                 _log.info("the line is back after %d failed attempts", self.failed_attempts)

@@ -10,7 +10,14 @@ a port or a URL first, or listens on a `tcp://` (Modbus TCP,
 from __future__ import annotations
 
 from aiortu.slave._config import ConfigError, DeviceConfig, load_config, parse_config
-from aiortu.slave._handlers import Handler, HandlerResult, Reply, RequestContext
+from aiortu.slave._handlers import (
+    BUILTIN_HANDLERS,
+    Answer,
+    Handler,
+    HandlerResult,
+    Reply,
+    RequestContext,
+)
 from aiortu.slave._routes import RangeAccess, RangeHandler, RoutedStore
 from aiortu.slave._server import (
     AfterHook,
@@ -39,7 +46,9 @@ from aiortu.slave._store import (
 from aiortu.slave._tcp_server import ModbusTcpServer, TcpServerCounters
 
 __all__ = (
+    "BUILTIN_HANDLERS",
     "AfterHook",
+    "Answer",
     "AsyncDataStore",
     "BeforeHook",
     "Block",

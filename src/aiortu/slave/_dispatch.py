@@ -12,11 +12,11 @@ both dispatchers; they differ only in how requests arrive and replies leave.
 from __future__ import annotations
 
 import inspect
-import logging
 import math
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+from aiortu._log import get_logger
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode
 from aiortu.core.data_model import AsyncDataStore, DataStore, Table
 from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_request
@@ -34,7 +34,7 @@ from aiortu.slave._routes import RangeHandler, RoutedStore
 
 __all__ = ("RESTART_COMMUNICATIONS", "AfterHook", "BeforeHook", "Dispatcher")
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 BeforeHook = Callable[[Any, RequestContext], Answer]
 """Called before the handler with (request, context): `None` goes on to the handler, a
@@ -283,7 +283,16 @@ def _checked(value: object, source: object) -> HandlerResult:
         if _valid_reply(value):
             return value
         return _fail(source, "a Reply with a bad response, delay or unit")
-    return _fail(source, f"a {type(value).__name__}")
+    return _fail(source, _described(value))
+
+
+def _described(value: object) -> str:
+    """`value` as a log names it: `12345 (an int)` for a number, else its type (`a str`)."""
+    name = type(value).__name__
+    kind = f"{'an' if name[0] in 'aeiouAEIOU' else 'a'} {name}"
+    if isinstance(value, int | float):
+        return f"{value} ({kind})"
+    return kind
 
 
 def _encoded(result: HandlerResult) -> bytes | Reply | None:

@@ -43,7 +43,6 @@ and detached.
 
 from __future__ import annotations
 
-import logging
 from collections import deque
 from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import asynccontextmanager
@@ -54,6 +53,7 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
+from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.data_model import AsyncDataStore, DataStore, Table
 from aiortu.core.frame import encode_frame
@@ -90,7 +90,7 @@ __all__ = (
     "serve",
 )
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 TraceCallback = Callable[[str, bytes], object]
 """Sees the line: `("received", frame)` for every frame whose CRC checks (for any

@@ -41,7 +41,6 @@ makes, so an application can react to it. Reading registers is one list slice.
 from __future__ import annotations
 
 import itertools
-import logging
 from bisect import bisect_right
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -51,6 +50,7 @@ from typing import Final, Self
 
 import anyio
 
+from aiortu._log import get_logger
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.data_model import (
     AsyncDataStore,
@@ -81,7 +81,7 @@ __all__ = (
     "Table",
 )
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 _ADDRESS_SPACE: Final = 0x10000
 _EXCEPTION_CODES: Final = tuple(sorted(int(code) for code in ExceptionCode))

@@ -39,7 +39,6 @@ to us, and what this server does:
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Final
@@ -47,6 +46,7 @@ from typing import Final
 import anyio
 import anyio.abc
 
+from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
 from aiortu.core.data_model import AsyncDataStore, DataStore
 from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
@@ -66,7 +66,7 @@ __all__ = (
     "listening_address",
 )
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 DEFAULT_MAX_CONNECTIONS: Final = 32
 """Connections served at once unless told otherwise."""

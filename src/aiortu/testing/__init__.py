@@ -16,7 +16,7 @@ See `docs/testing.md`.
 from __future__ import annotations
 
 from aiortu.testing._faults import FaultedChunk, FaultInjector, FaultPlan, FaultStats
-from aiortu.testing._pty_bus import PtyBus
+from aiortu.testing._pty_bus import PtyBus, make_raw
 from aiortu.testing._virtual_bus import TraceEntry, VirtualBus, VirtualEndpoint, virtual_pair
 
 __all__ = (
@@ -28,5 +28,6 @@ __all__ = (
     "TraceEntry",
     "VirtualBus",
     "VirtualEndpoint",
+    "make_raw",
     "virtual_pair",
 )
