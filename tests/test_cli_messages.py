@@ -53,7 +53,6 @@ BAD_INPUT = [
     ["read", PORT, "--unit", "1", "--ref", "40001", "--timeout", "soon"],
     ["read", PORT, "--unit", "1", "--ref", "40001", "--baudrate", "0"],
     ["read", PORT, "--unit", "1", "--ref", "40001", "--retries", "-1"],
-    ["read", "tcp://localhost:502", "--unit", "1", "--ref", "40001"],
     # write
     ["write", PORT, "--unit", "1", "--ref", "40001", "--values", "1,,2"],
     ["write", PORT, "--unit", "1", "--ref", "40001", "--values", "70000"],

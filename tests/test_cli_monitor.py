@@ -191,7 +191,8 @@ def test_modbus_tcp_is_refused_as_nothing_to_monitor():
     assert (result.returncode, result.stdout) == (2, "")
     assert result.stderr == (
         "aiortu monitor: error: PORT must be a serial device path or rtu+tcp://host:port, "
-        "not tcp://127.0.0.1:1\n"
+        "not tcp://127.0.0.1:1 (a Modbus TCP connection carries only its own requests and "
+        "replies)\n"
     )
 
 

@@ -26,7 +26,6 @@ where the next ADU starts: the stream closes and `receive()` raises
 
 from __future__ import annotations
 
-import logging
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
@@ -35,6 +34,7 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
+from aiortu._log import get_logger
 from aiortu.core.crc import crc16
 from aiortu.core.mbap import AduDecoder, MalformedHeader, encode_adu
 from aiortu.errors import InvalidValue
@@ -42,7 +42,7 @@ from aiortu.transport._tcp import open_tcp_connection
 
 __all__ = ("FramedStream", "ModbusTcpCounters", "ModbusTcpStream", "open_modbus_tcp")
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 _NONE_OUTSTANDING = -1
 
