@@ -208,7 +208,9 @@ class Link:
             self.backend_clock = True
         else:
             self.backend_clock = self.clock == backend.current_time
-        self.receiver.reset(self.clock())
+        if not getattr(self.stream, "starts_between_frames", False):
+            # A wire may be mid-frame when the port opens: wait for silence first (INIT).
+            self.receiver.reset(self.clock())
         self._task_group = anyio.create_task_group()
         await self._task_group.__aenter__()
         set_receiver = self._set_receiver
