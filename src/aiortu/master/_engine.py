@@ -14,7 +14,11 @@ which wakes the waiting transaction directly.
 
 A register read on an idle serial line may skip the machine while its reply comes as
 usual: that fast path lives in [`aiortu.master`][aiortu.master], behind one
-predicate; `LineEngine.submit_request` calls into it.
+predicate; `LineEngine.submit_request` calls into it. So does the hand-over: the line
+handed to a queued register read runs its usual exchange at once, from the callback
+that ended the transaction before it (`LineEngine._grant_next`), so a queue of reads
+costs what one caller costs. A queued caller waits on a future of the event loop where
+the link has one (the usual exchange completes it), else on an anyio event (trio).
 
 Cancellation never leaves the line half way through an exchange. A caller cancelled
 while queued is dropped; one cancelled before its request began to go out gives the line
@@ -65,7 +69,7 @@ from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.core.receiver import FrameReceived
 from aiortu.errors import ConnectionLost, ResponseTimeout, UnitOffline
 from aiortu.line._link import Link, LinkEvent
-from aiortu.master._job import TURN, Job, JobQueue, JobResult, Turn, Waiter
+from aiortu.master._job import TURN, Job, JobQueue, JobResult, Waiter
 from aiortu.master._stats import HealthPolicy, UnitStats
 from aiortu.master._usual_exchange import (
     UsualExchange,
@@ -213,9 +217,20 @@ class LineEngine:
         jobs = self._jobs
         job = jobs.new_job(transaction, priority)
         if jobs.busy or not self._open:
-            result = await self._wait_turn(job)
-            if result is not TURN:
-                return result  # its usual exchange ran when it was handed the line
+            # Wait for the turn here, not in a coroutine of its own: one frame less
+            # for each of many waiting callers.
+            waiter = self._queue(job)
+            try:
+                if waiter is not None:
+                    result = await waiter
+                    if result is not TURN:
+                        return result  # its usual exchange ran when it was handed the line
+                else:
+                    assert job.turn is not None
+                    await job.turn.wait()
+            except BaseException:
+                self._left_queue(job)
+                raise
         else:
             jobs.busy = True  # an idle line: the transaction runs at once, here
         return await self._run(job)
@@ -318,40 +333,36 @@ class LineEngine:
         self.link.forget_expected()
         self._leave_to_line_task(take_over(exchange, self.machine, self._jobs))
 
-    async def _wait_turn(self, job: Job) -> JobResult | Turn:
-        """Queue `job` and wait until it is handed the line (or failed): `TURN`, or
-        the result of the usual exchange the engine ran for it then (see `_grant_next`).
+    def _queue(self, job: Job) -> Waiter | None:
+        """Queue `job`; return the future its caller awaits (`TURN`, or the result of
+        the usual exchange run for it when it is handed the line: see `_grant_next`).
 
         On an event loop the caller waits on a future of the loop (smaller than an
-        anyio event, and what a usual exchange completes); elsewhere on an anyio event.
+        anyio event, and what a usual exchange completes); elsewhere (None) on the
+        job's anyio event, set when it is handed the line or failed.
         """
         link = self.link
         loop = link.loop
         waiter: Waiter | None = None
-        turn = None
         if loop is not None:
             waiter = job.waiter = loop.create_future()
         else:
             backend = link.backend
-            turn = job.turn = anyio.Event() if backend is None else backend.create_event()
+            job.turn = anyio.Event() if backend is None else backend.create_event()
         jobs = self._jobs
         jobs.push(job)
         if not jobs.busy and self._open:
             self._grant_next()
-        try:
-            if waiter is not None:
-                return await waiter
-            assert turn is not None
-            await turn.wait()
-            return TURN
-        except BaseException:
-            if job.usual:
-                pass  # its usual exchange holds the line, and sees the future cancelled
-            elif job.granted and not job.done:
-                self._release()  # handed the line, yet gone: hand it on
-            else:
-                job.transaction.abandoned = True  # still queued: the queue skips it
-            raise
+        return waiter
+
+    def _left_queue(self, job: Job) -> None:
+        """The caller of queued `job` is gone (cancelled, or failed) while it waited."""
+        if job.usual:
+            pass  # its usual exchange holds the line, and sees the future cancelled
+        elif job.granted and not job.done:
+            self._release()  # handed the line, yet gone: hand it on
+        else:
+            job.transaction.abandoned = True  # still queued: the queue skips it
 
     def _grant_next(self) -> None:
         """Hand the line to the first queued job: run its usual exchange at once where
