@@ -295,6 +295,16 @@ def section_callers(args: argparse.Namespace) -> list[str]:
             runs[callers].append(anyio.run(callers_run, in_memory(), callers, each))
             bare[callers].append(anyio.run(bare_callers_run, callers, each))
     memory = {callers: memory_per_waiting_caller(callers) for callers in CALLERS}
+    return callers_report(rounds, runs, bare, memory)
+
+
+def callers_report(
+    rounds: int,
+    runs: dict[int, list[Run]],
+    bare: dict[int, list[Run]],
+    memory: dict[int, tuple[float, float]],
+) -> list[str]:
+    """Section (b)'s table and verdicts."""
     # Each caller after the first: the line's fixed cost (its first request) left out.
     first = memory[1][0]
     extra = {n: (n * memory[n][0] - first) / (n - 1) for n in CALLERS if n > 1}
