@@ -16,6 +16,8 @@ Sections (each a function ``section_*``; ``--section`` picks some):
 (b) callers: 1, 10, 100, 1000 and 10,000 callers on one master, in memory as in (a);
     each caller waits until all have started, then reads a share of the reads (at least
     3 each): CPU per read and reads/s over all of them (the callers' wake-ups included).
+    Beside it, the same callers as bare tasks without a master (each read a loop future
+    completed by a callback in turn): what waking that many tasks costs, and the rest.
     The sizes take turns round by round. Every run checks that every read was right,
     that the slave got one message per request and that nothing timed out or was retried.
     Then the memory per waiting caller: callers started against a slave that does not
@@ -31,6 +33,8 @@ Sections (each a function ``section_*``; ``--section`` picks some):
 from __future__ import annotations
 
 import argparse
+import asyncio
+import collections
 import gc
 import sys
 import time
@@ -131,6 +135,49 @@ async def callers_run(
                 f"{callers} callers: wrong, requests, timeouts, retries, served = {outcome}"
             )
     return Run(reads, wall, cpu)
+
+
+async def bare_callers_run(callers: int, each: int) -> Run:
+    """*callers* bare tasks in the pattern of :func:`callers_run`, without a master: each
+    "read" awaits a future of the loop that a loop callback completes, one at a time,
+    handing on to the next queued future. What waking that many tasks in turn costs."""
+    loop = asyncio.get_running_loop()
+    queue: collections.deque[asyncio.Future[None]] = collections.deque()
+    busy = False
+
+    def finish(future: asyncio.Future[None]) -> None:
+        nonlocal busy
+        if queue:
+            loop.call_soon(finish, queue.popleft())
+        else:
+            busy = False
+        future.set_result(None)
+
+    def read() -> asyncio.Future[None]:
+        nonlocal busy
+        future = loop.create_future()
+        if busy:
+            queue.append(future)
+        else:
+            busy = True
+            loop.call_soon(finish, future)
+        return future
+
+    go = anyio.Event()
+
+    async def caller() -> None:
+        await go.wait()
+        for _ in range(each):
+            await read()
+
+    async with anyio.create_task_group() as group:
+        for _ in range(callers):
+            group.start_soon(caller)
+        await anyio.sleep(0.05 + callers * 20e-6)
+        wall, cpu = time.perf_counter(), time.process_time()
+        go.set()
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    return Run(callers * each, wall, cpu)
 
 
 async def sequential_in_memory(reads: int) -> Run:
@@ -241,15 +288,30 @@ def section_callers(args: argparse.Namespace) -> list[str]:
     rounds = 1 if args.quick else 3
     total = 5000 if args.quick else 20_000
     runs: dict[int, list[Run]] = {callers: [] for callers in CALLERS}
+    bare: dict[int, list[Run]] = {callers: [] for callers in CALLERS}
     for _ in range(rounds):
         for callers in CALLERS:
             each = max(3, total // callers)
             runs[callers].append(anyio.run(callers_run, in_memory(), callers, each))
+            bare[callers].append(anyio.run(bare_callers_run, callers, each))
     memory = {callers: memory_per_waiting_caller(callers) for callers in CALLERS}
+    return callers_report(rounds, runs, bare, memory)
+
+
+def callers_report(
+    rounds: int,
+    runs: dict[int, list[Run]],
+    bare: dict[int, list[Run]],
+    memory: dict[int, tuple[float, float]],
+) -> list[str]:
+    """Section (b)'s table and verdicts."""
     # Each caller after the first: the line's fixed cost (its first request) left out.
     first = memory[1][0]
     extra = {n: (n * memory[n][0] - first) / (n - 1) for n in CALLERS if n > 1}
     cpus = {n: benchlib.median([run.cpu_per_read for run in rs]) * 1e6 for n, rs in runs.items()}
+    bares = {n: benchlib.median([run.cpu_per_read for run in rs]) * 1e6 for n, rs in bare.items()}
+    # The master's and the line's share: the tasks' own wake-ups taken out.
+    beyond = {n: cpus[n] - bares[n] for n in CALLERS}
     rows = [
         [
             f"{callers:,}",
@@ -257,6 +319,8 @@ def section_callers(args: argparse.Namespace) -> list[str]:
             f"{benchlib.median([run.rate for run in runs[callers]]):,.0f}",
             f"{cpus[callers]:.1f}",
             spread_of([run.cpu_per_read * 1e6 for run in runs[callers]]),
+            f"{bares[callers]:.1f}",
+            f"{beyond[callers]:.1f}",
             f"{memory[callers][0] / 1024:.2f}",
             f"{extra[callers] / 1024:.2f}" if callers > 1 else "-",
             f"{memory[callers][1] / 1024:.2f}",
@@ -267,6 +331,7 @@ def section_callers(args: argparse.Namespace) -> list[str]:
     worst = max(extra.values()) / 1024
     many = [n for n in CALLERS if n > 1]
     spread_many = max(cpus[n] for n in many) / min(cpus[n] for n in many) - 1
+    spread_beyond = max(beyond.values()) / min(beyond.values()) - 1
     return [
         f"(b) callers: in memory (unpaced VirtualBus), 10 holding registers; {rounds} "
         "interleaved rounds; every read checked, no timeout, no retry, one slave message "
@@ -279,6 +344,8 @@ def section_callers(args: argparse.Namespace) -> list[str]:
                 "reads/s (median)",
                 "CPU us/read (median)",
                 "min..max",
+                "bare tasks: CPU us/read",
+                "the rest: CPU us/read",
                 "KiB per waiting caller",
                 "KiB per caller after the first",
                 "KiB per bare waiting task",
@@ -291,7 +358,10 @@ def section_callers(args: argparse.Namespace) -> list[str]:
         f"memory per waiting caller under 5 KiB: {verdict(worst < 5)} (at most {worst:.2f} KiB "
         "per caller after the first; the first carries the line's fixed cost of its first "
         "request). A bare waiting task is what the caller's own task costs without the "
-        "master.",
+        "master. Bare tasks: the same callers without a master, each read a future "
+        "completed by a loop callback in turn (waking that many tasks one after the "
+        "other); the rest is the master's, the slave's and the line's CPU per read, "
+        f"within {spread_beyond:.0%} from 1 to 10,000 callers.",
     ]
 
 

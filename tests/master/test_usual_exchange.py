@@ -360,3 +360,67 @@ def test_each_condition_of_the_usual_exchange_alone_keeps_it_off(
     change: dict[str, object],
 ) -> None:
     assert _predicate_case(**change) is None
+
+
+def test_the_line_handed_to_a_queued_caller_lets_the_usual_exchange_run() -> None:
+    # The line is not free (others wait for it), but the queue has just handed it to
+    # this caller: the same shortcut as on a free line.
+    assert _predicate_case(line_free=False, handed_line=True) is not None
+    assert _predicate_case(line_free=False, handed_line=True, guard_pending=True) is None
+
+
+async def test_queued_register_reads_run_their_usual_exchanges_without_the_machine(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Callers that queue on a pushing VirtualBus: each is handed the line and its read
+    # goes out from the hand-over, so the machine begins no transaction at all.
+    bus = aiortu.testing.VirtualBus(2)
+    store = aiortu.MemoryStore(holding_registers={0: [100, 101]})
+    slave = aiortu.Slave(bus.endpoints[1], {1: store}, frame_gap=0)
+    master = Master(bus.endpoints[0], frame_gap=0, timeout=5)
+    begun: list[Transaction] = []
+    begin = MasterMachine.begin
+
+    def counted(machine: MasterMachine, transaction: Transaction) -> None:
+        begun.append(transaction)
+        begin(machine, transaction)
+
+    monkeypatch.setattr(MasterMachine, "begin", counted)
+    results: list[object] = []
+
+    async def read() -> None:
+        results.append(await master.read_holding_registers(1, 0, 2))
+
+    async with slave, master, anyio.create_task_group() as group:
+        for _ in range(20):
+            group.start_soon(read)
+    assert results == [[100, 101]] * 20
+    assert master.unit_stats(1).requests == 20
+    assert begun == []
+
+
+async def test_a_queued_caller_cancelled_after_the_hand_over_leaves_its_reply_counted() -> None:
+    # B queues behind A; A's reply hands the line to B, whose request goes out from the
+    # read callback. B is cancelled while it is on the wire: its reply is counted and
+    # never reaches C, which gets its own data.
+    second = _with_crc(bytes.fromhex("010304000a000b"))
+    async with _master_on_a_pty(response_timeout=1.0) as (master, pty):
+        first = await _read_on_the_wire(master, pty)
+        queued = asyncio.create_task(master.read_holding_registers(1, 0, 2))
+        await _in_the_same_pass(lambda: master.engine.queued == 1)
+        pty.write(REPLY)
+        assert await read_master(pty, len(REQUEST)) == REQUEST  # B's, from the hand-over
+        assert await first == [7, 8]
+        assert master.engine._usual is not None  # B's usual exchange waits
+        queued.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await queued
+        third = asyncio.create_task(master.read_holding_registers(1, 0, 2))
+        await _in_the_same_pass(lambda: master.engine.queued == 1)  # B still holds the line
+        pty.write(REPLY)  # B's reply, after B is gone
+        assert await read_master(pty, len(REQUEST)) == REQUEST  # C's, from the hand-over
+        pty.write(second)
+        with anyio.fail_after(2):
+            assert await third == [10, 11]
+        stats = master.unit_stats(1)
+        assert (stats.requests, stats.successes, stats.failures) == (3, 3, 0)

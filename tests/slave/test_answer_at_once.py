@@ -311,3 +311,20 @@ async def test_a_request_arriving_while_a_handler_awaits_is_answered_after_it() 
                     replies += os.read(master_fd, 64)
         assert replies == _answer("41 01") + _answer("03 02 AE 41")
         assert slave.connection_error is None
+
+
+async def test_a_request_behind_a_queued_one_is_answered_after_it() -> None:
+    # One chunk, two requests: 05 (no fast path) goes to the serve loop's queue, and the
+    # read behind it waits its turn although the machine is still IDLE (the predicate's
+    # order condition, the only place it lives).
+    write_coil = encode_frame(UNIT, bytes.fromhex("05 00 13 FF 00"))
+    async with _slave_on_pty(example_store()) as (master_fd, slave):
+        os.write(master_fd, write_coil + READ)
+        replies = b""
+        with anyio.fail_after(5):
+            while len(replies) < len(write_coil) + 7:
+                await anyio.wait_readable(master_fd)
+                with contextlib.suppress(BlockingIOError):
+                    replies += os.read(master_fd, 64)
+        assert replies == write_coil + _answer("03 02 AE 41")
+        assert slave.connection_error is None

@@ -252,7 +252,9 @@ class Link:
         else:
             self.backend_clock = self.clock == backend.current_time
         now = self.clock()
-        self.receiver.reset(now)
+        if not getattr(self.stream, "starts_between_frames", False):
+            # A wire may be mid-frame when the port opens: wait for silence first (INIT).
+            self.receiver.reset(now)
         # A port just opened has heard nothing: someone may be mid-frame (a master whose
         # port came back after an unplug), so the first frame waits frame_gap too.
         activity = self._activity

@@ -14,7 +14,11 @@ which wakes the waiting transaction directly.
 
 A register read on an idle serial line may skip the machine while its reply comes as
 usual: that fast path lives in [`aiortu.master`][aiortu.master], behind one
-predicate; `LineEngine.submit_request` calls into it.
+predicate; `LineEngine.submit_request` calls into it. So does the hand-over: the line
+handed to a queued register read runs its usual exchange at once, from the callback
+that ended the transaction before it (`LineEngine._grant_next`), so a queue of reads
+costs what one caller costs. A queued caller waits on a future of the event loop where
+the link has one (the usual exchange completes it), else on an anyio event (trio).
 
 Cancellation never leaves the line half way through an exchange. A caller cancelled
 while queued is dropped; one cancelled before its request began to go out gives the line
@@ -43,10 +47,11 @@ request's timeout or fails at once (see `LineEngine.wait_for_reconnect`).
 
 from __future__ import annotations
 
+import asyncio
 import math
 from collections import deque
 from collections.abc import Awaitable
-from typing import Any
+from typing import Any, cast
 
 import anyio
 
@@ -64,7 +69,7 @@ from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.core.receiver import FrameReceived
 from aiortu.errors import ConnectionLost, ResponseTimeout, UnitOffline
 from aiortu.line._link import Link, LinkEvent
-from aiortu.master._job import Job, JobQueue
+from aiortu.master._job import TURN, Job, JobQueue, JobResult, Waiter
 from aiortu.master._stats import HealthPolicy, UnitStats
 from aiortu.master._usual_exchange import (
     UsualExchange,
@@ -212,7 +217,20 @@ class LineEngine:
         jobs = self._jobs
         job = jobs.new_job(transaction, priority)
         if jobs.busy or not self._open:
-            await self._wait_turn(job)
+            # Wait for the turn here, not in a coroutine of its own: one frame less
+            # for each of many waiting callers.
+            waiter = self._queue(job)
+            try:
+                if waiter is not None:
+                    result = await waiter
+                    if result is not TURN:
+                        return result  # its usual exchange ran when it was handed the line
+                else:
+                    assert job.turn is not None
+                    await job.turn.wait()
+            except BaseException:
+                self._left_queue(job)
+                raise
         else:
             jobs.busy = True  # an idle line: the transaction runs at once, here
         return await self._run(job)
@@ -242,6 +260,29 @@ class LineEngine:
         [`aiortu.master`][aiortu.master]), the request goes out now and the return is
         the future its reply completes; else the coroutine of `submit`.
         """
+        exchange = self._start_usual(unit, request, response_timeout, policy, priority=priority)
+        if exchange is not None:
+            # Completed with a result only: nobody hands this future a turn.
+            return cast("asyncio.Future[JobResult]", exchange.caller)
+        return self.submit(Transaction(unit, request, response_timeout, policy), priority)
+
+    def _start_usual(
+        self,
+        unit: int,
+        request: Request,
+        response_timeout: float,
+        policy: RetryPolicy,
+        *,
+        priority: int,
+        waiter: Waiter | None = None,
+    ) -> UsualExchange | None:
+        """Send `request`'s usual exchange now where the predicate lets it run, and
+        return it; else None, nothing sent.
+
+        `waiter` is the future of a queued caller the line is being handed to (the
+        exchange completes it); without one, the line must be free and the exchange
+        makes its own future.
+        """
         link = self.link
         jobs = self._jobs
         known = usual_exchange_for(
@@ -249,36 +290,39 @@ class LineEngine:
             request,
             enabled=self.usual_exchanges,
             line_free=self._open and not jobs.busy,
+            handed_line=waiter is not None,
             guard_pending=self._guard.until != _NO_GUARD,
             fail_fast_offline=self.health.fail_fast_offline,
             link=link,
             machine=self.machine,
         )
-        if known is not None:
-            inbox = self._inbox
-            inbox.events.clear()  # nothing that came before can answer it
-            stats = self.stats.get(unit) or self.unit_stats(unit)
-            exchange = send_usual_exchange(
-                link,
-                known,
-                stats,
-                timeout=response_timeout,
-                policy=policy,
-                priority=priority,
-                done=self._release,
-            )
-            if exchange is not None:
-                jobs.busy = True
-                stats.requests += 1
-                self._usual = exchange
-                deadline = inbox.deadline = exchange.end + response_timeout
-                if deadline < inbox.timer_at:
-                    self._arm_timer(deadline)
-                shape = known.reply_shape
-                assert shape is not None
-                link.expect(shape[0], shape[1], exchange.on_reply, known.last_reply)
-                return exchange.caller
-        return self.submit(Transaction(unit, request, response_timeout, policy), priority)
+        if known is None:
+            return None
+        inbox = self._inbox
+        inbox.events.clear()  # nothing that came before can answer it
+        stats = self.stats.get(unit) or self.unit_stats(unit)
+        exchange = send_usual_exchange(
+            link,
+            known,
+            stats,
+            timeout=response_timeout,
+            policy=policy,
+            priority=priority,
+            done=self._release,
+            caller=waiter,
+        )
+        if exchange is None:
+            return None
+        jobs.busy = True
+        stats.requests += 1
+        self._usual = exchange
+        deadline = inbox.deadline = exchange.end + response_timeout
+        if deadline < inbox.timer_at:
+            self._arm_timer(deadline)
+        shape = known.reply_shape
+        assert shape is not None
+        link.expect(shape[0], shape[1], exchange.on_reply, known.last_reply)
+        return exchange
 
     def _take_over(self) -> None:
         """Something other than the usual reply came during the usual exchange, or its
@@ -289,22 +333,59 @@ class LineEngine:
         self.link.forget_expected()
         self._leave_to_line_task(take_over(exchange, self.machine, self._jobs))
 
-    async def _wait_turn(self, job: Job) -> None:
-        """Queue `job` and wait until it is handed the line (or failed)."""
-        backend = self.link.backend
-        turn = job.turn = anyio.Event() if backend is None else backend.create_event()
+    def _queue(self, job: Job) -> Waiter | None:
+        """Queue `job`; return the future its caller awaits (`TURN`, or the result of
+        the usual exchange run for it when it is handed the line: see `_grant_next`).
+
+        On an event loop the caller waits on a future of the loop (smaller than an
+        anyio event, and what a usual exchange completes); elsewhere (None) on the
+        job's anyio event, set when it is handed the line or failed.
+        """
+        link = self.link
+        loop = link.loop
+        waiter: Waiter | None = None
+        if loop is not None:
+            waiter = job.waiter = loop.create_future()
+        else:
+            backend = link.backend
+            job.turn = anyio.Event() if backend is None else backend.create_event()
         jobs = self._jobs
         jobs.push(job)
         if not jobs.busy and self._open:
-            jobs.grant_next()
-        try:
-            await turn.wait()
-        except BaseException:
-            if job.granted and not job.done:
-                self._release()  # handed the line, yet gone: hand it on
-            else:
-                job.transaction.abandoned = True  # still queued: the queue skips it
-            raise
+            self._grant_next()
+        return waiter
+
+    def _left_queue(self, job: Job) -> None:
+        """The caller of queued `job` is gone (cancelled, or failed) while it waited."""
+        if job.usual:
+            pass  # its usual exchange holds the line, and sees the future cancelled
+        elif job.granted and not job.done:
+            self._release()  # handed the line, yet gone: hand it on
+        else:
+            job.transaction.abandoned = True  # still queued: the queue skips it
+
+    def _grant_next(self) -> None:
+        """Hand the line to the first queued job: run its usual exchange at once where
+        the predicate lets it (the line is handed to it, so a queue of register reads
+        costs what one caller costs), else wake its caller to run the transaction."""
+        job = self._jobs.next_job()
+        if job is None:
+            return
+        waiter = job.waiter
+        if waiter is not None:
+            transaction = job.transaction
+            exchange = self._start_usual(
+                transaction.unit,
+                transaction.request,
+                transaction.timeout,
+                transaction.policy,
+                priority=job.priority,
+                waiter=waiter,
+            )
+            if exchange is not None:
+                job.usual = True
+                return
+        job.wake()
 
     def _release(self) -> None:
         """The transaction that had the line is over: hand the line on."""
@@ -315,7 +396,7 @@ class LineEngine:
             jobs.busy = False
             self._wake.set()
         elif jobs.waiting:
-            jobs.grant_next()
+            self._grant_next()
         else:
             jobs.busy = False
 
@@ -386,7 +467,7 @@ class LineEngine:
         self._connected.set()
         try:
             if not self._jobs.busy:
-                self._jobs.grant_next()
+                self._grant_next()
             while not (link.closed and not self._jobs.busy):
                 await self._wake.wait()
                 self._wake = anyio.Event()

@@ -30,7 +30,6 @@ the wire.
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -38,7 +37,7 @@ from aiortu.core.master_machine import KnownRequest, MasterMachine
 from aiortu.core.master_transaction import RetryPolicy, Transaction
 from aiortu.core.pdu import Request
 from aiortu.line._link import Link
-from aiortu.master._job import Job, JobQueue, JobResult
+from aiortu.master._job import Job, JobQueue, Waiter
 from aiortu.master._stats import UnitStats
 
 __all__ = (
@@ -53,9 +52,10 @@ __all__ = (
 class UsualExchange:
     """A register read on the wire, run without the machine (see the module docstring)."""
 
-    caller: asyncio.Future[JobResult]
+    caller: Waiter
     """What the caller awaits: completed with the response, or by the line task after
-    `take_over`; cancelled if the caller is."""
+    `take_over`; cancelled if the caller is. A queued caller's own future where the
+    line was handed to it (never completed with `TURN` here)."""
     known: KnownRequest
     """What the machine remembers of the request: its frame, its reply's shape."""
     stats: UnitStats
@@ -90,6 +90,7 @@ def usual_exchange_for(
     *,
     enabled: bool,
     line_free: bool,
+    handed_line: bool = False,
     guard_pending: bool,
     fail_fast_offline: bool,
     link: Link,
@@ -108,8 +109,10 @@ def usual_exchange_for(
         # bytes (a serial port) has one, and an event loop for the caller's future.
         and link.loop is not None
         # Nobody holds the line or waits for it, and the line task serves it (it runs
-        # what the machine takes over).
-        and line_free
+        # what the machine takes over); or the queue has just handed the line to this
+        # request's caller, the first in it (the line task serves it then too), so a
+        # queue of register reads runs each as one caller's.
+        and (line_free or handed_line)
         # After a failed attempt the late-reply guard comes first: the machine's route
         # keeps it.
         and not guard_pending
@@ -132,15 +135,19 @@ def send_usual_exchange(
     policy: RetryPolicy,
     priority: int,
     done: Callable[[], None],
+    caller: Waiter | None = None,
 ) -> UsualExchange | None:
     """Send `known`'s request now and return the exchange on the wire, or None (nothing
-    sent) where the line asks for a wait (see [`send_now`][aiortu.line.Link.send_now])."""
+    sent) where the line asks for a wait (see [`send_now`][aiortu.line.Link.send_now]).
+
+    The exchange completes `caller` (a queued caller's future), or a new future."""
     frame = known.frame
     end = link.send_now(frame)
     if end is None:
         return None
     start = end - len(frame) * link.char_time
-    caller = link.loop.create_future()
+    if caller is None:
+        caller = link.loop.create_future()
     return UsualExchange(caller, known, stats, timeout, policy, priority, start, end, done)
 
 

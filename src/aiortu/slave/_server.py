@@ -308,31 +308,36 @@ class Slave(Dispatcher):
 
     def _on_link_event(self, event: LinkEvent | None) -> None:
         """The link's listener: count at once, answer at once, or queue for the serve loop."""
-        queue = self._queue
         if event is None:
             self._link_closed = True
-        elif not queue and self.machine.state is SlaveState.IDLE:
+            self._wake_serve_loop()
+        elif type(event) is FrameReceived and event.frame[0] in self._served:
+            # A request for us: answered at once where the shortcut's predicate allows it
+            # (`AnswerAtOnce.may_answer` holds every condition: the order of requests,
+            # the machine's state...), else left to the serve loop.
+            if not self._at_once.answer(event.frame):
+                self._queue_event(event)
+        elif not self._queue and self.machine.state is SlaveState.IDLE:
             # Nothing pending and no request under way: a discard, or a frame for another
-            # unit, only counts, and a request may be answered at once; only the rest
-            # wakes the serve loop.
-            if type(event) is not FrameReceived:
-                self._take_discard(event)
-                return
-            if event.frame[0] not in self._served:
+            # unit, only counts; it never wakes the serve loop.
+            if type(event) is FrameReceived:
                 self._take_frame(event)
-                return
-            if self._at_once.answer(event.frame):
-                return
-            queue.append(event)
+            else:
+                self._take_discard(event)
         else:
-            if len(queue) >= self.link.queue_size:
-                # A reader that falls behind never stalls the line; a request already
-                # answered (only ever first in the queue) is never dropped: it is counted.
-                drop = 1 if type(queue[0]) is Taken else 0
-                if drop < len(queue):
-                    del queue[drop]
-                    self.link.events_dropped += 1
-            queue.append(event)
+            self._queue_event(event)
+
+    def _queue_event(self, event: LinkEvent) -> None:
+        """Queue `event` for the serve loop, and wake it."""
+        queue = self._queue
+        if len(queue) >= self.link.queue_size:
+            # A reader that falls behind never stalls the line; a request already
+            # answered (only ever first in the queue) is never dropped: it is counted.
+            drop = 1 if type(queue[0]) is Taken else 0
+            if drop < len(queue):
+                del queue[drop]
+                self.link.events_dropped += 1
+        queue.append(event)
         self._wake_serve_loop()
 
     def _wake_serve_loop(self) -> None:

@@ -247,6 +247,11 @@ class _PushingEndpoint(VirtualEndpoint):
     extension of the serial port (`set_receiver`, `send_nowait`), so that a link reads and writes it
     without a task wake-up per frame."""
 
+    starts_between_frames = True
+    """No frame is ever under way when a link starts reading: transmissions arrive whole,
+    so its receiver need not wait for a first silence (INIT) and take the first request
+    for the tail of an earlier frame."""
+
     def __init__(self, bus: VirtualBus, index: int, buffer_size: int) -> None:
         super().__init__(bus, index, buffer_size)
         self._receiver: Callable[[bytes], None] | None = None
