@@ -73,7 +73,8 @@ async def test_ids_are_the_clients_own_and_pipelined_requests_all_answered() -> 
         replies = [await tcp.receive() for _ in ids]
         assert sorted(r.transaction_id for r in replies if r) == sorted(ids)
         for reply in replies:
-            assert reply is not None and reply.unit == UNIT
+            assert reply is not None
+            assert reply.unit == UNIT
             expected = [0x1234, 0xABCD, 7][reply.transaction_id % 3]
             assert reply.pdu == bytes.fromhex(f"03 02 {expected:04X}")
 
