@@ -24,6 +24,11 @@ EXPECTED = {
     "proxy_store.py": ["the far device now holds: [100, 200, 300, 401]"],
     "broadcast.py": ["unit 1: setpoint 215, registers 0..2 = [1, 2, 3]", "unit 3: setpoint 215"],
     "rtu_over_tcp.py": ["after the write: [1234]"],
+    "gateway_two_programs.py": [
+        "tool: setpoint written, reply 06 00 00 00 d7",
+        "logger: registers 0..2 = [215, 7, 8]",
+        "the device: setpoint 215",
+    ],
     "modbus_tcp_server.py": [
         "Modbus TCP transaction 2: reply 03 06 00 d7 00 07 00 08",
         "RTU over TCP: registers 0..2 = [215, 7, 8]",
