@@ -16,7 +16,7 @@ from __future__ import annotations
 import anyio
 
 import aiortu
-from aiortu.core.mbap import AduDecoder, encode_adu
+from aiortu.core.mbap import Adu, AduDecoder, encode_adu
 from aiortu.slave import Block, MemoryStore, Slave
 from aiortu.testing import VirtualBus
 
@@ -30,7 +30,7 @@ async def ask(port: int, requests: list[bytes]) -> list[bytes]:
     async with await anyio.connect_tcp("127.0.0.1", port) as connection:
         for transaction_id, pdu in enumerate(requests, start=1):
             await connection.send(encode_adu(transaction_id, UNIT, pdu))
-            adus = []
+            adus: list[Adu] = []
             while not adus:
                 adus = decoder.feed(await connection.receive())
             replies.append(adus[0].pdu)

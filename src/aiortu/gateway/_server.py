@@ -171,8 +171,11 @@ class Gateway:
         self.master = master
         """The master whose engine serves the line."""
         self.max_in_flight = max_in_flight
+        """Requests a connection may have waiting for their replies."""
         self.max_connections = max_connections
+        """Connections served at once; more are closed at once."""
         self.idle_timeout = float(idle_timeout)
+        """Seconds of silence, with no request waiting, after which a connection is closed."""
         self.default_unit = default_unit
         """The unit a request to unit id 255 goes to (None: exception 0B)."""
         self.coalesce = coalesce
