@@ -37,6 +37,7 @@ async def line(
     units: Mapping[int, MemoryStore] | None = None,
     *,
     master_options: Mapping[str, Any] | None = None,
+    listen: tuple[str, ...] = ("tcp://127.0.0.1:0",),
     **gateway_options: Any,
 ) -> AsyncIterator[Line]:
     """Unit 17 (`device()`) on a fast virtual line, and a gateway on 127.0.0.1, a free port."""
@@ -52,9 +53,7 @@ async def line(
         await stack.enter_async_context(slave)
         await stack.enter_async_context(master)
         await anyio.sleep(0.02)  # both receivers past their first silence
-        server = await stack.enter_async_context(
-            gateway(master, ["tcp://127.0.0.1:0"], **gateway_options)
-        )
+        server = await stack.enter_async_context(gateway(master, listen, **gateway_options))
         yield Line(bus, slave, master, server)
 
 

@@ -25,8 +25,10 @@ __all__ = ("Listen", "gateway")
 
 @dataclass(frozen=True, slots=True)
 class Listen:
-    """A listen URL (`tcp://host:port`, port 0 for a free one) and the priority of its
-    connections: lower values are served first."""
+    """A listen URL and the priority of its connections: lower values are served first.
+
+    `tcp://host:port` serves Modbus TCP, `rtu+tcp://host:port` RTU frames over TCP (as a
+    serial device server sends them); port 0 asks for a free port."""
 
     url: str
     priority: int = 0
@@ -36,11 +38,7 @@ def _listen(item: str | Listen) -> Listen:
     listen = item if isinstance(item, Listen) else Listen(item)
     if type(listen.priority) is not int:
         raise InvalidValue("priority", listen.priority, "an int (lower values go first)")
-    address = parse_listen_url(listen.url)
-    if address.scheme != MODBUS_TCP_SCHEME:
-        raise InvalidValue(
-            "listen", listen.url, "tcp://host:port", "the gateway serves Modbus TCP only so far"
-        )
+    parse_listen_url(listen.url)  # raises for a bad one, before anything is opened
     return listen
 
 
@@ -65,7 +63,8 @@ async def gateway(
     used as it is. The other arguments are [`Gateway`][aiortu.gateway.Gateway]'s.
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a listen URL that is not
-    `tcp://host:port`, and [`PortError`][aiortu.errors.PortError]s when a port cannot be opened.
+    `tcp://host:port` or `rtu+tcp://host:port`, and [`PortError`][aiortu.errors.PortError]s
+    when a port cannot be opened.
     """
     listens = [_listen(item) for item in listen]
     async with contextlib.AsyncExitStack() as stack:
@@ -97,5 +96,9 @@ async def gateway(
         stack.callback(tasks.cancel_scope.cancel)
         await tasks.start(server.run)
         for listener, item in listeners:
-            await tasks.start(functools.partial(server.serve, listener, priority=item.priority))
+            rtu_framing = parse_listen_url(item.url).scheme != MODBUS_TCP_SCHEME
+            serve = functools.partial(
+                server.serve, listener, priority=item.priority, rtu_framing=rtu_framing
+            )
+            await tasks.start(serve)
         yield server

@@ -37,10 +37,11 @@ import anyio
 import anyio.abc
 
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
-from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
+from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.errors import InvalidValue
 from aiortu.gateway._fair_queue import FairQueue, Lane
 from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
+from aiortu.gateway._framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
 from aiortu.master import Master
 
 __all__ = (
@@ -100,11 +101,15 @@ class GatewayCounters:
 class _Connection:
     """One client: its lane in the fair queue, its in-flight slots, its writer."""
 
-    def __init__(self, stream: anyio.abc.ByteStream, priority: int, max_in_flight: int) -> None:
+    def __init__(
+        self, stream: anyio.abc.ByteStream, priority: int, max_in_flight: int, framing: Framing
+    ) -> None:
         self.stream = stream
         self.priority = priority
+        self.framing = framing
         self.lane: Lane[_Job] = Lane(priority)
-        self.slots = anyio.Semaphore(max_in_flight)
+        # Without transaction ids, one request at a time keeps the replies in order.
+        self.slots = anyio.Semaphore(1 if framing.in_order else max_in_flight)
         self.in_flight = 0
         self.open = True
         self._send_lock = anyio.Lock()
@@ -114,7 +119,7 @@ class _Connection:
         try:
             if reply is not None and self.open:
                 async with self._send_lock:
-                    await self.stream.send(encode_adu(adu.transaction_id, adu.unit, reply))
+                    await self.stream.send(self.framing.encode(adu, reply))
         except _GONE:
             self.open = False
         finally:
@@ -275,23 +280,27 @@ class Gateway:
         listener: anyio.abc.Listener[anyio.abc.ByteStream],
         *,
         priority: int = 0,
+        rtu_framing: bool = False,
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
         """Accept connections from `listener` and serve each with `priority` (lower values go
-        first), until cancelled. Reports started once its address is in
-        [`local_addresses`][aiortu.gateway.Gateway.local_addresses]."""
+        first), until cancelled: Modbus TCP, or RTU frames with `rtu_framing` (see
+        [`serve_connection`][aiortu.gateway.Gateway.serve_connection]). Reports started once its
+        address is in [`local_addresses`][aiortu.gateway.Gateway.local_addresses]."""
         address = listener.extra(anyio.abc.SocketAttribute.local_address, None)
         if isinstance(address, tuple):
             self.local_addresses.append((str(address[0]), int(address[1])))
         task_status.started()
 
         async def accepted(stream: anyio.abc.ByteStream) -> None:
-            await self._accepted(stream, priority)
+            await self._accepted(stream, priority, rtu_framing)
 
         async with listener:
             await listener.serve(accepted)
 
-    async def _accepted(self, stream: anyio.abc.ByteStream, priority: int) -> None:
+    async def _accepted(
+        self, stream: anyio.abc.ByteStream, priority: int, rtu_framing: bool
+    ) -> None:
         if self._connections >= self.max_connections:
             self.counters.connections_refused += 1
             if not self._refusing:
@@ -307,7 +316,7 @@ class Gateway:
         self._connections += 1
         self.counters.connections_accepted += 1
         try:
-            await self.serve_connection(stream, priority)
+            await self.serve_connection(stream, priority, rtu_framing=rtu_framing)
         except Exception:
             # One connection's failure never ends the others, nor the gateway.
             _log.exception("gateway: serving %s failed; connection closed", _peer(stream))
@@ -315,28 +324,22 @@ class Gateway:
             self._connections -= 1
             self._refusing = False
 
-    async def serve_connection(self, stream: anyio.abc.ByteStream, priority: int = 0) -> None:
-        """Serve one Modbus TCP connection until the client closes it, it stays idle for
+    async def serve_connection(
+        self, stream: anyio.abc.ByteStream, priority: int = 0, *, rtu_framing: bool = False
+    ) -> None:
+        """Serve one connection until the client closes it, it stays idle for
         [`idle_timeout`][aiortu.gateway.Gateway.idle_timeout], or it sends a malformed header;
-        then close it. Needs [`run`][aiortu.gateway.Gateway.run] running."""
-        connection = _Connection(stream, priority, self.max_in_flight)
-        decoder = AduDecoder()
+        then close it. Needs [`run`][aiortu.gateway.Gateway.run] running.
+
+        The connection speaks Modbus TCP, or with `rtu_framing` RTU frames (unit, PDU, CRC) as
+        a serial device server does: a frame whose length its function code does not tell ends
+        after 20 ms of silence, a frame with a bad CRC is dropped, and as RTU frames carry no
+        transaction id the connection has one request on the line at a time.
+        """
+        framing: Framing = RtuFraming() if rtu_framing else MbapFraming()
+        connection = _Connection(stream, priority, self.max_in_flight, framing)
         try:
-            while True:
-                with anyio.move_on_after(self.idle_timeout) as idle:
-                    data = await stream.receive(_READ_SIZE)
-                if idle.cancelled_caught:
-                    if connection.in_flight:
-                        continue  # the client waits for the line, it is not idle
-                    self.counters.connections_idle += 1
-                    _log.info("gateway: %s idle for %g s, closed", _peer(stream), self.idle_timeout)
-                    return
-                try:
-                    adus = decoder.feed(data)
-                except MalformedHeader as error:
-                    self.counters.connections_malformed += 1
-                    _log.warning("gateway: %s sent %s; connection closed", _peer(stream), error)
-                    return
+            while (adus := await self._next_requests(connection)) is not None:
                 for adu in adus:
                     await connection.slots.acquire()
                     connection.in_flight += 1
@@ -347,6 +350,29 @@ class Gateway:
             connection.open = False
             self._queue.drop(connection.lane)
             await stream.aclose()
+
+    async def _next_requests(self, connection: _Connection) -> list[Adu] | None:
+        """The requests the connection's next bytes (or silence) complete; None to close it."""
+        stream, framing = connection.stream, connection.framing
+        while True:
+            silence = framing.waiting_for_silence()
+            with anyio.move_on_after(RTU_SILENCE if silence else self.idle_timeout) as timer:
+                data = await stream.receive(_READ_SIZE)
+            if not timer.cancelled_caught:
+                break
+            if silence:
+                return framing.silence()
+            if not connection.in_flight:
+                self.counters.connections_idle += 1
+                _log.info("gateway: %s idle for %g s, closed", _peer(stream), self.idle_timeout)
+                return None
+            # Not idle: the client waits for the line.
+        try:
+            return framing.feed(data)
+        except MalformedHeader as error:
+            self.counters.connections_malformed += 1
+            _log.warning("gateway: %s sent %s; connection closed", _peer(stream), error)
+            return None
 
     def _accept(self, connection: _Connection, adu: Adu) -> None:
         """Queue `adu` for the line, or answer it at once when its unit id names no unit."""
