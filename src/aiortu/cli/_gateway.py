@@ -34,6 +34,8 @@ _EXAMPLES = """\
 examples:
   aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:502
       Modbus TCP on port 502 of every interface, to the line at 19200 8E1
+  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:502 --listen rtu+tcp://0.0.0.0:5020
+      Modbus TCP clients, and RTU over TCP ones (serial device server drivers)
   aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:1502 --default-unit 1
       requests to unit id 255 go to unit 1 (otherwise they get exception 0B)
   aiortu gateway /dev/ttyUSB0 --listen tcp://127.0.0.1:1502,priority=-1 \\
@@ -74,7 +76,10 @@ def register(subparsers: Subparsers) -> None:
         action="append",
         required=True,
         metavar="URL[,priority=N]",
-        help="tcp://host:port to listen on (repeat for several); lower priorities go first (0)",
+        help=(
+            "tcp://host:port (Modbus TCP) or rtu+tcp://host:port (RTU frames) to listen on; "
+            "repeat for several; lower priorities go first (0)"
+        ),
     )
     line = parser.add_argument_group("line settings")
     add_line_settings(line)

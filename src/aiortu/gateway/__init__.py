@@ -1,7 +1,8 @@
-"""The line server: Modbus TCP clients share one serial line through its master's engine.
+"""The line server: network clients share one serial line through its master's engine.
 
 [`gateway`][aiortu.gateway.gateway] opens a line (or takes a running
-[`Master`][aiortu.master.Master]), listens on `tcp://` URLs and serves every client through
+[`Master`][aiortu.master.Master]), listens on `tcp://` (Modbus TCP) and `rtu+tcp://` (RTU frames
+over TCP) URLs and serves every client through
 the one engine of the line; [`Gateway`][aiortu.gateway.Gateway] is the server itself. Requests
 are forwarded at frame level: a function code aiortu knows is sent as its request class, so the
 engine checks the reply against the request; any other code (user-defined ones included) goes

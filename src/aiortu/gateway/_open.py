@@ -54,7 +54,7 @@ async def gateway(
     coalesce: bool = True,
     **master_options: Any,
 ) -> AsyncIterator[Gateway]:
-    """Share one serial line with Modbus TCP clients: yield a running
+    """Share one serial line with network clients: yield a running
     [`Gateway`][aiortu.gateway.Gateway] listening on every URL in `listen`.
 
     `serial_port_or_master` is a port name for [`open_master`][aiortu.master.open_master] (with

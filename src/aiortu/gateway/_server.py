@@ -1,4 +1,4 @@
-"""The line server: Modbus TCP clients share one serial line through its master's engine.
+"""The line server: network clients share one serial line through its master's engine.
 
 [`Gateway`][aiortu.gateway.Gateway] reads requests from any number of connections and hands
 them to the line one at a time, fairly. What it decides:
@@ -21,6 +21,8 @@ them to the line one at a time, fairly. What it decides:
   one transaction on the line; every client gets the reply with its own ids. A write, or any
   request that is not such a read, ends the sharing for its unit, so a read sent after a write
   never gets a reply read before it.
+- **Framing.** A connection speaks Modbus TCP, or RTU frames over TCP (see
+  [`serve_connection`][aiortu.gateway.Gateway.serve_connection]).
 - **Limits.** At most `max_connections` at once (more are closed at once); a connection with
   nothing waiting that sends nothing for `idle_timeout` seconds is closed; a malformed MBAP
   header closes that connection only, logged once.
