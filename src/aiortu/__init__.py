@@ -3,7 +3,8 @@
 See the README and `docs/` for the guides; the names they use are re-exported here. The packages
 [`aiortu.master`][aiortu.master], [`aiortu.slave`][aiortu.slave],
 [`aiortu.gateway`][aiortu.gateway], [`aiortu.testing`][aiortu.testing],
-[`aiortu.transport`][aiortu.transport], [`aiortu.line`][aiortu.line] and [`aiortu.core`][aiortu.core] hold the rest.
+[`aiortu.transport`][aiortu.transport], [`aiortu.line`][aiortu.line] and
+[`aiortu.core`][aiortu.core] hold the rest.
 """
 
 from __future__ import annotations
