@@ -10,7 +10,7 @@ from typing import Any
 import anyio
 
 from aiortu.core.timing import LineSettings
-from aiortu.gateway import Gateway, gateway
+from aiortu.gateway import Gateway, Listen, gateway
 from aiortu.master import Master
 from aiortu.slave import MemoryStore, Slave
 from aiortu.testing import VirtualBus
@@ -37,7 +37,7 @@ async def line(
     units: Mapping[int, MemoryStore] | None = None,
     *,
     master_options: Mapping[str, Any] | None = None,
-    listen: tuple[str, ...] = ("tcp://127.0.0.1:0",),
+    listen: tuple[str | Listen, ...] = ("tcp://127.0.0.1:0",),
     **gateway_options: Any,
 ) -> AsyncIterator[Line]:
     """Unit 17 (`device()`) on a fast virtual line, and a gateway on 127.0.0.1, a free port."""

@@ -10,6 +10,7 @@ from contextlib import AsyncExitStack
 import anyio
 import pytest
 
+from aiortu.gateway import Listen
 from aiortu.slave import RequestContext
 from tests.gateway.helpers import UNIT, Line, TcpClient, client, line
 
@@ -125,3 +126,43 @@ async def test_writes_are_never_coalesced_and_end_the_sharing() -> None:
             assert reply.pdu.hex() == "0600000001"
         assert bench.messages == 3
         assert bench.gateway.counters.coalesced == 0
+
+
+async def test_pipelining_is_bounded_per_connection() -> None:
+    gate = Gate()
+    async with line(max_in_flight=2, master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as tcp:
+            gate.close()
+            for transaction_id in range(5):
+                await tcp.send("03 0000 0001", UNIT, transaction_id)
+            await _until(lambda: bench.gateway.counters.requests == 2)
+            await anyio.sleep(0.1)  # time for a third to be taken, were it allowed
+            assert bench.gateway.counters.requests == 2
+            gate.opened.set()
+            replies = [await tcp.receive() for _ in range(5)]
+            assert [reply.transaction_id for reply in replies if reply] == [0, 1, 2, 3, 4]
+
+
+async def test_a_listener_with_a_lower_priority_value_goes_first() -> None:
+    gate = Gate()
+    listens = (Listen("tcp://127.0.0.1:0"), Listen("tcp://127.0.0.1:0", priority=-1))
+    slow = {"timeout": 10.0}
+    async with line(listen=listens, max_in_flight=8, coalesce=False, master_options=slow) as bench:
+        bench.slave.before_request(gate)
+        port = bench.gateway.local_addresses[1][1]
+        async with client(bench.gateway) as busy, await anyio.connect_tcp("127.0.0.1", port) as raw:
+            urgent = TcpClient(raw)
+            gate.close()
+            for transaction_id in range(8):
+                await busy.send(f"03 {transaction_id:04X} 0001", UNIT, transaction_id)
+            await _until(lambda: gate.held == 1 and bench.gateway.counters.requests == 8)
+            await urgent.send("03 000F 0001", UNIT, 99)
+            await _until(lambda: bench.gateway.counters.requests == 9)
+            before = len(_requests_on_wire(bench))
+            gate.opened.set()
+            assert (await urgent.receive()) is not None
+            wire = _requests_on_wire(bench)
+            urgent_frame = next(i for i in range(before, len(wire)) if wire[i][3] == 0x0F)
+            # Only the request already handed to the engine goes before it.
+            assert urgent_frame - before == 1
