@@ -239,6 +239,10 @@ class Gateway:
         reply: bytes | None = None
         try:
             reply = await self._reply(job, release)
+        except Exception:
+            # A bug must cost one request, not every connection.
+            _log.exception("gateway: forwarding a request failed; answered with exception 0B")
+            reply = exception_reply(job.adu.pdu, _NO_RESPONSE)
         finally:
             release()
             await job.connection.answer(job.adu, reply)
