@@ -16,7 +16,7 @@ from aiortu.slave import MemoryStore, Slave
 from aiortu.testing import VirtualBus
 from tests.slave.tcp_helpers import UNIT, TcpClient, device
 
-__all__ = ("UNIT", "Line", "TcpClient", "client", "line")
+__all__ = ("UNIT", "Line", "TcpClient", "client", "device", "line")
 
 
 @dataclass

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import anyio
+import anyio.abc
 import pytest
 
 from aiortu.core.mbap import encode_adu
-from tests.gateway.helpers import UNIT, Line, client, line
+from aiortu.slave import Slave
+from aiortu.testing import VirtualBus
+from tests.gateway.helpers import UNIT, Line, client, device, line
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -89,3 +92,41 @@ async def test_a_reply_goes_only_to_the_connection_that_asked() -> None:
         assert await a.receive(wait=0.2) is None
         assert await b.receive(wait=0.2) is None
         assert bench.messages == 2
+
+
+async def test_0a_at_once_while_the_port_is_reopened_then_served_again() -> None:
+    # The port comes back as a new line with the same device on it, when the test says so.
+    spare = VirtualBus(2)
+    back = anyio.Event()
+
+    async def reopen() -> anyio.abc.ByteStream:
+        await back.wait()
+        return spare.endpoints[0]
+
+    options = {"opener": reopen, "reconnect": True, "reconnect_delay": (0.01, 0.01)}
+    async with (
+        line(master_options=options) as bench,
+        client(bench.gateway) as tcp,
+        Slave(spare.endpoints[1], {UNIT: device()}, frame_gap=0.0),
+    ):
+        assert await tcp.request("03 0000 0001", UNIT, 1) == "03 02 12 34"
+        bench.bus.endpoints[0].close()  # the adapter is unplugged
+        with anyio.fail_after(5):
+            while bench.master.connected:  # noqa: ASYNC110  # no event to wait on
+                await anyio.sleep(0.01)
+        for transaction_id in (2, 3):
+            assert await tcp.request("03 0000 0001", UNIT, transaction_id) == "83 0A"
+        back.set()
+        with anyio.fail_after(5):
+            while not bench.master.connected:  # noqa: ASYNC110
+                await anyio.sleep(0.01)
+        await anyio.sleep(0.02)  # the new line's receivers past their first silence
+        assert await tcp.request("03 0000 0001", UNIT, 4) == "03 02 12 34"
+
+
+async def test_a_request_that_may_not_be_broadcast_is_not_sent_to_unit_0() -> None:
+    async with line() as bench, client(bench.gateway) as tcp:
+        await tcp.send("03 0000 0001", unit=0, transaction_id=1)
+        assert await tcp.receive(wait=0.3) is None
+        assert bench.gateway.counters.broadcasts == 0
+        assert not [entry for entry in bench.bus.trace if entry.sender == 0]
