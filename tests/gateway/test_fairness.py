@@ -166,3 +166,33 @@ async def test_a_listener_with_a_lower_priority_value_goes_first() -> None:
             urgent_frame = next(i for i in range(before, len(wire)) if wire[i][3] == 0x0F)
             # Only the request already handed to the engine goes before it.
             assert urgent_frame - before == 1
+
+
+async def test_a_read_sent_after_a_write_never_joins_a_read_from_before_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # With a wider engine window a read can be handed on while an identical one is on the
+    # line and a write waits between them: it must not share the older read's reply.
+    monkeypatch.setattr("aiortu.gateway._server._ENGINE_WINDOW", 4)
+    gate = Gate()
+    async with line(master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with (
+            client(bench.gateway) as x,
+            client(bench.gateway) as a,
+            client(bench.gateway) as b,
+        ):
+            gate.close()
+            await x.send("03 0000 0001", UNIT, 1)
+            await _until(lambda: gate.held == 1)
+            await a.send("06 0000 0042", UNIT, 2)
+            await _until(lambda: bench.gateway.counters.transactions == 2)
+            await b.send("03 0000 0001", UNIT, 3)
+            await _until(lambda: bench.gateway.counters.requests == 3)
+            await anyio.sleep(0.05)  # time for the read to be handed on
+            gate.opened.set()
+            old, new = await x.receive(), await b.receive()
+            assert old is not None
+            assert new is not None
+            assert (old.pdu.hex(" "), new.pdu.hex(" ")) == ("03 02 12 34", "03 02 00 42")
+            assert bench.gateway.counters.coalesced == 0
