@@ -63,6 +63,10 @@ async def test_a_request_outside_the_spec_is_forwarded_and_the_device_answers() 
         # 0 registers: no request class accepts it, the device answers exception 03.
         assert await tcp.request("03 0000 0000", UNIT) == "83 03"
         assert bench.messages == 1
+        # Not requests at all: refused by the gateway, nothing sent.
+        assert await tcp.request("00 01", UNIT) == "80 01"
+        assert await tcp.request("83 02", UNIT) == "83 01"
+        assert bench.messages == 1
 
 
 async def test_ids_are_the_clients_own_and_pipelined_requests_all_answered() -> None:

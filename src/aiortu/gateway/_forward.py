@@ -61,8 +61,8 @@ async def forward(master: Master, unit: int, pdu: bytes, priority: int) -> bytes
     """The reply PDU to `pdu` from `unit` (1..247): the device's, or exception 0B when it did not
     answer (after the master's retries, or at once while it is offline and the master fails fast),
     0A while the line is down."""
-    if pdu[0] & 0x80:
-        # Not a request: nothing on the line could answer it.
+    if pdu[0] == 0 or pdu[0] & 0x80:
+        # Function code 0, or an exception's: not a request, nothing on the line answers it.
         return exception_reply(pdu, ExceptionCode.ILLEGAL_FUNCTION)
     try:
         reply = await master.execute(unit, request_of(pdu), priority=priority)
