@@ -90,7 +90,8 @@ class GatewayCounters:
     requests: int = 0
     """Requests received (ADUs with a valid header)."""
     transactions: int = 0
-    """Requests sent on the line (broadcasts included)."""
+    """Requests handed to the master (broadcasts included); the master refuses those to an
+    offline unit without sending them."""
     coalesced: int = 0
     """Reads answered by an identical read in flight: no transaction of their own."""
     broadcasts: int = 0
@@ -253,8 +254,8 @@ class Gateway:
         pdu, unit, priority = job.adu.pdu, job.unit, job.connection.priority
         if unit == BROADCAST_UNIT:
             self._shared.clear()  # a broadcast may write anything on any unit
-            self.counters.transactions += 1
             if await forward_broadcast(self.master, pdu, priority):
+                self.counters.transactions += 1
                 self.counters.broadcasts += 1
             return None
         key = (unit, pdu) if self.coalesce and pdu[0] in COALESCED_CODES else None
