@@ -30,6 +30,11 @@ EXPECTED = {
         "register 100: exception 02",
         "requests 5, replies 5, dropped 0",
     ],
+    "gateway_two_programs.py": [
+        "tool: setpoint written, reply 06 00 00 00 d7",
+        "logger: registers 0..2 = [215, 7, 8]",
+        "the device: setpoint 215",
+    ],
     "modbus_tcp_server.py": [
         "Modbus TCP transaction 2: reply 03 06 00 d7 00 07 00 08",
         "RTU over TCP: registers 0..2 = [215, 7, 8]",

@@ -49,6 +49,19 @@ REUSED = {
         "test_the_unit_handle_and_typed_values",
         "test_broadcast_waits_the_turnaround_and_no_reply",
     ),
+    "tests.gateway.test_forwarding": (
+        "test_a_user_defined_code_goes_through_byte_for_byte",
+        "test_ids_are_the_clients_own_and_pipelined_requests_all_answered",
+        "test_broadcast_is_executed_and_not_answered",
+    ),
+    "tests.gateway.test_fairness": (
+        "test_a_flooding_client_cannot_starve_a_quiet_one",
+        "test_identical_reads_in_flight_at_once_are_one_transaction",
+    ),
+    "tests.gateway.test_failures": (
+        "test_a_dead_unit_gets_0b_after_its_timeout_then_at_once_while_offline",
+        "test_a_port_gone_gets_0a",
+    ),
     "tests.master.test_master_faults": (
         "test_no_reply_times_out_after_the_retries",
         "test_a_bad_crc_then_the_right_reply",

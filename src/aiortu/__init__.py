@@ -2,8 +2,9 @@
 
 See the README and `docs/` for the guides; the names they use are re-exported here. The packages
 [`aiortu.master`][aiortu.master], [`aiortu.slave`][aiortu.slave],
-[`aiortu.testing`][aiortu.testing], [`aiortu.transport`][aiortu.transport],
-[`aiortu.line`][aiortu.line] and [`aiortu.core`][aiortu.core] hold the rest.
+[`aiortu.gateway`][aiortu.gateway], [`aiortu.testing`][aiortu.testing],
+[`aiortu.transport`][aiortu.transport], [`aiortu.line`][aiortu.line] and
+[`aiortu.core`][aiortu.core] hold the rest.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ if TYPE_CHECKING:
         UnitOffline,
         UnitSkipped,
     )
+    from aiortu.gateway import gateway
     from aiortu.master import (
         BroadcastHandle,
         HealthPolicy,
@@ -93,6 +95,7 @@ _LAZY: dict[str, str] = {
     "UnitOffline": "aiortu.errors",
     "UnitSkipped": "aiortu.errors",
     "UnitStats": "aiortu.master",
+    "gateway": "aiortu.gateway",
     "load_config": "aiortu.slave",
     "open_master": "aiortu.master",
     "serve": "aiortu.slave",
@@ -141,6 +144,7 @@ __all__ = (
     "UnitSkipped",
     "UnitStats",
     "__version__",
+    "gateway",
     "load_config",
     "open_master",
     "serve",

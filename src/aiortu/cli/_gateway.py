@@ -1,0 +1,193 @@
+"""`aiortu gateway`: share one serial line with Modbus TCP clients (the line server).
+
+Opens the serial port, listens on each `--listen` URL and forwards every client's requests
+through the one master of the line (see [`aiortu.gateway`][aiortu.gateway]) until SIGINT or
+SIGTERM (exit 0). A port or listen address that cannot be opened is one line on stderr (exit 1);
+bad arguments are one line (exit 2). While the port is gone, clients get exception 0A and the
+port is reopened with back-off.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+import anyio
+
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
+from aiortu.cli._arguments import (
+    add_line_settings,
+    positive_int,
+    resolve_line_settings,
+    seconds,
+    seconds_or_zero,
+    unit,
+)
+from aiortu.cli._messages import port_failure
+from aiortu.errors import InvalidValue, PortError
+from aiortu.gateway import Listen, gateway
+
+__all__ = ("register", "run")
+
+_EXAMPLES = """\
+examples:
+  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:502
+      Modbus TCP on port 502 of every interface, to the line at 19200 8E1
+  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:502 --listen rtu+tcp://0.0.0.0:5020
+      Modbus TCP clients, and RTU over TCP ones (serial device server drivers)
+  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:1502 --default-unit 1
+      requests to unit id 255 go to unit 1 (otherwise they get exception 0B)
+  aiortu gateway /dev/ttyUSB0 --listen tcp://127.0.0.1:1502,priority=-1 \\
+                              --listen tcp://0.0.0.0:1503
+      local clients (the SCADA) go before those of the other listener
+
+two programs sharing one virtual line:
+  aiortu virtual-bus --ports 2                      # prints /dev/pts/5 and /dev/pts/6
+  aiortu serve /dev/pts/6 --config examples/devices.toml
+  aiortu gateway /dev/pts/5 --listen tcp://127.0.0.1:1502
+  mbpoll -m tcp -p 1502 -a 17 -t 4 -r 1 -c 3 127.0.0.1     # from any number of programs
+
+a client whose unit does not answer gets exception 0B (gateway target device failed to
+respond), at once while the unit is offline; 0A (gateway path unavailable) while the port
+is gone. Unit 0 is a broadcast: executed, never answered.
+
+exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the serial port or a listen address
+cannot be opened; 2 bad arguments
+"""
+
+
+def register(subparsers: Subparsers) -> None:
+    """Add the `gateway` subcommand to `subparsers`."""
+    parser = subparsers.add_parser(
+        "gateway",
+        help=SUMMARIES["gateway"],
+        description=(
+            "Share one serial line with many Modbus TCP clients: every request goes through "
+            "the line's one master, at frame level (every function code), fairly between "
+            "connections, until interrupted (SIGINT or SIGTERM). See docs/gateway.md."
+        ),
+        epilog=_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("port", metavar="SERIAL", help="serial device path or rtu+tcp://host:port")
+    parser.add_argument(
+        "--listen",
+        action="append",
+        required=True,
+        metavar="URL[,priority=N]",
+        help=(
+            "tcp://host:port (Modbus TCP) or rtu+tcp://host:port (RTU frames) to listen on; "
+            "repeat for several; lower priorities go first (0)"
+        ),
+    )
+    line = parser.add_argument_group("line settings")
+    add_line_settings(line)
+    line.add_argument(
+        "--frame-gap",
+        type=seconds_or_zero,
+        default=None,
+        metavar="SECONDS",
+        help="silence kept before each request (t3.5 of the line settings)",
+    )
+    master = parser.add_argument_group("the master on the line")
+    master.add_argument("--timeout", type=seconds, default=1.0, help="response timeout (1.0)")
+    master.add_argument("--retries", type=int, default=2, help="extra attempts of a read (2)")
+    master.add_argument(
+        "--offline-after",
+        type=positive_int,
+        default=3,
+        metavar="N",
+        help="failures in a row after which a unit gets 0B at once, probed every 5 s (3)",
+    )
+    clients = parser.add_argument_group("clients")
+    clients.add_argument(
+        "--max-in-flight", type=positive_int, default=4, metavar="N",
+        help="requests a connection may have waiting (4)",
+    )  # fmt: skip
+    clients.add_argument(
+        "--max-connections", type=positive_int, default=32, metavar="N",
+        help="connections served at once (32)",
+    )  # fmt: skip
+    clients.add_argument(
+        "--idle-timeout", type=seconds, default=120.0, metavar="SECONDS",
+        help="close a connection silent this long with nothing waiting (120)",
+    )  # fmt: skip
+    clients.add_argument(
+        "--default-unit", type=unit, default=None, metavar="UNIT",
+        help="the unit a request to unit id 255 goes to (none: exception 0B)",
+    )  # fmt: skip
+    clients.add_argument(
+        "--no-coalesce", dest="coalesce", action="store_false",
+        help="send every read, even while an identical one is in flight",
+    )  # fmt: skip
+    parser.set_defaults(run=run)
+
+
+def _listens(texts: list[str]) -> list[Listen] | str:
+    """The `--listen` values as [`Listen`][aiortu.gateway.Listen]s, or what is wrong with one."""
+    listens = []
+    for text in texts:
+        url, _, option = text.partition(",")
+        priority = 0
+        if option:
+            name, _, value = option.partition("=")
+            try:
+                if name != "priority":
+                    raise ValueError(name)
+                priority = int(value)
+            except ValueError:
+                return f"--listen {text}: after the URL only ',priority=N' (an integer) is allowed"
+        listens.append(Listen(url, priority))
+    return listens
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve until SIGINT or SIGTERM; return the exit code."""
+    resolve_line_settings(args)
+    listens = _listens(args.listen)
+    if isinstance(listens, str):
+        print(f"aiortu gateway: error: {listens}", file=sys.stderr)
+        return 2
+    return anyio.run(_serve, args, listens)
+
+
+async def _serve(args: argparse.Namespace, listens: list[Listen]) -> int:
+    failure: CommandFailed | None = None
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        try:
+            async with gateway(
+                args.port,
+                listens,
+                max_in_flight=args.max_in_flight,
+                max_connections=args.max_connections,
+                idle_timeout=args.idle_timeout,
+                default_unit=args.default_unit,
+                coalesce=args.coalesce,
+                baudrate=args.baudrate,
+                parity=args.parity,
+                stopbits=args.stopbits,
+                frame_gap=args.frame_gap,
+                timeout=args.timeout,
+                retries=args.retries,
+                offline_after=args.offline_after,
+            ) as server:
+                ports = ", ".join(f"{host}:{port}" for host, port in server.local_addresses)
+                line = f"{args.port} at {args.baudrate} 8{args.parity}{args.stopbits}"
+                _say(f"{line} shared on {ports}; Ctrl-C to stop")
+                async for _ in signals:
+                    break
+        except PortError as error:
+            failure = CommandFailed(port_failure(error))
+        except InvalidValue as error:
+            print(f"aiortu gateway: error: {error}", file=sys.stderr)
+            return 2
+    # Raised out here, not from inside the gateway's task group.
+    if failure is not None:
+        raise failure
+    return 0
+
+
+def _say(message: str) -> None:
+    sys.stderr.write(f"aiortu gateway: {message}\n")
+    sys.stderr.flush()

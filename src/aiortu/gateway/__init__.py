@@ -1,0 +1,46 @@
+"""The line server: network clients share one serial line through its master's engine.
+
+[`gateway`][aiortu.gateway.gateway] opens a line (or takes a running
+[`Master`][aiortu.master.Master]), listens on `tcp://` (Modbus TCP) and `rtu+tcp://` (RTU frames
+over TCP) URLs and serves every client through
+the one engine of the line; [`Gateway`][aiortu.gateway.Gateway] is the server itself. Requests
+are forwarded at frame level: a function code aiortu knows is sent as its request class, so the
+engine checks the reply against the request; any other code (user-defined ones included) goes
+out byte for byte. See `docs/gateway.md`.
+"""
+
+from __future__ import annotations
+
+import sys
+import types
+from typing import Any
+
+from aiortu.gateway._open import Listen, gateway
+from aiortu.gateway._server import (
+    DEFAULT_IDLE_TIMEOUT,
+    DEFAULT_MAX_CONNECTIONS,
+    DEFAULT_MAX_IN_FLIGHT,
+    Gateway,
+    GatewayCounters,
+)
+
+__all__ = (
+    "DEFAULT_IDLE_TIMEOUT",
+    "DEFAULT_MAX_CONNECTIONS",
+    "DEFAULT_MAX_IN_FLIGHT",
+    "Gateway",
+    "GatewayCounters",
+    "Listen",
+    "gateway",
+)
+
+
+class _CallableModule(types.ModuleType):
+    """This package, callable as [`gateway`][aiortu.gateway.gateway]: `aiortu.gateway(...)`
+    names the function, and stays callable once `import aiortu.gateway` made it the package."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return gateway(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

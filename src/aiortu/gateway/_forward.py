@@ -1,0 +1,86 @@
+"""One client request on the line: raw PDU in, raw PDU out, failures as gateway exceptions.
+
+A request PDU of a function code aiortu knows is sent as that code's class, so the engine checks
+the reply against it (byte count, echoed address and values) before it is returned. A PDU aiortu
+has no class for (a user-defined code), or one that does not decode (a quantity outside the
+spec's range: the device, not the gateway, says what it makes of it), goes out as it came, and
+any reply with its function code (or the exception form) answers it.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
+from aiortu.core.pdu import RawPDU, Request, Response, decode_request
+from aiortu.errors import ConnectionLost, MalformedPDU, ModbusError
+from aiortu.master import Master
+
+__all__ = ("COALESCED_CODES", "exception_reply", "forward", "forward_broadcast", "request_of")
+
+_log = logging.getLogger(__name__)
+
+COALESCED_CODES = frozenset(
+    {
+        FunctionCode.READ_COILS,
+        FunctionCode.READ_DISCRETE_INPUTS,
+        FunctionCode.READ_HOLDING_REGISTERS,
+        FunctionCode.READ_INPUT_REGISTERS,
+    }
+)
+"""The reads that identical requests in flight at once share: they change nothing."""
+
+_NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
+_NO_PATH = ExceptionCode.GATEWAY_PATH_UNAVAILABLE
+
+
+@dataclass(frozen=True, slots=True)
+class _AsReceived(RawPDU):
+    """A request forwarded byte for byte; a reply with its function code answers it."""
+
+    def check_response(self, response: Response) -> None:
+        if response.function_code != self.function_code:
+            raise MalformedPDU("reply function code differs from the request's")
+
+
+def exception_reply(pdu: bytes, code: ExceptionCode) -> bytes:
+    """The exception reply PDU to request `pdu` with `code`."""
+    return bytes(((pdu[0] | 0x80) & 0xFF, code))
+
+
+def request_of(pdu: bytes) -> Request:
+    """The request to send for the client's `pdu` (see the module docstring)."""
+    try:
+        return decode_request(pdu)
+    except MalformedPDU:
+        return _AsReceived(pdu[0], pdu[1:])
+
+
+async def forward(master: Master, unit: int, pdu: bytes, priority: int) -> bytes:
+    """The reply PDU to `pdu` from `unit` (1..247): the device's, or exception 0B when it did not
+    answer (after the master's retries, or at once while it is offline and the master fails fast),
+    0A while the line is down."""
+    if pdu[0] == 0 or pdu[0] & 0x80:
+        # Function code 0, or an exception's: not a request, nothing on the line answers it.
+        return exception_reply(pdu, ExceptionCode.ILLEGAL_FUNCTION)
+    try:
+        reply = await master.execute(unit, request_of(pdu), priority=priority)
+    except ConnectionLost as error:
+        _log.debug("gateway: unit %d: the line is down (%s)", unit, error)
+        return exception_reply(pdu, _NO_PATH)
+    except ModbusError as error:
+        _log.debug("gateway: unit %d did not answer: %s", unit, error)
+        return exception_reply(pdu, _NO_RESPONSE)
+    return reply.encode()
+
+
+async def forward_broadcast(master: Master, pdu: bytes, priority: int) -> bool:
+    """Send `pdu` to every unit and wait the turnaround delay; False when it was not sent (a
+    request the spec does not let be broadcast, or the line is down)."""
+    try:
+        await master.send_without_reply(BROADCAST_UNIT, request_of(pdu), priority=priority)
+    except ModbusError as error:
+        _log.debug("gateway: broadcast of function code %d not sent: %s", pdu[0], error)
+        return False
+    return True

@@ -1,0 +1,44 @@
+"""`aiortu gateway`: its help, and one line with the right exit code for what is wrong."""
+
+from __future__ import annotations
+
+import pytest
+
+from aiortu.cli import main
+
+
+def test_help_has_examples_exit_codes_and_mbpoll(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as raised:
+        main(["gateway", "--help"])
+    assert raised.value.code == 0
+    out = capsys.readouterr().out
+    assert "examples:" in out
+    assert "exit codes:" in out
+    assert "mbpoll -m tcp" in out
+
+
+@pytest.mark.parametrize(
+    ("listen", "message"),
+    [
+        ("tcp://127.0.0.1:0,prio=1", "only ',priority=N' (an integer) is allowed"),
+        ("udp://127.0.0.1:0", "a server listens on a tcp:// or rtu+tcp:// URL"),
+        ("/dev/ttyUSB1", "a server listens on a tcp:// or rtu+tcp:// URL"),
+    ],
+)
+def test_a_bad_listen_url_is_one_line_and_exit_2(
+    listen: str, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["gateway", "/dev/null", "--listen", listen]) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1
+    assert "Traceback" not in err
+
+
+def test_a_port_that_cannot_be_opened_is_one_line_and_exit_1(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["gateway", "/dev/no-such-port", "--listen", "tcp://127.0.0.1:0"]) == 1
+    err = capsys.readouterr().err
+    assert "/dev/no-such-port" in err
+    assert err.count("\n") == 1

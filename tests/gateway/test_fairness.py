@@ -1,0 +1,198 @@
+"""Round-robin between connections, and identical reads in flight at once coalesced.
+
+Latency is asserted as the number of transactions on the wire, never as time."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import AsyncExitStack
+
+import anyio
+import pytest
+
+from aiortu.gateway import Listen
+from aiortu.slave import RequestContext
+from tests.gateway.helpers import UNIT, Line, TcpClient, client, line
+
+pytestmark = pytest.mark.timeout(30)
+
+
+def _requests_on_wire(bench: Line) -> list[bytes]:
+    """The master's frames on the wire so far (unit, function code, ...), oldest first."""
+    return [entry.data for entry in bench.bus.trace if entry.sender == 0]
+
+
+async def _flood(tcp: TcpClient, pipelined: int, stop: anyio.Event) -> None:
+    """Keep `pipelined` reads of addresses 0..9 in flight until `stop`."""
+    sent = 0
+    for _ in range(pipelined):
+        await tcp.send(f"03 {sent % 10:04X} 0001", UNIT, sent)
+        sent += 1
+    while not stop.is_set():
+        assert await tcp.receive() is not None
+        await tcp.send(f"03 {sent % 10:04X} 0001", UNIT, sent & 0xFFFF)
+        sent += 1
+
+
+class Gate:
+    """Holds the slave's next request until opened, so the test sees the queue at rest."""
+
+    def __init__(self) -> None:
+        self.opened = anyio.Event()
+        self.opened.set()
+        self.held = 0
+
+    async def __call__(self, request: object, context: RequestContext) -> None:
+        if not self.opened.is_set():
+            self.held += 1  # only requests that wait: one let through does not count
+            await self.opened.wait()
+
+    def close(self) -> None:
+        self.opened = anyio.Event()
+
+
+async def _until(condition: Callable[[], bool]) -> None:
+    # Polls: the conditions are counters of several objects, none of which signals.
+    while not condition():  # noqa: ASYNC110
+        await anyio.sleep(0.001)
+
+
+async def test_a_flooding_client_cannot_starve_a_quiet_one() -> None:
+    # The flooding client may keep 16 requests waiting; the quiet one sends one at a time.
+    gate = Gate()
+    slow = {"timeout": 10.0}  # the gate, not a timeout, decides when a request is answered
+    async with line(max_in_flight=16, coalesce=False, master_options=slow) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as flood, client(bench.gateway) as quiet:
+            stop = anyio.Event()
+            waits = []
+            async with anyio.create_task_group() as tasks:
+                tasks.start_soon(_flood, flood, 16, stop)
+                for round_ in range(5):
+                    # The line stuck on one of the flood's requests, its others queued...
+                    gate.close()
+                    held = gate.held
+                    await _until(
+                        lambda h=held: gate.held > h and bench.gateway.counters.requests >= 16
+                    )
+                    # ... the quiet client's request arrives.
+                    requests = bench.gateway.counters.requests
+                    await quiet.send("03 000F 0001", UNIT, 900 + round_)
+                    await _until(lambda r=requests: bench.gateway.counters.requests > r)
+                    before = len(_requests_on_wire(bench))
+                    gate.opened.set()
+                    reply = await quiet.receive()
+                    assert reply is not None
+                    assert reply.pdu.hex(" ") == "03 02 00 00"
+                    wire = _requests_on_wire(bench)
+                    # The quiet read's place among the requests sent since it was queued.
+                    quiet_frame = next(i for i in range(before, len(wire)) if wire[i][3] == 0x0F)
+                    waits.append(quiet_frame - before)
+                stop.set()
+        # The one handed to the engine behind the request on the line, and one of the
+        # flooding client's taken in turn before it: never its whole queue of 16.
+        assert max(waits) <= 2, waits
+
+
+async def test_identical_reads_in_flight_at_once_are_one_transaction() -> None:
+    gate = Gate()
+    clients = 8
+    async with line(master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with AsyncExitStack() as stack:
+            tcps = [await stack.enter_async_context(client(bench.gateway)) for _ in range(clients)]
+            gate.close()
+            for index, tcp in enumerate(tcps):
+                await tcp.send("03 0000 0003", UNIT, 100 + index)
+            # Every read but the first joins the one on the line.
+            await _until(lambda: bench.gateway.counters.coalesced == clients - 1)
+            gate.opened.set()
+            for index, tcp in enumerate(tcps):
+                reply = await tcp.receive()
+                assert reply is not None
+                assert reply.transaction_id == 100 + index
+                assert reply.pdu.hex(" ").upper() == "03 06 12 34 AB CD 00 07"
+        assert bench.messages == 1
+        assert bench.gateway.counters.transactions == 1
+
+
+async def test_writes_are_never_coalesced_and_end_the_sharing() -> None:
+    async with line() as bench, client(bench.gateway) as a, client(bench.gateway) as b:
+        for tcp, transaction_id in ((a, 1), (b, 2), (a, 3)):
+            await tcp.send("06 0000 0001", UNIT, transaction_id)
+        for tcp in (a, b, a):
+            reply = await tcp.receive()
+            assert reply is not None
+            assert reply.pdu.hex() == "0600000001"
+        assert bench.messages == 3
+        assert bench.gateway.counters.coalesced == 0
+
+
+async def test_pipelining_is_bounded_per_connection() -> None:
+    gate = Gate()
+    async with line(max_in_flight=2, master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as tcp:
+            gate.close()
+            for transaction_id in range(5):
+                await tcp.send("03 0000 0001", UNIT, transaction_id)
+            await _until(lambda: bench.gateway.counters.requests == 2)
+            await anyio.sleep(0.1)  # time for a third to be taken, were it allowed
+            assert bench.gateway.counters.requests == 2
+            gate.opened.set()
+            replies = [await tcp.receive() for _ in range(5)]
+            assert [reply.transaction_id for reply in replies if reply] == [0, 1, 2, 3, 4]
+
+
+async def test_a_listener_with_a_lower_priority_value_goes_first() -> None:
+    gate = Gate()
+    listens = (Listen("tcp://127.0.0.1:0"), Listen("tcp://127.0.0.1:0", priority=-1))
+    slow = {"timeout": 10.0}
+    async with line(listen=listens, max_in_flight=8, coalesce=False, master_options=slow) as bench:
+        bench.slave.before_request(gate)
+        port = bench.gateway.local_addresses[1][1]
+        async with client(bench.gateway) as busy, await anyio.connect_tcp("127.0.0.1", port) as raw:
+            urgent = TcpClient(raw)
+            gate.close()
+            for transaction_id in range(8):
+                await busy.send(f"03 {transaction_id:04X} 0001", UNIT, transaction_id)
+            await _until(lambda: gate.held == 1 and bench.gateway.counters.requests == 8)
+            await urgent.send("03 000F 0001", UNIT, 99)
+            await _until(lambda: bench.gateway.counters.requests == 9)
+            before = len(_requests_on_wire(bench))
+            gate.opened.set()
+            assert (await urgent.receive()) is not None
+            wire = _requests_on_wire(bench)
+            urgent_frame = next(i for i in range(before, len(wire)) if wire[i][3] == 0x0F)
+            # Only the request already handed to the engine goes before it.
+            assert urgent_frame - before == 1
+
+
+async def test_a_read_sent_after_a_write_never_joins_a_read_from_before_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # With a wider engine window a read can be handed on while an identical one is on the
+    # line and a write waits between them: it must not share the older read's reply.
+    monkeypatch.setattr("aiortu.gateway._server._ENGINE_WINDOW", 4)
+    gate = Gate()
+    async with line(master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with (
+            client(bench.gateway) as x,
+            client(bench.gateway) as a,
+            client(bench.gateway) as b,
+        ):
+            gate.close()
+            await x.send("03 0000 0001", UNIT, 1)
+            await _until(lambda: gate.held == 1)
+            await a.send("06 0000 0042", UNIT, 2)
+            await _until(lambda: bench.gateway.counters.transactions == 2)
+            await b.send("03 0000 0001", UNIT, 3)
+            await _until(lambda: bench.gateway.counters.requests == 3)
+            await anyio.sleep(0.05)  # time for the read to be handed on
+            gate.opened.set()
+            old, new = await x.receive(), await b.receive()
+            assert old is not None
+            assert new is not None
+            assert (old.pdu.hex(" "), new.pdu.hex(" ")) == ("03 02 12 34", "03 02 00 42")
+            assert bench.gateway.counters.coalesced == 0

@@ -1,0 +1,94 @@
+"""Real peers through the gateway: pymodbus's async TCP client to an aiortu slave on a virtual
+line, and mbpoll -m tcp through the `aiortu gateway` command to `aiortu serve` on a pty bus."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import signal
+import subprocess
+import sys
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+import anyio
+import anyio.abc
+import pytest
+
+from aiortu.testing import PtyBus
+from tests.gateway.helpers import UNIT, device, line
+from tests.slave.test_tcp_interop import UNIT_ID, _data_codes, _ok
+
+pymodbus_client = pytest.importorskip("pymodbus.client")
+
+pytestmark = [pytest.mark.interop, pytest.mark.timeout(60)]
+
+MBPOLL = shutil.which("mbpoll")
+
+
+async def test_pymodbus_async_client_every_function_code_through_the_gateway() -> None:
+    store = device()
+    async with line({UNIT: store}, master_options={"timeout": 1.0}) as bench:
+        client = pymodbus_client.AsyncModbusTcpClient(
+            "127.0.0.1", port=bench.gateway.port, timeout=3, retries=0
+        )
+        try:
+            assert await client.connect()
+            await _data_codes(client, store)
+            # The serial line codes: the device on the line answers them.
+            assert (await _ok(client.read_exception_status(**UNIT_ID))).status == 0x6D
+            echo = await _ok(client.diag_query_data(b"\xa5\x37", **UNIT_ID))
+            assert echo.message == b"\xa5\x37"
+            await _ok(client.diag_get_comm_event_counter(**UNIT_ID))
+            await _ok(client.diag_get_comm_event_log(**UNIT_ID))
+            assert (await _ok(client.report_device_id(**UNIT_ID))).identifier[:1] == b"\x11"
+            # A unit that is not on the line: 0B once the master gave up on it.
+            missing = await client.read_holding_registers(0, count=1, device_id=5)
+            assert missing.isError()
+            assert missing.exception_code == 0x0B
+        finally:
+            client.close()
+
+
+async def _line_from(stream: anyio.abc.ByteReceiveStream, pattern: bytes) -> re.Match[bytes]:
+    text = b""
+    with anyio.fail_after(20):
+        while (found := re.search(pattern, text)) is None:
+            text += await stream.receive()
+    return found
+
+
+@asynccontextmanager
+async def _command(*args: str) -> AsyncIterator[anyio.abc.Process]:
+    command = [sys.executable, "-m", "aiortu", *args]
+    async with await anyio.open_process(command, stderr=subprocess.PIPE) as process:
+        try:
+            yield process
+        finally:
+            if process.returncode is None:
+                process.send_signal(signal.SIGTERM)
+                with anyio.fail_after(20):
+                    assert await process.wait() == 0
+
+
+@pytest.mark.skipif(MBPOLL is None, reason="mbpoll is not installed")
+async def test_mbpoll_through_the_gateway_command() -> None:
+    assert MBPOLL is not None
+    with PtyBus(2).running_in_thread() as bus:
+        config = "examples/devices.toml"
+        async with (
+            _command("serve", bus.paths[1], "--config", config) as slave,
+            _command("gateway", bus.paths[0], "--listen", "tcp://127.0.0.1:0") as gateway,
+        ):
+            assert slave.stderr is not None
+            assert gateway.stderr is not None
+            await _line_from(slave.stderr, rb"Ctrl-C")
+            port = (await _line_from(gateway.stderr, rb"127\.0\.0\.1:(\d+);"))[1].decode()
+            poll = [MBPOLL, "-m", "tcp", "-a", "17", "-p", port, "-1", "-o", "2"]
+            result = await anyio.run_process([*poll, "-r", "108", "-c", "3", "127.0.0.1"])
+            assert b"[108]: \t-20927" in result.stdout or b"[108]: \t44609" in result.stdout
+            # A write, then the same registers read back through the line.
+            await anyio.run_process([*poll, "-r", "109", "127.0.0.1", "1234", "5678"])
+            result = await anyio.run_process([*poll, "-r", "109", "-c", "2", "127.0.0.1"])
+            assert b"[109]: \t1234" in result.stdout
+            assert b"[110]: \t5678" in result.stdout

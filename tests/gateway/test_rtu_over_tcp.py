@@ -1,0 +1,65 @@
+"""The `rtu+tcp://` listener: RTU frames over TCP, as a serial device server sends them."""
+
+from __future__ import annotations
+
+import anyio
+import anyio.abc
+import pytest
+
+from aiortu.core.frame import encode_frame
+from aiortu.core.pdu import RawPDU
+from aiortu.slave import RequestContext
+from tests.gateway.helpers import UNIT, line
+
+pytestmark = pytest.mark.timeout(30)
+
+BOTH = ("tcp://127.0.0.1:0", "rtu+tcp://127.0.0.1:0")
+
+
+async def _reply(stream: anyio.abc.ByteStream, wait: float = 3.0) -> bytes | None:
+    """The bytes the gateway sends next, or None when it sends nothing within `wait`."""
+    with anyio.move_on_after(wait):
+        return await stream.receive()
+    return None
+
+
+def _echo(request: object, context: RequestContext) -> RawPDU:
+    assert isinstance(request, RawPDU)
+    return RawPDU(0x41, request.data)
+
+
+async def test_rtu_frames_are_answered_with_rtu_frames() -> None:
+    async with line(listen=BOTH) as bench:
+        bench.slave.set_handler(0x41, _echo)
+        port = bench.gateway.local_addresses[1][1]
+        async with await anyio.connect_tcp("127.0.0.1", port) as stream:
+            await stream.send(encode_frame(UNIT, bytes.fromhex("03 0001 0002")))
+            assert await _reply(stream) == encode_frame(UNIT, bytes.fromhex("03 04 ABCD 0007"))
+            # A user-defined code: its length is unknown, a silence ends it.
+            await stream.send(encode_frame(UNIT, bytes.fromhex("41 0102")))
+            assert await _reply(stream) == encode_frame(UNIT, bytes.fromhex("41 0102"))
+            # Two frames in one chunk: answered in order, one at a time.
+            two = encode_frame(UNIT, bytes.fromhex("03 0000 0001")) + encode_frame(
+                UNIT, bytes.fromhex("04 0000 0001")
+            )
+            await stream.send(two)
+            replies = b""
+            with anyio.fail_after(3):
+                while len(replies) < 14:
+                    replies += await stream.receive()
+            assert replies == encode_frame(UNIT, bytes.fromhex("03 02 1234")) + encode_frame(
+                UNIT, bytes.fromhex("04 02 000B")
+            )
+
+
+async def test_a_bad_crc_is_dropped_and_the_connection_goes_on() -> None:
+    async with line(listen=BOTH) as bench:
+        port = bench.gateway.local_addresses[1][1]
+        async with await anyio.connect_tcp("127.0.0.1", port) as stream:
+            frame = bytearray(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
+            frame[-1] ^= 0xFF
+            await stream.send(bytes(frame))
+            assert await _reply(stream, wait=0.3) is None
+            assert bench.messages == 0
+            await stream.send(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
+            assert await _reply(stream) == encode_frame(UNIT, bytes.fromhex("03 02 1234"))
