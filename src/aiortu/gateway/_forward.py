@@ -9,9 +9,9 @@ any reply with its function code (or the exception form) answers it.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
+from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
 from aiortu.core.pdu import RawPDU, Request, Response, decode_request
 from aiortu.errors import ConnectionLost, MalformedPDU, ModbusError
@@ -19,7 +19,7 @@ from aiortu.master import Master
 
 __all__ = ("COALESCED_CODES", "exception_reply", "forward", "forward_broadcast", "request_of")
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 COALESCED_CODES = frozenset(
     {

@@ -30,7 +30,6 @@ them to the line one at a time, fairly. What it decides:
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final
@@ -38,6 +37,7 @@ from typing import Final
 import anyio
 import anyio.abc
 
+from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
 from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.errors import InvalidValue
@@ -54,7 +54,7 @@ __all__ = (
     "GatewayCounters",
 )
 
-_log = logging.getLogger(__name__)
+_log = get_logger(__name__)
 
 DEFAULT_MAX_IN_FLIGHT: Final = 4
 """Requests a connection may have waiting for their replies, unless told otherwise."""
