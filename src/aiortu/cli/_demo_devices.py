@@ -20,8 +20,8 @@ from typing import Protocol
 
 from aiortu.core.addressing import Reference, Table, format_reference
 from aiortu.core.values import Layout, ValueType, encode_value
-from aiortu.master._poller import Point
-from aiortu.slave._store import Block, Change, MemoryStore
+from aiortu.master import Point
+from aiortu.slave import Block, Change, MemoryStore
 
 __all__ = (
     "DigitalIO",

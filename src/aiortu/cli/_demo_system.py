@@ -56,10 +56,9 @@ from aiortu.cli._demo_devices import (
 )
 from aiortu.core.timing import LineSettings
 from aiortu.errors import InvalidValue, ModbusError
-from aiortu.master._client import Master, UnitStats
-from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, UnitHealth
-from aiortu.slave._server import Slave
-from aiortu.testing._virtual_bus import VirtualBus
+from aiortu.master import CycleReport, CycleStats, Master, Point, Poller, UnitHealth, UnitStats
+from aiortu.slave import Slave
+from aiortu.testing import VirtualBus
 
 __all__ = ("Demo", "DemoEvent", "DeviceView", "ReadingView", "Snapshot")
 

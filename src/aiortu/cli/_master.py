@@ -41,7 +41,7 @@ from aiortu.errors import (
 )
 
 if TYPE_CHECKING:
-    from aiortu.master._client import Master
+    from aiortu.master import Master
 
 __all__ = (
     "EXIT_CODES_HELP",
@@ -132,7 +132,7 @@ async def open_from_args(
     With `reconnect` the master reopens the port after it disappears; without, a lost
     line fails the command (exit 1)."""
     # Imported here, not above: ``--help`` and bad arguments need none of the master.
-    from aiortu.master._client import open_master
+    from aiortu.master import open_master
 
     resolve_line_settings(args)
     async with open_master(

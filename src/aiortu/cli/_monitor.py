@@ -29,7 +29,7 @@ from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
 from aiortu.core.receiver import Role
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue, PortError
-from aiortu.line._link import Link
+from aiortu.line import Link
 from aiortu.transport import ModbusTcpAddress, open_stream, parse_port_url
 
 __all__ = ("FramePrinter", "register", "run")

@@ -49,8 +49,7 @@ from aiortu.errors import (
     UnitOffline,
     UnitSkipped,
 )
-from aiortu.master._poller import CycleReport, Poller, Sample, UnitHealth
-from aiortu.master._stats import UnitState
+from aiortu.master import CycleReport, Poller, Sample, UnitHealth, UnitState
 
 __all__ = ("TablePrinter", "parse_point", "points_from_args", "register", "run")
 

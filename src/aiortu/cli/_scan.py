@@ -41,7 +41,7 @@ from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRe
 from aiortu.core.receiver import FrameReceived, Role
 from aiortu.core.timing import LineSettings, Parity
 from aiortu.errors import ConnectionLost, ModbusError, PortError, UnsupportedSettings
-from aiortu.line._link import Link
+from aiortu.line import Link
 from aiortu.transport import open_stream
 
 __all__ = (

@@ -32,9 +32,7 @@ from aiortu.core.bus_decoder import describe_frame
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
 from aiortu.errors import ConnectionLost, ModbusError, PortError
-from aiortu.slave._config import ConfigError, load_config
-from aiortu.slave._server import serve
-from aiortu.slave._store import MemoryStore
+from aiortu.slave import ConfigError, MemoryStore, load_config, serve
 
 __all__ = ("register", "run")
 

@@ -62,7 +62,7 @@ from aiortu.core.pdu_registers import (
 from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
 from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
-from aiortu.line._link import Link
+from aiortu.line import Link
 from aiortu.master._arguments import (
     UNIT_RANGE,
     check_at_least,

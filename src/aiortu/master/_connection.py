@@ -25,7 +25,7 @@ import anyio.abc
 
 from aiortu._log import get_logger
 from aiortu.errors import ConnectionLost, InvalidValue, ModbusError
-from aiortu.line._link import Link
+from aiortu.line import Link
 from aiortu.master._engine import LineEngine
 
 __all__ = ("LineConnection", "ReconnectPolicy", "StreamOpener")

@@ -68,7 +68,7 @@ from aiortu.core.master_transaction import (
 from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.core.receiver import FrameReceived
 from aiortu.errors import ConnectionLost, ResponseTimeout, UnitOffline
-from aiortu.line._link import Link, LinkEvent
+from aiortu.line import Link, LinkEvent
 from aiortu.master._job import TURN, Job, JobQueue, JobResult, Waiter
 from aiortu.master._stats import HealthPolicy, UnitStats
 from aiortu.master._usual_exchange import (

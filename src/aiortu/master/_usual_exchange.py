@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from aiortu.core.master_machine import KnownRequest, MasterMachine
 from aiortu.core.master_transaction import RetryPolicy, Transaction
 from aiortu.core.pdu import Request
-from aiortu.line._link import Link
+from aiortu.line import Link
 from aiortu.master._job import Job, JobQueue, Waiter
 from aiortu.master._stats import UnitStats
 

@@ -45,7 +45,7 @@ from aiortu.core.pdu_registers import MAX_READ_REGISTERS, MAX_WRITE_REGISTERS
 from aiortu.core.receiver import FrameReceived
 from aiortu.core.slave_machine import SlaveMachine, SlaveState
 from aiortu.errors import ExceptionResponse
-from aiortu.line._link import Link, LinkEvent
+from aiortu.line import Link, LinkEvent
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler
 from aiortu.slave._store import MemoryStore
 

@@ -64,7 +64,7 @@ import anyio.from_thread
 from aiortu.core.timing import LineSettings
 from aiortu.testing._faults import FaultPlan
 from aiortu.testing._virtual_bus import TraceEntry, VirtualBus
-from aiortu.transport._fd import FileDescriptorStream
+from aiortu.transport import FileDescriptorStream
 
 __all__ = ("PtyBus", "make_raw")
 
