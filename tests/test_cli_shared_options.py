@@ -53,7 +53,7 @@ def test_poll_opens_its_master_with_the_options_given(
         raise PortError(port, "no such port")
         yield None
 
-    monkeypatch.setattr("aiortu.master._client.open_master", open_master)
+    monkeypatch.setattr("aiortu.master.open_master", open_master)
     args = build_parser("poll").parse_args(
         ["poll", "/dev/null", "--unit", "1", "--ref", "40001", *flags]
     )
