@@ -20,6 +20,7 @@ from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegi
 from aiortu.core.values import ValueType, decode_value
 from aiortu.master._poller import CycleReport, Sample, UnitHealth, UnitSkipped
 from aiortu.master._stats import UnitState
+from aiortu.testing import VirtualBus
 
 from .fakes import FakeSlave, answer, coil_value, line, register_value, standard_reply
 
@@ -130,6 +131,12 @@ async def test_points_with_their_own_interval_poll_on_their_own_schedule() -> No
         assert stats[0.02].cycles > 3 * stats[0.2].cycles
 
 
+def _sent_to(bus: VirtualBus, unit: int) -> list[float]:
+    """When the master put each request to *unit* on the line: its own schedule, which a
+    slow slave task cannot shift as it shifts the times the slave sees them."""
+    return [entry.start for entry in bus.trace if entry.sender == 0 and entry.data[0] == unit]
+
+
 async def _dead_unit_per_cycle(points: list[Point], cycles: int) -> tuple[list[float], list[int]]:
     """Poll `points` (unit 4 is dead) for `cycles` cycles: each cycle's duration, and the
     requests unit 4 had seen by its end."""
@@ -165,7 +172,7 @@ async def test_an_offline_unit_is_probed_every_offline_probe_interval() -> None:
     # Unit 1 answers: a timeout no load reaches. Unit 2 never does.
     options = {"timeout": 0.5, "retries": 0, "offline_after": 1}
     cycles = 100
-    async with line(units=frozenset({1}), **options) as (master, slave, _):
+    async with line(units=frozenset({1}), **options) as (master, slave, bus):
         points = [Point.of("alive", 1, "40001"), Point.of("dead", 2, "40001")]
         samples: list[Sample] = []
         poller = Poller(
@@ -174,7 +181,7 @@ async def test_an_offline_unit_is_probed_every_offline_probe_interval() -> None:
         started = anyio.current_time()
         await poller.run(cycles=cycles)
         elapsed = anyio.current_time() - started
-        probes = [seen.time for seen in slave.seen if seen.unit == 2]
+        probes = _sent_to(bus, 2)
         alive = [seen for seen in slave.seen if seen.unit == 1]
     # The first read, then one probe per 0.8 s at most (longer than an attempt's 0.5 s, so
     # the gaps show the schedule). The cycles after the first read, 0.01 s apart, last at
@@ -242,7 +249,7 @@ async def test_a_dead_unit_is_suspect_then_offline_and_then_only_probed() -> Non
     # The master keeps its defaults: 2 retries, offline after 3 failed transactions. Unit 1
     # answers (a timeout no load reaches); unit 2 never does.
     cycles = 25
-    async with line(units=frozenset({1}), timeout=0.5) as (master, slave, _):
+    async with line(units=frozenset({1}), timeout=0.5) as (master, slave, bus):
         points = [Point.of("alive", 1, "40001"), Point.of("dead", 2, "40001")]
         states: list[UnitState] = []
         attempts_by_cycle: list[int] = []
@@ -254,7 +261,7 @@ async def test_a_dead_unit_is_suspect_then_offline_and_then_only_probed() -> Non
         poller = Poller(master, points, interval=0.03, offline_probe_interval=0.6)
         poller.on_cycle(on_cycle)
         await poller.run(cycles=cycles)
-        attempts = [seen.time for seen in slave.seen if seen.unit == 2]
+        attempts = _sent_to(bus, 2)
         alive = [seen for seen in slave.seen if seen.unit == 1]
         health = poller.health()[2]
         stats = master.unit_stats(2)
