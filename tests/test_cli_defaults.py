@@ -5,52 +5,26 @@ a pty unless told otherwise; a parity asked for on a pty is refused with the fla
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
+from .cli_helpers import run_aiortu, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(60)
 
 DEVICES = str(Path(__file__).parent.parent / "examples" / "devices.toml")
 
 
-def aiortu(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "aiortu", *args],
-        capture_output=True,
-        text=True,
-        timeout=30,
-        check=False,
-    )
-
-
-def start(*args: str) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [sys.executable, "-m", "aiortu", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-
-
-def stop(process: subprocess.Popen[str]) -> tuple[str, str]:
-    process.terminate()
-    out, err = process.communicate(timeout=10)
-    assert process.returncode == 0, err
-    return out, err
-
-
 @pytest.fixture(scope="module")
 def bus() -> Iterator[list[str]]:
     """A default ``aiortu virtual-bus`` (three ports) with a default ``aiortu serve`` on its
     second port; the third is free for a monitor."""
-    relay = start("virtual-bus", "--ports", "3")
+    relay = start_aiortu("virtual-bus", "--ports", "3")
     assert relay.stdout is not None
     paths = [relay.stdout.readline().strip() for _ in range(3)]
-    slave = start("serve", paths[1], "--config", DEVICES)
+    slave = start_aiortu("serve", paths[1], "--config", DEVICES)
     assert slave.stderr is not None
     banner = slave.stderr.readline()
     try:
@@ -64,13 +38,13 @@ def bus() -> Iterator[list[str]]:
 
 
 def test_read_with_its_defaults(bus: list[str]) -> None:
-    result = aiortu("read", bus[0], "--unit", "17", "--ref", "40108", "--count", "3", "--json")
+    result = run_aiortu("read", bus[0], "--unit", "17", "--ref", "40108", "--count", "3", "--json")
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["values"] == [0xAE41, 0x5652, 0x4340]
 
 
 def test_poll_with_its_defaults(bus: list[str]) -> None:
-    result = aiortu("poll", bus[0], "--unit", "17", "--ref", "40108", "--cycles", "1")
+    result = run_aiortu("poll", bus[0], "--unit", "17", "--ref", "40108", "--cycles", "1")
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith("cycle 1  time ")
@@ -79,7 +53,7 @@ def test_poll_with_its_defaults(bus: list[str]) -> None:
 
 
 def test_a_parity_on_a_pty_is_refused_with_the_flags_to_use(bus: list[str]) -> None:
-    result = aiortu("read", bus[0], "--unit", "17", "--ref", "40108", "--parity", "even")
+    result = run_aiortu("read", bus[0], "--unit", "17", "--ref", "40108", "--parity", "even")
     assert result.returncode == 1
     assert result.stderr == (
         f"aiortu read: {bus[0]}: the driver kept 8N1 instead of 8E1; a pseudo-terminal keeps "
@@ -88,18 +62,18 @@ def test_a_parity_on_a_pty_is_refused_with_the_flags_to_use(bus: list[str]) -> N
 
 
 def test_scan_with_its_defaults(bus: list[str]) -> None:
-    result = aiortu("scan", bus[0], "--baudrates", "19200", "--units", "16-18", "-q")
+    result = run_aiortu("scan", bus[0], "--baudrates", "19200", "--units", "16-18", "-q")
     assert result.returncode == 0, result.stderr
     assert result.stdout.splitlines()[-1] == "found 1 unit (17) at 19200 8N2"
 
 
 def test_monitor_with_its_defaults(bus: list[str]) -> None:
-    monitor = start("monitor", bus[2])
+    monitor = start_aiortu("monitor", bus[2])
     assert monitor.stderr is not None
     assert monitor.stderr.readline().startswith(
         f"aiortu monitor: listening on {bus[2]} at 19200 8N2"
     )
-    assert aiortu("read", bus[0], "--unit", "17", "--ref", "40108").returncode == 0
+    assert run_aiortu("read", bus[0], "--unit", "17", "--ref", "40108").returncode == 0
     out, _ = stop(monitor)
     assert "request   ok        unit 17 read holding registers 107 (1)\n" in out
     assert "reply     ok        unit 17 reply holding 107 = [44609]\n" in out

@@ -5,8 +5,6 @@ from __future__ import annotations
 import io
 import re
 import signal
-import subprocess
-import sys
 
 import pytest
 
@@ -17,11 +15,9 @@ from aiortu.cli._demo_system import Demo
 from aiortu.core.addressing import Table
 from aiortu.core.values import Layout, decode_value
 
+from .cli_helpers import run_aiortu, start_aiortu
+
 pytestmark = pytest.mark.timeout(60)
-
-
-def demo_command(*args: str) -> list[str]:
-    return [sys.executable, "-m", "aiortu", "demo", *args]
 
 
 def values_of(lines: list[str], label: str) -> list[float]:
@@ -30,13 +26,7 @@ def values_of(lines: list[str], label: str) -> list[float]:
 
 
 def test_demo_runs_for_its_duration_and_shows_the_setpoint_take_effect():
-    result = subprocess.run(
-        demo_command("--duration", "3", "--seed", "7"),
-        capture_output=True,
-        text=True,
-        timeout=30,
-        check=False,
-    )
+    result = run_aiortu("demo", "--duration", "3", "--seed", "7")
     assert result.returncode == 0, result.stderr
     out = result.stdout
     assert "\x1b[" not in out  # piped: plain lines, no cursor movement
@@ -72,9 +62,7 @@ def test_demo_runs_for_its_duration_and_shows_the_setpoint_take_effect():
 
 
 def test_demo_stops_cleanly_on_sigint():
-    process = subprocess.Popen(
-        demo_command("--interval", "0.2"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
+    process = start_aiortu("demo", "--interval", "0.2")
     assert process.stdout is not None
     try:
         # Wait until it polls: the first block of values.
@@ -91,12 +79,7 @@ def test_demo_stops_cleanly_on_sigint():
 
 
 def test_demo_stops_quietly_when_the_reader_goes_away():
-    process = subprocess.Popen(
-        demo_command("--duration", "5", "--interval", "0.1"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    process = start_aiortu("demo", "--duration", "5", "--interval", "0.1")
     assert process.stdout is not None
     assert process.stdout.readline().startswith("aiortu demo:")
     process.stdout.close()  # as ``| head -1`` does

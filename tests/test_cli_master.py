@@ -4,9 +4,6 @@ on a pty bus (8N2): exact output, text and JSON; failures exit non-zero with one
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,6 +13,7 @@ from aiortu.core.timing import LineSettings
 from aiortu.testing import PtyBus
 
 from . import pymodbus_server
+from .cli_helpers import run_aiortu
 from .pymodbus_server import COILS, HOLDING_REGISTERS, INPUT_REGISTERS
 
 pytestmark = [pytest.mark.interop, pytest.mark.timeout(90)]
@@ -41,23 +39,11 @@ def silent_port() -> Iterator[str]:
         yield bus.paths[0]
 
 
-def aiortu(*args: str) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
-    return subprocess.run(
-        [sys.executable, "-m", "aiortu", *args],
-        capture_output=True,
-        text=True,
-        timeout=30,
-        check=False,
-        env=env,
-    )
-
-
 def test_read_holding_registers_as_text_and_json(port: str) -> None:
-    text = aiortu("read", port, "--unit", "1", "--table", "holding", "--address", "0",
+    text = run_aiortu("read", port, "--unit", "1", "--table", "holding", "--address", "0",
                   "--count", "3", *LINE)  # fmt: skip
     assert (text.returncode, text.stdout, text.stderr) == (0, "0 4660\n1 43981\n2 7\n", "")
-    as_json = aiortu("read", port, "--unit", "1", "--ref", "40001", "--count", "3", "--json",
+    as_json = run_aiortu("read", port, "--unit", "1", "--ref", "40001", "--count", "3", "--json",
                      *LINE)  # fmt: skip
     assert as_json.returncode == 0, as_json.stderr
     assert (
@@ -67,40 +53,40 @@ def test_read_holding_registers_as_text_and_json(port: str) -> None:
 
 
 def test_read_the_other_tables(port: str) -> None:
-    coils = aiortu("read", port, "--unit", "1", "--table", "coils", "--address", "0x3",
+    coils = run_aiortu("read", port, "--unit", "1", "--table", "coils", "--address", "0x3",
                    "--count", "5", "--json", *LINE)  # fmt: skip
     assert json.loads(coils.stdout) == {
         "unit": 1, "table": "coils", "address": 3, "values": COILS[3:8],
     }  # fmt: skip
-    inputs = aiortu("read", port, "--unit", "1", "--ref", "30003", "--count", "2", *LINE)
+    inputs = run_aiortu("read", port, "--unit", "1", "--ref", "30003", "--count", "2", *LINE)
     assert inputs.stdout == f"2 {INPUT_REGISTERS[2]}\n3 {INPUT_REGISTERS[3]}\n"
-    discrete = aiortu("read", port, "--unit", "1", "--table", "discrete", "--address", "0",
+    discrete = run_aiortu("read", port, "--unit", "1", "--table", "discrete", "--address", "0",
                       "--count", "3", *LINE)  # fmt: skip
     assert discrete.stdout == "0 0\n1 1\n2 0\n"
 
 
 def test_write_then_read_back(port: str) -> None:
-    written = aiortu("write", port, "--unit", "1", "--table", "holding", "--address", "35",
+    written = run_aiortu("write", port, "--unit", "1", "--table", "holding", "--address", "35",
                      "--values", "1,0x10,65535", "--json", *LINE)  # fmt: skip
     assert (written.returncode, written.stderr) == (0, "")
     assert (
         written.stdout
         == '{"unit": 1, "table": "holding", "address": 35, "values": [1, 16, 65535]}\n'
     )
-    back = aiortu("read", port, "--unit", "1", "--ref", "40036", "--count", "3", *LINE)
+    back = run_aiortu("read", port, "--unit", "1", "--ref", "40036", "--count", "3", *LINE)
     assert back.stdout == "35 1\n36 16\n37 65535\n"
-    coils = aiortu("write", port, "--unit", "1", "--table", "coils", "--address", "30",
+    coils = run_aiortu("write", port, "--unit", "1", "--table", "coils", "--address", "30",
                    "--values", "on,off,true,0", *LINE)  # fmt: skip
     assert (coils.returncode, coils.stdout) == (0, "30 1\n31 0\n32 1\n33 0\n")
-    single = aiortu("write", port, "--unit", "1", "--ref", "00040", "--values", "1", *LINE)
+    single = run_aiortu("write", port, "--unit", "1", "--ref", "00040", "--values", "1", *LINE)
     assert (single.returncode, single.stdout) == (0, "39 1\n")
-    bits = aiortu("read", port, "--unit", "1", "--table", "coils", "--address", "30",
+    bits = run_aiortu("read", port, "--unit", "1", "--table", "coils", "--address", "30",
                   "--count", "4", "--json", *LINE)  # fmt: skip
     assert json.loads(bits.stdout)["values"] == [True, False, True, False]
 
 
 def test_poll_prints_plain_cycles_when_piped(port: str) -> None:
-    result = aiortu("poll", port, "--unit", "1", "--ref", "40001", "--count", "3",
+    result = run_aiortu("poll", port, "--unit", "1", "--ref", "40001", "--count", "3",
                     "--cycles", "2", "--interval", "0.1", *LINE)  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert "\x1b[" not in result.stdout
@@ -119,7 +105,7 @@ def test_poll_prints_plain_cycles_when_piped(port: str) -> None:
 
 
 def test_poll_json_with_named_typed_points(port: str) -> None:
-    result = aiortu("poll", port, "--point", "a=1:40001", "--point", "b=1:40002:int16",
+    result = run_aiortu("poll", port, "--point", "a=1:40001", "--point", "b=1:40002:int16",
                     "--point", "w=1:40001:uint32:CDAB", "--cycles", "1", "--json",
                     *LINE)  # fmt: skip
     assert result.returncode == 0, result.stderr
@@ -152,18 +138,18 @@ def test_failures_exit_non_zero_with_one_line(
     port: str, args: list[str], code: int, message: str
 ) -> None:
     command, *rest = args
-    result = aiortu(command, port, *rest, *LINE)
+    result = run_aiortu(command, port, *rest, *LINE)
     assert (result.returncode, result.stdout, result.stderr) == (code, "", message + "\n")
 
 
 def test_no_reply_and_no_port(silent_port: str, tmp_path: Path) -> None:
-    timeout = aiortu("read", silent_port, "--unit", "1", "--ref", "40001", "--timeout", "0.2",
+    timeout = run_aiortu("read", silent_port, "--unit", "1", "--ref", "40001", "--timeout", "0.2",
                      *LINE)  # fmt: skip
     assert timeout.returncode == 3
     assert timeout.stdout == ""
     assert timeout.stderr == "aiortu read: no reply from unit 1 to function 0x03 within 0.2 s\n"
     assert timeout.stderr.count("\n") == 1
-    missing = aiortu("write", str(tmp_path / "ttyNONE"), "--unit", "1", "--ref", "40001",
+    missing = run_aiortu("write", str(tmp_path / "ttyNONE"), "--unit", "1", "--ref", "40001",
                      "--values", "1", *LINE)  # fmt: skip
     assert missing.returncode == 1
     assert missing.stderr.startswith(f"aiortu write: {tmp_path / 'ttyNONE'}: ")
@@ -171,7 +157,7 @@ def test_no_reply_and_no_port(silent_port: str, tmp_path: Path) -> None:
 
 
 def test_poll_shows_an_offline_unit(silent_port: str) -> None:
-    result = aiortu("poll", silent_port, "--unit", "5", "--ref", "40001", "--cycles", "4",
+    result = run_aiortu("poll", silent_port, "--unit", "5", "--ref", "40001", "--cycles", "4",
                     "--interval", "0.05", "--timeout", "0.1", *LINE)  # fmt: skip
     assert result.returncode == 0, result.stderr
     blocks = [block.splitlines() for block in result.stdout.strip("\n").split("\n\n")]

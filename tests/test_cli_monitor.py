@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import sys
 import time
 
 import pytest
@@ -13,6 +12,8 @@ import serial
 
 from aiortu.cli import main
 from aiortu.core.timing import LineSettings
+
+from .cli_helpers import run_aiortu, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -41,12 +42,7 @@ TEXT = [
 
 def monitor(port: str, *args: str) -> subprocess.Popen[str]:
     """Start ``aiortu monitor`` on *port* and wait until it listens."""
-    process = subprocess.Popen(
-        [sys.executable, "-m", "aiortu", "monitor", port, *LINE, *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    process = start_aiortu("monitor", port, *LINE, *args)
     assert process.stderr is not None
     ready = process.stderr.readline()
     assert ready.startswith(f"aiortu monitor: listening on {port} at 19200 8N2"), ready
@@ -62,13 +58,6 @@ def play(port: str) -> None:
             line.flush()
             time.sleep(0.05)
         time.sleep(0.2)
-
-
-def stop(process: subprocess.Popen[str], how: signal.Signals) -> tuple[str, str]:
-    process.send_signal(how)
-    out, err = process.communicate(timeout=10)
-    assert process.returncode == 0, err
-    return out, err
 
 
 @pytest.mark.parametrize("how", [signal.SIGINT, signal.SIGTERM])
@@ -167,13 +156,7 @@ def test_json_lines(pty_bus):
 
 @pytest.mark.parametrize("port", ["/dev/aiortu-no-such-port", "rtu+tcp://127.0.0.1:1"])
 def test_a_bad_port_is_one_line_and_exit_1(port):
-    result = subprocess.run(
-        [sys.executable, "-m", "aiortu", "monitor", port],
-        capture_output=True,
-        text=True,
-        timeout=20,
-        check=False,
-    )
+    result = run_aiortu("monitor", port, timeout=20)
     assert result.returncode == 1
     assert result.stdout == ""
     assert result.stderr.count("\n") == 1

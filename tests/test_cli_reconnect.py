@@ -7,7 +7,6 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import sys
 from collections.abc import AsyncIterator
 from pathlib import Path
 
@@ -20,6 +19,7 @@ from aiortu.core.timing import LineSettings
 from aiortu.testing._pty_bus import make_raw
 from aiortu.transport._fd import FileDescriptorStream
 
+from .cli_helpers import aiortu_command
 from .master.fakes import register_value
 from .master.test_reconnect import Device
 
@@ -48,7 +48,7 @@ class Output:
 
 @contextlib.asynccontextmanager
 async def aiortu_process(*args: str) -> AsyncIterator[anyio.abc.Process]:
-    command = [sys.executable, "-m", "aiortu", *args]
+    command = aiortu_command(*args)
     async with await anyio.open_process(command) as process:
         try:
             yield process

@@ -27,35 +27,20 @@ from aiortu.core.timing import LineSettings, Parity
 from aiortu.slave._handlers import BUILTIN_HANDLERS
 from aiortu.testing import VirtualBus
 
+from .cli_helpers import run_aiortu, start_aiortu
+
 pytestmark = pytest.mark.timeout(60)
 
 SLAVE_SCRIPT = Path(__file__).with_name("serve_units.py")
 SETTINGS = LineSettings(19200, parity="N", stopbits=2)
 
 
-def aiortu_command(*args: str) -> list[str]:
-    return [sys.executable, "-m", "aiortu", *args]
-
-
 @pytest.fixture(scope="module")
 def bus_with_slaves(tmp_path_factory):
     """A two-port pty bus at 8N2 with units 3 and 6 served on port 1; yields port 0."""
     links = tmp_path_factory.mktemp("bus")
-    bus = subprocess.Popen(
-        aiortu_command(
-            "virtual-bus",
-            "--ports",
-            "2",
-            "--parity",
-            "N",
-            "--stopbits",
-            "2",
-            "--link-dir",
-            str(links),
-        ),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    bus = start_aiortu(
+        "virtual-bus", "--ports", "2", "--parity", "N", "--stopbits", "2", "--link-dir", str(links)
     )
     slave = None
     try:
@@ -78,9 +63,7 @@ def bus_with_slaves(tmp_path_factory):
 
 
 def run_scan(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        aiortu_command("scan", *args), capture_output=True, text=True, timeout=30, check=False
-    )
+    return run_aiortu("scan", *args)
 
 
 def test_finds_exactly_the_units_served(bus_with_slaves):

@@ -19,6 +19,8 @@ from aiortu.cli import SUMMARIES, build_parser, main
 from aiortu.core.timing import LineSettings
 from aiortu.testing import PtyBus
 
+from .cli_helpers import aiortu_command
+
 pytestmark = pytest.mark.timeout(60)
 
 DEVICES = str(Path(__file__).parent.parent / "examples" / "devices.toml")
@@ -79,7 +81,7 @@ def served_bus() -> Iterator[str]:
     """A pty bus whose second port ``aiortu serve`` serves (units 5, 6 and 17)."""
     with PtyBus(2, settings=LineSettings(19200, parity="N", stopbits=2)).running_in_thread() as bus:
         slave = subprocess.Popen(
-            [sys.executable, "-m", "aiortu", "serve", bus.paths[1], "--config", DEVICES],
+            aiortu_command("serve", bus.paths[1], "--config", DEVICES),
             stderr=subprocess.PIPE,
             text=True,
         )
@@ -94,8 +96,8 @@ def served_bus() -> Iterator[str]:
 
 def test_an_interrupted_scan_reports_the_units_found_and_exits_130(served_bus: str) -> None:
     scan = subprocess.Popen(
-        [sys.executable, "-m", "aiortu", "scan", served_bus, "--baudrates", "19200,9600",
-         "--units", "1-40", "--timeout", "0.1"],
+        aiortu_command("scan", served_bus, "--baudrates", "19200,9600",
+                       "--units", "1-40", "--timeout", "0.1"),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -119,8 +121,8 @@ def test_an_interrupted_scan_reports_the_units_found_and_exits_130(served_bus: s
 def test_ctrl_c_during_a_read_exits_130_quietly() -> None:
     with PtyBus(2, settings=LineSettings(19200, parity="N", stopbits=2)).running_in_thread() as bus:
         read = subprocess.Popen(
-            [sys.executable, "-m", "aiortu", "read", bus.paths[0], "--unit", "1",
-             "--ref", "40001", "--timeout", "20"],
+            aiortu_command("read", bus.paths[0], "--unit", "1",
+                           "--ref", "40001", "--timeout", "20"),
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import signal
 import subprocess
-import sys
 import time
 
 import pytest
@@ -12,16 +11,13 @@ import serial
 
 from aiortu.cli import main
 
+from .cli_helpers import run_aiortu, start_aiortu
+
 pytestmark = pytest.mark.timeout(30)
 
 
 def start_bus(*args: str) -> tuple[subprocess.Popen[str], list[str]]:
-    process = subprocess.Popen(
-        [sys.executable, "-m", "aiortu", "virtual-bus", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    process = start_aiortu("virtual-bus", *args)
     assert process.stdout is not None
     count = int(args[args.index("--ports") + 1]) if "--ports" in args else 2
     paths = [process.stdout.readline().strip() for _ in range(count)]
@@ -95,13 +91,7 @@ def test_bad_arguments_exit_2_with_one_line(argv, capsys):
 
 
 def test_bad_arguments_in_a_subprocess():
-    result = subprocess.run(
-        [sys.executable, "-m", "aiortu", "virtual-bus", "--ports", "-3"],
-        capture_output=True,
-        text=True,
-        timeout=20,
-        check=False,
-    )
+    result = run_aiortu("virtual-bus", "--ports", "-3", timeout=20)
     assert result.returncode == 2
     assert result.stdout == ""
     assert result.stderr.count("\n") == 1

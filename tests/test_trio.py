@@ -19,7 +19,6 @@ from __future__ import annotations
 import importlib
 import itertools
 import os
-import random
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -29,12 +28,11 @@ from anyio.abc import SocketAttribute, SocketStream
 
 import aiortu
 from aiortu.core.addressing import Table
-from aiortu.core.pdu import Request
 from aiortu.core.timing import LineSettings
 from aiortu.testing import VirtualBus, virtual_pair
 from aiortu.testing._pty_bus import make_raw
 from aiortu.transport import FileDescriptorStream, open_serial
-from tests.master.fakes import FakeSlave, answer, line, register_value, silent
+from tests.master.fakes import line, register_value, silent
 from tests.transport.ptys import open_pty
 
 pytestmark = pytest.mark.timeout(60)
@@ -71,6 +69,7 @@ REUSED = {
         "test_health_offline_after_failures_and_online_after_a_success",
         "test_requests_in_flight_fail_when_the_line_dies",
         "test_priority_goes_first",
+        "test_cancelled_callers_never_desynchronise_the_line",
     ),
     "tests.master.test_tcp_master": (
         "test_every_master_method_against_the_modbus_tcp_server",
@@ -268,47 +267,16 @@ def test_the_serial_port_says_it_runs_on_asyncio_only_under_trio() -> None:
 
 def test_a_retry_after_a_silent_attempt_gets_the_reply(anyio_backend: str) -> None:
     async def scenario() -> None:
-        async with line(script={0: silent}, timeout=0.05, retries=1) as (master, slave, _):
+        # The first attempt gets no reply; a later one does, within a timeout no load
+        # reaches (spare retries for the unlikely case that it does).
+        async with line(script={0: silent}, timeout=0.5, retries=3) as (master, slave, _):
             assert await master.read_holding_registers(3, 7, 2) == [
                 register_value(3, 7),
                 register_value(3, 8),
             ]
-            assert len(slave.seen) == 2
             stats = master.unit_stats(3)
-            assert (stats.timeouts, stats.retries, stats.successes) == (1, 1, 1)
+            assert stats.timeouts >= 1
+            assert (stats.retries, stats.successes) == (stats.timeouts, 1)
+            assert len(slave.seen) == stats.timeouts + 1
 
     run(anyio_backend, scenario)
-
-
-def test_cancelled_callers_never_desynchronise_the_line(anyio_backend: str) -> None:
-    seed = random.randrange(2**32)
-
-    async def scenario() -> None:
-        generator = random.Random(seed)
-        tasks_before = len(anyio.get_running_tasks())
-
-        async def slow(slave: FakeSlave, unit: int, request: Request) -> None:
-            await anyio.sleep(generator.uniform(0, 0.006))
-            await answer(slave, unit, request)
-
-        async with line(default=slow, timeout=0.5) as (master, _, _):
-            cancelled = 0
-            for index in range(60):
-                unit = index % 7 + 1
-                with anyio.move_on_after(generator.uniform(0, 0.008)) as scope:
-                    await master.read_holding_registers(unit, index, 2)
-                cancelled += scope.cancelled_caught
-                address = 1000 + index
-                assert await master.read_holding_registers(unit, address, 2) == [
-                    register_value(unit, address),
-                    register_value(unit, address + 1),
-                ]
-            assert cancelled > 0
-        await anyio.sleep(0.01)
-        assert len(anyio.get_running_tasks()) == tasks_before
-
-    try:
-        run(anyio_backend, scenario)
-    except BaseException:
-        print(f"seed {seed}")
-        raise

@@ -31,8 +31,11 @@ from aiortu.transport._serial import open_serial
 from tests.master.fakes import standard_reply
 from tests.transport.ptys import LINE, Pty, open_pty, read_master
 
-TIMEOUT = 0.15
-"""The response timeout of the plans where an attempt must time out."""
+TIMEOUT = 0.25
+"""The response timeout of the plans where an attempt must time out. Their retry must
+still get its answer within it: a stall of the machine longer than this fails the run, so
+it is kept well above the 2 ms the device takes (each timed-out attempt costs it four
+times over across the runs)."""
 PATIENT = 2.0
 """The response timeout of the others: the device's answer is never late for it."""
 TIMING_OUT = frozenset(

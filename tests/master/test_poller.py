@@ -20,6 +20,7 @@ from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegi
 from aiortu.core.values import ValueType, decode_value
 from aiortu.master._poller import CycleReport, Sample, UnitHealth, UnitSkipped
 from aiortu.master._stats import UnitState
+from aiortu.testing import VirtualBus
 
 from .fakes import FakeSlave, answer, coil_value, line, register_value, standard_reply
 
@@ -130,62 +131,72 @@ async def test_points_with_their_own_interval_poll_on_their_own_schedule() -> No
         assert stats[0.02].cycles > 3 * stats[0.2].cycles
 
 
-async def _cycle_times(points: list[Point], cycles: int, probe: float) -> list[float]:
+def _sent_to(bus: VirtualBus, unit: int) -> list[float]:
+    """When the master put each request to *unit* on the line: its own schedule, which a
+    slow slave task cannot shift as it shifts the times the slave sees them."""
+    return [entry.start for entry in bus.trace if entry.sender == 0 and entry.data[0] == unit]
+
+
+async def _dead_unit_per_cycle(points: list[Point], cycles: int) -> tuple[list[float], list[int]]:
+    """Poll `points` (unit 4 is dead) for `cycles` cycles: each cycle's duration, and the
+    requests unit 4 had seen by its end."""
     durations: list[float] = []
-    units = frozenset({1, 2, 3})  # unit 4 is dead
-    options = {"timeout": 0.1, "retries": 0, "offline_after": 1}
-    async with line(units=units, **options) as (master, _, _):
-        poller = Poller(
-            master,
-            points,
-            interval=0.001,
-            offline_probe_interval=probe,
-            on_cycle=lambda r: durations.append(r.duration),
-        )
+    dead_requests: list[int] = []
+    units = frozenset({1, 2, 3})
+    # Replies are due from units 1 to 3: a timeout no load reaches.
+    options = {"timeout": 0.5, "retries": 0, "offline_after": 1}
+    async with line(units=units, **options) as (master, slave, _):
+
+        def on_cycle(report: CycleReport) -> None:
+            durations.append(report.duration)
+            dead_requests.append(sum(1 for seen in slave.seen if seen.unit == 4))
+
+        poller = Poller(master, points, interval=0.001, offline_probe_interval=60)
+        poller.on_cycle(on_cycle)
         await poller.run(cycles=cycles)
-    return durations
+    return durations, dead_requests
 
 
 async def test_a_dead_unit_does_not_stall_the_cycle() -> None:
     alive = [Point.of(f"u{u}r{r}", u, f"4{r * 20 + 1:04d}") for u in (1, 2, 3) for r in range(3)]
     dead = [Point.of(f"u4r{r}", 4, f"4{r * 20 + 1:04d}") for r in range(3)]
-    all_alive = await _cycle_times(alive, 8, probe=60)
-    with_dead = await _cycle_times(alive + dead, 8, probe=60)
-    # The first cycle pays one timeout for the dead unit (its other reads are skipped).
-    assert 0.1 <= with_dead[0] < 0.1 + 3 * max(all_alive)
-    typical = sorted(all_alive)[len(all_alive) // 2]
-    # The next request after a failed one waits the master's late-reply guard (0.1 s),
-    # which falls in the second cycle; from then on the dead unit costs nothing.
-    # A stall would cost at least the 0.1 s timeout; the margins below stay under it, so
-    # the test tells a stall from the noise of a busy machine.
-    assert with_dead[1] < 0.1 + 2 * typical + 0.08, (all_alive, with_dead)
-    later = sorted(with_dead[2:])
-    # The median, so that one cycle slowed by the machine does not count as a stall.
-    assert later[len(later) // 2] < 2 * typical + 0.05, (all_alive, with_dead)
+    durations, dead_requests = await _dead_unit_per_cycle(alive + dead, 8)
+    # The first cycle sends one request to the dead unit and pays its timeout; its other
+    # reads are skipped. Offline from then on (and its probe a minute away), it gets no
+    # request at all: no later cycle can wait for it.
+    assert dead_requests == [1] * 8
+    assert durations[0] >= 0.5
 
 
 async def test_an_offline_unit_is_probed_every_offline_probe_interval() -> None:
-    options = {"timeout": 0.05, "retries": 0, "offline_after": 1}
-    async with line(units=frozenset({1}), **options) as (master, slave, _):
+    # Unit 1 answers: a timeout no load reaches. Unit 2 never does.
+    options = {"timeout": 0.5, "retries": 0, "offline_after": 1}
+    cycles = 100
+    async with line(units=frozenset({1}), **options) as (master, slave, bus):
         points = [Point.of("alive", 1, "40001"), Point.of("dead", 2, "40001")]
         samples: list[Sample] = []
         poller = Poller(
-            master, points, interval=0.01, offline_probe_interval=0.3, on_sample=samples.append
+            master, points, interval=0.01, offline_probe_interval=0.8, on_sample=samples.append
         )
-        await poller.run(duration=1.0)
-        probes = [seen.time for seen in slave.seen if seen.unit == 2]
+        started = anyio.current_time()
+        await poller.run(cycles=cycles)
+        elapsed = anyio.current_time() - started
+        probes = _sent_to(bus, 2)
         alive = [seen for seen in slave.seen if seen.unit == 1]
-    # Sent at about 0, 0.3, 0.6 and 0.9 s: the first read, then one probe per interval.
-    assert len(probes) in (3, 4, 5), probes
+    # The first read, then one probe per 0.8 s at most (longer than an attempt's 0.5 s, so
+    # the gaps show the schedule). The cycles after the first read, 0.01 s apart, last at
+    # least 0.99 s: at least one probe is due.
+    assert len(probes) >= 2, probes
+    assert len(probes) <= 1 + elapsed / 0.8, (probes, elapsed)
     gaps = [b - a for a, b in itertools.pairwise(probes)]
-    assert all(gap >= 0.3 for gap in gaps), gaps
-    assert len(alive) > 30
+    assert all(gap >= 0.8 for gap in gaps), gaps
+    assert len(alive) == cycles
     dead = [s for s in samples if s.name == "dead"]
-    assert sum(isinstance(s.error, UnitSkipped) for s in dead) > 20
+    assert sum(isinstance(s.error, UnitSkipped) for s in dead) == cycles - len(probes)
     assert all(isinstance(s.error, aiortu.ResponseTimeout) for s in dead)
     health = poller.health()
     assert not health[2].online
-    assert health[2].skipped > 20
+    assert health[2].skipped == cycles - len(probes)
     assert health[2].next_probe is not None
 
 
@@ -205,11 +216,12 @@ async def test_the_poll_command_redraws_its_table_in_place_on_a_terminal() -> No
 
 
 async def test_dead_units_take_turns_for_one_probe_per_cycle() -> None:
+    # Only dead units: no reply is due, so the short timeout cannot turn a slow reply into
+    # one more offline unit taking its turn.
     options = {"timeout": 0.05, "retries": 0, "offline_after": 1}
     dead_units = (4, 5, 6)
     async with line(units=frozenset({1}), **options) as (master, slave, _):
-        points = [Point.of("alive", 1, "40001")]
-        points += [Point.of(f"dead{unit}", unit, "40001") for unit in dead_units]
+        points = [Point.of(f"dead{unit}", unit, "40001") for unit in dead_units]
         poller = Poller(master, points, interval=0.001, offline_probe_interval=0)
         await poller.run(cycles=10)
         sent = [seen.unit for seen in slave.seen if seen.unit in dead_units]
@@ -220,10 +232,9 @@ async def test_dead_units_take_turns_for_one_probe_per_cycle() -> None:
 
 
 async def test_max_probes_per_cycle_none_probes_every_due_unit() -> None:
-    options = {"timeout": 0.05, "retries": 0, "offline_after": 1}
+    options = {"timeout": 0.05, "retries": 0, "offline_after": 1}  # no reply is due
     async with line(units=frozenset({1}), **options) as (master, slave, _):
-        points = [Point.of("alive", 1, "40001")]
-        points += [Point.of(f"dead{unit}", unit, "40001") for unit in (4, 5)]
+        points = [Point.of(f"dead{unit}", unit, "40001") for unit in (4, 5)]
         poller = Poller(
             master, points, interval=0.001, offline_probe_interval=0, max_probes_per_cycle=None
         )
@@ -235,28 +246,40 @@ async def test_max_probes_per_cycle_none_probes_every_due_unit() -> None:
 
 
 async def test_a_dead_unit_is_suspect_then_offline_and_then_only_probed() -> None:
-    # The master keeps its defaults: 2 retries, offline after 3 failed transactions.
-    async with line(units=frozenset({1}), timeout=0.05) as (master, slave, _):
+    # The master keeps its defaults: 2 retries, offline after 3 failed transactions. Unit 1
+    # answers (a timeout no load reaches); unit 2 never does.
+    cycles = 25
+    async with line(units=frozenset({1}), timeout=0.5) as (master, slave, bus):
         points = [Point.of("alive", 1, "40001"), Point.of("dead", 2, "40001")]
         states: list[UnitState] = []
-        poller = Poller(master, points, interval=0.001, offline_probe_interval=0.2)
-        poller.on_cycle(lambda _: states.append(poller.health()[2].state))
-        await poller.run(duration=0.9)
-        attempts = [seen.time for seen in slave.seen if seen.unit == 2]
+        attempts_by_cycle: list[int] = []
+
+        def on_cycle(_: CycleReport) -> None:
+            states.append(poller.health()[2].state)
+            attempts_by_cycle.append(sum(1 for seen in slave.seen if seen.unit == 2))
+
+        poller = Poller(master, points, interval=0.03, offline_probe_interval=0.6)
+        poller.on_cycle(on_cycle)
+        await poller.run(cycles=cycles)
+        attempts = _sent_to(bus, 2)
         alive = [seen for seen in slave.seen if seen.unit == 1]
         health = poller.health()[2]
         stats = master.unit_stats(2)
     # Cycle 1 tries three times (the master's retries); cycles 2 and 3 read the suspect
-    # unit once each; then it is offline and probed once per 0.2 s.
+    # unit once each; then it is offline and only probed, once per 0.6 s at most.
     assert states[:3] == [UnitState.SUSPECT, UnitState.SUSPECT, UnitState.OFFLINE], states
+    assert states[3:] == [UnitState.OFFLINE] * (cycles - 3), states
+    assert attempts_by_cycle[:3] == [3, 4, 5], attempts_by_cycle
     first, suspect, probes = attempts[:3], attempts[3:5], attempts[5:]
     # Retries are spaced by the timeout and the late-reply guard (docs/master.md).
-    assert all(b - a >= 0.05 + master.engine.late_reply_guard for a, b in itertools.pairwise(first))
-    assert suspect[1] - suspect[0] < 0.2, attempts
-    assert 1 <= len(probes) <= 4, attempts
-    assert probes[0] - suspect[1] >= 0.2
-    assert all(b - a >= 0.2 for a, b in itertools.pairwise(probes)), attempts
-    assert len(alive) > 20
+    assert all(b - a >= 0.5 + master.engine.late_reply_guard for a, b in itertools.pairwise(first))
+    # The 22 cycles after, 0.03 s apart, last at least 0.66 s: a probe is due.
+    assert len(probes) >= 1, attempts
+    assert probes[0] - suspect[1] >= 0.6
+    assert all(b - a >= 0.6 for a, b in itertools.pairwise(probes)), attempts
+    # At most one probe a cycle; the live unit is read every cycle whatever the dead one does.
+    assert all(b - a <= 1 for a, b in itertools.pairwise(attempts_by_cycle[2:]))
+    assert len(alive) == cycles
     # The poller's health and the master's statistics tell the same story.
     assert health.state is stats.state is UnitState.OFFLINE
     assert health.next_probe is not None
@@ -277,7 +300,8 @@ async def test_one_crc_error_costs_one_sample_not_seconds() -> None:
         await slave.send_raw(bytes(frame))
 
     # The CLI's default: no retries.
-    async with line(default=garble_once, retries=0, timeout=0.05) as (master, _, _):
+    # Every reply is due (the garbled one too): a timeout no load reaches.
+    async with line(default=garble_once, retries=0, timeout=5) as (master, _, _):
         samples: list[Sample] = []
         poller = Poller(
             master, [Point.of("a", 1, "40001")], interval=0.001, on_sample=samples.append

@@ -56,8 +56,9 @@ class RawMaster:
         """Send the request PDU written in hex to *unit*."""
         await self.send(encode_frame(unit, bytes.fromhex(pdu_hex)))
 
-    async def receive_frame(self, wait: float = 1.0) -> bytes | None:
-        """The next reply frame, or None if none arrives within *wait* seconds."""
+    async def receive_frame(self, wait: float = 5.0) -> bytes | None:
+        """The next reply frame, or None if none arrives within *wait* seconds (the default
+        is for a reply that is due: long enough for any load)."""
         with anyio.move_on_after(wait):
             while True:
                 length = expected_response_length(self._buffer)
@@ -78,7 +79,8 @@ class RawMaster:
         return None
 
     async def request(self, unit: int, pdu_hex: str) -> str:
-        """Send a request and return the reply PDU in hex (``""`` if there is none)."""
+        """Send a request that is due a reply and return the reply PDU in hex (``""`` if
+        none came)."""
         await self.send_request(unit, pdu_hex)
         frame = await self.receive_frame()
         if frame is None:

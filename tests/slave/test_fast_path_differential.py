@@ -2,9 +2,10 @@
 
 Seeded random sequences of requests (every function code, broadcasts, other units, a
 unit whose store takes no fast path, malformed PDUs, garbage and bad CRCs, listen-only
-mode entered with 08/04 and left with 08/01) go to the same slave with the shortcut on
-and off, on a pty serial port (the push path, where whole requests are answered from the
-read callback) and on a virtual line. Every run must give the same bytes on the wire
+mode entered with 08/04 and left with 08/01, and bursts of two requests in one write
+whose first takes the general route) go to the same slave with the shortcut on and off,
+on a pty serial port (the push path, where whole requests are answered from the read
+callback) and on a virtual line. Every run must give the same bytes on the wire
 for each request, the same stores, diagnostic counters and comm event log.
 
 A failure names its seed; ``AIORTU_DIFFERENTIAL_SEED=N`` runs that seed alone.
@@ -115,9 +116,30 @@ def _write_coils(rng: random.Random, address: int) -> str:
     return f"0F{_h(address)}{_h(count)}{(count + 7) // 8:02X}{data}"
 
 
-def _step(rng: random.Random) -> bytes:
-    """One item the master puts on the line: a request, or garbage."""
+def _burst(rng: random.Random) -> tuple[bytes, bytes]:
+    """Two requests written at once: the first takes the general route, the second has a
+    fast path, so it arrives while the first still waits in the serve loop's queue."""
+    first, second = rng.choice(
+        (
+            ("07", f"03{_h(rng.choice((0, 5, 30)))}{_h(rng.choice((1, 3, 10)))}"),
+            (f"10{_h(rng.choice((0, 5, 200)))}000204{_h(rng.randrange(9))}0007", "0600010009"),
+            (f"03{_h(0)}{_h(2)}", f"03{_h(4)}{_h(2)}"),  # the first to the slow unit
+        )
+    )
+    unit = SLOW if first == f"03{_h(0)}{_h(2)}" else FAST
+    return encode_frame(unit, bytes.fromhex(first)), encode_frame(FAST, bytes.fromhex(second))
+
+
+def _step(rng: random.Random) -> tuple[bytes, ...]:
+    """One item the master puts on the line in one write: one or two frames, or garbage."""
     roll = rng.random()
+    if roll > 0.92:
+        return _burst(rng)
+    return (_single(rng, roll),)
+
+
+def _single(rng: random.Random, roll: float) -> bytes:
+    """A request, or garbage."""
     if roll < 0.04:
         return encode_frame(FAST, bytes.fromhex("08 0004 0000"))  # listen-only
     if roll < 0.10:
@@ -140,6 +162,7 @@ class _Run:
     """What one run gave: each item's reply bytes, and the slave's state at the end."""
 
     replies: list[bytes]
+    frames_sent: int
     answered_at_once: int
     counters: dict[str, int]
     events: bytes
@@ -210,11 +233,11 @@ def _seen(slave: Slave) -> int:
     return slave.link.frames_received + sum(slave.link.discarded.values())
 
 
-async def _settle(slave: Slave, seen_before: int) -> None:
-    """Wait until the slave has taken the item and finished with it."""
+async def _settle(slave: Slave, seen_before: int, frames: int) -> None:
+    """Wait until the slave has taken the item's *frames* and finished with them."""
     with anyio.fail_after(5):
         while not (  # noqa: ASYNC110 - polls the slave's state: no event tells it
-            _seen(slave) > seen_before
+            _seen(slave) >= seen_before + frames
             and slave.link.receiver.state is ReceiverState.IDLE
             and slave.machine.state is SlaveState.IDLE
             and not slave._queue
@@ -223,33 +246,36 @@ async def _settle(slave: Slave, seen_before: int) -> None:
 
 
 async def _reply(read: Any, sent: int) -> bytes:
-    """The *sent* reply frames the slave put on the wire for one item."""
+    """The *sent* reply frames the slave put on the wire for one item (after a burst, one
+    read may bring both)."""
     data = b""
+    start = 0
     with anyio.fail_after(5):
         for _ in range(sent):
-            frame = b""
-            while (length := expected_response_length(frame)) <= 0 or len(frame) < length:
-                assert length != CANNOT_KNOW, frame.hex(" ")
-                frame += await read()
-            data += frame
+            while (length := expected_response_length(data[start:])) <= 0 or (
+                len(data) - start < length
+            ):
+                assert length != CANNOT_KNOW, data[start:].hex(" ")
+                data += await read()
+            start += length
+    assert start == len(data), data.hex(" ")
     return data
 
 
-async def _run(line: Any, fast: bool, items: list[bytes]) -> _Run:
+async def _run(line: Any, fast: bool, items: list[tuple[bytes, ...]]) -> _Run:
     replies = []
     async with line(fast) as (slave, write, read):
         for item in items:
             seen, sent = _seen(slave), slave.link.frames_sent
-            write(item)
-            await _settle(slave, seen)
+            write(b"".join(item))  # a burst: no silence between its frames
+            await _settle(slave, seen, len(item))
             replies.append(await _reply(read, slave.link.frames_sent - sent))
-        tail = b""
-        with anyio.move_on_after(0.02):
-            tail = await read()  # nothing more may come
-        replies.append(tail)
+        # Nothing more can come: _settle left the slave idle with nothing queued, and every
+        # frame it sent was read.
         machine = slave.machine
         return _Run(
             replies,
+            slave.link.frames_sent,
             slave._at_once.answered,
             dataclasses.asdict(slave.counters),
             machine.event_log.events(),
@@ -259,19 +285,22 @@ async def _run(line: Any, fast: bool, items: list[bytes]) -> _Run:
         )
 
 
-def _differences(seed: int, items: list[bytes], runs: dict[str, _Run]) -> list[str]:
+def _differences(seed: int, items: list[tuple[bytes, ...]], runs: dict[str, _Run]) -> list[str]:
     first_name, first = next(iter(runs.items()))
     found = []
     for name, run in runs.items():
         for index, (a, b) in enumerate(zip(first.replies, run.replies, strict=True)):
             if a != b:
-                what = items[index].hex(" ") if index < len(items) else "the end"
+                what = "the end"
+                if index < len(items):
+                    what = " | ".join(frame.hex(" ") for frame in items[index])
                 found.append(
                     f"seed {seed}: item {index} ({what}): "
                     f"{first_name} replied {a.hex(' ')!r}, {name} {b.hex(' ')!r}"
                 )
                 break
-        for field in ("counters", "events", "event_count", "listen_only", "stores"):
+        fields = ("frames_sent", "counters", "events", "event_count", "listen_only", "stores")
+        for field in fields:
             if getattr(first, field) != getattr(run, field):
                 found.append(f"seed {seed}: {field} differ between {first_name} and {name}")
     return found

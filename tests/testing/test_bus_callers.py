@@ -154,3 +154,26 @@ async def test_a_cancelled_receive_leaves_the_bytes_on_the_bus() -> None:
     assert b.pending == len(b"request")
     with anyio.fail_after(5):
         assert await b.receive() == b"request"
+
+
+async def test_a_reader_cancelled_after_taking_bytes_keeps_them() -> None:
+    # The reader takes the bytes out of the buffer, then yields once; the canceller runs
+    # in that pass. The bytes already taken must still reach the reader.
+    a, b = virtual_pair(chunk_size=256)
+    await a.send(b"request")
+    got: list[bytes] = []
+    scope = anyio.CancelScope()
+
+    async def reader() -> None:
+        with scope:
+            got.append(await b.receive())
+
+    async def canceller() -> None:
+        scope.cancel()
+
+    with anyio.fail_after(5):
+        async with anyio.create_task_group() as group:
+            group.start_soon(reader)
+            group.start_soon(canceller)
+    assert got == [b"request"]
+    assert b.pending == 0

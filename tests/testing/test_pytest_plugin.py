@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 import sys
 import textwrap
@@ -73,9 +72,9 @@ def test_strict_mode_and_without_pytest_asyncio(tmp_path):
             tmp_path / "plain", "@pytest.mark.anyio", "-p", "no:asyncio", "-rA"
         ),
     }
-    # anyio's plugin runs each anyio test once per installed backend: with trio installed
-    # (a test extra), the fixtures are checked under trio too.
-    anyio_backends = ["asyncio"] + (["trio"] if importlib.util.find_spec("trio") else [])
+    # anyio's plugin runs each anyio test once per installed backend: trio is a required
+    # test extra, so the fixtures are checked under trio too.
+    anyio_backends = ["asyncio", "trio"]
     expected = {
         "strict": ["test_pair", "test_bus_factory", "test_pty_sync"],
         "no pytest-asyncio": [
