@@ -179,12 +179,12 @@ def tcp_url() -> Iterator[str]:
 
 
 def test_read_write_and_poll_over_modbus_tcp(tcp_url: str) -> None:
-    text = aiortu("read", tcp_url, "--unit", "1", "--table", "holding", "--address", "0",
+    text = run_aiortu("read", tcp_url, "--unit", "1", "--table", "holding", "--address", "0",
                   "--count", "3")  # fmt: skip
     assert (text.returncode, text.stdout, text.stderr) == (0, "0 4660\n1 43981\n2 7\n", "")
-    written = aiortu("write", tcp_url, "--unit", "1", "--ref", "40021", "--values", "5,6")
+    written = run_aiortu("write", tcp_url, "--unit", "1", "--ref", "40021", "--values", "5,6")
     assert (written.returncode, written.stdout, written.stderr) == (0, "20 5\n21 6\n", "")
-    polled = aiortu("poll", tcp_url, "--unit", "1", "--ref", "40021", "--count", "2",
+    polled = run_aiortu("poll", tcp_url, "--unit", "1", "--ref", "40021", "--count", "2",
                     "--cycles", "1")  # fmt: skip
     assert polled.returncode == 0, polled.stderr
     assert polled.stdout.splitlines()[1:4] == [
@@ -192,5 +192,5 @@ def test_read_write_and_poll_over_modbus_tcp(tcp_url: str) -> None:
         "40021               1  5",
         "40022               1  6",
     ]
-    refused = aiortu("read", tcp_url, "--unit", "1", "--ref", "41001", "--count", "2")
+    refused = run_aiortu("read", tcp_url, "--unit", "1", "--ref", "41001", "--count", "2")
     assert refused.returncode == 4

@@ -164,13 +164,7 @@ def test_a_bad_port_is_one_line_and_exit_1(port):
 
 
 def test_modbus_tcp_is_refused_as_nothing_to_monitor():
-    result = subprocess.run(
-        [sys.executable, "-m", "aiortu", "monitor", "tcp://127.0.0.1:1"],
-        capture_output=True,
-        text=True,
-        timeout=20,
-        check=False,
-    )
+    result = run_aiortu("monitor", "tcp://127.0.0.1:1")
     assert (result.returncode, result.stdout) == (2, "")
     assert result.stderr == (
         "aiortu monitor: error: PORT must be a serial device path or rtu+tcp://host:port, "
