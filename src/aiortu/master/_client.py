@@ -19,13 +19,12 @@ lives in [`aiortu.master`][aiortu.master], the state machine in
 Who runs a transaction. The line is owned by one transaction at a time, and that
 transaction runs in its caller's task: on an idle line a call sends its request and
 waits for the reply itself, and a busy line hands itself to the next queued call (FIFO,
-lower priority first) when the transaction in progress ends. An earlier design had one
-task run every transaction, which cost two task hand-overs per call (to the line task
-and back) and about a third of the master's CPU per read; the rules that design gave
-are kept: exchanges never overlap, the queue order is the same, and a caller cancelled
-after its request began to go out leaves the attempt to the master's line task, which
-waits for its reply (so that it never reaches a later request) and only then hands the
-line on. The line task also notices a dead link and fails the queue.
+lower priority first) when the transaction in progress ends. Exchanges never overlap,
+and a caller cancelled after its request began to go out leaves the attempt to the
+master's line task, which waits for its reply (so that it never reaches a later request)
+and only then hands the line on. The line task also notices a dead link and fails the
+queue. Why the transaction runs in its caller's task: see "Design notes" in
+docs/protocol.md.
 """
 
 from __future__ import annotations
