@@ -247,6 +247,8 @@ class Gateway:
         self.local_addresses: list[tuple[str, int]] = []
         """The host and port of each TCP listener [`serve`][aiortu.gateway.Gateway.serve]
         serves."""
+        self.metrics_address: tuple[str, int] | None = None
+        """The host and port the statistics are served on as Prometheus text (None: not)."""
         self.unix_paths: list[str] = []
         """The path of each Unix socket listener [`serve`][aiortu.gateway.Gateway.serve]
         serves."""
