@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from aiortu.errors import InvalidValue
 from aiortu.master import Master
 
-__all__ = ("ALL_UNITS", "GatewayLine", "check_lines", "parse_line")
+__all__ = ("ALL_UNITS", "GatewayLine", "check_lines")
 
 ALL_UNITS = range(1, 248)
 """The unit ids a line serves unless told otherwise."""
@@ -60,27 +60,3 @@ def check_lines(lines: Sequence[GatewayLine]) -> None:
                     ),
                 )
         seen.append(line)
-
-
-def parse_line(text: str) -> GatewayLine:
-    """A `--line PORT:FIRST-LAST` value (or `PORT:UNIT`) as a
-    [`GatewayLine`][aiortu.gateway.GatewayLine]; raises
-    [`InvalidValue`][aiortu.errors.InvalidValue] when the units are not such a range."""
-    port, colon, units = text.rpartition(":")
-    first, dash, last = units.partition("-")
-    try:
-        if not (colon and port):
-            raise ValueError(text)
-        low = int(first)
-        high = int(last) if dash else low
-    except ValueError:
-        raise InvalidValue(
-            "--line", text, "PORT:FIRST-LAST", message=f"--line {text}: expected PORT:FIRST-LAST "
-            "with unit ids in 1..247, as /dev/ttyUSB0:1-20"
-        ) from None  # fmt: skip
-    if not 1 <= low <= high <= 247:
-        raise InvalidValue(
-            "--line", text, "PORT:FIRST-LAST", message=f"--line {text}: the units must be "
-            "FIRST-LAST with 1 <= FIRST <= LAST <= 247"
-        )  # fmt: skip
-    return GatewayLine(port, range(low, high + 1))
