@@ -203,7 +203,6 @@ def _listens(texts: list[str]) -> list[Listen] | str:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT or SIGTERM; return the exit code."""
-    resolve_line_settings(args)
     listens = _listens(args.listen)
     try:
         if isinstance(listens, str):
@@ -212,6 +211,11 @@ def run(args: argparse.Namespace) -> int:
     except InvalidValue as error:
         print(f"aiortu gateway: error: {error}", file=sys.stderr)
         return 2
+    # Every line shares the settings; the first port's kind picks the defaults.
+    given = args.port
+    args.port = ports if isinstance(ports, str) else str(ports[0].port)
+    resolve_line_settings(args)
+    args.port = given
     return anyio.run(_serve, args, ports, listens)
 
 
