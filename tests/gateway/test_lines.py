@@ -92,7 +92,7 @@ async def test_overlapping_ranges_are_refused_in_one_sentence() -> None:
 
 @pytest.mark.parametrize(
     ("units", "allowed"),
-    [(range(0, 5), "1..247"), (range(240, 249), "1..247"), (range(5, 5), "1..247")],
+    [(range(5), "1..247"), (range(240, 249), "1..247"), (range(5, 5), "1..247")],
 )
 async def test_a_range_outside_the_unit_ids_is_refused(units: range, allowed: str) -> None:
     async with AsyncExitStack() as stack:

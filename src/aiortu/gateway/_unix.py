@@ -27,8 +27,9 @@ def unix_path(url: str) -> str | None:
     return path
 
 
-def _stale(path: str) -> bool:
-    """Whether `path` is a socket nobody listens on (left by a gateway that was killed)."""
+def _in_use(path: str) -> bool:
+    """Whether a program listens on the socket `path` (anyio replaces any socket file there,
+    a stale one left by a gateway that was killed, but a live one must stay)."""
     try:
         if not stat.S_ISSOCK(os.stat(path).st_mode):
             return False
@@ -37,11 +38,9 @@ def _stale(path: str) -> bool:
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
         try:
             probe.connect(path)
-        except ConnectionRefusedError:
-            return True
         except OSError:
             return False
-    return False
+    return True
 
 
 async def listen_unix(path: str, url: str) -> anyio.abc.Listener[anyio.abc.ByteStream]:
@@ -50,8 +49,8 @@ async def listen_unix(path: str, url: str) -> anyio.abc.Listener[anyio.abc.ByteS
     Raises [`PortBusy`][aiortu.errors.PortBusy] when a program listens on it or another file
     is in the way, [`PortPermissionDenied`][aiortu.errors.PortPermissionDenied] and
     [`PortNotFound`][aiortu.errors.PortNotFound] (no such directory)."""
-    if _stale(path):
-        os.unlink(path)
+    if _in_use(path):
+        raise PortBusy(url, "a program listens on that socket")
     try:
         return await anyio.create_unix_listener(path)
     except OSError as exc:
@@ -60,7 +59,7 @@ async def listen_unix(path: str, url: str) -> anyio.abc.Listener[anyio.abc.ByteS
 
 def _error(url: str, exc: OSError) -> PortError:
     if exc.errno == errno.EADDRINUSE:
-        return PortBusy(url, "a program listens on that socket, or a file is in the way")
+        return PortBusy(url, "a file that is not a socket is in the way")
     if exc.errno == errno.EACCES:
         return PortPermissionDenied(url, "no permission to create the socket there")
     if exc.errno == errno.ENOENT:
