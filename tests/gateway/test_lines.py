@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import AsyncIterator
 from contextlib import AsyncExitStack, asynccontextmanager
+from typing import Any
 
 import anyio
 import pytest
@@ -20,8 +21,10 @@ from tests.gateway.helpers import client
 
 pytestmark = pytest.mark.timeout(30)
 
-_MASTER = {"frame_gap": 0, "timeout": 0.2, "retries": 0, "turnaround_delay": 0.005,
-           "late_reply_guard": 0.005, "fail_fast_offline": True, "reconnect_fail_fast": True}  # fmt: skip
+_MASTER: dict[str, Any] = {
+    "frame_gap": 0, "timeout": 0.2, "retries": 0, "turnaround_delay": 0.005,
+    "late_reply_guard": 0.005, "fail_fast_offline": True, "reconnect_fail_fast": True,
+}  # fmt: skip
 
 
 async def _bus(stack: AsyncExitStack, unit: int, value: int) -> tuple[Master, Slave]:
@@ -77,6 +80,8 @@ async def test_a_broadcast_goes_on_every_line() -> None:
         assert await tcp.request("03 0001 0001", unit=5) == "03 02 00 63"
         assert await tcp.request("03 0001 0001", unit=30) == "03 02 00 63"
         assert server.counters.broadcasts == 2
+        assert slave_a.counters.bus_message_count == 2  # the broadcast, the read
+        assert slave_b.counters.bus_message_count == 2
 
 
 async def test_overlapping_ranges_are_refused_in_one_sentence() -> None:

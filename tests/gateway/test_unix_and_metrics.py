@@ -18,7 +18,7 @@ from tests.gateway.helpers import UNIT, TcpClient, client, line
 
 pytestmark = pytest.mark.timeout(30)
 
-_SAMPLE = re.compile(r'^(\w+)\{(.*)\} (\d+)$')
+_SAMPLE = re.compile(r"^(\w+)\{(.*)\} (\d+)$")
 
 
 async def test_a_unix_socket_serves_modbus_tcp_and_is_removed_after(tmp_path: Path) -> None:
@@ -26,10 +26,10 @@ async def test_a_unix_socket_serves_modbus_tcp_and_is_removed_after(tmp_path: Pa
     async with line(listen=(f"unix:{path}",)) as bench:
         assert bench.gateway.unix_paths == [path]
         async with await anyio.connect_unix(path) as stream:
-            tcp = TcpClient(stream)  # type: ignore[arg-type]
+            tcp = TcpClient(stream)
             assert await tcp.request("03 0000 0002", transaction_id=9) == "03 04 12 34 AB CD"
         assert bench.gateway.statistics.clients["unix"].requests == 1
-    assert not os.path.exists(path)
+    assert not await anyio.Path(path).exists()
 
 
 async def test_a_stale_socket_file_is_replaced_and_a_live_one_refused(tmp_path: Path) -> None:
@@ -42,7 +42,7 @@ async def test_a_stale_socket_file_is_replaced_and_a_live_one_refused(tmp_path: 
             async with gateway(bench.master, [f"unix:{path}"]):
                 pass
         async with await anyio.connect_unix(path) as stream:
-            assert await TcpClient(stream).request("03 0000 0001") == "03 02 12 34"  # type: ignore[arg-type]
+            assert await TcpClient(stream).request("03 0000 0001") == "03 02 12 34"
         assert bench.gateway.counters.requests == 1
 
 
@@ -86,7 +86,8 @@ async def test_metrics_are_served_as_prometheus_text() -> None:
             await tcp.request("03 0000 0001")
         await tcp.request("03 0000 0001", unit=250)
         address = bench.gateway.metrics_address
-        assert address is not None and address[1] != 0
+        assert address is not None
+        assert address[1] != 0
         head, body = await _get(address, "/metrics")
         assert head.startswith("HTTP/1.1 200 OK")
         assert "Content-Type: text/plain; version=0.0.4" in head
