@@ -61,8 +61,10 @@ a client whose unit does not answer gets exception 0B (gateway target device fai
 respond), at once while the unit is offline; 0A (gateway path unavailable) while the port
 is gone. Unit 0 is a broadcast: executed, never answered.
 
-exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the serial port or a listen address
-cannot be opened; 2 bad arguments
+as a service, one instance per serial device: examples/aiortu-gateway@.service
+
+exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 a serial port, a listen address or
+the metrics address cannot be opened; 2 bad arguments (overlapping --line ranges too)
 """
 
 
@@ -122,7 +124,12 @@ def register(subparsers: Subparsers) -> None:
         metavar="N",
         help="failures in a row after which a unit gets 0B at once, probed every 5 s (3)",
     )
-    clients = parser.add_argument_group("clients")
+    _add_client_options(parser.add_argument_group("clients"))
+    _add_statistics(parser.add_argument_group("statistics"))
+    parser.set_defaults(run=run)
+
+
+def _add_client_options(clients: argparse._ArgumentGroup) -> None:
     clients.add_argument(
         "--max-in-flight", type=positive_int, default=4, metavar="N",
         help="requests a connection may have waiting (4)",
@@ -147,7 +154,9 @@ def register(subparsers: Subparsers) -> None:
         "--cache-ms", type=non_negative_float, default=0, metavar="MS",
         help="answer a read of the same block again for MS milliseconds (0: off)",
     )  # fmt: skip
-    watch = parser.add_argument_group("statistics")
+
+
+def _add_statistics(watch: argparse._ArgumentGroup) -> None:
     watch.add_argument(
         "--stats", type=seconds, default=None, metavar="SECONDS",
         help="print statistics per line, unit and client on stderr at this interval",
@@ -156,7 +165,6 @@ def register(subparsers: Subparsers) -> None:
         "--metrics", default=None, metavar="URL",
         help="serve them as Prometheus text, as http://127.0.0.1:9102/metrics",
     )  # fmt: skip
-    parser.set_defaults(run=run)
 
 
 def non_negative_float(text: str) -> float:

@@ -10,9 +10,10 @@ them to the line one at a time, fairly. What it decides:
   quiet client's request waits for one request of each busy client, not for their queues.
 - **Pipelining.** A connection may have `max_in_flight` requests waiting for their replies;
   the gateway reads nothing more from it until one is answered (TCP then holds the client back).
-- **Unit ids.** Unit 0 is a broadcast: executed on the line, followed by the master's
-  turnaround delay, never answered. Unit 255 is `default_unit` (exception 0B when None), and
-  so is unit 0 when a client's broadcasts are not wanted... no: unit 0 is always a broadcast.
+- **Lines.** Each line has its own master, queue and window; a request goes to the line whose
+  unit range holds its unit id, and a unit no line serves gets exception 0A at once.
+- **Unit ids.** Unit 0 is a broadcast: executed on every line, followed by the master's
+  turnaround delay, never answered. Unit 255 is `default_unit` (exception 0B when None).
   Units 248..254 get exception 0B at once.
 - **Failures.** Exception 0B when the unit does not answer after the master's timeout and
   retries, and at once while it is offline (with the master's `fail_fast_offline`, which
@@ -21,6 +22,9 @@ them to the line one at a time, fairly. What it decides:
   one transaction on the line; every client gets the reply with its own ids. A write, or any
   request that is not such a read, ends the sharing for its unit, so a read sent after a write
   never gets a reply read before it.
+- **Cache.** With `cache_ms`, a read of a block answered at most that long ago is answered
+  again without the line; a write drops the blocks it touches.
+- **Statistics.** Per line, unit and client host, in `statistics`.
 - **Framing.** A connection speaks Modbus TCP, or RTU frames over TCP (see
   [`serve_connection`][aiortu.gateway.Gateway.serve_connection]).
 - **Limits.** At most `max_connections` at once (more are closed at once); a connection with
