@@ -124,3 +124,11 @@ def test_bad_lines_on_the_command_line_are_one_line_and_exit_2(
     err = capsys.readouterr().err
     assert message in err
     assert err.count("\n") == 1
+
+
+async def test_lines_given_as_masters_without_names_are_numbered() -> None:
+    async with AsyncExitStack() as stack:
+        master_a, _ = await _bus(stack, 5, 0)
+        master_b, _ = await _bus(stack, 30, 0)
+        lines = [GatewayLine(master_a, range(1, 21)), GatewayLine(master_b, range(21, 41))]
+        assert sorted(Gateway(lines).statistics.lines) == ["line 1", "line 2"]

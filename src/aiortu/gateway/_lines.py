@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from aiortu.errors import InvalidValue
 from aiortu.master import Master
 
-__all__ = ("ALL_UNITS", "GatewayLine", "check_lines")
+__all__ = ("ALL_UNITS", "GatewayLine", "check_lines", "line_names")
 
 ALL_UNITS = range(1, 248)
 """The unit ids a line serves unless told otherwise."""
@@ -60,3 +60,13 @@ def check_lines(lines: Sequence[GatewayLine]) -> None:
                     ),
                 )
         seen.append(line)
+
+
+def line_names(lines: Sequence[GatewayLine]) -> list[str]:
+    """The name of each line for statistics: its label, numbered when several share one
+    (masters given without a name)."""
+    labels = [line.label for line in lines]
+    return [
+        f"{label} {index + 1}" if labels.count(label) > 1 else label
+        for index, label in enumerate(labels)
+    ]

@@ -50,7 +50,7 @@ from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._fair_queue import FairQueue, Lane
 from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
 from aiortu.gateway._framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
-from aiortu.gateway._lines import GatewayLine, check_lines
+from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import GatewayStatistics, LineStatistics
 from aiortu.master import Master
 
@@ -115,9 +115,12 @@ class GatewayCounters:
 class _Line:
     """One line: its master, the units routed to it, its queue, window, shared reads, cache."""
 
-    def __init__(self, line: GatewayLine, cache: ReadCache | None, stats: LineStatistics) -> None:
-        assert isinstance(line.port, Master)
-        self.name = line.label
+    def __init__(
+        self, line: GatewayLine, name: str, cache: ReadCache | None, stats: LineStatistics
+    ) -> None:
+        if not isinstance(line.port, Master):
+            raise InvalidValue("port", line.port, "a running Master (gateway() opens ports)")
+        self.name = name
         self.master = line.port
         self.units = line.units
         self.queue: FairQueue[_Job] = FairQueue()
@@ -229,10 +232,11 @@ class Gateway:
         self._lines = [
             _Line(
                 line,
+                name,
                 ReadCache(cache_ms / 1000, clock) if cache_ms else None,
-                self.statistics.line(line.label),
+                self.statistics.line(name),
             )
-            for line in lines
+            for line, name in zip(lines, line_names(lines), strict=True)
         ]
         self.master = self._lines[0].master
         """The master whose engine serves the (first) line."""
