@@ -60,6 +60,11 @@ REUSED = {
         "test_a_dead_unit_gets_0b_after_its_timeout_then_at_once_while_offline",
         "test_a_port_gone_gets_0a",
     ),
+    "tests.gateway.test_lines": ("test_each_unit_goes_to_its_line_and_only_there",),
+    "tests.gateway.test_cache": (
+        "test_through_the_gateway_reads_hit_the_cache_until_a_write_or_the_age",
+    ),
+    "tests.gateway.test_unix_and_metrics": ("test_metrics_are_served_as_prometheus_text",),
     "tests.master.test_master_faults": (
         "test_no_reply_times_out_after_the_retries",
         "test_a_bad_crc_then_the_right_reply",

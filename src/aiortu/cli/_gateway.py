@@ -26,7 +26,7 @@ from aiortu.cli._arguments import (
 )
 from aiortu.cli._messages import port_failure
 from aiortu.errors import InvalidValue, PortError
-from aiortu.gateway import Listen, gateway
+from aiortu.gateway import Gateway, GatewayLine, Listen, gateway
 
 __all__ = ("register", "run")
 
@@ -41,6 +41,15 @@ examples:
   aiortu gateway /dev/ttyUSB0 --listen tcp://127.0.0.1:1502,priority=-1 \\
                               --listen tcp://0.0.0.0:1503
       local clients (the SCADA) go before those of the other listener
+  aiortu gateway /dev/ttyUSB0 --listen unix:/run/aiortu-ttyUSB0.sock
+      Modbus TCP framing on a Unix socket, for programs on this machine
+  aiortu gateway --line /dev/ttyUSB0:1-20 --line /dev/ttyUSB1:21-40 \\
+                 --listen tcp://0.0.0.0:502
+      two lines, each with its own master; units 41..247 get exception 0A
+  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:502 --cache-ms 500 \\
+                 --stats 60 --metrics http://127.0.0.1:9102/metrics
+      reads answered again for 500 ms, statistics on stderr every minute and
+      for Prometheus on port 9102
 
 two programs sharing one virtual line:
   aiortu virtual-bus --ports 2                      # prints /dev/pts/5 and /dev/pts/6
@@ -52,8 +61,10 @@ a client whose unit does not answer gets exception 0B (gateway target device fai
 respond), at once while the unit is offline; 0A (gateway path unavailable) while the port
 is gone. Unit 0 is a broadcast: executed, never answered.
 
-exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the serial port or a listen address
-cannot be opened; 2 bad arguments
+as a service, one instance per serial device: examples/aiortu-gateway@.service
+
+exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 a serial port, a listen address or
+the metrics address cannot be opened; 2 bad arguments (overlapping --line ranges too)
 """
 
 
@@ -70,15 +81,28 @@ def register(subparsers: Subparsers) -> None:
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("port", metavar="SERIAL", help="serial device path or rtu+tcp://host:port")
+    parser.add_argument(
+        "port",
+        metavar="SERIAL",
+        nargs="?",
+        help="serial device path or rtu+tcp://host:port (or give --line instead)",
+    )
+    parser.add_argument(
+        "--line",
+        action="append",
+        default=[],
+        metavar="SERIAL:FIRST-LAST",
+        help="a line and the unit ids routed to it (as /dev/ttyUSB0:1-20); repeat for several",
+    )
     parser.add_argument(
         "--listen",
         action="append",
         required=True,
         metavar="URL[,priority=N]",
         help=(
-            "tcp://host:port (Modbus TCP) or rtu+tcp://host:port (RTU frames) to listen on; "
-            "repeat for several; lower priorities go first (0)"
+            "tcp://host:port (Modbus TCP), rtu+tcp://host:port (RTU frames) or unix:PATH "
+            "(Modbus TCP on a Unix socket) to listen on; repeat for several; lower "
+            "priorities go first (0)"
         ),
     )
     line = parser.add_argument_group("line settings")
@@ -100,7 +124,12 @@ def register(subparsers: Subparsers) -> None:
         metavar="N",
         help="failures in a row after which a unit gets 0B at once, probed every 5 s (3)",
     )
-    clients = parser.add_argument_group("clients")
+    _add_client_options(parser.add_argument_group("clients"))
+    _add_statistics(parser.add_argument_group("statistics"))
+    parser.set_defaults(run=run)
+
+
+def _add_client_options(clients: argparse._ArgumentGroup) -> None:
     clients.add_argument(
         "--max-in-flight", type=positive_int, default=4, metavar="N",
         help="requests a connection may have waiting (4)",
@@ -121,7 +150,45 @@ def register(subparsers: Subparsers) -> None:
         "--no-coalesce", dest="coalesce", action="store_false",
         help="send every read, even while an identical one is in flight",
     )  # fmt: skip
-    parser.set_defaults(run=run)
+    clients.add_argument(
+        "--cache-ms", type=non_negative_float, default=0, metavar="MS",
+        help="answer a read of the same block again for MS milliseconds (0: off)",
+    )  # fmt: skip
+
+
+def _add_statistics(watch: argparse._ArgumentGroup) -> None:
+    watch.add_argument(
+        "--stats", type=seconds, default=None, metavar="SECONDS",
+        help="print statistics per line, unit and client on stderr at this interval",
+    )  # fmt: skip
+    watch.add_argument(
+        "--metrics", default=None, metavar="URL",
+        help="serve them as Prometheus text, as http://127.0.0.1:9102/metrics",
+    )  # fmt: skip
+
+
+def non_negative_float(text: str) -> float:
+    """A number of 0 or more, for argparse."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"{text} is negative: give 0 or more")
+    return value
+
+
+def _ports(args: argparse.Namespace) -> str | list[GatewayLine]:
+    """The positional port, or the `--line` values; raises InvalidValue when wrong."""
+    if args.port is not None and args.line:
+        raise InvalidValue(
+            "--line", args.line, "", message="give either SERIAL or --line, not both"
+        )
+    if args.port is not None:
+        return str(args.port)
+    if not args.line:
+        raise InvalidValue("SERIAL", None, "", message="give a SERIAL port or --line")
+    return [_parse_line(text) for text in args.line]
 
 
 def _listens(texts: list[str]) -> list[Listen] | str:
@@ -144,26 +211,60 @@ def _listens(texts: list[str]) -> list[Listen] | str:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT or SIGTERM; return the exit code."""
-    resolve_line_settings(args)
     listens = _listens(args.listen)
-    if isinstance(listens, str):
-        print(f"aiortu gateway: error: {listens}", file=sys.stderr)
+    try:
+        if isinstance(listens, str):
+            raise InvalidValue("--listen", args.listen, "", message=listens)
+        ports = _ports(args)
+    except InvalidValue as error:
+        print(f"aiortu gateway: error: {error}", file=sys.stderr)
         return 2
-    return anyio.run(_serve, args, listens)
+    # Every line shares the settings; the first port's kind picks the defaults.
+    given = args.port
+    args.port = ports if isinstance(ports, str) else str(ports[0].port)
+    resolve_line_settings(args)
+    args.port = given
+    return anyio.run(_serve, args, ports, listens)
 
 
-async def _serve(args: argparse.Namespace, listens: list[Listen]) -> int:
+def _parse_line(text: str) -> GatewayLine:
+    """A `--line PORT:FIRST-LAST` value (or `PORT:UNIT`); raises InvalidValue when wrong."""
+    port, colon, units = text.rpartition(":")
+    first, dash, last = units.partition("-")
+    try:
+        if not (colon and port):
+            raise ValueError(text)
+        low = int(first)
+        high = int(last) if dash else low
+    except ValueError:
+        raise InvalidValue(
+            "--line", text, "PORT:FIRST-LAST", message=f"--line {text}: expected PORT:FIRST-LAST "
+            "with unit ids in 1..247, as /dev/ttyUSB0:1-20"
+        ) from None  # fmt: skip
+    if not 1 <= low <= high <= 247:
+        raise InvalidValue(
+            "--line", text, "PORT:FIRST-LAST", message=f"--line {text}: the units must be "
+            "FIRST-LAST with 1 <= FIRST <= LAST <= 247"
+        )  # fmt: skip
+    return GatewayLine(port, range(low, high + 1))
+
+
+async def _serve(
+    args: argparse.Namespace, ports: str | list[GatewayLine], listens: list[Listen]
+) -> int:
     failure: CommandFailed | None = None
     with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
         try:
             async with gateway(
-                args.port,
+                ports,
                 listens,
                 max_in_flight=args.max_in_flight,
                 max_connections=args.max_connections,
                 idle_timeout=args.idle_timeout,
                 default_unit=args.default_unit,
                 coalesce=args.coalesce,
+                cache_ms=args.cache_ms,
+                metrics=args.metrics,
                 baudrate=args.baudrate,
                 parity=args.parity,
                 stopbits=args.stopbits,
@@ -172,11 +273,13 @@ async def _serve(args: argparse.Namespace, listens: list[Listen]) -> int:
                 retries=args.retries,
                 offline_after=args.offline_after,
             ) as server:
-                ports = ", ".join(f"{host}:{port}" for host, port in server.local_addresses)
-                line = f"{args.port} at {args.baudrate} 8{args.parity}{args.stopbits}"
-                _say(f"{line} shared on {ports}; Ctrl-C to stop")
-                async for _ in signals:
-                    break
+                _say(f"{_shared_what(args, server)}; Ctrl-C to stop")
+                async with anyio.create_task_group() as tasks:
+                    if args.stats is not None:
+                        tasks.start_soon(_print_stats, server, args.stats)
+                    async for _ in signals:
+                        break
+                    tasks.cancel_scope.cancel()
         except PortError as error:
             failure = CommandFailed(port_failure(error))
         except InvalidValue as error:
@@ -186,6 +289,24 @@ async def _serve(args: argparse.Namespace, listens: list[Listen]) -> int:
     if failure is not None:
         raise failure
     return 0
+
+
+def _shared_what(args: argparse.Namespace, server: Gateway) -> str:
+    """What the gateway serves where, for its first line on stderr."""
+    where = [f"{host}:{port}" for host, port in server.local_addresses] + server.unix_paths
+    names = args.port or ", ".join(args.line)
+    text = f"{names} at {args.baudrate} 8{args.parity}{args.stopbits} shared on {', '.join(where)}"
+    if server.metrics_address is not None:
+        host, port = server.metrics_address
+        text += f"; metrics on http://{host}:{port}"
+    return text
+
+
+async def _print_stats(server: Gateway, interval: float) -> None:
+    while True:
+        await anyio.sleep(interval)
+        for line in server.statistics.summary():
+            _say(line)
 
 
 def _say(message: str) -> None:

@@ -1,9 +1,10 @@
 """The line server: network clients share one serial line through its master's engine.
 
 [`gateway`][aiortu.gateway.gateway] opens a line (or takes a running
-[`Master`][aiortu.master.Master]), listens on `tcp://` (Modbus TCP) and `rtu+tcp://` (RTU frames
-over TCP) URLs and serves every client through
-the one engine of the line; [`Gateway`][aiortu.gateway.Gateway] is the server itself. Requests
+[`Master`][aiortu.master.Master]), or several lines routed by unit ranges
+([`GatewayLine`][aiortu.gateway.GatewayLine]), listens on `tcp://` (Modbus TCP), `rtu+tcp://`
+(RTU frames over TCP) and `unix:PATH` URLs and serves every client through the one engine of
+its unit's line; [`Gateway`][aiortu.gateway.Gateway] is the server itself. Requests
 are forwarded at frame level: a function code aiortu knows is sent as its request class, so the
 engine checks the reply against the request; any other code (user-defined ones included) goes
 out byte for byte. See `docs/gateway.md`.
@@ -15,6 +16,7 @@ import sys
 import types
 from typing import Any
 
+from aiortu.gateway._lines import GatewayLine
 from aiortu.gateway._open import Listen, gateway
 from aiortu.gateway._server import (
     DEFAULT_IDLE_TIMEOUT,
@@ -23,14 +25,25 @@ from aiortu.gateway._server import (
     Gateway,
     GatewayCounters,
 )
+from aiortu.gateway._stats import (
+    ClientStatistics,
+    GatewayStatistics,
+    LineStatistics,
+    UnitStatistics,
+)
 
 __all__ = (
+    "ClientStatistics",
     "DEFAULT_IDLE_TIMEOUT",
     "DEFAULT_MAX_CONNECTIONS",
     "DEFAULT_MAX_IN_FLIGHT",
     "Gateway",
     "GatewayCounters",
+    "GatewayLine",
+    "GatewayStatistics",
+    "LineStatistics",
     "Listen",
+    "UnitStatistics",
     "gateway",
 )
 

@@ -1,22 +1,27 @@
-"""`gateway(...)`: open the line (or take a running master), listen, serve until the block ends."""
+"""`gateway(...)`: open the lines (or take running masters), listen, serve until the block ends."""
 
 from __future__ import annotations
 
 import contextlib
 import functools
-from collections.abc import AsyncIterator, Sequence
+import time
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import anyio
+import anyio.abc
 
 from aiortu.errors import InvalidValue
+from aiortu.gateway._lines import GatewayLine, check_lines
+from aiortu.gateway._metrics import parse_metrics_url, serve_metrics
 from aiortu.gateway._server import (
     DEFAULT_IDLE_TIMEOUT,
     DEFAULT_MAX_CONNECTIONS,
     DEFAULT_MAX_IN_FLIGHT,
     Gateway,
 )
+from aiortu.gateway._unix import listen_unix, remove_socket, unix_path
 from aiortu.master import Master, open_master
 from aiortu.transport import MODBUS_TCP_SCHEME, listen_tcp, parse_listen_url
 
@@ -28,7 +33,8 @@ class Listen:
     """A listen URL and the priority of its connections: lower values are served first.
 
     `tcp://host:port` serves Modbus TCP, `rtu+tcp://host:port` RTU frames over TCP (as a
-    serial device server sends them); port 0 asks for a free port."""
+    serial device server sends them), `unix:PATH` Modbus TCP on a Unix socket; port 0 asks
+    for a free port."""
 
     url: str
     priority: int = 0
@@ -38,13 +44,60 @@ def _listen(item: str | Listen) -> Listen:
     listen = item if isinstance(item, Listen) else Listen(item)
     if type(listen.priority) is not int:
         raise InvalidValue("priority", listen.priority, "an int (lower values go first)")
-    parse_listen_url(listen.url)  # raises for a bad one, before anything is opened
+    if unix_path(listen.url) is None:
+        parse_listen_url(listen.url)  # raises for a bad one, before anything is opened
     return listen
+
+
+def _lines(
+    ports: str | Master | Sequence[GatewayLine], options: dict[str, Any]
+) -> list[GatewayLine]:
+    if isinstance(ports, (str, Master)):
+        lines = [GatewayLine(ports)]
+    else:
+        lines = list(ports)
+        if not all(isinstance(line, GatewayLine) for line in lines):
+            raise InvalidValue("lines", ports, "a port name, a Master or a list of GatewayLine")
+    check_lines(lines)
+    if options and any(isinstance(line.port, Master) for line in lines):
+        raise InvalidValue("master_options", sorted(options), "none with a Master given")
+    return lines
+
+
+async def _open_lines(
+    stack: contextlib.AsyncExitStack, lines: list[GatewayLine], options: dict[str, Any]
+) -> list[GatewayLine]:
+    """The lines with a running master each: those given, and those opened with `options`."""
+    options.setdefault("fail_fast_offline", True)
+    options.setdefault("reconnect_fail_fast", True)
+    opened = []
+    for line in lines:
+        master = line.port
+        if not isinstance(master, Master):
+            master = await stack.enter_async_context(open_master(master, **options))
+        opened.append(GatewayLine(master, line.units, line.label))
+    return opened
+
+
+async def _listener(
+    stack: contextlib.AsyncExitStack, url: str
+) -> anyio.abc.Listener[anyio.abc.ByteStream]:
+    path = unix_path(url)
+    if path is not None:
+        listener = await listen_unix(path, url)
+        stack.callback(remove_socket, path)
+        return listener
+    address = parse_listen_url(url)
+    return await listen_tcp(address.host, address.port, url=url)
+
+
+def _rtu_framing(url: str) -> bool:
+    return unix_path(url) is None and parse_listen_url(url).scheme != MODBUS_TCP_SCHEME
 
 
 @contextlib.asynccontextmanager
 async def gateway(
-    serial_port_or_master: str | Master,
+    serial_port_or_master: str | Master | Sequence[GatewayLine],
     listen: Sequence[str | Listen] = (),
     *,
     max_in_flight: int = DEFAULT_MAX_IN_FLIGHT,
@@ -52,53 +105,53 @@ async def gateway(
     idle_timeout: float = DEFAULT_IDLE_TIMEOUT,
     default_unit: int | None = None,
     coalesce: bool = True,
+    cache_ms: float = 0,
+    clock: Callable[[], float] = time.monotonic,
+    metrics: str | None = None,
     **master_options: Any,
 ) -> AsyncIterator[Gateway]:
-    """Share one serial line with network clients: yield a running
+    """Share serial lines with network clients: yield a running
     [`Gateway`][aiortu.gateway.Gateway] listening on every URL in `listen`.
 
     `serial_port_or_master` is a port name for [`open_master`][aiortu.master.open_master] (with
     `master_options`; `fail_fast_offline` and `reconnect_fail_fast` default to true here, so that
-    clients get exceptions 0B and 0A at once) or a running [`Master`][aiortu.master.Master],
-    used as it is. The other arguments are [`Gateway`][aiortu.gateway.Gateway]'s.
+    clients get exceptions 0B and 0A at once), a running [`Master`][aiortu.master.Master], used
+    as it is, or several [`GatewayLine`][aiortu.gateway.GatewayLine]s, each with its unit range.
+    With `metrics` (`http://127.0.0.1:9102/metrics`), the statistics are served there as
+    Prometheus text, from [`metrics_address`][aiortu.gateway.Gateway.metrics_address]. The other
+    arguments are [`Gateway`][aiortu.gateway.Gateway]'s.
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a listen URL that is not
-    `tcp://host:port` or `rtu+tcp://host:port`, and [`PortError`][aiortu.errors.PortError]s
-    when a port cannot be opened.
+    `tcp://host:port`, `rtu+tcp://host:port` or `unix:PATH`, or lines whose unit ranges
+    overlap, and [`PortError`][aiortu.errors.PortError]s when a port cannot be opened.
     """
     listens = [_listen(item) for item in listen]
+    lines = _lines(serial_port_or_master, master_options)
+    where = parse_metrics_url(metrics) if metrics is not None else None
     async with contextlib.AsyncExitStack() as stack:
-        if isinstance(serial_port_or_master, Master):
-            if master_options:
-                raise InvalidValue(
-                    "master_options", sorted(master_options), "none with a Master given"
-                )
-            master = serial_port_or_master
-        else:
-            master_options.setdefault("fail_fast_offline", True)
-            master_options.setdefault("reconnect_fail_fast", True)
-            master = await stack.enter_async_context(
-                open_master(serial_port_or_master, **master_options)
-            )
         server = Gateway(
-            master,
+            await _open_lines(stack, lines, master_options),
             max_in_flight=max_in_flight,
             max_connections=max_connections,
             idle_timeout=idle_timeout,
             default_unit=default_unit,
             coalesce=coalesce,
+            cache_ms=cache_ms,
+            clock=clock,
         )
-        listeners = []
-        for item in listens:
-            address = parse_listen_url(item.url)
-            listeners.append((await listen_tcp(address.host, address.port, url=item.url), item))
+        listeners = [(await _listener(stack, item.url), item) for item in listens]
+        http = None if where is None else await listen_tcp(where.host, where.port, url=metrics)
         tasks = await stack.enter_async_context(anyio.create_task_group())
         stack.callback(tasks.cancel_scope.cancel)
         await tasks.start(server.run)
         for listener, item in listeners:
-            rtu_framing = parse_listen_url(item.url).scheme != MODBUS_TCP_SCHEME
             serve = functools.partial(
-                server.serve, listener, priority=item.priority, rtu_framing=rtu_framing
+                server.serve, listener, priority=item.priority, rtu_framing=_rtu_framing(item.url)
             )
             await tasks.start(serve)
+        if http is not None and where is not None:
+            address = http.extra(anyio.abc.SocketAttribute.local_address)
+            assert isinstance(address, tuple)
+            server.metrics_address = (str(address[0]), int(address[1]))
+            tasks.start_soon(serve_metrics, http, where.path, server.statistics.prometheus)
         yield server

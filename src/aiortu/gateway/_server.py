@@ -10,9 +10,10 @@ them to the line one at a time, fairly. What it decides:
   quiet client's request waits for one request of each busy client, not for their queues.
 - **Pipelining.** A connection may have `max_in_flight` requests waiting for their replies;
   the gateway reads nothing more from it until one is answered (TCP then holds the client back).
-- **Unit ids.** Unit 0 is a broadcast: executed on the line, followed by the master's
-  turnaround delay, never answered. Unit 255 is `default_unit` (exception 0B when None), and
-  so is unit 0 when a client's broadcasts are not wanted... no: unit 0 is always a broadcast.
+- **Lines.** Each line has its own master, queue and window; a request goes to the line whose
+  unit range holds its unit id, and a unit no line serves gets exception 0A at once.
+- **Unit ids.** Unit 0 is a broadcast: executed on every line, followed by the master's
+  turnaround delay, never answered. Unit 255 is `default_unit` (exception 0B when None).
   Units 248..254 get exception 0B at once.
 - **Failures.** Exception 0B when the unit does not answer after the master's timeout and
   retries, and at once while it is offline (with the master's `fail_fast_offline`, which
@@ -21,6 +22,9 @@ them to the line one at a time, fairly. What it decides:
   one transaction on the line; every client gets the reply with its own ids. A write, or any
   request that is not such a read, ends the sharing for its unit, so a read sent after a write
   never gets a reply read before it.
+- **Cache.** With `cache_ms`, a read of a block answered at most that long ago is answered
+  again without the line; a write drops the blocks it touches.
+- **Statistics.** Per line, unit and client host, in `statistics`.
 - **Framing.** A connection speaks Modbus TCP, or RTU frames over TCP (see
   [`serve_connection`][aiortu.gateway.Gateway.serve_connection]).
 - **Limits.** At most `max_connections` at once (more are closed at once); a connection with
@@ -30,7 +34,8 @@ them to the line one at a time, fairly. What it decides:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -41,9 +46,12 @@ from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
 from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.errors import InvalidValue
+from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._fair_queue import FairQueue, Lane
 from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
 from aiortu.gateway._framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
+from aiortu.gateway._lines import GatewayLine, check_lines, line_names
+from aiortu.gateway._stats import GatewayStatistics, LineStatistics
 from aiortu.master import Master
 
 __all__ = (
@@ -72,6 +80,7 @@ _READ_SIZE = 4096
 _UNIT_RANGE = range(1, 248)
 _ALL_UNITS = 0xFF
 _NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
+_NO_PATH = ExceptionCode.GATEWAY_PATH_UNAVAILABLE
 _GONE = (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError)
 
 
@@ -98,7 +107,27 @@ class GatewayCounters:
     """Requests to unit 0 sent on the line."""
     refused_units: int = 0
     """Requests answered with exception 0B at once for their unit id (248..254, or 255 with no
-    default unit)."""
+    default unit), or 0A for a unit no line serves."""
+    cache_hits: int = 0
+    """Reads answered from the read cache: no transaction of their own."""
+
+
+class _Line:
+    """One line: its master, the units routed to it, its queue, window, shared reads, cache."""
+
+    def __init__(
+        self, line: GatewayLine, name: str, cache: ReadCache | None, stats: LineStatistics
+    ) -> None:
+        if not isinstance(line.port, Master):
+            raise InvalidValue("port", line.port, "a running Master (gateway() opens ports)")
+        self.name = name
+        self.master = line.port
+        self.units = line.units
+        self.queue: FairQueue[_Job] = FairQueue()
+        self.window = anyio.Semaphore(_ENGINE_WINDOW)
+        self.shared: dict[tuple[int, bytes], _Shared] = {}
+        self.cache = cache
+        self.stats = stats
 
 
 class _Connection:
@@ -110,12 +139,20 @@ class _Connection:
         self.stream = stream
         self.priority = priority
         self.framing = framing
-        self.lane: Lane[_Job] = Lane(priority)
+        self.lanes: dict[_Line, Lane[_Job]] = {}
+        self.client = _host(stream)
         # Without transaction ids, one request at a time keeps the replies in order.
         self.slots = anyio.Semaphore(1 if framing.in_order else max_in_flight)
         self.in_flight = 0
         self.open = True
         self._send_lock = anyio.Lock()
+
+    def lane(self, line: _Line) -> Lane[_Job]:
+        """The connection's lane in the queue of `line`."""
+        lane = self.lanes.get(line)
+        if lane is None:
+            lane = self.lanes[line] = Lane(self.priority)
+        return lane
 
     async def answer(self, adu: Adu, reply: bytes | None) -> None:
         """Send `reply` with the request's ids (None: nothing to send), and free the slot."""
@@ -135,6 +172,7 @@ class _Job:
     connection: _Connection
     adu: Adu
     unit: int
+    line: _Line
     """The unit on the line (unit 255 mapped)."""
 
 
@@ -154,21 +192,34 @@ class Gateway:
     [`serve_connection`][aiortu.gateway.Gateway.serve_connection];
     [`gateway`][aiortu.gateway.gateway] does it all for listen URLs.
 
+    `master` is the line's master, or several [`GatewayLine`][aiortu.gateway.GatewayLine]s
+    whose `port` is a running master: a request goes to the line whose `units` hold its unit
+    id, and a unit no line serves gets exception 0A (gateway path unavailable: the spec's code
+    for a gateway with no path to the target, as a misconfiguration). With `cache_ms`, a read
+    (01 to 04) of the same unit and block as one answered at most that many milliseconds ago is
+    answered again without the line; `clock` gives the cache's time in seconds.
+
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a `max_in_flight` or
-    `max_connections` below 1, an `idle_timeout` that is not positive, or a `default_unit`
-    outside 1..247.
+    `max_connections` below 1, an `idle_timeout` that is not positive, a `default_unit`
+    outside 1..247, a negative `cache_ms`, or lines whose unit ranges overlap.
     """
 
     def __init__(
         self,
-        master: Master,
+        master: Master | Sequence[GatewayLine],
         *,
         max_in_flight: int = DEFAULT_MAX_IN_FLIGHT,
         max_connections: int = DEFAULT_MAX_CONNECTIONS,
         idle_timeout: float = DEFAULT_IDLE_TIMEOUT,
         default_unit: int | None = None,
         coalesce: bool = True,
+        cache_ms: float = 0,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        lines = [GatewayLine(master)] if isinstance(master, Master) else list(master)
+        check_lines(lines)
+        if not (isinstance(cache_ms, (int, float)) and cache_ms >= 0):
+            raise InvalidValue("cache_ms", cache_ms, "a number of milliseconds, 0 or more")
         for name, value in (("max_in_flight", max_in_flight), ("max_connections", max_connections)):
             if type(value) is not int or value < 1:
                 raise InvalidValue(name, value, "an int of at least 1")
@@ -176,8 +227,19 @@ class Gateway:
             raise InvalidValue("idle_timeout", idle_timeout, "a positive number of seconds")
         if default_unit is not None and default_unit not in _UNIT_RANGE:
             raise InvalidValue("default_unit", default_unit, _UNIT_RANGE)
-        self.master = master
-        """The master whose engine serves the line."""
+        self.statistics = GatewayStatistics()
+        """Counters per line, unit and client."""
+        self._lines = [
+            _Line(
+                line,
+                name,
+                ReadCache(cache_ms / 1000, clock) if cache_ms else None,
+                self.statistics.line(name),
+            )
+            for line, name in zip(lines, line_names(lines), strict=True)
+        ]
+        self.master = self._lines[0].master
+        """The master whose engine serves the (first) line."""
         self.max_in_flight = max_in_flight
         """Requests a connection may have waiting for their replies."""
         self.max_connections = max_connections
@@ -191,12 +253,15 @@ class Gateway:
         self.counters = GatewayCounters()
         """What happened to the connections and requests."""
         self.local_addresses: list[tuple[str, int]] = []
-        """The host and port of each listener [`serve`][aiortu.gateway.Gateway.serve] serves."""
+        """The host and port of each TCP listener [`serve`][aiortu.gateway.Gateway.serve]
+        serves."""
+        self.metrics_address: tuple[str, int] | None = None
+        """The host and port the statistics are served on as Prometheus text (None: not)."""
+        self.unix_paths: list[str] = []
+        """The path of each Unix socket listener [`serve`][aiortu.gateway.Gateway.serve]
+        serves."""
         self._connections = 0
         self._refusing = False
-        self._queue: FairQueue[_Job] = FairQueue()
-        self._window = anyio.Semaphore(_ENGINE_WINDOW)
-        self._shared: dict[tuple[int, bytes], _Shared] = {}
         self._tasks: anyio.abc.TaskGroup | None = None
 
     @property
@@ -216,17 +281,22 @@ class Gateway:
     async def run(
         self, *, task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED
     ) -> None:
-        """Hand queued requests to the line in turn, until cancelled."""
+        """Hand queued requests to each line in turn, until cancelled."""
         async with anyio.create_task_group() as tasks:
             self._tasks = tasks
+            for line in self._lines:
+                tasks.start_soon(self._dispatch, line, tasks)
             task_status.started()
             try:
-                while True:
-                    await self._window.acquire()
-                    job = await self._queue.take()
-                    tasks.start_soon(self._run_job, job)
+                await anyio.sleep_forever()
             finally:
                 self._tasks = None
+
+    async def _dispatch(self, line: _Line, tasks: anyio.abc.TaskGroup) -> None:
+        while True:
+            await line.window.acquire()
+            job = await line.queue.take()
+            tasks.start_soon(self._run_job, job)
 
     async def _run_job(self, job: _Job) -> None:
         released = False
@@ -235,7 +305,7 @@ class Gateway:
             nonlocal released
             if not released:
                 released = True
-                self._window.release()
+                job.line.window.release()
 
         reply: bytes | None = None
         try:
@@ -246,37 +316,77 @@ class Gateway:
             reply = exception_reply(job.adu.pdu, _NO_RESPONSE)
         finally:
             release()
-            await job.connection.answer(job.adu, reply)
+            if reply is not None:
+                self.statistics.answered(job.line.name, job.unit, reply)
+            await self._answer(job.connection, job.adu, reply)
+
+    async def _answer(self, connection: _Connection, adu: Adu, reply: bytes | None) -> None:
+        if reply is not None:
+            self.statistics.client(connection.client).replies += 1
+        await connection.answer(adu, reply)
 
     async def _reply(self, job: _Job, release: Callable[[], None]) -> bytes | None:
         """The reply to `job` from the line; `release` frees its place in the engine window
-        early when it shares another read's transaction."""
-        pdu, unit, priority = job.adu.pdu, job.unit, job.connection.priority
+        early when the cache or another read's transaction answers it."""
+        pdu, unit, line = job.adu.pdu, job.unit, job.line
         if unit == BROADCAST_UNIT:
-            self._shared.clear()  # a broadcast may write anything on any unit
-            if await forward_broadcast(self.master, pdu, priority):
-                self.counters.transactions += 1
-                self.counters.broadcasts += 1
+            await self._broadcast(pdu, job.connection.priority)
             return None
-        key = (unit, pdu) if self.coalesce and pdu[0] in COALESCED_CODES else None
-        if key is None:
-            for other in [k for k in self._shared if k[0] == unit]:
-                del self._shared[other]  # later reads of this unit must follow the write
-            self.counters.transactions += 1
-            return await forward(self.master, unit, pdu, priority)
-        shared = self._shared.get(key)
+        if pdu[0] not in COALESCED_CODES:
+            for other in [k for k in line.shared if k[0] == unit]:
+                del line.shared[other]  # later reads of this unit must follow the write
+            if line.cache is not None:
+                line.cache.invalidate(unit, pdu)
+            self._count_transaction(line)
+            return await forward(line.master, unit, pdu, job.connection.priority)
+        cache = line.cache if line.cache is not None and line.cache.cacheable(pdu) else None
+        if cache is not None and (cached := cache.get(unit, pdu)) is not None:
+            release()
+            self.counters.cache_hits += 1
+            line.stats.cache_hits += 1
+            return cached
+        generation = cache.generation(unit) if cache is not None else (0, 0)
+        reply = await self._shared_read(job, release)
+        if cache is not None:
+            cache.put(unit, pdu, reply, generation)
+        return reply
+
+    async def _broadcast(self, pdu: bytes, priority: int) -> None:
+        """Send `pdu` to every unit of every line: a broadcast may write anything."""
+        for line in self._lines:
+            line.shared.clear()
+            if line.cache is not None:
+                line.cache.clear()
+            if await forward_broadcast(line.master, pdu, priority):
+                self._count_transaction(line)
+                self.counters.broadcasts += 1
+                line.stats.broadcasts += 1
+
+    def _count_transaction(self, line: _Line) -> None:
+        self.counters.transactions += 1
+        line.stats.transactions += 1
+
+    async def _shared_read(self, job: _Job, release: Callable[[], None]) -> bytes:
+        """The reply to read `job`, shared with identical reads in flight at the same moment."""
+        pdu, unit, line = job.adu.pdu, job.unit, job.line
+        if not self.coalesce:
+            self._count_transaction(line)
+            return await forward(line.master, unit, pdu, job.connection.priority)
+        key = (unit, pdu)
+        shared = line.shared.get(key)
         if shared is not None:
             release()
             self.counters.coalesced += 1
+            line.stats.coalesced += 1
             await shared.done.wait()
             return shared.reply
-        shared = self._shared[key] = _Shared(exception_reply(pdu, _NO_RESPONSE))
-        self.counters.transactions += 1
+        shared = line.shared[key] = _Shared(exception_reply(pdu, _NO_RESPONSE))
+        self._count_transaction(line)
         try:
-            shared.reply = await forward(self.master, unit, pdu, priority)
+            shared.reply = await forward(line.master, unit, pdu, job.connection.priority)
         finally:
-            if self._shared.get(key) is shared:
-                del self._shared[key]
+            if line.shared.get(key) is shared:
+                del line.shared[key]
             shared.done.set()
         return shared.reply
 
@@ -297,6 +407,8 @@ class Gateway:
         address = listener.extra(anyio.abc.SocketAttribute.local_address, None)
         if isinstance(address, tuple):
             self.local_addresses.append((str(address[0]), int(address[1])))
+        elif isinstance(address, str):
+            self.unix_paths.append(address)
         task_status.started()
 
         async def accepted(stream: anyio.abc.ByteStream) -> None:
@@ -322,6 +434,7 @@ class Gateway:
             return
         self._connections += 1
         self.counters.connections_accepted += 1
+        self.statistics.client(_host(stream)).connections += 1
         try:
             await self.serve_connection(stream, priority, rtu_framing=rtu_framing)
         except Exception:
@@ -355,7 +468,8 @@ class Gateway:
             return
         finally:
             connection.open = False
-            self._queue.drop(connection.lane)
+            for line, lane in connection.lanes.items():
+                line.queue.drop(lane)
             await stream.aclose()
 
     async def _next_requests(self, connection: _Connection) -> list[Adu] | None:
@@ -382,18 +496,40 @@ class Gateway:
             return None
 
     def _accept(self, connection: _Connection, adu: Adu) -> None:
-        """Queue `adu` for the line, or answer it at once when its unit id names no unit."""
+        """Queue `adu` for its line, or answer it at once when its unit id names no unit (0B)
+        or a unit no line serves (0A)."""
         self.counters.requests += 1
+        self.statistics.client(connection.client).requests += 1
         unit = adu.unit
         if unit == _ALL_UNITS and self.default_unit is not None:
             unit = self.default_unit
-        if unit != BROADCAST_UNIT and unit not in _UNIT_RANGE:
+        line = self._route(unit)
+        if line is None:
             self.counters.refused_units += 1
             assert self._tasks is not None, "Gateway.run is not running"
-            refusal = exception_reply(adu.pdu, _NO_RESPONSE)
-            self._tasks.start_soon(connection.answer, adu, refusal)
+            code = _NO_PATH if unit in _UNIT_RANGE else _NO_RESPONSE
+            refusal = exception_reply(adu.pdu, code)
+            self._tasks.start_soon(self._answer, connection, adu, refusal)
             return
-        self._queue.put(connection.lane, _Job(connection, adu, unit))
+        self.statistics.unit(line.name, unit).requests += 1
+        line.queue.put(connection.lane(line), _Job(connection, adu, unit, line))
+
+    def _route(self, unit: int) -> _Line | None:
+        """The line of `unit` (the first line for a broadcast, which goes on every line)."""
+        if unit == BROADCAST_UNIT:
+            return self._lines[0]
+        for line in self._lines:
+            if unit in line.units:
+                return line
+        return None
+
+
+def _host(stream: anyio.abc.ByteStream) -> str:
+    """The client's host, for statistics (its port changes with every connection)."""
+    address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
+    if isinstance(address, tuple):
+        return str(address[0])
+    return "unix" if isinstance(address, str) else "local"
 
 
 def _peer(stream: anyio.abc.ByteStream) -> str:
