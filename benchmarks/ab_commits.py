@@ -3,7 +3,7 @@
 Run from the repository root with pymodbus and socat installed::
 
     python benchmarks/ab_commits.py BEFORE AFTER [--rounds 8] [--requests 3000]
-        [--part master|slave ...]
+        [--part master|slave|calls ...]
 
 BEFORE and AFTER are checkouts of the repository (for an older commit,
 ``git archive COMMIT | tar -x -C DIR``); each runs with ``PYTHONPATH=TREE/src``, and its
@@ -19,7 +19,11 @@ master: one socat pty pair at 19200 8N2 and one pymodbus RTU server; each round,
 slave: each round, a fresh slave process per contender on a socat pty pair of its own
     (aiortu's of BEFORE and of AFTER with ``frame_gap=0``, pymodbus's server), read by
     pymodbus's ``AsyncModbusSerialClient`` in this process; the slave's CPU per request
-    is read from /proc around the timed reads.
+    is read from /proc around the timed reads (in clock ticks of 10 ms: use 6000 reads or
+    more per round).
+calls: the Python function calls (and coroutine resumptions) of one read of each tree's
+    master, counted with ``sys.setprofile`` over up to 1000 reads in one process each:
+    a figure the load of the machine does not move.
 
 Prints the machine, the commands, the load average before and after, and a table per
 part: medians, min..max, and the ratios to AFTER and to pymodbus.
@@ -59,17 +63,29 @@ def commit(tree: str) -> str:
 # -- the child processes of the master part ---------------------------------------------------
 
 
-async def child_aiortu(port: str, requests: int) -> tuple[str, float]:
+async def child_aiortu(port: str, requests: int, count_calls: bool = False) -> tuple[str, float]:
+    """Time *requests* reads; return where aiortu came from and the CPU seconds per read
+    (with *count_calls*, the Python function calls and resumptions per read instead)."""
     import aiortu
+
+    calls = 0
+
+    def count(frame: object, event: str, arg: object) -> None:
+        nonlocal calls
+        calls += event == "call"
 
     async with aiortu.open_master(port, frame_gap=0, timeout=1.0, **PTY) as master:  # type: ignore[arg-type]
         for _ in range(20):
             await master.read_holding_registers(1, 0, 10)
         cpu = time.process_time()
+        if count_calls:
+            sys.setprofile(count)
         for _ in range(requests):
             if await master.read_holding_registers(1, 0, 10) != EXPECTED:
                 raise AssertionError("aiortu read the wrong registers")
-        return aiortu.__file__, (time.process_time() - cpu) / requests
+        sys.setprofile(None)
+        cost = calls if count_calls else time.process_time() - cpu
+        return aiortu.__file__, cost / requests
 
 
 async def pymodbus_reads(port: str, requests: int) -> float:
@@ -108,8 +124,8 @@ def child(kind: str, port: str, requests: int) -> None:
 
     warnings.filterwarnings("ignore")
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-    if kind == "aiortu":
-        path, cpu = asyncio.run(child_aiortu(port, requests))
+    if kind in ("aiortu", "calls"):
+        path, cpu = asyncio.run(child_aiortu(port, requests, kind == "calls"))
         print(path)
     elif kind == "pymodbus":
         cpu = asyncio.run(pymodbus_reads(port, requests)) / requests
@@ -125,7 +141,7 @@ def run_child(tree: str, kind: str, port: str, requests: int) -> float:
     if done.returncode != 0:
         raise RuntimeError(f"the {kind} client of {tree} failed:\n{done.stderr}")
     lines = done.stdout.split()
-    if kind == "aiortu" and not lines[0].startswith(os.path.realpath(tree)):
+    if kind in ("aiortu", "calls") and not lines[0].startswith(os.path.realpath(tree)):
         raise RuntimeError(f"the client of {tree} imported aiortu from {lines[0]}")
     return float(lines[-1])
 
@@ -153,6 +169,18 @@ def part_master(before: str, after: str, rounds: int, requests: int) -> dict[str
             for name in rotated(list(contenders), turn):
                 tree, kind = contenders[name]
                 results[name].append(run_child(tree, kind, client_port, requests))
+    return results
+
+
+def part_calls(before: str, after: str, rounds: int, requests: int) -> dict[str, list[float]]:
+    """Python calls per read of each tree's master (one run each: the count is the same
+    whatever the load)."""
+    results: dict[str, list[float]] = {}
+    with benchlib.Children() as children:
+        client_port, server_port = children.socat_pair()
+        children.server("pymodbus", server_port)
+        for name, tree in (("before", before), ("after", after)):
+            results[name] = [run_child(tree, "calls", client_port, min(requests, 1000))]
     return results
 
 
@@ -195,19 +223,20 @@ def part_slave(before: str, after: str, rounds: int, requests: int) -> dict[str,
     return results
 
 
-def report(title: str, results: dict[str, list[float]], reference: str) -> list[str]:
+def report(title: str, results: dict[str, list[float]], reference: str, unit: str) -> list[str]:
     cpu = {name: benchlib.median(values) for name, values in results.items()}
+    scale = 1e6 if unit.startswith("CPU") else 1.0
     rows = [
         [
             name,
-            f"{cpu[name] * 1e6:.1f}",
-            f"{min(values) * 1e6:.1f}..{max(values) * 1e6:.1f}",
+            f"{cpu[name] * scale:.1f}",
+            f"{min(values) * scale:.1f}..{max(values) * scale:.1f}",
             f"{cpu[name] / cpu['after']:.3f}x",
             f"{cpu[name] / cpu[reference]:.2f}x",
         ]
         for name, values in results.items()
     ]
-    headers = [title, "CPU us/read (median)", "min..max", "vs after", f"vs {reference}"]
+    headers = [title, f"{unit} (median)", "min..max", "vs after", f"vs {reference}"]
     per_round = " ".join(
         f"{a / b:.2f}" for a, b in zip(results["after"], results["before"], strict=True)
     )
@@ -219,9 +248,10 @@ def report(title: str, results: dict[str, list[float]], reference: str) -> list[
     ]
 
 
-PARTS: dict[str, tuple[str, Callable[..., dict[str, list[float]]], str]] = {
-    "master": ("Master (client process CPU)", part_master, PYMODBUS),
-    "slave": ("Slave (slave process CPU)", part_slave, PYMODBUS_SERVER),
+PARTS: dict[str, tuple[str, Callable[..., dict[str, list[float]]], str, str]] = {
+    "master": ("Master (client process CPU)", part_master, PYMODBUS, "CPU us/read"),
+    "slave": ("Slave (slave process CPU)", part_slave, PYMODBUS_SERVER, "CPU us/read"),
+    "calls": ("Master (Python calls)", part_calls, "before", "calls/read"),
 }
 
 
@@ -240,14 +270,14 @@ def main() -> None:
     print("\n".join(benchlib.header()))
     print(f"before: {before} at {commit(before)}; after: {after} at {commit(after)}")
     for name in args.part or list(PARTS):
-        title, run, reference = PARTS[name]
+        title, run, reference, unit = PARTS[name]
         started = load()
         results = run(before, after, args.rounds, args.requests)
         print()
         print(f"{name}: {args.rounds} rounds of {args.requests} reads of 10 holding registers")
         print(f"load average (1, 5, 15 min) before: {started}; after: {load()}")
         print()
-        print("\n".join(report(title, results, reference)), flush=True)
+        print("\n".join(report(title, results, reference, unit)), flush=True)
 
 
 if __name__ == "__main__":
