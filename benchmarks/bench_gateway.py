@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import itertools
 import os
 import socket
 import struct
@@ -42,7 +43,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import benchlib  # noqa: E402
+import benchlib
 
 BAUDRATE = 19200
 CHAR_BITS = 11  # 8N2: start, 8 data, 2 stop
@@ -124,15 +125,16 @@ def read_request(transaction: int, unit: int, address: int = 0) -> bytes:
 
 
 async def _client(
-    port: int, units: Sequence[int], stop_at: float, warmup_at: float, load: Load, index: int
-) -> None:
+    port: int, units: Sequence[int], stop_at: float, warmup_at: float, load: Load, index: int,
+    address: int,
+) -> None:  # fmt: skip
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
     transaction = 0
     try:
         while (now := time.perf_counter()) < stop_at:
             unit = units[transaction % len(units)]
             transaction = (transaction + 1) & 0xFFFF
-            writer.write(read_request(transaction, unit))
+            writer.write(read_request(transaction, unit, address))
             try:
                 header = await asyncio.wait_for(reader.readexactly(7), 5)
             except TimeoutError:
@@ -154,16 +156,29 @@ async def _client(
 
 
 def run_clients(
-    port: int, clients: int, seconds: float, units: Sequence[int] = (1,), warmup: float = 0.5
-) -> Load:
-    """*clients* connections reading for *warmup* + *seconds*; counts after the warm-up."""
+    port: int, clients: int, seconds: float, units: Sequence[int] = (1,), warmup: float = 0.5,
+    same_block: bool = False,
+) -> Load:  # fmt: skip
+    """*clients* connections reading for *warmup* + *seconds*; counts after the warm-up.
+
+    Each client reads a block of its own (addresses 2 * index ...), so that no two requests
+    in flight are the same and the gateway cannot coalesce them, or all read the same block.
+    """
     load = Load(seconds, [0] * clients)
 
     async def main() -> None:
         start = time.perf_counter()
         await asyncio.gather(
             *(
-                _client(port, units, start + warmup + seconds, start + warmup, load, index)
+                _client(
+                    port,
+                    units,
+                    start + warmup + seconds,
+                    start + warmup,
+                    load,
+                    index,
+                    0 if same_block else 2 * index,
+                )
                 for index in range(clients)
             )
         )
@@ -180,13 +195,14 @@ def measure(
     clients: int,
     units: Sequence[int] = (1,),
     warmup: float = 0.5,
+    same_block: bool = False,
 ) -> tuple[Load, float]:
     """One run: start gateway *name*, load it, stop it. Returns the load and CPU s/request."""
     process, port = start_gateway(children, name, serial, args.mbusd)
     try:
         run_clients(port, 1, 0.3, units, warmup=0.0)  # the line and the slave warmed up
         cpu = benchlib.cpu_seconds(process.pid)
-        load = run_clients(port, clients, args.seconds, units, warmup)
+        load = run_clients(port, clients, args.seconds, units, warmup, same_block)
         cpu = benchlib.cpu_seconds(process.pid) - cpu
     finally:
         children.stop(process)
@@ -258,24 +274,27 @@ def section_unpaced(args: argparse.Namespace) -> list[str]:
 def gaps_before_requests(trace: Sequence[object], since: float) -> list[float]:
     """The silences on the wire before each burst the gateway (port 0) started."""
     gaps = []
-    for before, entry in zip(trace, trace[1:], strict=False):
+    for before, entry in itertools.pairwise(trace):
         if entry.sender == 0 and entry.start >= since:  # type: ignore[attr-defined]
             gaps.append(entry.start - before.end)  # type: ignore[attr-defined]
     return gaps
 
 
-def wire_transactions(trace: Sequence[object], since: float, until: float) -> int:
-    return sum(
-        1
+def wire_transactions(trace: Sequence[object], since: float, until: float) -> float:
+    """Requests the gateway put on the wire between *since* and *until*, from its bytes
+    (a gateway may write one frame in several bursts)."""
+    sent = sum(
+        len(entry.data)  # type: ignore[attr-defined]
         for entry in trace
         if entry.sender == 0 and since <= entry.start < until  # type: ignore[attr-defined]
     )
+    return sent / REQUEST_BYTES
 
 
 def _paced_run(
     children: benchlib.Children, serial: str, bus: object, name: str, args: argparse.Namespace,
-    clients: int, address: int,
-) -> tuple[Load, int, list[float]]:  # fmt: skip
+    clients: int, same_block: bool,
+) -> tuple[Load, float, list[float]]:  # fmt: skip
     """One run on the paced bus: the load, the gateway's frames on the wire, their gaps."""
     import anyio.lowlevel  # noqa: F401  (the bus clock is anyio's: the loop's monotonic)
 
@@ -283,7 +302,7 @@ def _paced_run(
     try:
         run_clients(port, 1, 0.3, warmup=0.0)
         since = time.monotonic() + 0.5
-        load = run_clients(port, clients, args.seconds, warmup=0.5)
+        load = run_clients(port, clients, args.seconds, warmup=0.5, same_block=same_block)
         until = time.monotonic()
     finally:
         children.stop(process)
@@ -294,11 +313,11 @@ def _paced_run(
 
 def section_paced(args: argparse.Namespace) -> list[str]:
     names = contenders(args)
-    runs: dict[str, list[tuple[Load, int, list[float]]]] = {name: [] for name in names}
+    runs: dict[str, list[tuple[Load, float, list[float]]]] = {name: [] for name in names}
     with paced_line() as (children, serial, bus):
         for _ in range(args.rounds):
             for name in names:
-                runs[name].append(_paced_run(children, serial, bus, name, args, 8, 0))
+                runs[name].append(_paced_run(children, serial, bus, name, args, 8, False))
     rows = []
     for name in names:
         rate = benchlib.median([load.rate for load, _, _ in runs[name]])
@@ -322,11 +341,11 @@ def section_paced(args: argparse.Namespace) -> list[str]:
 
 def section_coalescing(args: argparse.Namespace) -> list[str]:
     names = contenders(args)
-    runs: dict[str, list[tuple[Load, int]]] = {name: [] for name in names}
+    runs: dict[str, list[tuple[Load, float]]] = {name: [] for name in names}
     with paced_line() as (children, serial, bus):
         for _ in range(args.rounds):
             for name in names:
-                load, wire, _ = _paced_run(children, serial, bus, name, args, 32, 0)
+                load, wire, _ = _paced_run(children, serial, bus, name, args, 32, True)
                 runs[name].append((load, wire))
     rows = []
     for name in names:
