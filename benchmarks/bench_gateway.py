@@ -20,8 +20,10 @@ Sections:
   wire limit, and the silences before each request on the bus trace against t3.5.
 - `coalescing`: the paced bus, 32 clients reading the same block: requests/s served
   against transactions/s on the wire (from the bus trace).
-- `dead-unit`: the socat pair, 8 clients polling units 1..10 in turn, unit 10 absent from
-  the server or present: the other units' requests/s after the first cycle.
+- `dead-unit`: the socat pair to aiortu's slave (`bench_servers.py aiortu`: pymodbus's
+  server answers an absent unit with exception 04 instead of silence), 8 clients polling
+  units 1..10 in turn, unit 10 absent or present: the other units' requests/s after the
+  first cycles.
 
 mbusd is built by `/work/shared/peers/build-mbusd.sh` (the default `--mbusd` path is where
 it puts it); without it the mbusd rows are left out.
@@ -216,11 +218,12 @@ def contenders(args: argparse.Namespace) -> list[str]:
 
 
 @contextlib.contextmanager
-def socat_line(units: int = 1) -> Iterator[tuple[benchlib.Children, str]]:
-    """A socat pty pair with pymodbus's RTU server on one end; yield the other end."""
+def socat_line(units: int = 1, slave: str = "pymodbus") -> Iterator[tuple[benchlib.Children, str]]:
+    """A socat pty pair with pymodbus's RTU server (or aiortu's) on one end; yield the other
+    end."""
     with benchlib.Children() as children:
         near, far = children.socat_pair()
-        children.server("pymodbus", far, "--units", str(units))
+        children.server(slave, far, "--units", str(units))
         yield children, near
 
 
@@ -271,11 +274,12 @@ def section_unpaced(args: argparse.Namespace) -> list[str]:
     return ["### Unpaced (socat pty pair)", "", benchlib.table(headers, rows)]
 
 
-def gaps_before_requests(trace: Sequence[object], since: float) -> list[float]:
-    """The silences on the wire before each burst the gateway (port 0) started."""
+def gaps_before(trace: Sequence[object], since: float, sender: int) -> list[float]:
+    """The silences on the wire before each burst *sender* started (0: the gateway, 1: the
+    slave)."""
     gaps = []
     for before, entry in itertools.pairwise(trace):
-        if entry.sender == 0 and entry.start >= since:  # type: ignore[attr-defined]
+        if entry.sender == sender and entry.start >= since:  # type: ignore[attr-defined]
             gaps.append(entry.start - before.end)  # type: ignore[attr-defined]
     return gaps
 
@@ -294,7 +298,7 @@ def wire_transactions(trace: Sequence[object], since: float, until: float) -> fl
 def _paced_run(
     children: benchlib.Children, serial: str, bus: object, name: str, args: argparse.Namespace,
     clients: int, same_block: bool,
-) -> tuple[Load, float, list[float]]:  # fmt: skip
+) -> tuple[Load, float, list[float], list[float]]:  # fmt: skip
     """One run on the paced bus: the load, the gateway's frames on the wire, their gaps."""
     import anyio.lowlevel  # noqa: F401  (the bus clock is anyio's: the loop's monotonic)
 
@@ -308,29 +312,35 @@ def _paced_run(
         children.stop(process)
         children.processes.remove(process)
     trace = bus.trace  # type: ignore[attr-defined]
-    return load, wire_transactions(trace, since, until), gaps_before_requests(trace, since)
+    wire = wire_transactions(trace, since, until)
+    return load, wire, gaps_before(trace, since, 0), gaps_before(trace, since, 1)
 
 
 def section_paced(args: argparse.Namespace) -> list[str]:
     names = contenders(args)
-    runs: dict[str, list[tuple[Load, float, list[float]]]] = {name: [] for name in names}
+    runs: dict[str, list[tuple[Load, float, list[float], list[float]]]] = {
+        name: [] for name in names
+    }
     with paced_line() as (children, serial, bus):
         for _ in range(args.rounds):
             for name in names:
                 runs[name].append(_paced_run(children, serial, bus, name, args, 8, False))
     rows = []
     for name in names:
-        rate = benchlib.median([load.rate for load, _, _ in runs[name]])
-        gaps = [gap for _, _, run_gaps in runs[name] for gap in run_gaps]
+        rate = benchlib.median([run[0].rate for run in runs[name]])
+        gaps = [gap for run in runs[name] for gap in run[2]]
+        turnarounds = [gap for run in runs[name] for gap in run[3]]
         short = sum(1 for gap in gaps if gap < T35)
         rows.append(
             [
                 name, f"{rate:.1f}", f"{rate / WIRE_LIMIT * 100:.1f}",
-                f"{min(gaps) * 1000:.2f}" if gaps else "-", f"{short} of {len(gaps)}",
+                f"{min(gaps) * 1000:.2f}", f"{benchlib.median(gaps) * 1000:.2f}",
+                f"{short} of {len(gaps)}", f"{benchlib.median(turnarounds) * 1000:.2f}",
             ]
         )  # fmt: skip
     headers = ["gateway", "requests/s", "% of wire limit", "shortest gap before a request ms",
-               "requests after less than t3.5"]  # fmt: skip
+               "median gap before a request ms", "requests after less than t3.5",
+               "median slave turnaround ms"]  # fmt: skip
     return [
         f"### Paced 19200 8N2 line, 8 clients (wire limit {WIRE_LIMIT:.1f} transactions/s, "
         f"t3.5 {T35 * 1000:.2f} ms)",
@@ -345,7 +355,7 @@ def section_coalescing(args: argparse.Namespace) -> list[str]:
     with paced_line() as (children, serial, bus):
         for _ in range(args.rounds):
             for name in names:
-                load, wire, _ = _paced_run(children, serial, bus, name, args, 32, True)
+                load, wire, _, _ = _paced_run(children, serial, bus, name, args, 32, True)
                 runs[name].append((load, wire))
     rows = []
     for name in names:
@@ -365,12 +375,14 @@ def section_dead_unit(args: argparse.Namespace) -> list[str]:
     units = tuple(range(1, 11))
     results: dict[tuple[str, str], list[float]] = {}
     for case, served in (("all alive", 10), ("unit 10 dead", 9)):
-        with socat_line(served) as (children, serial):
+        # aiortu's slave: pymodbus's server answers a unit it does not serve with exception
+        # 04 where a switched-off device is silent.
+        with socat_line(served, "aiortu") as (children, serial):
             for _ in range(args.rounds):
                 for name in names:
-                    # The first cycle (each client's first request to every unit) is the
-                    # warm-up: the dead unit's first timeout is not counted.
-                    load, _ = measure(children, name, serial, args, 8, units, warmup=1.0)
+                    # The first cycles are the warm-up: the 2 s cover the dead unit's first
+                    # timeouts (0.5 s each) until the aiortu master takes it offline (3).
+                    load, _ = measure(children, name, serial, args, 8, units, warmup=2.0)
                     alive = sum(load.per_unit.get(unit, 0) for unit in units[:9])
                     results.setdefault((name, case), []).append(alive / load.seconds)
     rows = []
