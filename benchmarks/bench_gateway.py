@@ -14,7 +14,8 @@ contenders alternate (A B A B ...) for `--rounds` rounds and the tables give med
 Sections:
 
 - `unpaced`: a socat pty pair (no pacing), 1, 8 and 32 clients: requests/s, the gateway's
-  CPU per request, p99 latency, and fairness (the largest deviation of a client's request
+  CPU per request, p99 latency, and fairness; the aiortu gateway also with `--frame-gap
+  0.001`, the same 1 ms of silence before a request as mbusd's `-R 1` (the largest deviation of a client's request
   count from the mean of all clients).
 - `paced`: an [`aiortu.testing.PtyBus`] paced at 19200 8N2, 8 clients: the share of the
   wire limit, and the silences before each request on the bus trace against t3.5.
@@ -55,6 +56,8 @@ REPLY_BYTES = 5 + 20
 WIRE_LIMIT = 1 / ((REQUEST_BYTES + REPLY_BYTES) * CHAR_BITS / BAUDRATE + 2 * T35)
 """Transactions/s a 19200 8N2 line carries: both frames' characters and t3.5 before each."""
 MBUSD = "/tmp/mbusd-build/mbusd"
+GAP_1MS = "aiortu, 1 ms gap"
+"""The gateway keeping 1 ms of silence before each request (mbusd's `-R 1`), not t3.5."""
 
 
 def free_port() -> int:
@@ -77,7 +80,8 @@ def wait_listening(port: int, process: subprocess.Popen[bytes]) -> None:
 def start_gateway(
     children: benchlib.Children, name: str, serial: str, mbusd: str
 ) -> tuple[subprocess.Popen[bytes], int]:
-    """Start gateway *name* (`aiortu` or `mbusd`) on *serial*; return it and its TCP port."""
+    """Start gateway *name* (`aiortu`, `GAP_1MS` or `mbusd`) on *serial*; return it and its
+    TCP port."""
     port = free_port()
     if name == "mbusd":
         argv = [mbusd, "-d", "-L", "/dev/null", "-v", "0", "-p", serial, "-s", str(BAUDRATE)]
@@ -88,6 +92,8 @@ def start_gateway(
         argv += ["--listen", f"tcp://127.0.0.1:{port}", "--baudrate", str(BAUDRATE)]
         argv += ["--parity", "N", "--stopbits", "2", "--retries", "0", "--timeout", "0.5"]
         argv += ["--max-connections", "64"]
+        if name == GAP_1MS:
+            argv += ["--frame-gap", "0.001"]
     process = children.start(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     wait_listening(port, process)
     return process, port
@@ -243,7 +249,7 @@ def paced_line() -> Iterator[tuple[benchlib.Children, str, object]]:
 
 
 def section_unpaced(args: argparse.Namespace) -> list[str]:
-    names = contenders(args)
+    names = [*contenders(args), GAP_1MS]
     rows = []
     with socat_line() as (children, serial):
         for clients in (1, 8, 32):
