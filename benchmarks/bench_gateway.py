@@ -14,9 +14,9 @@ contenders alternate (A B A B ...) for `--rounds` rounds and the tables give med
 Sections:
 
 - `unpaced`: a socat pty pair (no pacing), 1, 8 and 32 clients: requests/s, the gateway's
-  CPU per request, p99 latency, and fairness; the aiortu gateway also with `--frame-gap
-  0.001`, the same 1 ms of silence before a request as mbusd's `-R 1` (the largest deviation of a client's request
-  count from the mean of all clients).
+  CPU per request, p99 latency, and fairness (the largest deviation of a client's request
+  count from the mean of all clients); the aiortu gateway also with `--frame-gap 0.001`,
+  the same 1 ms of silence before a request as mbusd's `-R 1`.
 - `paced`: an [`aiortu.testing.PtyBus`] paced at 19200 8N2, 8 clients: the share of the
   wire limit, and the silences before each request on the bus trace against t3.5.
 - `coalescing`: the paced bus, 32 clients reading the same block: requests/s served
