@@ -29,7 +29,13 @@ pymodbus_client = pytest.importorskip("pymodbus.client")
 pytestmark = [pytest.mark.interop, pytest.mark.timeout(90)]
 
 SETTINGS = LineSettings(19200, parity="N", stopbits=2)
-LINE: dict[str, Any] = {"baudrate": 19200, "parity": "N", "stopbits": 2, "timeout": 0.5, "retries": 0}
+LINE: dict[str, Any] = {
+    "baudrate": 19200,
+    "parity": "N",
+    "stopbits": 2,
+    "timeout": 0.5,
+    "retries": 0,
+}
 UNIT = {"device_id": 1}
 
 MBUSD = os.environ.get("AIORTU_MBUSD", "/tmp/mbusd-build/mbusd")
