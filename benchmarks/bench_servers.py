@@ -66,9 +66,12 @@ async def serve_pymodbus(port: str, units: int, changing: bool = False) -> None:
 
     # pymodbus's device context shifts addresses by one: the block starts at 1 for
     # protocol address 0.
-    block = (ChangingBlock if changing else ModbusSequentialDataBlock)(1, REGISTERS)
-    device = ModbusDeviceContext(hr=block)
-    context = ModbusServerContext(devices=dict.fromkeys(range(1, units + 1), device), single=False)
+    # pymodbus refuses one device object under several ids: one (same) block each.
+    block_class = ChangingBlock if changing else ModbusSequentialDataBlock
+    devices = {
+        unit: ModbusDeviceContext(hr=block_class(1, REGISTERS)) for unit in range(1, units + 1)
+    }
+    context = ModbusServerContext(devices=devices, single=False)
     server = ModbusSerialServer(
         context,
         framer=FramerType.RTU,
