@@ -26,7 +26,7 @@ Sections:
   units 1..10 in turn, unit 10 absent or present: the other units' requests/s after the
   first cycles.
 
-mbusd is built by `/work/shared/peers/build-mbusd.sh` (the default `--mbusd` path is where
+mbusd is built by `../shared/peers/build-mbusd.sh` (the default `--mbusd` path is where
 it puts it); without it the mbusd rows are left out.
 """
 

@@ -65,7 +65,7 @@ from aiortu.core.master_transaction import (
     SkipReason,
     Transaction,
 )
-from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_response
+from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response, decode_response
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
 
 __all__ = (
@@ -500,7 +500,12 @@ class MasterMachine:
             reason = SkipReason.OTHER_FUNCTION
         else:
             try:
-                response = decode_response(pdu)
+                # A request sent as raw bytes (a user-defined code, or one forwarded as
+                # it came) takes any reply of its code as raw bytes too.
+                if isinstance(request, RawPDU) and not pdu[0] & EXCEPTION_BIT:
+                    response = RawPDU.decode(pdu)
+                else:
+                    response = decode_response(pdu)
                 if not isinstance(response, ExceptionPDU):
                     request.check_response(response)
             except MalformedPDU as error:
