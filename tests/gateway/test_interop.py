@@ -1,4 +1,5 @@
-"""Real peers through the gateway: pymodbus's async TCP client to an aiortu slave on a virtual
+"""Real peers through the gateway: pymodbus's async TCP client and aiortu's Modbus TCP master
+to an aiortu slave on a virtual
 line, and mbpoll -m tcp through the `aiortu gateway` command to `aiortu serve` on a pty bus."""
 
 from __future__ import annotations
@@ -92,3 +93,27 @@ async def test_mbpoll_through_the_gateway_command() -> None:
             result = await anyio.run_process([*poll, "-r", "109", "-c", "2", "127.0.0.1"])
             assert b"[109]: \t1234" in result.stdout
             assert b"[110]: \t5678" in result.stdout
+
+
+async def test_aiortu_modbus_tcp_master_through_the_gateway() -> None:
+    # aiortu's own master over Modbus TCP, as a network client of the line server: the
+    # same Master API end to end, transaction ids matched by the master, 0B for a unit the
+    # line does not answer.
+    import aiortu
+
+    store = device()
+    async with line({UNIT: store}, master_options={"timeout": 1.0}) as bench:
+        url = f"tcp://127.0.0.1:{bench.gateway.port}"
+        async with aiortu.open_master(url, timeout=3.0, retries=0) as master:
+            await master.write_registers(UNIT, 0, [215, 7, 8])
+            assert await master.read_holding_registers(UNIT, 0, 3) == [215, 7, 8]
+            await master.write_coil(UNIT, 1, True)
+            assert (await master.read_coils(UNIT, 0, 2))[1] is True
+            assert await master.read_input_registers(UNIT, 0, 2) == list(
+                store.read(aiortu.slave.Table.INPUT_REGISTERS, 0, 2)
+            )
+            with pytest.raises(aiortu.ExceptionResponse) as refused:
+                await master.read_holding_registers(5, 0, 1)
+            assert (
+                refused.value.code == aiortu.ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
+            )
