@@ -1,6 +1,6 @@
 """Real peers through the gateway: pymodbus's async TCP client and aiortu's Modbus TCP master
-to an aiortu slave on a virtual
-line, and mbpoll -m tcp through the `aiortu gateway` command to `aiortu serve` on a pty bus."""
+to an aiortu slave on a virtual line, and mbpoll -m tcp through the `aiortu gateway` command
+to `aiortu serve` on a pty bus."""
 
 from __future__ import annotations
 
