@@ -73,7 +73,8 @@ class SkipReason(enum.StrEnum):
     """Why a frame was not taken as the reply."""
 
     STALE = "stale"
-    """It ended before the request began to go out."""
+    """It began before a reply to the request could have (see
+    :attr:`Transaction.earliest_reply`)."""
     OTHER_UNIT = "other unit"
     """It comes from another unit."""
     OTHER_FUNCTION = "other function"
@@ -130,6 +131,16 @@ class Transaction:
     """When the current attempt began to go out."""
     attempt_end: float = 0.0
     """When the current attempt had left the wire."""
+    min_turnaround: float | None = None
+    """The unit's least delay from the end of a request on the wire to the first byte of
+    its reply, where the line's wire times are real (a serial port, a paced virtual
+    line); None where they are not (TCP, unpaced virtual lines, ptys): there a request's
+    computed wire time may not have passed yet when its genuine reply arrives."""
+    earliest_reply: float = 0.0
+    """The earliest a reply to the current attempt can begin, set by
+    :meth:`~aiortu.core.master_machine.MasterMachine.sent`: *attempt_end* plus
+    *min_turnaround*; a frame that began sooner is stale. Without *min_turnaround* it is
+    *attempt_start*, and a frame that ended sooner is stale."""
     frame_error: FrameError | None = None
     """The last frame error of the current attempt, if any."""
     failures: list[Failure] = field(default_factory=list)

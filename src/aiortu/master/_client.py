@@ -62,7 +62,7 @@ from aiortu.core.pdu_registers import (
 )
 from aiortu.core.receiver import Role, TimingMode
 from aiortu.core.timing import LineSettings
-from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
+from aiortu.errors import ExceptionResponse, InvalidRequest, InvalidValue, MalformedPDU
 from aiortu.line._link import Link
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
 from aiortu.master._engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
@@ -106,6 +106,15 @@ def _check_unit(unit: object) -> int:
     return unit
 
 
+def _check_turnaround(seconds: object) -> float:
+    """Return *seconds* as a minimum turnaround, else raise InvalidValue."""
+    if isinstance(seconds, bool) or not isinstance(seconds, int | float):
+        raise InvalidValue("min_turnaround", seconds, "a number of seconds from 0 to 10")
+    if not 0 <= seconds <= 10:  # also rejects NaN
+        raise InvalidValue("min_turnaround", seconds, "a number of seconds from 0 to 10")
+    return float(seconds)
+
+
 class Master(SerialLineFunctions):
     """A Modbus RTU master on *stream*; an async context manager.
 
@@ -117,7 +126,8 @@ class Master(SerialLineFunctions):
     *turnaround_delay* is the wait after a broadcast. Health: *offline_after*
     consecutive failures mark a unit offline; with *fail_fast_offline* calls to it raise
     :class:`~aiortu.errors.UnitOffline` except one probe every *probe_interval*
-    seconds. *timing* is the receiver's t1.5 mode.
+    seconds. *timing* is the receiver's t1.5 mode. *min_turnaround* and *wire_timed*
+    decide which replies are stale (see below).
 
     Reconnecting (see :mod:`aiortu.master._connection`): when the stream fails, the
     request in flight and the queued ones raise :class:`~aiortu.errors.ConnectionLost`.
@@ -139,8 +149,12 @@ class Master(SerialLineFunctions):
     How a late reply is kept from a later request. RTU frames carry no transaction id,
     so a reply is matched by what it is and when it came:
 
-    1. Before each request goes out, whatever the line delivered is dropped, and a frame
-       that ended before the request began to go out is dropped as stale.
+    1. Before each request goes out, whatever the line delivered is dropped. Causality:
+       where the line's wire times are real (a serial port, a paced virtual line: see
+       *wire_timed*), a frame that began before the request had left the wire plus the
+       unit's minimum turnaround (*min_turnaround* seconds, 0 by default;
+       :meth:`set_min_turnaround` per unit) is stale; elsewhere (TCP, ptys, unpaced
+       virtual lines) a frame that ended before the request began to go out is.
     2. A frame must come from the unit asked, with the request's function code (or its
        exception form), and pass the request's checks of the reply (byte count, echoed
        address, count and values); anything else is skipped while the wait goes on.
@@ -179,6 +193,8 @@ class Master(SerialLineFunctions):
         reconnect: bool = True,
         reconnect_delay: tuple[float, float] = (0.1, 5.0),
         reconnect_fail_fast: bool = False,
+        min_turnaround: float = 0.0,
+        wire_timed: bool | None = None,
     ) -> None:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 seconds, not {timeout!r}")
@@ -190,10 +206,13 @@ class Master(SerialLineFunctions):
         self.policy = RetryPolicy.of(retries, retry_on)
 
         def make_link(stream: anyio.abc.ByteStream) -> Link:
-            return Link(
+            link = Link(
                 stream, self.settings, role=Role.MASTER, timing=timing, frame_gap=frame_gap,
                 clock=clock,
             )  # fmt: skip
+            if wire_timed is not None:
+                link.wire_timed = wire_timed
+            return link
 
         link = make_link(stream)
         self.engine = LineEngine(
@@ -201,6 +220,7 @@ class Master(SerialLineFunctions):
             health=HealthPolicy(offline_after, fail_fast_offline, probe_interval),
             late_reply_guard=late_reply_guard,
         )
+        self.engine.min_turnaround = _check_turnaround(min_turnaround)
         self.connection = LineConnection(
             self.engine,
             link,
@@ -251,6 +271,21 @@ class Master(SerialLineFunctions):
     def statistics(self) -> Mapping[int, UnitStats]:
         """:class:`~aiortu.master._engine.UnitStats` by unit address, for units used so far."""
         return self.engine.stats
+
+    def set_min_turnaround(self, unit: int, seconds: float | None) -> None:
+        """Set the least time *unit* takes from the end of a request on the wire to the
+        first byte of its reply (``None``: back to the master's *min_turnaround*).
+
+        A frame that begins sooner cannot answer the request and is skipped as stale,
+        where the line's wire times are real (see the class docstring). Set it from the
+        device's documented turnaround; a spec-abiding device keeps at least t3.5 of
+        silence. Too large a value drops the device's genuine replies.
+        """
+        _check_unit(unit)
+        if seconds is None:
+            self.engine.unit_turnaround.pop(unit, None)
+        else:
+            self.engine.unit_turnaround[unit] = _check_turnaround(seconds)
 
     def unit_stats(self, unit: int) -> UnitStats:
         """The statistics and health of *unit*."""
@@ -550,6 +585,8 @@ async def open_master(
     reconnect: bool = True,
     reconnect_delay: tuple[float, float] = (0.1, 5.0),
     reconnect_fail_fast: bool = False,
+    min_turnaround: float = 0.0,
+    wire_timed: bool | None = None,
     **transport_options: Any,
 ) -> AsyncIterator[Master]:
     """Open *port_or_url* (a serial device path or ``rtu+tcp://host:port``) and yield a
@@ -585,6 +622,8 @@ async def open_master(
         reconnect=reconnect,
         reconnect_delay=reconnect_delay,
         reconnect_fail_fast=reconnect_fail_fast,
+        min_turnaround=min_turnaround,
+        wire_timed=wire_timed,
     )
     try:
         async with master:

@@ -133,6 +133,11 @@ class LineEngine:
         """With :attr:`wait_for_reconnect`: raise at once instead of waiting."""
         self.transactions = 0
         """Transactions run on the line (abandoned ones included)."""
+        self.min_turnaround = 0.0
+        """Seconds from the end of a request on the wire to the first byte of a reply
+        that every unit takes at least, unless :attr:`unit_turnaround` says otherwise."""
+        self.unit_turnaround: dict[int, float] = {}
+        """The minimum turnaround of single units (see :attr:`min_turnaround`)."""
         self.usual_exchanges = True
         """Whether register reads may run their usual exchange without the machine (see
         :meth:`submit_request`); false runs every transaction through it."""
@@ -145,6 +150,14 @@ class LineEngine:
         if stats is None:
             stats = self.stats[unit] = UnitStats()
         return stats
+
+    def reply_delay(self, unit: int) -> float | None:
+        """The least delay from a request to *unit* leaving the wire to its reply, where
+        the link's wire times are real; None where they are not (see
+        :attr:`~aiortu.core.master_transaction.Transaction.min_turnaround`)."""
+        if not self.link.wire_timed:
+            return None
+        return self.unit_turnaround.get(unit, self.min_turnaround)
 
     async def submit(
         self, transaction: Transaction, priority: int = 0
@@ -162,6 +175,7 @@ class LineEngine:
             await self._wait_connected(transaction.timeout)
         if self.health.fail_fast_offline:
             self._check_offline(transaction.unit)
+        transaction.min_turnaround = self.reply_delay(transaction.unit)
         job = Job(transaction, priority, next(self._sequence))
         if self._busy or not self._serving or self._link_closed:
             await self._wait_turn(job)
@@ -247,7 +261,15 @@ class LineEngine:
         """The link's read callback found the usual reply of the usual exchange."""
         in_flight = self._in_flight
         assert in_flight is not None
-        caller, known, unit, _, _, _, start, _ = in_flight
+        caller, known, unit, _, _, _, start, sent = in_flight
+        turnaround = self.reply_delay(unit)
+        if turnaround is not None:
+            first = end - (len(frame) - 1) * self.link.char_time
+            if first < sent + turnaround:
+                # Begun before the unit could answer: stale, for the machine to skip.
+                self._take_over()
+                self._on_link_event(FrameReceived(frame, first, end))
+                return
         self._in_flight = None
         response = self.machine.usual_response(known, frame)
         self.stats[unit].count_success(self.link.clock() - start)
@@ -265,6 +287,7 @@ class LineEngine:
         caller, known, unit, response_timeout, policy, priority, start, end = in_flight
         self.link.forget_expected()
         transaction = Transaction(unit, known.request, response_timeout, policy)
+        transaction.min_turnaround = self.reply_delay(unit)
         self.machine.begin(transaction)
         self.machine.sent(start, end)
         job = Job(transaction, priority, next(self._sequence))
@@ -596,11 +619,12 @@ class LineEngine:
             if self._usual is not None:
                 frame, end = self._usual
                 self._usual = None
-                response = machine.take_usual_reply(frame, end)
+                start = end - (len(frame) - 1) * link.char_time
+                response = machine.take_usual_reply(frame, end, start)
                 if response is not None:
                     return Outcome(OutcomeKind.DONE, response)
                 # Not for this machine at this moment: the usual way, as an event.
-                events.append(FrameReceived(frame, end - (len(frame) - 1) * link.char_time, end))
+                events.append(FrameReceived(frame, start, end))
                 continue
             if self._link_closed:
                 raise link.connection_lost_error()
