@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import anyio
 
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
-from aiortu.core.errors import ModbusError
 from aiortu.core.crc import crc16
+from aiortu.core.errors import ModbusError
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Response, decode_request, decode_response
 from aiortu.slave._server import Slave

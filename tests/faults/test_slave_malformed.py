@@ -63,7 +63,8 @@ async def test_broadcast_and_other_units_get_no_answer() -> None:
     async with slave_under_test() as under_test:
         for unit in OTHER_UNITS:
             for code in (0x03, 0x08, 0x2B, 0x41):
-                assert await under_test.exchange(unit, malformed_pdu(code, "byte", b"\x01", 1)) == []
+                pdu = malformed_pdu(code, "byte", b"\x01", 1)
+                assert await under_test.exchange(unit, pdu) == []
 
 
 def test_the_check_catches_what_it_must() -> None:
