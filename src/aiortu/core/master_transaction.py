@@ -132,8 +132,9 @@ class Transaction:
     attempt_end: float = 0.0
     """When the current attempt had left the wire."""
     min_turnaround: float | None = None
-    """The unit's least delay from the end of a request on the wire to the first byte of
-    its reply, where the line's wire times are real (a serial port, a paced virtual
+    """The least delay from the end of a request on the wire to the arrival of the first
+    byte of its reply (the unit's turnaround and that byte's wire time), where the line's
+    wire times are real (a serial port, a paced virtual
     line); None where they are not (TCP, unpaced virtual lines, ptys): there a request's
     computed wire time may not have passed yet when its genuine reply arrives."""
     earliest_reply: float = 0.0

@@ -152,12 +152,14 @@ class LineEngine:
         return stats
 
     def reply_delay(self, unit: int) -> float | None:
-        """The least delay from a request to *unit* leaving the wire to its reply, where
-        the link's wire times are real; None where they are not (see
+        """The least delay from a request to *unit* leaving the wire to the arrival of
+        its reply's first byte, where the link's wire times are real: the unit's minimum
+        turnaround plus the byte's own wire time. None where they are not (see
         :attr:`~aiortu.core.master_transaction.Transaction.min_turnaround`)."""
-        if not self.link.wire_timed:
+        link = self.link
+        if not link.wire_timed:
             return None
-        return self.unit_turnaround.get(unit, self.min_turnaround)
+        return self.unit_turnaround.get(unit, self.min_turnaround) + link.char_time
 
     async def submit(
         self, transaction: Transaction, priority: int = 0
