@@ -74,8 +74,8 @@ class Soak:
 
     async def flood_round(self, rng: random.Random, seed: int) -> None:
         result = await garbage_flood(rng, rng.randrange(100_000, 1_000_000))
-        self.faults["flood: garbage bytes"] += result.garbage
-        self.operations["flood: floods"] += 1
+        self.faults["flood: garbage floods"] += 1
+        self.operations["flood: garbage bytes written"] += result.garbage
         self.max_idle_cpu = max(self.max_idle_cpu, result.idle_cpu / result.idle)
         self.max_rss_growth = max(self.max_rss_growth, result.rss_growth)
         if not result.answered:
