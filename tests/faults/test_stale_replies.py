@@ -24,11 +24,11 @@ from tests.transport.ptys import open_pty
 REPLY = ReadHoldingRegistersResponse((1, 2)).encode()
 
 
-def _waiting(min_turnaround: float | None, observer: bool = False) -> MasterMachine:
+def _waiting(reply_delay: float | None, observer: bool = False) -> MasterMachine:
     """A machine waiting for the reply to a request that went out from 1.000 to 1.005."""
     machine = MasterMachine(on_transition=(lambda *_: None) if observer else None)
     transaction = Transaction(7, ReadHoldingRegistersRequest(0, 2), timeout=0.5)
-    transaction.min_turnaround = min_turnaround
+    transaction.reply_delay = reply_delay
     machine.begin(transaction)
     machine.sent(1.000, 1.005)
     return machine

@@ -395,7 +395,7 @@ class MasterMachine:
             or transaction is None
             or len(frame) != shape[1]
             or not frame.startswith(shape[0])
-            or (end if start is None or transaction.min_turnaround is None else start)
+            or (end if start is None or transaction.reply_delay is None else start)
             < transaction.earliest_reply
         ):
             return None
@@ -413,11 +413,11 @@ class MasterMachine:
         transaction.attempts += 1
         transaction.attempt_start = start
         transaction.attempt_end = end
-        turnaround = transaction.min_turnaround
+        delay = transaction.reply_delay
         # Causality: no reply can begin before the unit has the whole request and has
         # had its turnaround. Only where the line's wire times are real (see the field).
         # Without it the rule is weaker: the frame must end after the request began.
-        transaction.earliest_reply = start if turnaround is None else end + turnaround
+        transaction.earliest_reply = start if delay is None else end + delay
         transaction.frame_error = None
         if transaction.expects_reply:
             if self.state is _S.IDLE and self._on_transition is None:
@@ -434,7 +434,7 @@ class MasterMachine:
     def frame_received(self, unit: int, pdu: bytes, start: float, end: float) -> Outcome:
         """A frame with a good CRC arrived (``start``/``end``: its first and last byte)."""
         transaction = self.transaction
-        if transaction is not None and transaction.min_turnaround is None:
+        if transaction is not None and transaction.reply_delay is None:
             start = end  # no real wire times: only the end is sure to follow the request
         if self.state is MasterState.WAITING_REPLY and self._on_transition is None:
             # The usual reply to a register read takes the table's two transitions

@@ -131,16 +131,16 @@ class Transaction:
     """When the current attempt began to go out."""
     attempt_end: float = 0.0
     """When the current attempt had left the wire."""
-    min_turnaround: float | None = None
+    reply_delay: float | None = None
     """The least delay from the end of a request on the wire to the arrival of the first
     byte of its reply (the unit's turnaround and that byte's wire time), where the line's
-    wire times are real (a serial port, a paced virtual
-    line); None where they are not (TCP, unpaced virtual lines, ptys): there a request's
-    computed wire time may not have passed yet when its genuine reply arrives."""
+    wire times are real (a serial port, a paced virtual line); None where they are not
+    (TCP, unpaced virtual lines, ptys): there a request's computed wire time may not have
+    passed yet when its genuine reply arrives."""
     earliest_reply: float = 0.0
-    """The earliest a reply to the current attempt can begin, set by
+    """The earliest the first byte of a reply to the current attempt can arrive, set by
     :meth:`~aiortu.core.master_machine.MasterMachine.sent`: *attempt_end* plus
-    *min_turnaround*; a frame that began sooner is stale. Without *min_turnaround* it is
+    *reply_delay*; a frame that began sooner is stale. Without *reply_delay* it is
     *attempt_start*, and a frame that ended sooner is stale."""
     frame_error: FrameError | None = None
     """The last frame error of the current attempt, if any."""

@@ -155,7 +155,7 @@ class LineEngine:
         """The least delay from a request to *unit* leaving the wire to the arrival of
         its reply's first byte, where the link's wire times are real: the unit's minimum
         turnaround plus the byte's own wire time. None where they are not (see
-        :attr:`~aiortu.core.master_transaction.Transaction.min_turnaround`)."""
+        :attr:`~aiortu.core.master_transaction.Transaction.reply_delay`)."""
         link = self.link
         if not link.wire_timed:
             return None
@@ -177,7 +177,7 @@ class LineEngine:
             await self._wait_connected(transaction.timeout)
         if self.health.fail_fast_offline:
             self._check_offline(transaction.unit)
-        transaction.min_turnaround = self.reply_delay(transaction.unit)
+        transaction.reply_delay = self.reply_delay(transaction.unit)
         job = Job(transaction, priority, next(self._sequence))
         if self._busy or not self._serving or self._link_closed:
             await self._wait_turn(job)
@@ -289,7 +289,7 @@ class LineEngine:
         caller, known, unit, response_timeout, policy, priority, start, end = in_flight
         self.link.forget_expected()
         transaction = Transaction(unit, known.request, response_timeout, policy)
-        transaction.min_turnaround = self.reply_delay(unit)
+        transaction.reply_delay = self.reply_delay(unit)
         self.machine.begin(transaction)
         self.machine.sent(start, end)
         job = Job(transaction, priority, next(self._sequence))
