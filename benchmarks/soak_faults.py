@@ -94,7 +94,7 @@ async def soak(args: argparse.Namespace) -> int:
     stop = started + args.minutes * 60
     next_report = started + 60
     rss_start = rss_bytes()
-    count = 0
+    count = reported = 0
     while time.monotonic() < stop and (args.rounds is None or count < args.rounds):
         kind = args.only or chooser.choices(KINDS, WEIGHTS)[0]
         seed = args.seed if args.rounds == 1 else chooser.randrange(1 << 32)
@@ -105,6 +105,9 @@ async def soak(args: argparse.Namespace) -> int:
                 await rounds[kind](random.Random(seed), seed)
         except Exception as error:  # a crash or a hang is a violation, with its seed
             state.violations.append(f"{kind} round, seed {seed}: {type(error).__name__}: {error}")
+        for violation in state.violations[reported:]:
+            print(f"VIOLATION {violation}", flush=True)
+        reported = len(state.violations)
         if time.monotonic() >= next_report:
             next_report += 60
             print(
