@@ -169,6 +169,27 @@ async def slave_under_test() -> AsyncIterator[SlaveUnderTest]:
     await master_end.aclose()
 
 
+def _readings(unit: int, pdu: bytes) -> list[bytes]:
+    """The requests a slave may read in the frame of *pdu*: *pdu*, and the PDU of each
+    shorter frame with a good CRC the frame begins with. A frame is complete as soon as
+    its length is known and its CRC checks, so a good request followed by its CRC's low
+    byte is that request and then a stray byte (the CRC of the longer frame ends in 00)."""
+    frame = encode_frame(unit, pdu)
+    prefixes = [frame[1 : end - 2] for end in range(4, len(frame)) if crc16(frame[:end]) == 0]
+    return [pdu, *prefixes]
+
+
+def _answers(request: bytes, reply: bytes) -> str:
+    """Why *reply* does not answer *request* ("" if it does)."""
+    try:
+        response = decode_response(reply)
+        assert isinstance(response, Response)
+        decode_request(request).check_response(response)
+    except ModbusError as error:
+        return str(error)
+    return ""
+
+
 def check_answers(unit: int, pdu: bytes, answers: list[bytes]) -> list[str]:
     """What is wrong with *answers* to the request *pdu* sent to *unit*: nothing to a
     broadcast or another unit; to :data:`UNIT`, at most one frame, from that unit, that
@@ -192,12 +213,9 @@ def check_answers(unit: int, pdu: bytes, answers: list[bytes]) -> list[str]:
             if len(reply) != 2 or reply[1] not in set(ExceptionCode):
                 problems.append(f"{where}: exception answer {reply.hex(' ')} is not a spec one")
         elif reply[0] == pdu[0] < EXCEPTION_BIT:
-            try:
-                response = decode_response(reply)
-                assert isinstance(response, Response)
-                decode_request(pdu).check_response(response)
-            except ModbusError as error:
-                problems.append(f"{where}: reply {reply.hex(' ')} does not answer it: {error}")
+            errors = [_answers(request, reply) for request in _readings(unit, pdu)]
+            if all(errors):
+                problems.append(f"{where}: reply {reply.hex(' ')} does not answer it: {errors[0]}")
         else:
             problems.append(f"{where}: answer {reply.hex(' ')} has another function code")
     return problems

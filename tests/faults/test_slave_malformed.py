@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from aiortu.core.codes import FunctionCode
+from aiortu.core.frame import encode_frame
 
 from .slave_scenarios import (
     CODES,
@@ -74,3 +75,14 @@ def test_the_check_catches_what_it_must() -> None:
     assert check_answers(UNIT, b"\x03", [bytes.fromhex("11 83 0C") + b"\x00\x00"])
     assert check_answers(UNIT, b"\x03\x00\x00\x00\x01", [reply, reply])
     assert check_answers(UNIT, b"\x03\x00\x00\x00\x01", [reply]) == []
+
+
+async def test_a_request_followed_by_its_crcs_low_byte_is_that_request() -> None:
+    # Found by the fault soak (seed 644211623): "01 00 13 00 13" and the low byte of its
+    # CRC (8E) make a frame whose CRC ends in 00, so its first 8 bytes are the request
+    # with a good CRC. The slave answers that request; the check must accept it.
+    request = bytes.fromhex("01 00 13 00 13")
+    assert encode_frame(UNIT, request + b"\x8e") == encode_frame(UNIT, request) + b"\x00"
+    async with slave_under_test() as under_test:
+        assert await under_test.exchange(UNIT, request + b"\x8e") == []
+        assert await under_test.exchange(UNIT, bytes.fromhex("2b 0e 01 00 b1")) == []
