@@ -151,10 +151,11 @@ class Master(SerialLineFunctions):
 
     1. Before each request goes out, whatever the line delivered is dropped. Causality:
        where the line's wire times are real (a serial port, a paced virtual line: see
-       *wire_timed*), a frame that began before the request had left the wire plus the
-       unit's minimum turnaround (*min_turnaround* seconds, 0 by default;
-       :meth:`set_min_turnaround` per unit) is stale; elsewhere (TCP, ptys, unpaced
-       virtual lines) a frame that ended before the request began to go out is.
+       *wire_timed*), a frame whose first byte arrived before the request had left the
+       wire plus the unit's minimum turnaround plus that byte's own wire time
+       (*min_turnaround* seconds, 0 by default; :meth:`set_min_turnaround` per unit)
+       is stale; elsewhere (TCP, ptys, unpaced virtual lines) a frame that ended before
+       the request began to go out is.
     2. A frame must come from the unit asked, with the request's function code (or its
        exception form), and pass the request's checks of the reply (byte count, echoed
        address, count and values); anything else is skipped while the wait goes on.
