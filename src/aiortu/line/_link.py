@@ -181,6 +181,12 @@ class Link:
         if self.frame_gap < 0 or math.isnan(self.frame_gap):
             raise ValueError(f"frame_gap must be >= 0 seconds, not {frame_gap}")
         self.clock = clock
+        self.wire_timed: bool = getattr(stream, "wire_timed", False) is True
+        """Whether the wire times the link computes from [`settings`][aiortu.line.Link] are real: a
+        frame sent cannot have left the wire sooner, so no reply can begin sooner. True
+        where the stream says so (a serial port that is not a pseudo-terminal, a paced
+        virtual line); false on TCP, unpaced virtual lines and ptys, which deliver at once.
+        The master may set it (`Master(wire_timed=...)`)."""
         self.receiver = Receiver(
             self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence
         )
