@@ -3,8 +3,10 @@ been received and answered is not the reply, where the line's wire times are rea
 
 from __future__ import annotations
 
+import asyncio
 import math
 import os
+from typing import cast
 
 import anyio
 import pytest
@@ -12,11 +14,14 @@ import pytest
 import aiortu
 from aiortu.core.frame import encode_frame
 from aiortu.core.master_machine import MasterMachine
-from aiortu.core.master_transaction import OutcomeKind, SkipReason, Transaction
+from aiortu.core.master_transaction import OutcomeKind, RetryPolicy, SkipReason, Transaction
 from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
 from aiortu.core.receiver import FrameReceived, Receiver, Role
 from aiortu.core.timing import LineSettings
 from aiortu.line import Link
+from aiortu.master import UnitStats
+from aiortu.master._job import JobQueue
+from aiortu.master._usual_exchange import UsualExchange, send_usual_exchange, take_over
 from aiortu.testing import VirtualBus
 from aiortu.transport import open_serial
 from tests.transport.ptys import open_pty
@@ -45,12 +50,72 @@ def test_a_frame_begun_before_the_unit_could_answer_is_stale(observer: bool) -> 
     assert genuine.kind is OutcomeKind.DONE
 
 
+class _Line:
+    """What the usual exchange uses of a link: the request leaves the wire at 1.005."""
+
+    char_time = 0.0005
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+
+    def send_now(self, frame: bytes) -> float:
+        return 1.005
+
+
+def _usual_exchange(
+    loop: asyncio.AbstractEventLoop, reply_delay: float | None, stale: list[FrameReceived]
+) -> tuple[UsualExchange, list[str]]:
+    """A usual exchange of a read of 2 registers from unit 7 (sent 1.001 to 1.005)."""
+    known = MasterMachine().usual_exchange(7, ReadHoldingRegistersRequest(0, 2))
+    assert known is not None
+    released: list[str] = []
+    exchange = send_usual_exchange(
+        cast("Link", _Line(loop)),
+        known,
+        UnitStats(),
+        timeout=0.5,
+        policy=RetryPolicy(),
+        priority=0,
+        done=lambda: released.append("line"),
+        stale=stale.append,
+        reply_delay=reply_delay,
+    )
+    assert exchange is not None
+    return exchange, released
+
+
 def test_the_usual_reply_taken_at_once_obeys_the_same_rule() -> None:
-    machine = _waiting(0.002)
-    frame = encode_frame(7, REPLY)
-    machine.usual_reply  # the request is looked up, as the engine does  # noqa: B018
-    assert machine.take_usual_reply(frame, 1.010, 1.0065) is None
-    assert machine.take_usual_reply(frame, 1.011, 1.0071) is not None
+    # The read callback's fast path: a reply whose first byte came before 1.007 is
+    # handed to the machine as a frame (dated by its first byte), not taken.
+    frame = encode_frame(7, REPLY)  # 9 bytes: the first one 4 ms before the last
+    loop = asyncio.new_event_loop()
+    try:
+        stale: list[FrameReceived] = []
+        exchange, released = _usual_exchange(loop, 0.002, stale)
+        exchange.on_reply(frame, 1.0105)  # began at 1.0065
+        assert [(event.frame, event.start, event.end) for event in stale] == [
+            (frame, pytest.approx(1.0065), 1.0105)
+        ]
+        assert not exchange.caller.done()
+        assert released == []
+        transaction = take_over(exchange, MasterMachine(), JobQueue()).transaction
+        assert transaction.reply_delay == 0.002  # the machine keeps the same rule
+        assert transaction.earliest_reply == pytest.approx(1.007)
+
+        stale.clear()
+        exchange, released = _usual_exchange(loop, 0.002, stale)
+        exchange.on_reply(frame, 1.0111)  # began at 1.0071
+        assert stale == []
+        assert released == ["line"]
+        assert exchange.caller.result().values == (1, 2)  # type: ignore[union-attr]
+
+        # Without real wire times no reply is stale by its time here.
+        exchange, released = _usual_exchange(loop, None, stale)
+        exchange.on_reply(frame, 1.0)
+        assert stale == []
+        assert released == ["line"]
+    finally:
+        loop.close()
 
 
 def test_without_real_wire_times_a_reply_only_has_to_end_after_the_request_began() -> None:
