@@ -208,6 +208,9 @@ async def test_wire_timed_comes_from_the_stream() -> None:
     paced = VirtualBus(2, settings=LineSettings(19200))
     assert Link(paced.endpoints[0]).wire_timed is True
     assert Link(VirtualBus(2).endpoints[0]).wire_timed is False
+    # A bus faster than the link's settings delivers sooner than the link computes.
+    assert Link(VirtualBus(2, settings=LineSettings(115200)).endpoints[0]).wire_timed is False
+    assert Link(VirtualBus(2, settings=LineSettings(9600)).endpoints[0]).wire_timed is True
     with open_pty() as pty:
         stream = await open_serial(pty.path, LineSettings(19200, parity="N"))
         async with stream:
