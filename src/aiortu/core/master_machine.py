@@ -24,13 +24,15 @@ sleeps until [`MasterMachine.deadline`][aiortu.core.master_machine.MasterMachine
 
 * The response timeout runs from the end of transmission (the time the caller passes to
   [`MasterMachine.sent`][aiortu.core.master_machine.MasterMachine.sent]), per attempt.
-* A frame answers the request only when it ended after the request began to go out (older
-  frames are stale), comes from the unit asked, carries the request's function code or its
-  exception form, decodes, and passes `request.check_response`. A stale frame, or one
-  from another unit or with another function code, is skipped and the wait goes on: on a
-  multi-drop line other units talk too. A frame from the unit asked with the request's
-  function code that does not decode or does not answer the request (a byte count or an
-  echo that differs) fails the attempt at once with
+* A frame answers the request only when it began no sooner than the request could have
+  been received and processed
+  ([`Transaction.earliest_reply`][aiortu.core.master_transaction.Transaction.earliest_reply];
+  older frames are stale), comes from the unit asked, carries the request's function code
+  or its exception form, decodes, and passes `request.check_response`. A stale frame, or
+  one from another unit or with another function code, is skipped and the wait goes on:
+  on a multi-drop line other units talk too. A frame from the unit asked with the
+  request's function code that does not decode or does not answer the request (a byte
+  count or an echo that differs) fails the attempt at once with
   [`MalformedPDU`][aiortu.errors.MalformedPDU]: nobody else on the line sends it, and the
   unit will not send a better one for this attempt.
 * Bytes that fail the CRC or the framing are noted; the wait goes on for a short grace
@@ -147,7 +149,7 @@ _FRAME_CACHE_SIZE: Final = 256
 class _ArrivedFrame:
     unit: int
     pdu: bytes
-    end: float
+    start: float
 
 
 @dataclass(slots=True)
@@ -399,6 +401,11 @@ class MasterMachine:
         transaction.attempts += 1
         transaction.attempt_start = start
         transaction.attempt_end = end
+        delay = transaction.reply_delay
+        # Causality: no reply can begin before the unit has the whole request and has
+        # had its turnaround. Only where the line's wire times are real (see the field).
+        # Without it the rule is weaker: the frame must end after the request began.
+        transaction.earliest_reply = start if delay is None else end + delay
         transaction.frame_error = None
         if transaction.expects_reply:
             if self.state is _S.IDLE and self._on_transition is None:
@@ -414,12 +421,15 @@ class MasterMachine:
 
     def frame_received(self, unit: int, pdu: bytes, start: float, end: float) -> Outcome:
         """A frame with a good CRC arrived (`start`/`end`: its first and last byte)."""
+        transaction = self.transaction
+        if transaction is not None and transaction.reply_delay is None:
+            start = end  # no real wire times: only the end is sure to follow the request
         if self.state is MasterState.WAITING_REPLY and self._on_transition is None:
             # The usual reply to a register read takes the table's two transitions
             # (REPLY_RECEIVED, then REPLY_OK) in one step; anything else, and every frame
             # with an observer, is examined the general way (_examine_frame), one
             # transition at a time. The tests hold both ways equal.
-            response = self._usual_reply(unit, pdu, end)
+            response = self._usual_reply(unit, pdu, start)
             if response is not None:
                 self.state = _USUAL_REPLY_TARGET
                 self.deadline = None
@@ -427,11 +437,12 @@ class MasterMachine:
         if self.state is MasterState.WAITING_TURNAROUND:
             # Nobody answers a broadcast; whatever arrives is another conversation.
             return Outcome(OutcomeKind.WAIT, skipped=SkipReason.OTHER_UNIT)
-        return self._fire(_E.REPLY_RECEIVED, _ArrivedFrame(unit, pdu, end))
+        return self._fire(_E.REPLY_RECEIVED, _ArrivedFrame(unit, pdu, start))
 
     def frame_error(self, error: FrameError, end: float) -> Outcome:
         """Bytes that ended at `end` made no valid frame; `error` says why."""
-        if self.state is MasterState.WAITING_TURNAROUND or end < self._current.attempt_start:
+        # Bytes that ended before a reply could begin are not the reply.
+        if self.state is MasterState.WAITING_TURNAROUND or end < self._current.earliest_reply:
             return _WAIT
         return self._fire(_E.FRAME_ERROR, _BadBytes(error, end))
 
@@ -486,13 +497,13 @@ class MasterMachine:
 
     def _examine_frame(self, argument: object) -> None:
         assert isinstance(argument, _ArrivedFrame)
-        unit, pdu, end = argument.unit, argument.pdu, argument.end
+        unit, pdu, start = argument.unit, argument.pdu, argument.start
         transaction = self.transaction
         assert transaction is not None
         request = transaction.request
         reason: SkipReason | None = None
         response: Response | ExceptionPDU | None = None
-        if end < transaction.attempt_start:
+        if start < transaction.earliest_reply:
             reason = SkipReason.STALE
         elif unit != transaction.unit or unit == BROADCAST_UNIT:
             reason = SkipReason.OTHER_UNIT
@@ -518,17 +529,18 @@ class MasterMachine:
         else:
             self._fire(_E.REPLY_OK, response)
 
-    def _usual_reply(self, unit: int, pdu: bytes, end: float) -> Response | None:
-        """The reply to a register read when `pdu` is one, from the unit asked, after the
-        request began: built without decode_response's general checks (its length is the
-        request's count, and 16-bit words are always in range); else None."""
+    def _usual_reply(self, unit: int, pdu: bytes, start: float) -> Response | None:
+        """The reply to a register read when `pdu` is one, from the unit asked, begun no
+        sooner than a reply could (`start`): built without decode_response's general
+        checks (its length is the request's count, and 16-bit words are always in
+        range); else None."""
         transaction = self.transaction
         assert transaction is not None
         request = transaction.request
         if (
             type(request) in _REGISTER_READS
             and unit == transaction.unit != BROADCAST_UNIT
-            and end >= transaction.attempt_start
+            and start >= transaction.earliest_reply
             and isinstance(request, ReadHoldingRegistersRequest)
             and pdu
             and pdu[0] == request.function_code

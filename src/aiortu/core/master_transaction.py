@@ -136,7 +136,8 @@ class SkipReason(enum.StrEnum):
     """Why a frame was not taken as the reply."""
 
     STALE = "stale"
-    """It ended before the request began to go out."""
+    """It began before a reply to the request could have (see
+    [`Transaction.earliest_reply`][aiortu.core.master_transaction.Transaction.earliest_reply])."""
     OTHER_UNIT = "other unit"
     """It comes from another unit."""
     OTHER_FUNCTION = "other function"
@@ -193,6 +194,17 @@ class Transaction:
     """When the current attempt began to go out."""
     attempt_end: float = 0.0
     """When the current attempt had left the wire."""
+    reply_delay: float | None = None
+    """The least delay from the end of a request on the wire to the arrival of the first
+    byte of its reply (the unit's turnaround and that byte's wire time), where the line's
+    wire times are real (a serial port, a paced virtual line); None where they are not
+    (TCP, unpaced virtual lines, ptys): there a request's computed wire time may not have
+    passed yet when its genuine reply arrives."""
+    earliest_reply: float = 0.0
+    """The earliest the first byte of a reply to the current attempt can arrive, set by
+    [`sent`][aiortu.core.master_machine.MasterMachine.sent]: *attempt_end* plus
+    *reply_delay*; a frame that began sooner is stale. Without *reply_delay* it is
+    *attempt_start*, and a frame that ended sooner is stale."""
     frame_error: FrameError | None = None
     """The last frame error of the current attempt, if any."""
     failures: list[Failure] = field(default_factory=list)

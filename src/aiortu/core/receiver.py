@@ -607,8 +607,8 @@ class Receiver:
                 self._out.append(
                     FrameReceived(
                         bytes(buffer[offset : offset + found]),
-                        self._estimate(offset, end),
-                        self._estimate(offset + found - 1, end),
+                        self._estimate(offset, end, None if keep_tail else length),
+                        self._estimate(offset + found - 1, end, None if keep_tail else length),
                     )
                 )
                 resume = garbage_from = offset + found
@@ -639,9 +639,19 @@ class Receiver:
             buffer.clear()
             search.forget()
 
-    def _estimate(self, index: int, end: float) -> float:
-        """When byte `index` of the buffer arrived, assuming back-to-back characters."""
-        return min(end, self._first + index * self.char_time)
+    def _estimate(self, index: int, end: float, length: int | None = None) -> float:
+        """When byte `index` of the buffer arrived, assuming back-to-back characters.
+
+        With `length`, the buffer's length when its last byte arrived at `end`: no sooner
+        than the bytes after it allow. A frame found after a pause in the buffer (garbage,
+        a pause, a reply) is then never dated before it came, which a master relies on
+        to tell a reply from a stale frame.
+        """
+        char_time = self.char_time
+        time = min(end, self._first + index * char_time)
+        if length is None:
+            return time
+        return max(time, end - (length - 1 - index) * char_time)
 
 
 _MID_FRAME = frozenset((ReceiverState.START, ReceiverState.DATABUF))

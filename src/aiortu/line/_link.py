@@ -181,6 +181,14 @@ class Link:
         if self.frame_gap < 0 or math.isnan(self.frame_gap):
             raise ValueError(f"frame_gap must be >= 0 seconds, not {frame_gap}")
         self.clock = clock
+        self.wire_timed: bool = _wire_timed(stream, self.settings)
+        """Whether the wire times the link computes from [`settings`][aiortu.line.Link] are real: a
+        frame sent cannot have left the wire sooner, so no reply can begin sooner. True
+        where the stream says so (a serial port that is not a pseudo-terminal, a paced
+        virtual line); false on TCP, unpaced virtual lines and ptys, which deliver at once.
+        A stream whose own settings are faster than the link's is not: the link would date
+        its frames later than they left the wire. The master may set it
+        (`Master(wire_timed=...)`)."""
         self.receiver = Receiver(
             self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence
         )
@@ -559,3 +567,13 @@ class Link:
         a large share of t3.5 at high baud rates. Elsewhere it sleeps on the loop's timers.
         """
         await self._silence.wait(self._activity, self.clock, silence)
+
+
+def _wire_timed(stream: object, settings: LineSettings) -> bool:
+    """Whether the wire times computed from `settings` are real on `stream` (see
+    [`Link.wire_timed`][aiortu.line.Link.wire_timed])."""
+    if getattr(stream, "wire_timed", False) is not True:
+        return False
+    paced = getattr(stream, "settings", None)
+    # Bytes that go faster than `settings` leave the wire sooner than computed.
+    return not isinstance(paced, LineSettings) or paced.char_time >= settings.char_time

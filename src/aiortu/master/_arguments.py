@@ -95,6 +95,17 @@ def check_seconds(
     return seconds
 
 
+def check_turnaround(seconds: object) -> float:
+    """Return `seconds` as a unit's minimum turnaround if it is a number from 0 to 10."""
+    allowed = "a number of seconds from 0 to 10"
+    if type(seconds) is not float and not is_int(seconds):
+        raise InvalidValue("min_turnaround", seconds, allowed)
+    value = float(seconds)  # type: ignore[arg-type]  # a float or an int, checked above
+    if not 0 <= value <= 10:  # also rejects NaN
+        raise InvalidValue("min_turnaround", seconds, allowed)
+    return value
+
+
 def check_timeout(timeout: object) -> float:
     """Return a call's response timeout, in seconds, if it is finite and > 0."""
     if type(timeout) is float and 0 < timeout < math.inf:
@@ -215,6 +226,8 @@ def check_master_settings(
     settings: object = None,
     clock: object = float,
     opener: object = None,
+    min_turnaround: object = 0.0,
+    wire_timed: object = None,
 ) -> None:
     """Raise InvalidValue, naming the setting, for the first of a master's settings that is
     out of its range (see [`Master`][aiortu.master.Master])."""
@@ -240,3 +253,6 @@ def check_master_settings(
         raise InvalidValue("clock", clock, "a function returning the time in seconds")
     if opener is not None and not callable(opener):
         raise InvalidValue("opener", opener, "None or an async function returning a stream")
+    check_turnaround(min_turnaround)
+    if wire_timed is not None and not isinstance(wire_timed, bool):
+        raise InvalidValue("wire_timed", wire_timed, "None (from the stream), True or False")

@@ -72,6 +72,7 @@ from aiortu.master._arguments import (
     check_priority,
     check_registers,
     check_timeout,
+    check_turnaround,
     check_unit,
 )
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
@@ -137,7 +138,8 @@ class Master(SerialLineFunctions):
     `turnaround_delay` is the wait after a broadcast. Health: `offline_after`
     consecutive failures mark a unit offline; with `fail_fast_offline` calls to it raise
     [`UnitOffline`][aiortu.errors.UnitOffline] except one probe every `probe_interval`
-    seconds. `timing` is the receiver's t1.5 mode.
+    seconds. `timing` is the receiver's t1.5 mode. `min_turnaround` and `wire_timed`
+    decide which replies are stale (see below).
 
     Reconnecting (see [`aiortu.master`][aiortu.master]): when the stream fails, the request in
     flight and the queued ones raise [`ConnectionLost`][aiortu.errors.ConnectionLost]. A master
@@ -158,8 +160,12 @@ class Master(SerialLineFunctions):
     How a late reply is kept from a later request. RTU frames carry no transaction id,
     so a reply is matched by what it is and when it came:
 
-    1. Before each request goes out, whatever the line delivered is dropped, and a frame
-       that ended before the request began to go out is dropped as stale.
+    1. Before each request goes out, whatever the line delivered is dropped. Causality: where the
+       line's wire times are real (a serial port, a paced virtual line: see `wire_timed`), a frame
+       whose first byte arrived before the request had left the wire plus the unit's minimum
+       turnaround plus that byte's own wire time (`min_turnaround` seconds, 0 by default;
+       [`set_min_turnaround`][aiortu.master.Master.set_min_turnaround] per unit) is stale; elsewhere
+       (TCP, ptys, unpaced virtual lines) a frame that ended before the request began to go out is.
     2. A frame must come from the unit asked, with the request's function code (or its
        exception form), and pass the request's checks of the reply (byte count, echoed
        address, count and values); anything else is skipped while the wait goes on.
@@ -199,6 +205,8 @@ class Master(SerialLineFunctions):
         reconnect: bool = True,
         reconnect_delay: tuple[float, float] = (0.1, 5.0),
         reconnect_fail_fast: bool = False,
+        min_turnaround: float = 0.0,
+        wire_timed: bool | None = None,
     ) -> None:
         check_master_settings(
             timeout=timeout, retries=retries, retry_on=retry_on, repeatable=repeatable,
@@ -207,7 +215,7 @@ class Master(SerialLineFunctions):
             fail_fast_offline=fail_fast_offline, probe_interval=probe_interval,
             reconnect=reconnect, reconnect_delay=reconnect_delay,
             reconnect_fail_fast=reconnect_fail_fast, timing=timing, settings=settings,
-            clock=clock, opener=opener,
+            clock=clock, opener=opener, min_turnaround=min_turnaround, wire_timed=wire_timed,
         )  # fmt: skip
         self.settings = settings if settings is not None else LineSettings()
         self.timeout = float(timeout)
@@ -215,10 +223,13 @@ class Master(SerialLineFunctions):
         self.policy = RetryPolicy.of(retries, retry_on, repeatable)
 
         def make_link(stream: anyio.abc.ByteStream) -> Link:
-            return Link(
+            link = Link(
                 stream, self.settings, role=Role.MASTER, timing=timing, frame_gap=frame_gap,
                 clock=clock,
             )  # fmt: skip
+            if wire_timed is not None:
+                link.wire_timed = wire_timed
+            return link
 
         link = make_link(stream)
         self.engine = LineEngine(
@@ -226,6 +237,7 @@ class Master(SerialLineFunctions):
             health=HealthPolicy(offline_after, fail_fast_offline, probe_interval),
             late_reply_guard=late_reply_guard,
         )
+        self.engine.min_turnaround = check_turnaround(min_turnaround)
         self.connection = LineConnection(
             self.engine,
             link,
@@ -276,6 +288,21 @@ class Master(SerialLineFunctions):
     def statistics(self) -> Mapping[int, UnitStats]:
         """[`UnitStats`][aiortu.master.UnitStats] by unit address, for units used so far."""
         return self.engine.stats
+
+    def set_min_turnaround(self, unit: int, seconds: float | None) -> None:
+        """Set the least time `unit` takes from the end of a request on the wire to the
+        first byte of its reply (`None`: back to the master's *min_turnaround*).
+
+        A frame that begins sooner cannot answer the request and is skipped as stale,
+        where the line's wire times are real (see the class docstring). Set it from the
+        device's documented turnaround; a spec-abiding device keeps at least t3.5 of
+        silence. Too large a value drops the device's genuine replies.
+        """
+        check_unit(unit)
+        if seconds is None:
+            self.engine.unit_turnaround.pop(unit, None)
+        else:
+            self.engine.unit_turnaround[unit] = check_turnaround(seconds)
 
     def unit_stats(self, unit: int) -> UnitStats:
         """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
@@ -602,6 +629,8 @@ async def open_master(
     reconnect: bool = True,
     reconnect_delay: tuple[float, float] = (0.1, 5.0),
     reconnect_fail_fast: bool = False,
+    min_turnaround: float = 0.0,
+    wire_timed: bool | None = None,
     **transport_options: Any,
 ) -> AsyncIterator[Master]:
     """Open `port_or_url` (a serial device path, `rtu+tcp://host:port`, or `tcp://host:port` for
@@ -629,7 +658,8 @@ async def open_master(
         "late_reply_guard": late_reply_guard, "offline_after": offline_after,
         "fail_fast_offline": fail_fast_offline, "probe_interval": probe_interval,
         "timing": timing, "reconnect": reconnect, "reconnect_delay": reconnect_delay,
-        "reconnect_fail_fast": reconnect_fail_fast,
+        "reconnect_fail_fast": reconnect_fail_fast, "min_turnaround": min_turnaround,
+        "wire_timed": wire_timed,
     }  # fmt: skip
     check_master_settings(**options)  # before the port is opened: a bad one leaves it shut
     settings = LineSettings(baudrate, bytesize, parity, stopbits)

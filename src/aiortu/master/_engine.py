@@ -154,6 +154,11 @@ class LineEngine:
         self.usual_exchanges = True
         """Whether register reads may run their usual exchange without the machine (see
         [`aiortu.master`][aiortu.master]); false runs every transaction through it."""
+        self.min_turnaround = 0.0
+        """Seconds from the end of a request on the wire to the first byte of a reply
+        that every unit takes at least, unless `unit_turnaround` says otherwise."""
+        self.unit_turnaround: dict[int, float] = {}
+        """The minimum turnaround of single units (see `min_turnaround`)."""
         self._guard = _LateReplyGuard(late_reply_guard)
         self._jobs = JobQueue()
         self._open = False
@@ -197,6 +202,16 @@ class LineEngine:
             stats = self.stats[unit] = UnitStats()
         return stats
 
+    def reply_delay(self, unit: int) -> float | None:
+        """The least delay from a request to `unit` leaving the wire to the arrival of
+        its reply's first byte, where the link's wire times are real: the unit's minimum
+        turnaround plus the byte's own wire time. None where they are not (see
+        [`Transaction.reply_delay`][aiortu.core.master_transaction.Transaction.reply_delay])."""
+        link = self.link
+        if not link.wire_timed:
+            return None
+        return self.unit_turnaround.get(unit, self.min_turnaround) + link.char_time
+
     async def submit(
         self, transaction: Transaction, priority: int = 0
     ) -> Response | ExceptionPDU | None:
@@ -213,6 +228,7 @@ class LineEngine:
             await self._wait_connected(transaction.timeout)
         if self.health.fail_fast_offline:
             self._check_offline(transaction.unit)
+        transaction.reply_delay = self.reply_delay(transaction.unit)
         jobs = self._jobs
         job = jobs.new_job(transaction, priority)
         if jobs.busy or not self._open:
@@ -309,6 +325,8 @@ class LineEngine:
             policy=policy,
             priority=priority,
             done=self._release,
+            stale=self._on_link_event,
+            reply_delay=self.reply_delay(unit) if link.wire_timed else None,
             caller=waiter,
         )
         if exchange is None:

@@ -14,7 +14,9 @@ the machine:
    length) straight from the read callback
    ([`expect`][aiortu.line.Link.expect]).
 3. That reply ends it (`UsualExchange.on_reply`, called by the link): it is
-   decoded and counted, the line handed on, and the future completed. The caller's
+   decoded and counted, the line handed on, and the future completed. One that began
+   before the unit could have answered (where the line's wire times are real) is stale:
+   it goes to the machine as a frame, which skips it (step 4). The caller's
    task is woken once, and no coroutine of the engine runs.
 4. Anything else (another frame, bad bytes, the response timeout, the line lost) makes
    the machine take the attempt over (`take_over`): it begins the transaction
@@ -30,12 +32,14 @@ the wire.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from aiortu.core.master_machine import KnownRequest, MasterMachine
 from aiortu.core.master_transaction import RetryPolicy, Transaction
 from aiortu.core.pdu import Request
+from aiortu.core.receiver import FrameReceived
 from aiortu.line import Link
 from aiortu.master._job import Job, JobQueue, Waiter
 from aiortu.master._stats import UnitStats
@@ -72,10 +76,25 @@ class UsualExchange:
     """When it had left the wire."""
     done: Callable[[], None]
     """What the engine does once the usual reply came: hand the line on."""
+    stale: Callable[[FrameReceived], None]
+    """What the engine does with a stale reply: the machine takes it over and skips it."""
+    reply_delay: float | None
+    """The unit's least delay to the reply's first byte, or None without real wire
+    times (see
+    [`Transaction.reply_delay`][aiortu.core.master_transaction.Transaction.reply_delay])."""
+    stale_before: float
+    """A usual reply that ends sooner began before `end` plus `reply_delay`: stale
+    (minus infinity without a reply delay). One comparison on the fast path."""
+    char_time: float
+    """The wire time of a character, to date a stale reply's first byte."""
 
     def on_reply(self, frame: bytes, end: float) -> None:
         """The link's read callback: `frame`, the usual reply (its shape matched, its CRC
         checked), ended at `end`. Count it, hand the line on, complete the future."""
+        if end < self.stale_before:
+            # Begun before the unit could answer: the machine skips it as stale.
+            self.stale(FrameReceived(frame, end - (len(frame) - 1) * self.char_time, end))
+            return
         response = MasterMachine.usual_response(self.known, frame)
         self.stats.count_success(end - self.start)
         self.done()
@@ -135,12 +154,16 @@ def send_usual_exchange(
     policy: RetryPolicy,
     priority: int,
     done: Callable[[], None],
+    stale: Callable[[FrameReceived], None],
+    reply_delay: float | None,
     caller: Waiter | None = None,
 ) -> UsualExchange | None:
     """Send `known`'s request now and return the exchange on the wire, or None (nothing
     sent) where the line asks for a wait (see [`send_now`][aiortu.line.Link.send_now]).
 
-    The exchange completes `caller` (a queued caller's future), or a new future."""
+    The exchange completes `caller` (a queued caller's future), or a new future.
+    `reply_delay` is the unit's least delay to its reply's first byte (None: the line's
+    wire times are not real, and no reply is stale by its time here)."""
     frame = known.frame
     end = link.send_now(frame)
     if end is None:
@@ -148,7 +171,19 @@ def send_usual_exchange(
     start = end - len(frame) * link.char_time
     if caller is None:
         caller = link.loop.create_future()
-    return UsualExchange(caller, known, stats, timeout, policy, priority, start, end, done)
+    char_time = link.char_time
+    if reply_delay is None:
+        stale_before = -math.inf
+    else:
+        shape = known.reply_shape
+        assert shape is not None
+        # The reply's first byte, at its end less (length - 1) characters, must come at
+        # `end + reply_delay` or later.
+        stale_before = end + reply_delay + (shape[1] - 1) * char_time
+    return UsualExchange(
+        caller, known, stats, timeout, policy, priority, start, end, done, stale,
+        reply_delay, stale_before, char_time,
+    )  # fmt: skip
 
 
 def take_over(exchange: UsualExchange, machine: MasterMachine, jobs: JobQueue) -> Job:
@@ -160,6 +195,7 @@ def take_over(exchange: UsualExchange, machine: MasterMachine, jobs: JobQueue) -
     """
     known = exchange.known
     transaction = Transaction(known.frame[0], known.request, exchange.timeout, exchange.policy)
+    transaction.reply_delay = exchange.reply_delay
     machine.begin(transaction)
     machine.sent(exchange.start, exchange.end)
     job = jobs.new_job(transaction, exchange.priority)

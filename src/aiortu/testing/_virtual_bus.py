@@ -155,6 +155,17 @@ class VirtualEndpoint(anyio.abc.ByteStream):
         return self._closed
 
     @property
+    def settings(self) -> LineSettings | None:
+        """The line settings the bus paces at, or None for an unpaced bus."""
+        return self.bus.settings
+
+    @property
+    def wire_timed(self) -> bool:
+        """Whether bytes take their wire time here (a paced bus): then a master may trust the wire
+        time it computes (see [`aiortu.line.Link.wire_timed`][aiortu.line.Link.wire_timed])."""
+        return self.bus.char_time > 0
+
+    @property
     def pending(self) -> int:
         """The number of bytes that arrived and wait to be received."""
         return len(self._buffer)

@@ -38,6 +38,7 @@ from __future__ import annotations
 import asyncio
 import errno
 import os
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import ModuleType
@@ -340,6 +341,21 @@ class _PortProtocol(asyncio.Protocol):
             self.on_lost()
 
 
+_LINUX: bool = sys.platform.startswith("linux")
+
+
+def _is_pseudo_terminal(fd: int) -> bool:
+    """Whether `fd` is a pseudo-terminal (Linux: device majors 136 to 143; elsewhere
+    by its name)."""
+    try:
+        if _LINUX:
+            return 136 <= os.major(os.fstat(fd).st_rdev) <= 143
+        name = os.ttyname(fd)
+    except OSError:
+        return False
+    return name.startswith(("/dev/pts/", "/dev/ttys", "/dev/pty"))
+
+
 class SerialStream(ByteStream, PushStream):
     """An open serial port as a byte stream. Made by [`open_serial`][aiortu.transport.open_serial].
 
@@ -368,6 +384,13 @@ class SerialStream(ByteStream, PushStream):
         self._receive_guard = anyio.ResourceGuard("reading from")
         self._send_guard = anyio.ResourceGuard("writing to")
         self._backend: Any = None
+
+    @property
+    def wire_timed(self) -> bool:
+        """Whether bytes take their wire time at the baud rate: true for a real port,
+        false for a pseudo-terminal, which delivers at once whatever the baud rate
+        (see [`aiortu.line.Link.wire_timed`][aiortu.line.Link.wire_timed])."""
+        return not _is_pseudo_terminal(self._serial.fileno())
 
     @property
     def port(self) -> str:
