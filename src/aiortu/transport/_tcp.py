@@ -28,15 +28,9 @@ import anyio.abc
 from anyio.abc import SocketAttribute, SocketStream
 
 from aiortu.errors import InvalidValue, PortBusy, PortError, PortNotFound, PortPermissionDenied
+from aiortu.transport._url import format_tcp_url
 
 __all__ = ("format_tcp_url", "listen_tcp", "open_rtu_over_tcp", "open_tcp_connection")
-
-
-def format_tcp_url(host: str, port: int, scheme: str = "rtu+tcp") -> str:
-    """The `scheme://host:port` URL of a server, with IPv6 hosts in brackets."""
-    if ":" in host:
-        return f"{scheme}://[{host}]:{port}"
-    return f"{scheme}://{host}:{port}"
 
 
 def _leaf_errors(exc: BaseException) -> list[BaseException]:

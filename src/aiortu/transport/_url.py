@@ -41,6 +41,14 @@ TCP_SCHEME = "rtu+tcp"
 MODBUS_TCP_SCHEME = "tcp"
 """The URL scheme of Modbus TCP (MBAP framing)."""
 
+
+def format_tcp_url(host: str, port: int, scheme: str = TCP_SCHEME) -> str:
+    """The `scheme://host:port` URL of a server, with IPv6 hosts in brackets."""
+    if ":" in host:
+        return f"{scheme}://[{host}]:{port}"
+    return f"{scheme}://{host}:{port}"
+
+
 _URL_FORM = "a serial device path, rtu+tcp://host:port or tcp://host:port"
 _LISTEN_FORM = "tcp://host:port or rtu+tcp://host:port"
 
@@ -64,8 +72,7 @@ class TcpAddress:
     port: int
 
     def __str__(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{TCP_SCHEME}://{host}:{self.port}"
+        return format_tcp_url(self.host, self.port, TCP_SCHEME)
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,8 +84,7 @@ class ModbusTcpAddress:
     port: int
 
     def __str__(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{MODBUS_TCP_SCHEME}://{host}:{self.port}"
+        return format_tcp_url(self.host, self.port, MODBUS_TCP_SCHEME)
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,8 +98,7 @@ class ListenAddress:
     port: int
 
     def __str__(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{self.scheme}://{host}:{self.port}"
+        return format_tcp_url(self.host, self.port, self.scheme)
 
 
 PortAddress = SerialAddress | TcpAddress | ModbusTcpAddress
