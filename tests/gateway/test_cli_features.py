@@ -6,7 +6,6 @@ from __future__ import annotations
 import re
 import signal
 import subprocess
-import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -16,6 +15,7 @@ import anyio.abc
 import pytest
 
 from aiortu.testing import PtyBus
+from tests.cli_helpers import aiortu_command
 from tests.gateway.helpers import TcpClient
 
 pytestmark = pytest.mark.timeout(60)
@@ -37,7 +37,7 @@ class Output:
 
 @asynccontextmanager
 async def _command(*args: str) -> AsyncIterator[Output]:
-    command = [sys.executable, "-m", "aiortu", *args]
+    command = aiortu_command(*args)
     async with await anyio.open_process(command, stderr=subprocess.PIPE) as process:
         assert process.stderr is not None
         try:

@@ -8,7 +8,6 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -17,6 +16,7 @@ import anyio.abc
 import pytest
 
 from aiortu.testing import PtyBus
+from tests.cli_helpers import aiortu_command
 from tests.gateway.helpers import UNIT, device, line
 from tests.slave.test_tcp_interop import UNIT_ID, _data_codes, _ok
 
@@ -61,7 +61,7 @@ async def _line_from(stream: anyio.abc.ByteReceiveStream, pattern: bytes) -> re.
 
 @asynccontextmanager
 async def _command(*args: str) -> AsyncIterator[anyio.abc.Process]:
-    command = [sys.executable, "-m", "aiortu", *args]
+    command = aiortu_command(*args)
     async with await anyio.open_process(command, stderr=subprocess.PIPE) as process:
         try:
             yield process

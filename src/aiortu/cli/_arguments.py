@@ -132,6 +132,17 @@ def add_line_settings(group: argparse._ArgumentGroup) -> None:
     )
 
 
+def add_frame_gap(group: argparse._ArgumentGroup, *, before: str) -> None:
+    """Add `--frame-gap`, the silence kept before each `before` (`args.frame_gap`)."""
+    group.add_argument(
+        "--frame-gap",
+        type=seconds_or_zero,
+        default=None,
+        metavar="SECONDS",
+        help=f"silence kept before each {before} (t3.5 of the line settings)",
+    )
+
+
 def add_timing(group: argparse._ActionsContainer) -> None:
     """Add `--timing strict|tolerant`, the receiver's t1.5 mode (`args.timing`)."""
     group.add_argument(

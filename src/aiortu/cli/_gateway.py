@@ -17,11 +17,11 @@ import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import (
+    add_frame_gap,
     add_line_settings,
     positive_int,
     resolve_line_settings,
     seconds,
-    seconds_or_zero,
     unit,
 )
 from aiortu.cli._messages import port_failure
@@ -107,13 +107,7 @@ def register(subparsers: Subparsers) -> None:
     )
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
-    line.add_argument(
-        "--frame-gap",
-        type=seconds_or_zero,
-        default=None,
-        metavar="SECONDS",
-        help="silence kept before each request (t3.5 of the line settings)",
-    )
+    add_frame_gap(line, before="request")
     master = parser.add_argument_group("the master on the line")
     master.add_argument("--timeout", type=seconds, default=1.0, help="response timeout (1.0)")
     master.add_argument("--retries", type=int, default=2, help="extra attempts of a read (2)")

@@ -21,11 +21,11 @@ import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import (
+    add_frame_gap,
     add_line_settings,
     add_no_reconnect,
     add_timing,
     resolve_line_settings,
-    seconds_or_zero,
 )
 from aiortu.cli._messages import library_warnings_on_stderr, port_failure
 from aiortu.core.bus_decoder import describe_frame
@@ -88,13 +88,7 @@ def register(subparsers: Subparsers) -> None:
     )
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
-    line.add_argument(
-        "--frame-gap",
-        type=seconds_or_zero,
-        default=None,
-        metavar="SECONDS",
-        help="silence kept before each reply (t3.5 of the line settings)",
-    )
+    add_frame_gap(line, before="reply")
     add_timing(line)
     parser.add_argument(
         "--trace", action="store_true", help="log every frame on stderr, in hex, with its meaning"

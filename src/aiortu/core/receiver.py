@@ -255,7 +255,6 @@ class Receiver:
         self.timing = TimingMode(timing)
         self.char_time = self.settings.char_time
         self.t1_5 = self.settings.t1_5
-        self.t3_5 = self.settings.t3_5
         if frame_silence is None:
             frame_silence = self.settings.t3_5
             if self.timing is TimingMode.TOLERANT:
@@ -263,6 +262,7 @@ class Receiver:
         if frame_silence < 0:
             raise ValueError(f"frame_silence must be >= 0, not {frame_silence}")
         self.frame_silence = frame_silence
+        self._init_silence = min(self.settings.t3_5, frame_silence)
         self._strict = self.timing is TimingMode.STRICT
         self.state = ReceiverState.IDLE if now is None else ReceiverState.INIT
         self._buffer = bytearray()
@@ -314,9 +314,10 @@ class Receiver:
             silence = first_arrival - char_time - last
             # (IDLE, SILENCE) does nothing (see TRANSITIONS), and IDLE is where each frame
             # of a poll loop finds the receiver: no need to fire it there.
-            needed = self._silence_needed()
-            if silence >= needed and self.state is not _S.IDLE:
-                self._fire(ReceiverEvent.SILENCE, b"", 0, last + needed)
+            if self.state is not _S.IDLE:
+                needed = self._silence_needed()
+                if silence >= needed:
+                    self._fire(ReceiverEvent.SILENCE, b"", 0, last + needed)
         else:
             silence = float("inf")
         state = self.state
@@ -385,7 +386,7 @@ class Receiver:
         tolerant bound would keep a receiver that starts on a busy line deaf, then have
         it hand on old frames gathered as noise), else the frame silence."""
         if self.state is _S.INIT:
-            return min(self.t3_5, self.frame_silence)
+            return self._init_silence
         return self.frame_silence
 
     def reset(self, now: float) -> None:
