@@ -53,6 +53,7 @@ from aiortu.gateway._framing import RTU_SILENCE, Framing, MbapFraming, RtuFramin
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import GatewayStatistics, LineStatistics
 from aiortu.master import Master
+from aiortu.slave._tcp_server import peer_address
 
 __all__ = (
     "DEFAULT_IDLE_TIMEOUT",
@@ -428,7 +429,7 @@ class Gateway:
                     "gateway: %d connections open, the most allowed; closing %s "
                     "(logged once until one closes)",
                     self._connections,
-                    _peer(stream),
+                    peer_address(stream),
                 )
             await stream.aclose()
             return
@@ -439,7 +440,7 @@ class Gateway:
             await self.serve_connection(stream, priority, rtu_framing=rtu_framing)
         except Exception:
             # One connection's failure never ends the others, nor the gateway.
-            _log.exception("gateway: serving %s failed; connection closed", _peer(stream))
+            _log.exception("gateway: serving %s failed; connection closed", peer_address(stream))
         finally:
             self._connections -= 1
             self._refusing = False
@@ -485,14 +486,16 @@ class Gateway:
                 return framing.silence()
             if not connection.in_flight:
                 self.counters.connections_idle += 1
-                _log.info("gateway: %s idle for %g s, closed", _peer(stream), self.idle_timeout)
+                _log.info(
+                    "gateway: %s idle for %g s, closed", peer_address(stream), self.idle_timeout
+                )
                 return None
             # Not idle: the client waits for the line.
         try:
             return framing.feed(data)
         except MalformedHeader as error:
             self.counters.connections_malformed += 1
-            _log.warning("gateway: %s sent %s; connection closed", _peer(stream), error)
+            _log.warning("gateway: %s sent %s; connection closed", peer_address(stream), error)
             return None
 
     def _accept(self, connection: _Connection, adu: Adu) -> None:
@@ -530,11 +533,3 @@ def _host(stream: anyio.abc.ByteStream) -> str:
     if isinstance(address, tuple):
         return str(address[0])
     return "unix" if isinstance(address, str) else "local"
-
-
-def _peer(stream: anyio.abc.ByteStream) -> str:
-    """The client's address, for logs."""
-    address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
-    if isinstance(address, tuple):
-        return f"{address[0]}:{address[1]}"
-    return "a client"

@@ -74,7 +74,8 @@ class AnswerAtOnce:
     `queue` is the serve loop's queue, `before` and `after` its hook lists (the same
     objects: the predicate sees every change); `serve_later` hands a `Taken` to
     the serve loop; `to_listener` hands a whole request the shortcut did not answer to
-    the slave's listener, as the receiver would have.
+    the slave's listener, as the receiver would have, past the listener's own try of the
+    shortcut (the predicate and the fast path run once per request).
     """
 
     __slots__ = (

@@ -155,7 +155,7 @@ class Slave(Dispatcher):
             before=self._before,
             after=self._after,
             serve_later=self._leave,
-            to_listener=self._on_link_event,
+            to_listener=self._unanswered,
         )
         self._trace: TraceCallback | None = None
         self.trace = trace
@@ -311,12 +311,20 @@ class Slave(Dispatcher):
         if event is None:
             self._link_closed = True
             self._wake_serve_loop()
-        elif type(event) is FrameReceived and event.frame[0] in self._served:
+        elif not (
             # A request for us: answered at once where the shortcut's predicate allows it
             # (`AnswerAtOnce.may_answer` holds every condition: the order of requests,
             # the machine's state...), else left to the serve loop.
-            if not self._at_once.answer(event.frame):
-                self._queue_event(event)
+            type(event) is FrameReceived
+            and event.frame[0] in self._served
+            and self._at_once.answer(event.frame)
+        ):
+            self._unanswered(event)
+
+    def _unanswered(self, event: LinkEvent) -> None:
+        """Queue `event`, not answered at once, for the serve loop; or only count it."""
+        if type(event) is FrameReceived and event.frame[0] in self._served:
+            self._queue_event(event)
         elif not self._queue and self.machine.state is SlaveState.IDLE:
             # Nothing pending and no request under way: a discard, or a frame for another
             # unit, only counts; it never wakes the serve loop.

@@ -64,6 +64,7 @@ __all__ = (
     "ModbusTcpServer",
     "TcpServerCounters",
     "listening_address",
+    "peer_address",
 )
 
 _log = get_logger(__name__)
@@ -239,7 +240,7 @@ class ModbusTcpServer(Dispatcher):
                     "Modbus TCP: %d connections open, the most allowed; closing %s "
                     "(logged once until one closes)",
                     self._connections,
-                    _peer(stream),
+                    peer_address(stream),
                 )
             await stream.aclose()
             return
@@ -249,7 +250,7 @@ class ModbusTcpServer(Dispatcher):
             await self.serve_connection(stream)
         except Exception:
             # One connection's failure never ends the others, nor the server.
-            _log.exception("Modbus TCP: serving %s failed; connection closed", _peer(stream))
+            _log.exception("Modbus TCP: serving %s failed; connection closed", peer_address(stream))
         finally:
             self._connections -= 1
             self._refusing = False
@@ -266,14 +267,18 @@ class ModbusTcpServer(Dispatcher):
                 if idle.cancelled_caught:
                     self.counters.connections_idle += 1
                     _log.info(
-                        "Modbus TCP: %s idle for %g s, closed", _peer(stream), self.idle_timeout
+                        "Modbus TCP: %s idle for %g s, closed",
+                        peer_address(stream),
+                        self.idle_timeout,
                     )
                     return
                 try:
                     adus = decoder.feed(data)
                 except MalformedHeader as error:
                     self.counters.connections_malformed += 1
-                    _log.warning("Modbus TCP: %s sent %s; connection closed", _peer(stream), error)
+                    _log.warning(
+                        "Modbus TCP: %s sent %s; connection closed", peer_address(stream), error
+                    )
                     return
                 if adus:
                     await self._answer_all(stream, adus)
@@ -377,7 +382,7 @@ def listening_address(listener: anyio.abc.Listener[anyio.abc.ByteStream]) -> tup
     return None
 
 
-def _peer(stream: anyio.abc.ByteStream) -> str:
+def peer_address(stream: anyio.abc.ByteStream) -> str:
     """The client's address, for logs."""
     address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
     if isinstance(address, tuple):
