@@ -326,7 +326,7 @@ class LineEngine:
             priority=priority,
             done=self._release,
             stale=self._on_link_event,
-            reply_delay=self.reply_delay(unit) if link.wire_timed else None,
+            reply_delay=self.reply_delay(unit),
             caller=waiter,
         )
         if exchange is None:

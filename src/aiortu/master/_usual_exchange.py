@@ -168,10 +168,10 @@ def send_usual_exchange(
     end = link.send_now(frame)
     if end is None:
         return None
-    start = end - len(frame) * link.char_time
+    char_time = link.char_time
+    start = end - len(frame) * char_time
     if caller is None:
         caller = link.loop.create_future()
-    char_time = link.char_time
     if reply_delay is None:
         stale_before = -math.inf
     else:
