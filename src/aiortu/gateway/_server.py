@@ -53,7 +53,7 @@ from aiortu.gateway._framing import RTU_SILENCE, Framing, MbapFraming, RtuFramin
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import GatewayStatistics, LineStatistics
 from aiortu.master import Master
-from aiortu.slave._tcp_server import peer_address
+from aiortu.transport import peer_address
 
 __all__ = (
     "DEFAULT_IDLE_TIMEOUT",

@@ -55,6 +55,7 @@ from aiortu.errors import InvalidValue
 from aiortu.slave._answer_at_once import exception_pdu
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
+from aiortu.transport import peer_address
 
 __all__ = (
     "DEFAULT_IDLE_TIMEOUT",
@@ -64,7 +65,6 @@ __all__ = (
     "ModbusTcpServer",
     "TcpServerCounters",
     "listening_address",
-    "peer_address",
 )
 
 _log = get_logger(__name__)
@@ -380,11 +380,3 @@ def listening_address(listener: anyio.abc.Listener[anyio.abc.ByteStream]) -> tup
     if isinstance(address, tuple):
         return (str(address[0]), int(address[1]))
     return None
-
-
-def peer_address(stream: anyio.abc.ByteStream) -> str:
-    """The client's address, for logs."""
-    address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
-    if isinstance(address, tuple):
-        return f"{address[0]}:{address[1]}"
-    return "a client"

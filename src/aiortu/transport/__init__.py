@@ -27,7 +27,7 @@ from aiortu.transport._mbap_stream import (
 )
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
-from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp
+from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp, peer_address
 from aiortu.transport._url import (
     MODBUS_TCP_SCHEME,
     TCP_SCHEME,
@@ -64,6 +64,7 @@ __all__ = (
     "open_stream",
     "parse_listen_url",
     "parse_port_url",
+    "peer_address",
 )
 
 _SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo"})

@@ -30,7 +30,13 @@ from anyio.abc import SocketAttribute, SocketStream
 from aiortu.errors import InvalidValue, PortBusy, PortError, PortNotFound, PortPermissionDenied
 from aiortu.transport._url import format_tcp_url
 
-__all__ = ("format_tcp_url", "listen_tcp", "open_rtu_over_tcp", "open_tcp_connection")
+__all__ = (
+    "format_tcp_url",
+    "listen_tcp",
+    "open_rtu_over_tcp",
+    "open_tcp_connection",
+    "peer_address",
+)
 
 
 def _leaf_errors(exc: BaseException) -> list[BaseException]:
@@ -118,3 +124,12 @@ def _listen_error(where: str, exc: OSError) -> PortError:
     if exc.errno == errno.EADDRNOTAVAIL:
         return PortNotFound(where, "that address is not one of this machine's")
     return PortNotFound(where, f"cannot listen: {exc.strerror or exc}")
+
+
+def peer_address(stream: anyio.abc.ByteStream) -> str:
+    """The address of the peer at the other end of `stream` (`host:port`), for logs; "a
+    client" where the stream has no remote address (a Unix socket, an in-memory stream)."""
+    address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
+    if isinstance(address, tuple):
+        return f"{address[0]}:{address[1]}"
+    return "a client"
