@@ -1,11 +1,10 @@
 """Every `aiortu...` name the guides show in code exists and is public.
 
-Public means: each module on the way is public (no part starts with an underscore, and it
-is not a deprecated module left behind by a move), each name a module gives is in its
-`__all__` (or is a public submodule), and an attribute of a class is one without a
-leading underscore that the class has. The guides are README.md and docs/*.md (but for
-the architecture page); names are taken from their code spans and code blocks, including
-`from aiortu... import ...` lines.
+Public means: each module on the way is public (no part starts with an underscore), each
+name a module gives is in its `__all__` (or is a public submodule), and an attribute of a
+class is one without a leading underscore that the class has. The guides are README.md and
+docs/*.md (but for the architecture page); names are taken from their code spans and code
+blocks, including `from aiortu... import ...` lines.
 """
 
 from __future__ import annotations
@@ -42,12 +41,6 @@ def names_in(page: Path) -> set[str]:
     return names
 
 
-def _is_forwarding(origin: str | None) -> bool:
-    """Whether a module's file is a deprecated module that forwards to a new home."""
-    source = Path(origin or "").read_text(encoding="utf-8")
-    return "from aiortu._moved import " in source
-
-
 def why_not_public(dotted: str) -> str | None:
     """None if *dotted* names a public thing, else what is wrong with it."""
     current: object = aiortu
@@ -59,8 +52,6 @@ def why_not_public(dotted: str) -> str | None:
             package = hasattr(current, "__path__")
             spec = importlib.util.find_spec(f"{path}.{part}") if package else None
             if spec is not None:
-                if _is_forwarding(spec.origin):
-                    return f"{path}.{part} is a deprecated module"
                 current = importlib.import_module(f"{path}.{part}")
             elif part in getattr(current, "__all__", ()):
                 current = getattr(current, part)
@@ -89,4 +80,4 @@ def test_the_check_finds_names_and_refuses_private_ones() -> None:
     assert why_not_public("aiortu.Point.of") is None
     assert why_not_public("aiortu.slave._store.Block") == "aiortu.slave._store is private"
     assert why_not_public("aiortu.master.LineEngine") == "aiortu.master does not export LineEngine"
-    assert why_not_public("aiortu.store") == "aiortu.store is a deprecated module"
+    assert why_not_public("aiortu.store") == "aiortu does not export store"

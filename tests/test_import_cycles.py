@@ -1,28 +1,8 @@
-"""No import cycle among aiortu's modules, type-checking imports included.
-
-The deprecated forwarding modules (``aiortu/link.py``, ``aiortu/store.py``, ...) are left
-out: they import their new home lazily, for users only, and nothing inside aiortu
-imports them (an import-linter contract holds that).
-"""
+"""No import cycle among aiortu's modules, type-checking imports included."""
 
 from __future__ import annotations
 
-import tomllib
-from pathlib import Path
-
 import grimp
-
-_PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
-_FORWARDING_CONTRACT = "Nothing inside aiortu imports the deprecated forwarding modules"
-
-
-def forwarding_modules() -> set[str]:
-    """The deprecated forwarding modules, as the import-linter contract lists them."""
-    config = tomllib.loads(_PYPROJECT.read_text())
-    for contract in config["tool"]["importlinter"]["contracts"]:
-        if contract["name"] == _FORWARDING_CONTRACT:
-            return set(contract["forbidden_modules"])
-    raise AssertionError(f"no contract named {_FORWARDING_CONTRACT!r} in pyproject.toml")
 
 
 def cycles(imports: dict[str, set[str]]) -> list[list[str]]:
@@ -76,9 +56,7 @@ def test_the_cycle_finder_finds_cycles() -> None:
 
 def test_no_import_cycle_type_checking_imports_included() -> None:
     graph = grimp.build_graph("aiortu", exclude_type_checking_imports=False)
-    left_out = forwarding_modules()
-    assert left_out <= graph.modules, "a forwarding module listed in pyproject.toml is gone"
-    modules = graph.modules - left_out
+    modules = graph.modules
     imports = {
         module: graph.find_modules_directly_imported_by(module) & modules for module in modules
     }
