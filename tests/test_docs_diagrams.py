@@ -8,13 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from aiortu.core import master_machine, receiver, slave_machine
+from aiortu.core import ascii, master_machine, receiver, slave_machine
 from aiortu.core.diagrams import state_diagram
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 
 MACHINES: dict[str, tuple[Mapping[tuple[enum.Enum, enum.Enum], object], enum.Enum]] = {
     "receiver": (receiver.TRANSITIONS, receiver.ReceiverState.INIT),
+    "ascii receiver": (ascii.ASCII_TRANSITIONS, ascii.AsciiState.IDLE),
     "master": (master_machine.TRANSITIONS, master_machine.MasterState.IDLE),
     "slave": (slave_machine.TRANSITIONS, slave_machine.SlaveState.IDLE),
 }

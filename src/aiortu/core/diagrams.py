@@ -41,10 +41,12 @@ def state_diagram(
 
 
 def _main() -> None:
-    from aiortu.core import master_machine, receiver, slave_machine
+    from aiortu.core import ascii, master_machine, receiver, slave_machine
 
     print("Receiver:")
     print(state_diagram(receiver.TRANSITIONS, receiver.ReceiverState.INIT))
+    print("ASCII receiver:")
+    print(state_diagram(ascii.ASCII_TRANSITIONS, ascii.AsciiState.IDLE))
     print("Master:")
     print(state_diagram(master_machine.TRANSITIONS, master_machine.MasterState.IDLE))
     print("Slave:")
