@@ -44,6 +44,7 @@ from aiortu.slave._store import (
     Table,
 )
 from aiortu.slave._tcp_server import ModbusTcpServer, TcpServerCounters
+from aiortu.slave._udp_server import ModbusUdpServer
 
 __all__ = (
     "BUILTIN_HANDLERS",
@@ -61,6 +62,7 @@ __all__ = (
     "HandlerResult",
     "MemoryStore",
     "ModbusTcpServer",
+    "ModbusUdpServer",
     "RangeAccess",
     "RangeHandler",
     "Reply",

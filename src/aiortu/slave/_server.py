@@ -71,9 +71,12 @@ from aiortu.slave._handlers import (
 )
 from aiortu.slave._routes import RangeHandler
 from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS, ModbusTcpServer, listening_address
+from aiortu.slave._udp_server import ModbusUdpServer
 from aiortu.transport import (
     MODBUS_TCP_SCHEME,
+    MODBUS_UDP_SCHEME,
     TCP_SCHEME,
+    TLS_SCHEME,
     ListenAddress,
     listen_tcp,
     open_stream,
@@ -557,8 +560,8 @@ _WILDCARDS = frozenset({"0.0.0.0", "::"})
 def _listen_address(port_or_url: str, listen: bool | None) -> ListenAddress | None:
     """Where `port_or_url` listens, or None when it is a port to open (see serve)."""
     scheme = port_or_url.partition("://")[0].lower() if "://" in port_or_url else ""
-    if scheme == MODBUS_TCP_SCHEME:
-        return parse_listen_url(port_or_url)
+    if scheme in (MODBUS_TCP_SCHEME, MODBUS_UDP_SCHEME, TLS_SCHEME):
+        return parse_listen_url(port_or_url, (scheme,))
     if scheme == TCP_SCHEME:
         address = parse_listen_url(port_or_url)
         if listen or (listen is None and (address.port == 0 or address.host in _WILDCARDS)):
@@ -615,6 +618,8 @@ async def serve(
       [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]; `options` go to it
       (`max_connections`, `idle_timeout`, `unit_aliases`, `answer_unknown_units`,
       `serial_line_codes`).
+    - `udp://host:port`: Modbus UDP, the same server answering each datagram to its source
+      ([`ModbusUdpServer`][aiortu.slave.ModbusUdpServer]; the same `options`).
     - `rtu+tcp://host:port` with `listen` true, or with a wildcard host (`0.0.0.0`, `[::]`) or port
       0 (addresses nobody can connect to): listens for RTU framing over TCP and yields the running
       [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (option `max_connections`).
@@ -625,6 +630,11 @@ async def serve(
     """
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     address = _listen_address(port_or_url, listen)
+    if address is not None and address.scheme == MODBUS_UDP_SCHEME:
+        udp = ModbusUdpServer(units, handlers=handlers, trace=trace, **options)
+        async with udp.running(address, port_or_url):
+            yield udp
+        return
     if address is not None:
         server: ModbusTcpServer | RtuOverTcpServer
         if address.scheme == MODBUS_TCP_SCHEME:

@@ -28,9 +28,18 @@ from aiortu.transport._mbap_stream import (
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
 from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp, peer_address
+from aiortu.transport._udp import (
+    DatagramCounters,
+    check_datagram,
+    listen_udp,
+    open_modbus_udp,
+    serve_datagrams,
+)
 from aiortu.transport._url import (
     MODBUS_TCP_SCHEME,
+    MODBUS_UDP_SCHEME,
     TCP_SCHEME,
+    TLS_SCHEME,
     ListenAddress,
     ModbusTcpAddress,
     PortAddress,
@@ -42,7 +51,10 @@ from aiortu.transport._url import (
 
 __all__ = (
     "MODBUS_TCP_SCHEME",
+    "MODBUS_UDP_SCHEME",
     "TCP_SCHEME",
+    "TLS_SCHEME",
+    "DatagramCounters",
     "FileDescriptorStream",
     "FramedStream",
     "ListenAddress",
@@ -57,19 +69,24 @@ __all__ = (
     "SerialAttribute",
     "SerialStream",
     "TcpAddress",
+    "check_datagram",
     "listen_tcp",
+    "listen_udp",
     "open_modbus_tcp",
+    "open_modbus_udp",
     "open_rtu_over_tcp",
     "open_serial",
     "open_stream",
     "parse_listen_url",
     "parse_port_url",
     "peer_address",
+    "serve_datagrams",
 )
 
 _SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo"})
 _TCP_OPTIONS = frozenset({"connect_timeout"})
 _MODBUS_TCP_OPTIONS = frozenset({"connect_timeout", "counters"})
+_MODBUS_UDP_OPTIONS = frozenset({"counters"})
 
 
 async def open_stream(
@@ -85,7 +102,9 @@ async def open_stream(
     `tcp://host:port` connects to a Modbus TCP server and returns a
     [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream], which carries RTU frames as MBAP ADUs
     ([`open_modbus_tcp`][aiortu.transport.open_modbus_tcp]; options `connect_timeout` and
-    `counters`; `settings` are not used). Anything else is a serial device path
+    `counters`; `settings` are not used). `udp://host:port` talks Modbus UDP, one ADU per
+    datagram, through the same stream ([`open_modbus_udp`][aiortu.transport.open_modbus_udp];
+    option `counters`). Anything else is a serial device path
     ([`open_serial`][aiortu.transport.open_serial]; options `exclusive`, `rs485` and
     `local_echo`).
 
@@ -94,7 +113,9 @@ async def open_stream(
     [`PortError`][aiortu.errors.PortError] subclasses when it cannot be opened.
     """
     address = parse_port_url(port_or_url)
-    if isinstance(address, ModbusTcpAddress):
+    if isinstance(address, ModbusTcpAddress) and address.scheme == MODBUS_UDP_SCHEME:
+        kind, allowed = "Modbus UDP", _MODBUS_UDP_OPTIONS
+    elif isinstance(address, ModbusTcpAddress):
         kind, allowed = "Modbus TCP", _MODBUS_TCP_OPTIONS
     elif isinstance(address, TcpAddress):
         kind, allowed = "RTU over TCP", _TCP_OPTIONS
@@ -106,6 +127,8 @@ async def open_stream(
             f"{port_or_url}: {kind} takes no option {', '.join(unknown)} "
             f"(it takes {', '.join(sorted(allowed))})"
         )
+    if isinstance(address, ModbusTcpAddress) and address.scheme == MODBUS_UDP_SCHEME:
+        return await open_modbus_udp(address.host, address.port, **options)
     if isinstance(address, ModbusTcpAddress):
         return await open_modbus_tcp(address.host, address.port, **options)
     if isinstance(address, TcpAddress):

@@ -32,6 +32,7 @@ from aiortu.transport._url import format_tcp_url
 
 __all__ = (
     "format_tcp_url",
+    "listen_error",
     "listen_tcp",
     "open_rtu_over_tcp",
     "open_tcp_connection",
@@ -113,10 +114,11 @@ async def listen_tcp(
     except socket.gaierror as exc:
         raise PortNotFound(where, f"unknown host {host!r} ({exc.strerror})") from exc
     except OSError as exc:
-        raise _listen_error(where, exc) from exc
+        raise listen_error(where, exc) from exc
 
 
-def _listen_error(where: str, exc: OSError) -> PortError:
+def listen_error(where: str, exc: OSError) -> PortError:
+    """The [`PortError`][aiortu.errors.PortError] that says why listening on `where` failed."""
     if exc.errno == errno.EADDRINUSE:
         return PortBusy(where, "the port is in use by another program")
     if exc.errno == errno.EACCES:
