@@ -44,6 +44,7 @@ from aiortu.slave._store import (
     Table,
 )
 from aiortu.slave._tcp_server import ModbusTcpServer, TcpServerCounters
+from aiortu.slave._tls_server import ModbusTlsServer
 from aiortu.slave._udp_server import ModbusUdpServer
 
 __all__ = (
@@ -62,6 +63,7 @@ __all__ = (
     "HandlerResult",
     "MemoryStore",
     "ModbusTcpServer",
+    "ModbusTlsServer",
     "ModbusUdpServer",
     "RangeAccess",
     "RangeHandler",

@@ -71,6 +71,7 @@ from aiortu.slave._handlers import (
 )
 from aiortu.slave._routes import RangeHandler
 from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS, ModbusTcpServer, listening_address
+from aiortu.slave._tls_server import ModbusTlsServer
 from aiortu.slave._udp_server import ModbusUdpServer
 from aiortu.transport import (
     MODBUS_TCP_SCHEME,
@@ -620,6 +621,9 @@ async def serve(
       `serial_line_codes`).
     - `udp://host:port`: Modbus UDP, the same server answering each datagram to its source
       ([`ModbusUdpServer`][aiortu.slave.ModbusUdpServer]; the same `options`).
+    - `tls://host:port`: Modbus/TCP Security, mutual TLS with roles
+      ([`ModbusTlsServer`][aiortu.slave.ModbusTlsServer]; `options` `certfile`, `keyfile`,
+      `cafile` and `rules`, and the Modbus TCP server's).
     - `rtu+tcp://host:port` with `listen` true, or with a wildcard host (`0.0.0.0`, `[::]`) or port
       0 (addresses nobody can connect to): listens for RTU framing over TCP and yields the running
       [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (option `max_connections`).
@@ -637,7 +641,9 @@ async def serve(
         return
     if address is not None:
         server: ModbusTcpServer | RtuOverTcpServer
-        if address.scheme == MODBUS_TCP_SCHEME:
+        if address.scheme == TLS_SCHEME:
+            server = ModbusTlsServer(units, handlers=handlers, trace=trace, **options)
+        elif address.scheme == MODBUS_TCP_SCHEME:
             server = ModbusTcpServer(units, handlers=handlers, trace=trace, **options)
         else:
             server = RtuOverTcpServer(

@@ -17,6 +17,13 @@ from typing import Any
 from anyio.abc import ByteStream
 
 from aiortu.core.timing import LineSettings
+from aiortu.transport._authorization import (
+    WRITE_FUNCTION_CODES,
+    AccessRule,
+    RoleRules,
+    load_rules,
+    parse_rules,
+)
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._mbap_stream import (
@@ -28,6 +35,16 @@ from aiortu.transport._mbap_stream import (
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
 from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp, peer_address
+from aiortu.transport._tls import (
+    ROLE_OID,
+    CertificateError,
+    TlsListener,
+    certificate_role,
+    client_tls_context,
+    describe_tls_failure,
+    open_modbus_tls,
+    server_tls_context,
+)
 from aiortu.transport._udp import (
     DatagramCounters,
     check_datagram,
@@ -52,8 +69,12 @@ from aiortu.transport._url import (
 __all__ = (
     "MODBUS_TCP_SCHEME",
     "MODBUS_UDP_SCHEME",
+    "ROLE_OID",
     "TCP_SCHEME",
     "TLS_SCHEME",
+    "WRITE_FUNCTION_CODES",
+    "AccessRule",
+    "CertificateError",
     "DatagramCounters",
     "FileDescriptorStream",
     "FramedStream",
@@ -64,29 +85,39 @@ __all__ = (
     "ModbusTcpStream",
     "PortAddress",
     "PushStream",
+    "RoleRules",
     "RS485Options",
     "SerialAddress",
     "SerialAttribute",
     "SerialStream",
     "TcpAddress",
+    "TlsListener",
+    "certificate_role",
     "check_datagram",
+    "client_tls_context",
+    "describe_tls_failure",
     "listen_tcp",
     "listen_udp",
+    "load_rules",
     "open_modbus_tcp",
+    "open_modbus_tls",
     "open_modbus_udp",
     "open_rtu_over_tcp",
     "open_serial",
     "open_stream",
     "parse_listen_url",
     "parse_port_url",
+    "parse_rules",
     "peer_address",
     "serve_datagrams",
+    "server_tls_context",
 )
 
 _SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo"})
 _TCP_OPTIONS = frozenset({"connect_timeout"})
 _MODBUS_TCP_OPTIONS = frozenset({"connect_timeout", "counters"})
 _MODBUS_UDP_OPTIONS = frozenset({"counters"})
+_MODBUS_TLS_OPTIONS = frozenset({"connect_timeout", "counters", "certfile", "keyfile", "cafile"})
 
 
 async def open_stream(
@@ -104,7 +135,9 @@ async def open_stream(
     ([`open_modbus_tcp`][aiortu.transport.open_modbus_tcp]; options `connect_timeout` and
     `counters`; `settings` are not used). `udp://host:port` talks Modbus UDP, one ADU per
     datagram, through the same stream ([`open_modbus_udp`][aiortu.transport.open_modbus_udp];
-    option `counters`). Anything else is a serial device path
+    option `counters`). `tls://host:port` talks Modbus/TCP Security
+    ([`open_modbus_tls`][aiortu.transport.open_modbus_tls]; options `certfile`, `keyfile` and
+    `cafile`, required, and `connect_timeout` and `counters`). Anything else is a serial device path
     ([`open_serial`][aiortu.transport.open_serial]; options `exclusive`, `rs485` and
     `local_echo`).
 
@@ -115,6 +148,8 @@ async def open_stream(
     address = parse_port_url(port_or_url)
     if isinstance(address, ModbusTcpAddress) and address.scheme == MODBUS_UDP_SCHEME:
         kind, allowed = "Modbus UDP", _MODBUS_UDP_OPTIONS
+    elif isinstance(address, ModbusTcpAddress) and address.scheme == TLS_SCHEME:
+        kind, allowed = "Modbus/TCP Security", _MODBUS_TLS_OPTIONS
     elif isinstance(address, ModbusTcpAddress):
         kind, allowed = "Modbus TCP", _MODBUS_TCP_OPTIONS
     elif isinstance(address, TcpAddress):
@@ -129,6 +164,8 @@ async def open_stream(
         )
     if isinstance(address, ModbusTcpAddress) and address.scheme == MODBUS_UDP_SCHEME:
         return await open_modbus_udp(address.host, address.port, **options)
+    if isinstance(address, ModbusTcpAddress) and address.scheme == TLS_SCHEME:
+        return await open_modbus_tls(address.host, address.port, **options)
     if isinstance(address, ModbusTcpAddress):
         return await open_modbus_tcp(address.host, address.port, **options)
     if isinstance(address, TcpAddress):
