@@ -385,3 +385,15 @@ def test_a_bad_rule_file_is_one_line_naming_the_key(
 
 def test_der_utf8_long_form() -> None:
     assert der_utf8("a" * 200)[:3] == b"\x0c\x81\xc8"
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_modbus_tls_runs_on_both_backends(pki: dict[str, Any], backend: str) -> None:
+    async def scenario() -> None:
+        with anyio.fail_after(10):
+            async with tls_server(pki) as server, tls_master(pki, server, "viewer") as master:
+                assert await master.read_holding_registers(1, 0, 2) == [1, 2]
+                with pytest.raises(aiortu.ExceptionResponse):
+                    await master.write_register(1, 0, 5)
+
+    anyio.run(scenario, backend=backend)

@@ -254,3 +254,17 @@ async def test_the_counters_go_on_across_streams() -> None:
                 with anyio.fail_after(2):
                     assert (await stream.receive())[:2] == b"\x01\x03"
     assert (counters.next_transaction_id, counters.replies) == (1, 2)
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_modbus_udp_runs_on_both_backends(backend: str) -> None:
+    async def scenario() -> None:
+        with anyio.fail_after(10):
+            async with (
+                aiortu.serve("udp://127.0.0.1:0", {17: _store()}) as server,
+                aiortu.open_master(f"udp://127.0.0.1:{server.port}", retries=0) as master,
+            ):
+                await master.write_register(17, 4, 9)
+                assert await master.read_holding_registers(17, 2, 3) == [3, 0, 9]
+
+    anyio.run(scenario, backend=backend)
