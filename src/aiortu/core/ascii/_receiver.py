@@ -144,6 +144,8 @@ class AsciiFrameDiscarded:
 
 
 AsciiReceiverOutput = AsciiFrameReceived | AsciiFrameDiscarded
+"""What [`feed`][aiortu.core.ascii.AsciiReceiver.feed] and
+[`expire`][aiortu.core.ascii.AsciiReceiver.expire] return a list of."""
 
 _S = AsciiState
 _E = AsciiEvent
