@@ -78,6 +78,7 @@ from aiortu.transport import (
     MODBUS_UDP_SCHEME,
     TCP_SCHEME,
     TLS_SCHEME,
+    AsciiStream,
     ListenAddress,
     listen_tcp,
     open_stream,
@@ -135,6 +136,8 @@ class Slave(Dispatcher):
             if unit not in _UNIT_RANGE:
                 raise InvalidValue("unit", unit, _UNIT_RANGE)
         stores: dict[int, DataStore | AsyncDataStore] = dict(units)
+        if isinstance(stream, AsciiStream):
+            stream.answering = True  # 08/03 changes this end's input delimiter
         self.link = Link(
             stream,
             settings,

@@ -17,6 +17,8 @@ from typing import Any
 from anyio.abc import ByteStream
 
 from aiortu.core.timing import LineSettings
+from aiortu.errors import InvalidValue
+from aiortu.transport._ascii_stream import ASCII_BYTESIZE, AsciiStream, check_ascii_settings
 from aiortu.transport._authorization import (
     WRITE_FUNCTION_CODES,
     AccessRule,
@@ -53,6 +55,7 @@ from aiortu.transport._udp import (
     serve_datagrams,
 )
 from aiortu.transport._url import (
+    ASCII_TCP_SCHEME,
     MODBUS_TCP_SCHEME,
     MODBUS_UDP_SCHEME,
     TCP_SCHEME,
@@ -67,6 +70,8 @@ from aiortu.transport._url import (
 )
 
 __all__ = (
+    "ASCII_BYTESIZE",
+    "ASCII_TCP_SCHEME",
     "MODBUS_TCP_SCHEME",
     "MODBUS_UDP_SCHEME",
     "ROLE_OID",
@@ -74,6 +79,7 @@ __all__ = (
     "TLS_SCHEME",
     "WRITE_FUNCTION_CODES",
     "AccessRule",
+    "AsciiStream",
     "CertificateError",
     "DatagramCounters",
     "FileDescriptorStream",
@@ -93,6 +99,7 @@ __all__ = (
     "TcpAddress",
     "TlsListener",
     "certificate_role",
+    "check_ascii_settings",
     "check_datagram",
     "client_tls_context",
     "describe_tls_failure",
@@ -113,8 +120,8 @@ __all__ = (
     "server_tls_context",
 )
 
-_SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo"})
-_TCP_OPTIONS = frozenset({"connect_timeout"})
+_SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo", "framing", "ascii_timeout"})
+_TCP_OPTIONS = frozenset({"connect_timeout", "framing", "ascii_timeout"})
 _MODBUS_TCP_OPTIONS = frozenset({"connect_timeout", "counters"})
 _MODBUS_UDP_OPTIONS = frozenset({"counters"})
 _MODBUS_TLS_OPTIONS = frozenset({"connect_timeout", "counters", "certfile", "keyfile", "cafile"})
@@ -139,7 +146,11 @@ async def open_stream(
     ([`open_modbus_tls`][aiortu.transport.open_modbus_tls]; options `certfile`, `keyfile` and
     `cafile`, required, and `connect_timeout` and `counters`). Anything else is a serial device path
     ([`open_serial`][aiortu.transport.open_serial]; options `exclusive`, `rs485` and
-    `local_echo`).
+    `local_echo`). `framing="ascii"` carries Modbus ASCII frames on a serial port or an
+    `rtu+tcp://` connection instead of RTU ones, as `ascii+tcp://host:port` does
+    ([`AsciiStream`][aiortu.transport.AsciiStream]; option `ascii_timeout`, the
+    inter-character timeout, 1 s by default); a serial port without the spec's 7 data bits is
+    opened as asked, with a warning.
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a malformed URL,
     `TypeError` for an option the transport does not take, and the transport's
@@ -153,7 +164,8 @@ async def open_stream(
     elif isinstance(address, ModbusTcpAddress):
         kind, allowed = "Modbus TCP", _MODBUS_TCP_OPTIONS
     elif isinstance(address, TcpAddress):
-        kind, allowed = "RTU over TCP", _TCP_OPTIONS
+        kind = "ASCII over TCP" if address.framing == "ascii" else "RTU over TCP"
+        allowed = _TCP_OPTIONS
     else:
         kind, allowed = "a serial port", _SERIAL_OPTIONS
     unknown = sorted(set(options) - allowed)
@@ -162,6 +174,16 @@ async def open_stream(
             f"{port_or_url}: {kind} takes no option {', '.join(unknown)} "
             f"(it takes {', '.join(sorted(allowed))})"
         )
+    ascii_options = _ascii_framing(port_or_url, address, options)
+    stream = await _open(address, settings, options)
+    if ascii_options is None:
+        return stream
+    if isinstance(address, SerialAddress):
+        check_ascii_settings(port_or_url, settings)
+    return AsciiStream(stream, settings, **ascii_options)
+
+
+async def _open(address: PortAddress, settings: LineSettings, options: Any) -> ByteStream:
     if isinstance(address, ModbusTcpAddress) and address.scheme == MODBUS_UDP_SCHEME:
         return await open_modbus_udp(address.host, address.port, **options)
     if isinstance(address, ModbusTcpAddress) and address.scheme == TLS_SCHEME:
@@ -171,3 +193,23 @@ async def open_stream(
     if isinstance(address, TcpAddress):
         return await open_rtu_over_tcp(address.host, address.port, **options)
     return await open_serial(address.path, settings, **options)
+
+
+def _ascii_framing(
+    url: str, address: PortAddress, options: dict[str, Any]
+) -> dict[str, Any] | None:
+    """The [`AsciiStream`][aiortu.transport.AsciiStream] options when `url` is to carry ASCII
+    frames (taken out of `options`), else None."""
+    framing = options.pop("framing", None)
+    timeout = options.pop("ascii_timeout", None)
+    if isinstance(address, TcpAddress) and address.framing == "ascii":
+        if framing not in (None, "ascii"):
+            raise InvalidValue("framing", framing, "'ascii' for an ascii+tcp:// URL")
+        framing = "ascii"
+    if framing not in (None, "rtu", "ascii"):
+        raise InvalidValue("framing", framing, "'rtu' or 'ascii'")
+    if framing != "ascii":
+        if timeout is not None:
+            raise InvalidValue("ascii_timeout", timeout, "given with framing='ascii' only")
+        return None
+    return {} if timeout is None else {"timeout": timeout}

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from aiortu.errors import InvalidValue
 
 __all__ = (
+    "ASCII_TCP_SCHEME",
     "MODBUS_TCP_SCHEME",
     "MODBUS_UDP_SCHEME",
     "TLS_SCHEME",
@@ -52,6 +53,9 @@ MODBUS_UDP_SCHEME = "udp"
 TLS_SCHEME = "tls"
 """The URL scheme of Modbus/TCP Security (MBAP framing inside mutual TLS)."""
 
+ASCII_TCP_SCHEME = "ascii+tcp"
+"""The URL scheme of Modbus ASCII over TCP, to a serial device server."""
+
 _MBAP_SCHEMES = (MODBUS_TCP_SCHEME, MODBUS_UDP_SCHEME, TLS_SCHEME)
 
 
@@ -63,7 +67,8 @@ def format_tcp_url(host: str, port: int, scheme: str = TCP_SCHEME) -> str:
 
 
 _URL_FORM = (
-    "a serial device path, rtu+tcp://host:port, tcp://host:port, udp://host:port or tls://host:port"
+    "a serial device path, rtu+tcp://host:port, ascii+tcp://host:port, tcp://host:port, "
+    "udp://host:port or tls://host:port"
 )
 
 
@@ -79,14 +84,18 @@ class SerialAddress:
 
 @dataclass(frozen=True, slots=True)
 class TcpAddress:
-    """A serial device server reached by RTU over TCP."""
+    """A serial device server reached over TCP, its frames in RTU (`rtu+tcp://`) or ASCII
+    (`ascii+tcp://`) framing."""
 
     host: str
     """A host name, an IPv4 address, or an IPv6 address without brackets."""
     port: int
+    framing: str = "rtu"
+    """`rtu` or `ascii`."""
 
     def __str__(self) -> str:
-        return format_tcp_url(self.host, self.port, TCP_SCHEME)
+        scheme = ASCII_TCP_SCHEME if self.framing == "ascii" else TCP_SCHEME
+        return format_tcp_url(self.host, self.port, scheme)
 
 
 @dataclass(frozen=True, slots=True)
@@ -174,13 +183,13 @@ def _parse_host_port(
 
 
 def parse_port_url(text: str) -> PortAddress:
-    """Parse a port name: a serial device path, `rtu+tcp://host:port`, `tcp://host:port`,
-    `udp://host:port` or `tls://host:port`.
+    """Parse a port name: a serial device path, `rtu+tcp://host:port`, `ascii+tcp://host:port`,
+    `tcp://host:port`, `udp://host:port` or `tls://host:port`.
 
     >>> parse_port_url("/dev/ttyUSB0")
     SerialAddress(path='/dev/ttyUSB0')
     >>> parse_port_url("rtu+tcp://[::1]:5020")
-    TcpAddress(host='::1', port=5020)
+    TcpAddress(host='::1', port=5020, framing='rtu')
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for an empty name, an unknown scheme, or
     a URL without a valid host and port (1..65535).
@@ -195,10 +204,13 @@ def parse_port_url(text: str) -> PortAddress:
     scheme = scheme.lower()
     if scheme in _MBAP_SCHEMES:
         return ModbusTcpAddress(*_parse_host_port(text, rest, scheme), scheme)
+    if scheme == ASCII_TCP_SCHEME:
+        return TcpAddress(*_parse_host_port(text, rest, scheme), "ascii")
     if scheme != TCP_SCHEME:
         raise _bad(
             text,
-            f"unknown scheme {scheme!r}: only rtu+tcp://, tcp://, udp:// and tls:// are supported",
+            f"unknown scheme {scheme!r}: only rtu+tcp://, ascii+tcp://, tcp://, udp:// and "
+            "tls:// are supported",
         )
     return TcpAddress(*_parse_host_port(text, rest, scheme))
 
