@@ -1,9 +1,12 @@
-"""pymodbus's Modbus UDP and Modbus/TCP Security servers, for the transports' interop tests.
+"""pymodbus's Modbus UDP, Modbus/TCP Security and ASCII servers, for the transports' interop
+tests.
 
 ``python pymodbus_peers.py udp`` serves unit 1 over Modbus UDP on an ephemeral port of
 127.0.0.1; ``python pymodbus_peers.py tls CERT KEY CAFILE`` serves it over TLS (client
-certificates signed by CAFILE required). Each prints ``ready PORT`` once it listens and runs
-until killed. The tables are those of :mod:`tests.pymodbus_server`.
+certificates signed by CAFILE required); ``python pymodbus_peers.py ascii DEVICE`` serves it in
+Modbus ASCII on a serial device at 19200 8N2 (a pty keeps neither parity nor 7 data bits).
+Each prints ``ready PORT`` once it listens (0 for a serial device) and runs until killed. The
+tables are those of :mod:`tests.pymodbus_server`.
 """
 
 from __future__ import annotations
@@ -16,7 +19,8 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from pymodbus.server import ModbusTlsServer, ModbusUdpServer
+from pymodbus import FramerType
+from pymodbus.server import ModbusSerialServer, ModbusTlsServer, ModbusUdpServer
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from tests.pymodbus_server import _context
@@ -30,8 +34,23 @@ def _port(server: ModbusUdpServer | ModbusTlsServer) -> int:
     return int(transport.get_extra_info("sockname")[1])  # type: ignore[union-attr]
 
 
+async def serve_ascii(device: str) -> None:
+    def connected(up: bool) -> None:
+        if up:
+            print("ready 0", flush=True)
+
+    server = ModbusSerialServer(
+        _context(), framer=FramerType.ASCII, port=device, baudrate=19200, bytesize=8,
+        parity="N", stopbits=2, trace_connect=connected,
+    )  # fmt: skip
+    await server.serve_forever()
+
+
 async def serve(argv: list[str]) -> None:
     server: ModbusUdpServer | ModbusTlsServer
+    if argv[0] == "ascii":
+        await serve_ascii(argv[1])
+        return
     if argv[0] == "udp":
         server = ModbusUdpServer(_context(), address=("127.0.0.1", 0))
     else:

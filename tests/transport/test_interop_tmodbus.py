@@ -1,16 +1,8 @@
-"""Modbus UDP and Modbus/TCP Security against tmodbus 1.1.0, both ways, its side in a process
-of its own.
-
-tmodbus needs Python 3.12: it runs from a venv of its own (`AIORTU_TMODBUS_VENV`, by default
-/tmp/venv-tmodbus), made here when missing from the Python 3.12 at `AIORTU_PYTHON312` (by default
-pyenv's 3.12.1, else `python3.12`) with tmodbus 1.1.0 and cryptography from PyPI; `.ci/run` makes
-it up front. A machine without Python 3.12 fails these tests, saying so: the peer is required.
-"""
+"""Modbus UDP, Modbus/TCP Security and Modbus ASCII against tmodbus 1.1.0, both ways, its side
+in a process of its own, from a venv of its own (see tests/transport/peer_venvs.py)."""
 
 from __future__ import annotations
 
-import os
-import shutil
 import subprocess
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -21,45 +13,17 @@ import pytest
 
 import aiortu
 from tests.transport.certificates import Authority
+from tests.transport.peer_venvs import tmodbus_python
 
 pytestmark = [pytest.mark.interop, pytest.mark.timeout(120)]
 
 PEER = str(Path(__file__).with_name("tmodbus_peer.py"))
-VENV = Path(os.environ.get("AIORTU_TMODBUS_VENV", "/tmp/venv-tmodbus"))
-PYENV_312 = "/root/.pyenv/versions/3.12.1/bin/python"
-
-
-def _python312() -> str | None:
-    given = os.environ.get("AIORTU_PYTHON312")
-    if given:
-        return given
-    if os.access(PYENV_312, os.X_OK):
-        return PYENV_312
-    return shutil.which("python3.12")
 
 
 @pytest.fixture(scope="module")
 def tmodbus() -> str:
     """The Python of a venv with tmodbus 1.1.0, made when missing."""
-    python = VENV / "bin" / "python"
-    check = [
-        str(python),
-        "-c",
-        "import tmodbus, cryptography; assert tmodbus.__version__ == '1.1.0'",
-    ]
-    if python.exists() and subprocess.run(check, capture_output=True, check=False).returncode == 0:
-        return str(python)
-    base = _python312()
-    if base is None:
-        pytest.fail("tmodbus needs Python 3.12: set AIORTU_PYTHON312 to one, or make the venv")
-    for step in (
-        [base, "-m", "venv", str(VENV)],
-        [str(python), "-m", "pip", "install", "-q", "tmodbus==1.1.0", "cryptography"],
-    ):
-        done = subprocess.run(step, capture_output=True, text=True, check=False, timeout=300)
-        if done.returncode != 0:
-            pytest.fail(f"cannot make the tmodbus venv: {' '.join(step)}: {done.stderr[-500:]}")
-    return str(python)
+    return tmodbus_python()
 
 
 @contextmanager
