@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.addressing import (
+from aiortu.core.errors import InvalidValue
+from aiortu.core.model import (
     Reference,
     Table,
     data_model_number,
@@ -16,7 +17,6 @@ from aiortu.core.addressing import (
     parse_reference,
     protocol_address,
 )
-from aiortu.core.errors import InvalidValue
 
 
 def test_table_properties() -> None:

@@ -10,8 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from aiortu.core.errors import InvalidValue
-from aiortu.core.pdu import pack_bits, unpack_bits
-from aiortu.core.values import (
+from aiortu.core.model import (
     Layout,
     ValueType,
     bits_to_bytes,
@@ -36,6 +35,7 @@ from aiortu.core.values import (
     uint32_to_registers,
     uint64_to_registers,
 )
+from aiortu.core.pdu import pack_bits, unpack_bits
 
 INTEGER_RANGES = {
     ValueType.INT16: (-(2**15), 2**15 - 1),

@@ -12,27 +12,25 @@ from hypothesis import strategies as st
 from aiortu.core.codes import ExceptionCode, FunctionCode
 from aiortu.core.errors import InvalidRequest, InvalidValue, MalformedPDU
 from aiortu.core.pdu import (
+    MAX_READ_BITS,
+    MAX_WRITE_BITS,
     PDU,
     ExceptionPDU,
     RawPDU,
-    Request,
-    Response,
-    decode_request,
-    decode_response,
-)
-from aiortu.core.pdu_bits import (
-    MAX_READ_BITS,
-    MAX_WRITE_BITS,
     ReadCoilsRequest,
     ReadCoilsResponse,
     ReadDiscreteInputsRequest,
     ReadDiscreteInputsResponse,
+    ReadHoldingRegistersResponse,
+    Request,
+    Response,
     WriteMultipleCoilsRequest,
     WriteMultipleCoilsResponse,
     WriteSingleCoilRequest,
     WriteSingleCoilResponse,
+    decode_request,
+    decode_response,
 )
-from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
 from tests.core.strategies_bits_registers import (
     BITS_REQUEST_STRATEGIES,
     BITS_RESPONSE_STRATEGIES,

@@ -8,17 +8,23 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core import pdu_device_id as di
 from aiortu.core.codes import DeviceIdObject, DeviceIdReadCode
 from aiortu.core.errors import InvalidRequest, InvalidValue, MalformedPDU
-from aiortu.core.pdu import RawPDU, decode_request, decode_response, known_function_codes
-from aiortu.core.pdu_device_id import (
+from aiortu.core.pdu import (
+    RawPDU,
     ReadDeviceIdentificationRequest,
     ReadDeviceIdentificationResponse,
+    decode_request,
+    decode_response,
+    known_function_codes,
 )
-
-from .pdu_contract import assert_invalid, assert_only_malformed, assert_round_trip
-from .strategies_serial_files_devid import REQUEST_STRATEGIES, RESPONSE_STRATEGIES, mutations
+from aiortu.core.pdu import _device_id as di
+from tests.core.pdu_contract import assert_invalid, assert_only_malformed, assert_round_trip
+from tests.core.strategies_serial_files_devid import (
+    REQUEST_STRATEGIES,
+    RESPONSE_STRATEGIES,
+    mutations,
+)
 
 Req = ReadDeviceIdentificationRequest
 Resp = ReadDeviceIdentificationResponse

@@ -8,20 +8,24 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core import pdu_files as pf
 from aiortu.core.errors import InvalidRequest, InvalidValue, MalformedPDU
-from aiortu.core.pdu import decode_request, decode_response
-from aiortu.core.pdu_files import (
+from aiortu.core.pdu import (
     FileRecord,
     FileRecordRequest,
     ReadFileRecordRequest,
     ReadFileRecordResponse,
     WriteFileRecordRequest,
     WriteFileRecordResponse,
+    decode_request,
+    decode_response,
 )
-
-from .pdu_contract import assert_invalid, assert_only_malformed, assert_round_trip
-from .strategies_serial_files_devid import REQUEST_STRATEGIES, RESPONSE_STRATEGIES, mutations
+from aiortu.core.pdu import _files as pf
+from tests.core.pdu_contract import assert_invalid, assert_only_malformed, assert_round_trip
+from tests.core.strategies_serial_files_devid import (
+    REQUEST_STRATEGIES,
+    RESPONSE_STRATEGIES,
+    mutations,
+)
 
 REQUESTS = [ReadFileRecordRequest, WriteFileRecordRequest]
 RESPONSES = [ReadFileRecordResponse, WriteFileRecordResponse]

@@ -11,15 +11,15 @@ from hypothesis import strategies as st
 
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.errors import InvalidRequest, InvalidValue, MalformedPDU
-from aiortu.core.pdu import PDU, RawPDU, Request, Response, decode_request, decode_response
-from aiortu.core.pdu_bits import WriteSingleCoilResponse
-from aiortu.core.pdu_registers import (
+from aiortu.core.pdu import (
     MAX_FIFO_COUNT,
     MAX_READ_REGISTERS,
     MAX_READ_WRITE_WRITE_REGISTERS,
     MAX_WRITE_REGISTERS,
+    PDU,
     MaskWriteRegisterRequest,
     MaskWriteRegisterResponse,
+    RawPDU,
     ReadFifoQueueRequest,
     ReadFifoQueueResponse,
     ReadHoldingRegistersRequest,
@@ -28,10 +28,15 @@ from aiortu.core.pdu_registers import (
     ReadInputRegistersResponse,
     ReadWriteMultipleRegistersRequest,
     ReadWriteMultipleRegistersResponse,
+    Request,
+    Response,
     WriteMultipleRegistersRequest,
     WriteMultipleRegistersResponse,
+    WriteSingleCoilResponse,
     WriteSingleRegisterRequest,
     WriteSingleRegisterResponse,
+    decode_request,
+    decode_response,
 )
 from tests.core.strategies_bits_registers import (
     REGISTERS_REQUEST_STRATEGIES,

@@ -8,11 +8,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core import pdu_serial_line as sl
 from aiortu.core.codes import DiagnosticSubFunction, FunctionCode
 from aiortu.core.errors import InvalidRequest, InvalidValue, MalformedPDU
-from aiortu.core.pdu import decode_request, decode_response
-from aiortu.core.pdu_serial_line import (
+from aiortu.core.pdu import (
     DiagnosticsRequest,
     DiagnosticsResponse,
     GetCommEventCounterRequest,
@@ -23,10 +21,12 @@ from aiortu.core.pdu_serial_line import (
     ReadExceptionStatusResponse,
     ReportServerIdRequest,
     ReportServerIdResponse,
+    decode_request,
+    decode_response,
 )
-
-from .pdu_contract import assert_invalid, assert_only_malformed, assert_round_trip
-from .strategies_serial_files_devid import (
+from aiortu.core.pdu import _serial_line as sl
+from tests.core.pdu_contract import assert_invalid, assert_only_malformed, assert_round_trip
+from tests.core.strategies_serial_files_devid import (
     COUNTER_SUB_FUNCTIONS,
     REQUEST_STRATEGIES,
     RESPONSE_STRATEGIES,

@@ -10,25 +10,31 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from aiortu.core.bus_decoder import BusDecoder, CrcStatus, DecodedFrame, Direction, describe_frame
 from aiortu.core.codes import DiagnosticSubFunction, ExceptionCode
 from aiortu.core.errors import CRCError, MalformedPDU
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import ExceptionPDU, Request, Response
-from aiortu.core.pdu_bits import ReadCoilsRequest
-from aiortu.core.pdu_registers import (
+from aiortu.core.pdu import (
+    DiagnosticsRequest,
+    ExceptionPDU,
+    ReadCoilsRequest,
     ReadHoldingRegistersRequest,
+    Request,
+    Response,
     WriteSingleRegisterRequest,
 )
-from aiortu.core.pdu_serial_line import DiagnosticsRequest
-from aiortu.core.receiver import (
+from aiortu.core.rtu import (
+    BusDecoder,
+    CrcStatus,
+    DecodedFrame,
+    Direction,
     DiscardReason,
     FrameDiscarded,
     FrameReceived,
     Receiver,
     Role,
+    describe_frame,
+    encode_frame,
 )
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from tests.core import strategies_bits_registers as bits_registers
 from tests.core import strategies_serial_files_devid as serial_files_devid
 from tests.core.frame_strategies import has_accidental_prefix

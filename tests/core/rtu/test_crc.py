@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core import crc as crc_module
-from aiortu.core.crc import CRC_INITIAL, check_crc, crc16, crc16_bytes
 from aiortu.core.errors import InvalidValue
+from aiortu.core.rtu import CRC_INITIAL, check_crc, crc16, crc16_bytes
+from aiortu.core.rtu import _crc as crc_module
 
 
 def reference_crc16(data: bytes, crc: int = 0xFFFF) -> int:

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from aiortu.core.codes import USER_DEFINED_FUNCTION_CODES
 from aiortu.core.errors import CRCError, InvalidValue, MalformedPDU, ModbusError
-from aiortu.core.frame import (
+from aiortu.core.rtu import (
     CANNOT_KNOW,
     MAX_FRAME_LENGTH,
     MIN_FRAME_LENGTH,
@@ -19,8 +19,7 @@ from aiortu.core.frame import (
     expected_request_length,
     expected_response_length,
 )
-
-from .frame_strategies import Sample, custom_pdus, requests, responses, units
+from tests.core.frame_strategies import Sample, custom_pdus, requests, responses, units
 
 H = bytes.fromhex
 

@@ -11,20 +11,20 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from aiortu.core.crc import crc16
-from aiortu.core.frame import (
-    MAX_FRAME_LENGTH,
-    MIN_FRAME_LENGTH,
-    encode_frame,
-    expected_request_length,
-    expected_response_length,
-)
-from aiortu.core.pdu_registers import (
+from aiortu.core.pdu import (
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
     WriteMultipleRegistersRequest,
 )
-from aiortu.core.receiver import (
+from aiortu.core.rtu import (
+    MAX_FRAME_LENGTH,
+    MIN_FRAME_LENGTH,
+    crc16,
+    encode_frame,
+    expected_request_length,
+    expected_response_length,
+)
+from aiortu.core.rtu._receiver import (
     TOLERANT_FRAME_SILENCE,
     TRANSITIONS,
     DiscardReason,
@@ -38,9 +38,8 @@ from aiortu.core.receiver import (
     Role,
     TimingMode,
 )
-from aiortu.core.timing import LineSettings
-
-from .frame_strategies import Sample, customs, has_accidental_prefix, requests, responses
+from aiortu.core.serial import LineSettings
+from tests.core.frame_strategies import Sample, customs, has_accidental_prefix, requests, responses
 
 S = ReceiverState
 E = ReceiverEvent
@@ -854,7 +853,7 @@ def test_a_chunk_equal_to_the_checked_frame_skips_the_crc(
         computed.append(data)
         return crc16(data)
 
-    monkeypatch.setattr("aiortu.core.receiver.crc16", counted_crc16)
+    monkeypatch.setattr("aiortu.core.rtu._receiver.crc16", counted_crc16)
     assert receiver.take_expected_frame(bytes(reply), 2.0, checked=reply)
     assert computed == []
     other = H("0103020008") + crc16(H("0103020008")).to_bytes(2, "little")

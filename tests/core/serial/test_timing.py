@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.timing import FIXED_T1_5, FIXED_T3_5, LineSettings, Parity
+from aiortu.core.serial import FIXED_T1_5, FIXED_T3_5, LineSettings, Parity
 from aiortu.errors import InvalidValue
 
 # (baudrate, parity, stopbits) -> bits per character

@@ -1,7 +1,7 @@
 """Draw a state machine's transition table as a Mermaid state diagram.
 
 The documentation's diagrams are generated from the same tables the machines run on
-(`python -m aiortu.core.diagrams`), and a test checks that the pages still match, so a
+(`python -m aiortu.core.machines._diagrams`), and a test checks that the pages still match, so a
 diagram can never drift from the code.
 """
 
@@ -41,10 +41,12 @@ def state_diagram(
 
 
 def _main() -> None:
-    from aiortu.core import master_machine, receiver, slave_machine
+    from aiortu.core.machines import _master_machine as master_machine
+    from aiortu.core.machines import _slave_machine as slave_machine
+    from aiortu.core.rtu import RECEIVER_TRANSITIONS, ReceiverState
 
     print("Receiver:")
-    print(state_diagram(receiver.TRANSITIONS, receiver.ReceiverState.INIT))
+    print(state_diagram(RECEIVER_TRANSITIONS, ReceiverState.INIT))
     print("Master:")
     print(state_diagram(master_machine.TRANSITIONS, master_machine.MasterState.IDLE))
     print("Slave:")

@@ -14,19 +14,19 @@ The machine follows the master diagram of the serial line spec:
     PROCESSING_ERROR    retry, give up, or go on   -- retry, give up -->      IDLE
                         waiting                    -- a frame error noted --> WAITING_REPLY
 
-[`TRANSITIONS`][aiortu.core.master_machine.TRANSITIONS] is that diagram as data: `(state, event) ->
+`TRANSITIONS` is that diagram as data: `(state, event) ->
 (next state, action)`. A pair missing from it is a bug and raises
-[`MasterMachineError`][aiortu.core.master_machine.MasterMachineError], never a silent no-op. The
+[`MasterMachineError`][aiortu.core.machines.MasterMachineError], never a silent no-op. The
 documentation draws its diagram from the same table.
 
 The machine owns the decisions of a transaction; the async master only moves bytes and
-sleeps until [`MasterMachine.deadline`][aiortu.core.master_machine.MasterMachine.deadline]:
+sleeps until [`MasterMachine.deadline`][aiortu.core.machines.MasterMachine.deadline]:
 
 * The response timeout runs from the end of transmission (the time the caller passes to
-  [`MasterMachine.sent`][aiortu.core.master_machine.MasterMachine.sent]), per attempt.
+  [`MasterMachine.sent`][aiortu.core.machines.MasterMachine.sent]), per attempt.
 * A frame answers the request only when it began no sooner than the request could have
   been received and processed
-  ([`Transaction.earliest_reply`][aiortu.core.master_transaction.Transaction.earliest_reply];
+  ([`Transaction.earliest_reply`][aiortu.core.machines.Transaction.earliest_reply];
   older frames are stale), comes from the unit asked, carries the request's function code
   or its exception form, decodes, and passes `request.check_response`. A stale frame, or
   one from another unit or with another function code, is skipped and the wait goes on:
@@ -38,12 +38,12 @@ sleeps until [`MasterMachine.deadline`][aiortu.core.master_machine.MasterMachine
 * Bytes that fail the CRC or the framing are noted; the wait goes on for a short grace
   (a good frame may follow in the same burst), and if nothing answers, the attempt fails
   with that frame error rather than a plain timeout.
-* Retries follow a [`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy]: by default on
+* Retries follow a [`RetryPolicy`][aiortu.core.machines.RetryPolicy]: by default on
   timeouts and frame errors only, never on exception responses (a device that refused
   will refuse again).
 * A register read that gets its usual reply changes nothing in the machine, so a driver may run it
   without the machine and hand it over only if something else happens
-  ([`MasterMachine.usual_exchange`][aiortu.core.master_machine.MasterMachine.usual_exchange]; the
+  ([`MasterMachine.usual_exchange`][aiortu.core.machines.MasterMachine.usual_exchange]; the
   async master's driver of that is [`aiortu.master`][aiortu.master]).
 
 Time comes in as arguments; the machine never reads a clock.
@@ -59,16 +59,23 @@ from typing import Final
 
 from aiortu.core.codes import BROADCAST_UNIT, EXCEPTION_BIT
 from aiortu.core.errors import FrameError, MalformedPDU, ResponseTimeout
-from aiortu.core.frame import encode_frame
-from aiortu.core.master_transaction import (
+from aiortu.core.machines._master_transaction import (
     Failure,
     Outcome,
     OutcomeKind,
     SkipReason,
     Transaction,
 )
-from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response, decode_response
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
+from aiortu.core.pdu import (
+    ExceptionPDU,
+    RawPDU,
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    Request,
+    Response,
+    decode_response,
+)
+from aiortu.core.rtu import encode_frame
 
 __all__ = (
     "DEFAULT_FRAME_ERROR_GRACE",
@@ -142,7 +149,7 @@ _WAIT = Outcome(OutcomeKind.WAIT)
 
 _FRAME_CACHE_SIZE: Final = 256
 """Request frames a machine remembers (see
-[`MasterMachine.frame`][aiortu.core.master_machine.MasterMachine.frame])."""
+[`MasterMachine.frame`][aiortu.core.machines.MasterMachine.frame])."""
 
 
 @dataclass(slots=True)
@@ -160,7 +167,7 @@ class _BadBytes:
 
 class KnownRequest:
     """What a machine remembers of a request to a unit (see
-    [`MasterMachine.frame`][aiortu.core.master_machine.MasterMachine.frame]): its frame, the shape
+    [`MasterMachine.frame`][aiortu.core.machines.MasterMachine.frame]): its frame, the shape
     of its usual reply, and the last usual reply it decoded."""
 
     __slots__ = ("frame", "last_reply", "last_response", "reply_shape", "request")
@@ -175,7 +182,7 @@ class KnownRequest:
         self.last_reply: bytes | None = None
         """The last usual reply (a whole frame whose CRC was found good), or None."""
         self.last_response: Response | None = None
-        """The response [`last_reply`][aiortu.core.master_machine.KnownRequest.last_reply] holds."""
+        """The response [`last_reply`][aiortu.core.machines.KnownRequest.last_reply] holds."""
 
 
 _REGISTER_READS: Final = frozenset((ReadHoldingRegistersRequest, ReadInputRegistersRequest))
@@ -229,7 +236,7 @@ _USUAL_REPLY_TARGET: Final = TRANSITIONS[
 
 def next_state(state: MasterState, event: MasterEvent) -> MasterState:
     """The state `event` leads to from `state`; raises
-    [`MasterMachineError`][aiortu.core.master_machine.MasterMachineError] if none."""
+    [`MasterMachineError`][aiortu.core.machines.MasterMachineError] if none."""
     entry = TRANSITIONS.get((state, event))
     if entry is None:
         raise MasterMachineError(f"no transition for event {event.name} in state {state.name}")
@@ -245,20 +252,20 @@ class MasterMachine:
 
     Drive it like this for each transaction:
 
-    1. [`begin`][aiortu.core.master_machine.MasterMachine.begin] with a
-       [`Transaction`][aiortu.core.master_transaction.Transaction] (state IDLE).
-    2. Send [`frame`][aiortu.core.master_machine.MasterMachine.frame], then
-       [`sent`][aiortu.core.master_machine.MasterMachine.sent] with when it began to go out and when
+    1. [`begin`][aiortu.core.machines.MasterMachine.begin] with a
+       [`Transaction`][aiortu.core.machines.Transaction] (state IDLE).
+    2. Send [`frame`][aiortu.core.machines.MasterMachine.frame], then
+       [`sent`][aiortu.core.machines.MasterMachine.sent] with when it began to go out and when
        it had left the wire.
     3. Until the outcome is DONE or FAILED: feed
-       [`frame_received`][aiortu.core.master_machine.MasterMachine.frame_received],
-       [`frame_error`][aiortu.core.master_machine.MasterMachine.frame_error] and, once the clock
-       passes [`deadline`][aiortu.core.master_machine.MasterMachine.deadline],
-       [`expired`][aiortu.core.master_machine.MasterMachine.expired]. On RETRY, send
-       [`frame`][aiortu.core.master_machine.MasterMachine.frame] again and call
-       [`sent`][aiortu.core.master_machine.MasterMachine.sent].
+       [`frame_received`][aiortu.core.machines.MasterMachine.frame_received],
+       [`frame_error`][aiortu.core.machines.MasterMachine.frame_error] and, once the clock
+       passes [`deadline`][aiortu.core.machines.MasterMachine.deadline],
+       [`expired`][aiortu.core.machines.MasterMachine.expired]. On RETRY, send
+       [`frame`][aiortu.core.machines.MasterMachine.frame] again and call
+       [`sent`][aiortu.core.machines.MasterMachine.sent].
 
-    [`connection_lost`][aiortu.core.master_machine.MasterMachine.connection_lost] ends the
+    [`connection_lost`][aiortu.core.machines.MasterMachine.connection_lost] ends the
     transaction in any state but PROCESSING_*. `on_transition`, if given, is called with `(state,
     event, next state)` for every transition (for tracing and for the tests).
     """
@@ -285,9 +292,9 @@ class MasterMachine:
         """The current state."""
         self.transaction: Transaction | None = None
         """The transaction in progress (kept after it ends, until the next
-        [`begin`][aiortu.core.master_machine.MasterMachine.begin])."""
+        [`begin`][aiortu.core.machines.MasterMachine.begin])."""
         self.deadline: float | None = None
-        """When to call [`expired`][aiortu.core.master_machine.MasterMachine.expired]: the end of
+        """When to call [`expired`][aiortu.core.machines.MasterMachine.expired]: the end of
         the response timeout or turnaround."""
         self.frame_error_grace = frame_error_grace
         """Seconds the wait goes on after a frame error (never past the response timeout)."""
@@ -324,7 +331,7 @@ class MasterMachine:
 
     def _known(self) -> KnownRequest:
         """What the machine remembers of the request in progress (see
-        [`frame`][aiortu.core.master_machine.MasterMachine.frame])."""
+        [`frame`][aiortu.core.machines.MasterMachine.frame])."""
         transaction = self._current
         known = self._entry = self._remember(transaction.unit, transaction.request)
         return known
@@ -355,10 +362,10 @@ class MasterMachine:
         SEND_UNICAST, REPLY_RECEIVED and REPLY_OK, with nothing to remember. So a driver may send
         *frame* and wait for the reply of that shape (first bytes, length) without telling the
         machine. If that reply comes whole with a good CRC before the response timeout,
-        [`usual_response`][aiortu.core.master_machine.MasterMachine.usual_response] makes it the
+        [`usual_response`][aiortu.core.machines.MasterMachine.usual_response] makes it the
         response. On anything else (another frame, bad bytes, the timeout, the line lost), the
-        driver calls [`begin`][aiortu.core.master_machine.MasterMachine.begin] and then
-        [`sent`][aiortu.core.master_machine.MasterMachine.sent] with the times the frame went out,
+        driver calls [`begin`][aiortu.core.machines.MasterMachine.begin] and then
+        [`sent`][aiortu.core.machines.MasterMachine.sent] with the times the frame went out,
         and goes on the usual way: the machine then knows everything it would have known.
 
         This applies where the machine is IDLE, has no transition observer (which must
@@ -372,11 +379,11 @@ class MasterMachine:
     @staticmethod
     def usual_response(known: KnownRequest, frame: bytes) -> Response:
         """The response in `frame`, the usual reply to `known`'s request (see
-        [`usual_exchange`][aiortu.core.master_machine.MasterMachine.usual_exchange]): its shape is
+        [`usual_exchange`][aiortu.core.machines.MasterMachine.usual_exchange]): its shape is
         matched and its CRC checked.
 
         A poll loop reads the same block again and again and often gets the same bytes back. A frame
-        equal to [`KnownRequest.last_reply`][aiortu.core.master_machine.KnownRequest.last_reply]
+        equal to [`KnownRequest.last_reply`][aiortu.core.machines.KnownRequest.last_reply]
         holds the same response, so it is not decoded again (and a link need not check its CRC
         again: see [`aiortu.line.Link.expect`][aiortu.line.Link.expect]). Responses are immutable,
         so sharing one is safe.
@@ -448,7 +455,7 @@ class MasterMachine:
 
     def expired(self, now: float) -> Outcome:
         """The clock reached `now`; past
-        [`deadline`][aiortu.core.master_machine.MasterMachine.deadline] this ends the wait."""
+        [`deadline`][aiortu.core.machines.MasterMachine.deadline] this ends the wait."""
         if self.deadline is None or now < self.deadline:
             return _WAIT
         if self.state is MasterState.WAITING_TURNAROUND:

@@ -1,12 +1,12 @@
 """What the master's state machine works on and answers with: one transaction to one unit
-([`Transaction`][aiortu.core.master_transaction.Transaction]), how its failed attempts are retried
-([`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy]), and the machine's answer to each
-event ([`Outcome`][aiortu.core.master_transaction.Outcome]).
+([`Transaction`][aiortu.core.machines.Transaction]), how its failed attempts are retried
+([`RetryPolicy`][aiortu.core.machines.RetryPolicy]), and the machine's answer to each
+event ([`Outcome`][aiortu.core.machines.Outcome]).
 
-Sans-IO, like [`aiortu.core.master_machine`][aiortu.core.master_machine], which drives these; the
+Sans-IO, like [`aiortu.core.machines`][aiortu.core.machines], which drives these; the
 async master ([`aiortu.master`][aiortu.master]) makes a
-[`Transaction`][aiortu.core.master_transaction.Transaction] per request and acts on each
-[`Outcome`][aiortu.core.master_transaction.Outcome].
+[`Transaction`][aiortu.core.machines.Transaction] per request and acts on each
+[`Outcome`][aiortu.core.machines.Outcome].
 """
 
 from __future__ import annotations
@@ -17,10 +17,9 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from aiortu.core.codes import FunctionCode
-from aiortu.core.crc import crc16
 from aiortu.core.errors import CRCError, FrameError, InvalidValue
-from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import ExceptionPDU, Request, Response
+from aiortu.core.rtu import crc16, encode_frame
 
 __all__ = (
     "DEFAULT_RETRY_ON",
@@ -36,7 +35,7 @@ __all__ = (
 
 
 class Failure(enum.Enum):
-    """The kinds of failed attempt a [`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy] can
+    """The kinds of failed attempt a [`RetryPolicy`][aiortu.core.machines.RetryPolicy] can
     retry."""
 
     TIMEOUT = "timeout"
@@ -86,10 +85,10 @@ class RetryPolicy:
     """How often a failed attempt is repeated, after which failures, and for which requests.
 
     `retries` is the number of extra attempts (0 sends once). `retry_on` holds
-    [`Failure`][aiortu.core.master_transaction.Failure] members and, to retry exception responses
+    [`Failure`][aiortu.core.machines.Failure] members and, to retry exception responses
     too, exception codes (`ExceptionCode.SERVER_DEVICE_BUSY`, for instance). `repeatable` holds the
     function codes whose requests may be sent again
-    ([`SAFE_TO_REPEAT`][aiortu.core.master_transaction.SAFE_TO_REPEAT] by default: a timed-out write
+    ([`SAFE_TO_REPEAT`][aiortu.core.machines.SAFE_TO_REPEAT] by default: a timed-out write
     may have been done, and only an idempotent one can safely be done twice); a request of any other
     code is sent once.
     """
@@ -120,7 +119,7 @@ class RetryPolicy:
 
     def for_function(self, function_code: int) -> RetryPolicy:
         """This policy for a request of `function_code`: without retries unless the
-        code is [`repeatable`][aiortu.core.master_transaction.RetryPolicy]."""
+        code is [`repeatable`][aiortu.core.machines.RetryPolicy]."""
         if self.retries == 0 or function_code in self.repeatable:
             return self
         return RetryPolicy(0, self.retry_on, self.repeatable)
@@ -137,7 +136,7 @@ class SkipReason(enum.StrEnum):
 
     STALE = "stale"
     """It began before a reply to the request could have (see
-    [`Transaction.earliest_reply`][aiortu.core.master_transaction.Transaction.earliest_reply])."""
+    [`Transaction.earliest_reply`][aiortu.core.machines.Transaction.earliest_reply])."""
     OTHER_UNIT = "other unit"
     """It comes from another unit."""
     OTHER_FUNCTION = "other function"
@@ -148,21 +147,21 @@ class OutcomeKind(enum.Enum):
     """What the caller of the machine does next."""
 
     WAIT = "wait"
-    """Keep waiting until [`deadline`][aiortu.core.master_machine.MasterMachine.deadline]."""
+    """Keep waiting until [`deadline`][aiortu.core.machines.MasterMachine.deadline]."""
     DONE = "done"
-    """The transaction is over: [`Outcome.response`][aiortu.core.master_transaction.Outcome] (or
+    """The transaction is over: [`Outcome.response`][aiortu.core.machines.Outcome] (or
     `None` without reply)."""
     RETRY = "retry"
-    """Send [`frame`][aiortu.core.master_machine.MasterMachine.frame] again, then call
-    [`sent`][aiortu.core.master_machine.MasterMachine.sent]."""
+    """Send [`frame`][aiortu.core.machines.MasterMachine.frame] again, then call
+    [`sent`][aiortu.core.machines.MasterMachine.sent]."""
     FAILED = "failed"
-    """The transaction is over: raise [`Outcome.error`][aiortu.core.master_transaction.Outcome]."""
+    """The transaction is over: raise [`Outcome.error`][aiortu.core.machines.Outcome]."""
 
 
 @dataclass(slots=True)
 class Outcome:
     """The machine's answer to an event; see
-    [`OutcomeKind`][aiortu.core.master_transaction.OutcomeKind]. Read it, do not change it (not
+    [`OutcomeKind`][aiortu.core.machines.OutcomeKind]. Read it, do not change it (not
     frozen: one is made per reply, and a frozen dataclass takes twice as long)."""
 
     kind: OutcomeKind
@@ -177,7 +176,7 @@ class Transaction:
 
     `expects_reply` is false for broadcasts and for requests a device never answers (diagnostics 04,
     force listen-only mode); those wait `turnaround` seconds instead. Set
-    [`abandoned`][aiortu.core.master_transaction.Transaction] when the caller is gone: the attempt
+    [`abandoned`][aiortu.core.machines.Transaction] when the caller is gone: the attempt
     in flight finishes (so that its reply cannot reach a later request) but is not retried.
     """
 
@@ -202,7 +201,7 @@ class Transaction:
     passed yet when its genuine reply arrives."""
     earliest_reply: float = 0.0
     """The earliest the first byte of a reply to the current attempt can arrive, set by
-    [`sent`][aiortu.core.master_machine.MasterMachine.sent]: *attempt_end* plus
+    [`sent`][aiortu.core.machines.MasterMachine.sent]: *attempt_end* plus
     *reply_delay*; a frame that began sooner is stale. Without *reply_delay* it is
     *attempt_start*, and a frame that ended sooner is stale."""
     frame_error: FrameError | None = None

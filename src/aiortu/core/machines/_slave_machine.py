@@ -12,23 +12,23 @@ The machine follows the slave diagram of the serial line spec:
     FORMATTING_REPLY  the normal reply        -- sent, or withheld -->        IDLE
     FORMATTING_ERROR  the exception reply     -- sent, or withheld -->        IDLE
 
-[`TRANSITIONS`][aiortu.core.slave_machine.TRANSITIONS] is that diagram as data. A (state, event)
+`TRANSITIONS` is that diagram as data. A (state, event)
 pair missing from it is a bug and raises
-[`SlaveMachineError`][aiortu.core.slave_machine.SlaveMachineError], never a silent no-op.
+[`SlaveMachineError`][aiortu.core.machines.SlaveMachineError], never a silent no-op.
 
 The machine is sans-IO: the slave tells it what happened and it says what to do. It owns the spec's
 decisions: frames for units it does not serve are dropped and counted; broadcasts (unit 0) are
 executed and never answered, not even with an exception; in listen-only mode requests are only
 monitored (counted and logged), never executed nor answered, except restart communications (08/01),
 which leaves the mode; and exceptions come in the spec's order. That order falls out of the phases:
-[`SlaveMachine.check_request`][aiortu.core.slave_machine.SlaveMachine.check_request] answers 01 for
+[`SlaveMachine.check_request`][aiortu.core.machines.SlaveMachine.check_request] answers 01 for
 an unsupported function before any 03 or 02 the decoder found in the request itself (the decoder
 checks quantities before address ranges), and only a request that passed those checks reaches
 PROCESSING, where the data store answers 02 for unmapped addresses and a failing handler 04.
 
-[`SerialLineCounters`][aiortu.core.slave_machine.SerialLineCounters] are the counters the spec's
+[`SerialLineCounters`][aiortu.core.machines.SerialLineCounters] are the counters the spec's
 Diagnostics function (08) reports; the machine updates them as frames go by, along with the comm
-event log and counter ([`CommEventLog`][aiortu.core.comm_events.CommEventLog]) that 0B and 0C
+event log and counter ([`CommEventLog`][aiortu.core.machines.CommEventLog]) that 0B and 0C
 report.
 """
 
@@ -40,7 +40,7 @@ from dataclasses import dataclass, fields
 from typing import Final
 
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
-from aiortu.core.comm_events import (
+from aiortu.core.machines._comm_events import (
     EVENT_ENTERED_LISTEN_ONLY,
     EVENT_RESTART,
     CommEventLog,
@@ -161,7 +161,7 @@ class SerialLineCounters:
 
     Each counts since the slave started or the counters were last cleared, and wraps at 65536 when
     reported (the spec's counters are 16-bit words;
-    [`word`][aiortu.core.slave_machine.SerialLineCounters.word] does that).
+    [`word`][aiortu.core.machines.SerialLineCounters.word] does that).
     """
 
     bus_message_count: int = 0
@@ -199,28 +199,28 @@ class SlaveMachine:
 
     Drive it in this order for each frame:
 
-    1. [`frame_received`][aiortu.core.slave_machine.SlaveMachine.frame_received]; if it returns
+    1. [`frame_received`][aiortu.core.machines.SlaveMachine.frame_received]; if it returns
        `False` the frame is not for us: stop.
     2. In listen-only mode, unless the request is restart communications (08/01), call
-       [`ignore`][aiortu.core.slave_machine.SlaveMachine.ignore] and stop.
-    3. [`check_request`][aiortu.core.slave_machine.SlaveMachine.check_request]; if it returns
+       [`ignore`][aiortu.core.machines.SlaveMachine.ignore] and stop.
+    3. [`check_request`][aiortu.core.machines.SlaveMachine.check_request]; if it returns
        `False` the request gets an exception.
     4. Otherwise execute the request, then
-       [`processed`][aiortu.core.slave_machine.SlaveMachine.processed] or
-       [`processing_failed`][aiortu.core.slave_machine.SlaveMachine.processing_failed].
-    5. If [`should_reply`][aiortu.core.slave_machine.SlaveMachine.should_reply], send the reply (an
-       exception with [`exception_code`][aiortu.core.slave_machine.SlaveMachine.exception_code] when
+       [`processed`][aiortu.core.machines.SlaveMachine.processed] or
+       [`processing_failed`][aiortu.core.machines.SlaveMachine.processing_failed].
+    5. If [`should_reply`][aiortu.core.machines.SlaveMachine.should_reply], send the reply (an
+       exception with [`exception_code`][aiortu.core.machines.SlaveMachine.exception_code] when
        the state is FORMATTING_ERROR) and call
-       [`reply_sent`][aiortu.core.slave_machine.SlaveMachine.reply_sent]; otherwise call
-       [`no_reply`][aiortu.core.slave_machine.SlaveMachine.no_reply].
+       [`reply_sent`][aiortu.core.machines.SlaveMachine.reply_sent]; otherwise call
+       [`no_reply`][aiortu.core.machines.SlaveMachine.no_reply].
 
     Corrupt frames and overruns are reported with
-    [`frame_corrupt`][aiortu.core.slave_machine.SlaveMachine.frame_corrupt] and
-    [`character_overrun`][aiortu.core.slave_machine.SlaveMachine.character_overrun], between frames.
+    [`frame_corrupt`][aiortu.core.machines.SlaveMachine.frame_corrupt] and
+    [`character_overrun`][aiortu.core.machines.SlaveMachine.character_overrun], between frames.
     The diagnostics handlers change the machine through
-    [`clear_counters`][aiortu.core.slave_machine.SlaveMachine.clear_counters],
-    [`enter_listen_only`][aiortu.core.slave_machine.SlaveMachine.enter_listen_only] and
-    [`restart_communications`][aiortu.core.slave_machine.SlaveMachine.restart_communications].
+    [`clear_counters`][aiortu.core.machines.SlaveMachine.clear_counters],
+    [`enter_listen_only`][aiortu.core.machines.SlaveMachine.enter_listen_only] and
+    [`restart_communications`][aiortu.core.machines.SlaveMachine.restart_communications].
     """
 
     __slots__ = (
@@ -331,10 +331,10 @@ class SlaveMachine:
     def answered_at_once(self, unit: int, function_code: int) -> None:
         """A request for `unit` (one of ours, not a broadcast) arrived, was executed and got its
         normal reply, which has gone out, all while the machine was IDLE and not in listen-only
-        mode: [`frame_received`][aiortu.core.slave_machine.SlaveMachine.frame_received],
-        [`check_request`][aiortu.core.slave_machine.SlaveMachine.check_request],
-        [`processed`][aiortu.core.slave_machine.SlaveMachine.processed] and
-        [`reply_sent`][aiortu.core.slave_machine.SlaveMachine.reply_sent] in one step, the same
+        mode: [`frame_received`][aiortu.core.machines.SlaveMachine.frame_received],
+        [`check_request`][aiortu.core.machines.SlaveMachine.check_request],
+        [`processed`][aiortu.core.machines.SlaveMachine.processed] and
+        [`reply_sent`][aiortu.core.machines.SlaveMachine.reply_sent] in one step, the same
         counters and log entries at a fraction of the work. A slave that answers a request in the
         read callback counts it this way; the tests hold both ways equal.
         """
@@ -370,7 +370,7 @@ class SlaveMachine:
         exception code decoding the request gave (03 for a quantity or value, 02 for an address
         range), or `None`. An unsupported function gets 01 whatever else is wrong with the request.
         On `False` the machine is in FORMATTING_ERROR with
-        [`exception_code`][aiortu.core.slave_machine.SlaveMachine.exception_code] set.
+        [`exception_code`][aiortu.core.machines.SlaveMachine.exception_code] set.
         """
         if not supported:
             return self._invalid(ExceptionCode.ILLEGAL_FUNCTION)

@@ -115,7 +115,7 @@ class Reference:
     """One element of one table: `table` and its protocol `address` (0..65535).
 
     `table` may also be given by its value (`"holding_registers"`); it is stored as a
-    [`Table`][aiortu.core.addressing.Table].
+    [`Table`][aiortu.core.model.Table].
     """
 
     table: Table

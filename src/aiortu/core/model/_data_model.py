@@ -2,26 +2,26 @@
 
 The tables are coils (one bit, read/write), discrete inputs (one bit, read-only), input registers
 (16 bits, read-only) and holding registers (16 bits, read/write), each with protocol addresses
-0..65535; [`Table`][aiortu.core.addressing.Table] is
-[`aiortu.core.addressing.Table`][aiortu.core.addressing.Table], re-exported here. A slave unit
-serves them from a [`DataStore`][aiortu.core.data_model.DataStore]:
-[`read`][aiortu.core.data_model.DataStore.read] and
-[`write`][aiortu.core.data_model.DataStore.write] on a [`Table`][aiortu.core.addressing.Table],
+0..65535; [`Table`][aiortu.core.model.Table] is
+[`aiortu.core.model.Table`][aiortu.core.model.Table], re-exported here. A slave unit
+serves them from a [`DataStore`][aiortu.core.model.DataStore]:
+[`read`][aiortu.core.model.DataStore.read] and
+[`write`][aiortu.core.model.DataStore.write] on a [`Table`][aiortu.core.model.Table],
 raising [`ExceptionResponse`][aiortu.errors.ExceptionResponse] with the code the master should get
 (02 for an address outside the map). Optional capabilities are separate protocols:
 
-- [`SupportsFifoQueues`][aiortu.core.data_model.SupportsFifoQueues]: Read FIFO Queue (18);
-- [`SupportsExceptionStatus`][aiortu.core.data_model.SupportsExceptionStatus]: Read Exception Status
+- [`SupportsFifoQueues`][aiortu.core.model.SupportsFifoQueues]: Read FIFO Queue (18);
+- [`SupportsExceptionStatus`][aiortu.core.model.SupportsExceptionStatus]: Read Exception Status
   (07);
-- [`SupportsFileRecords`][aiortu.core.data_model.SupportsFileRecords]: Read and Write File Record
+- [`SupportsFileRecords`][aiortu.core.model.SupportsFileRecords]: Read and Write File Record
   (14, 15);
-- [`SupportsDeviceIdentification`][aiortu.core.data_model.SupportsDeviceIdentification]: Read Device
+- [`SupportsDeviceIdentification`][aiortu.core.model.SupportsDeviceIdentification]: Read Device
   Identification (2B/0E);
-- [`SupportsServerId`][aiortu.core.data_model.SupportsServerId]: Report Server ID (11).
+- [`SupportsServerId`][aiortu.core.model.SupportsServerId]: Report Server ID (11).
 
 Any of these methods may instead return an awaitable (be `async def`): that is an async store, for
 example one that proxies another device through a master
-([`AsyncDataStore`][aiortu.core.data_model.AsyncDataStore] spells the protocol out). The slave
+([`AsyncDataStore`][aiortu.core.model.AsyncDataStore] spells the protocol out). The slave
 awaits such results; a sync store pays nothing for that possibility.
 
 These definitions live in the core because both the slave and the stores
@@ -34,8 +34,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-from aiortu.core.addressing import Table
 from aiortu.core.errors import InvalidValue
+from aiortu.core.model._addressing import Table
 
 __all__ = (
     "AsyncDataStore",
@@ -74,10 +74,10 @@ class DataStore(Protocol):
 
 @runtime_checkable
 class AsyncDataStore(Protocol):
-    """A [`DataStore`][aiortu.core.data_model.DataStore] whose methods are coroutines (a proxy to
+    """A [`DataStore`][aiortu.core.model.DataStore] whose methods are coroutines (a proxy to
     another device, ...).
 
-    The slave accepts it wherever it accepts a [`DataStore`][aiortu.core.data_model.DataStore].
+    The slave accepts it wherever it accepts a [`DataStore`][aiortu.core.model.DataStore].
     """
 
     async def read(self, table: Table, address: int, count: int) -> Sequence[int]:

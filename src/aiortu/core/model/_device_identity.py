@@ -17,8 +17,7 @@ from collections.abc import Mapping
 from typing import Final
 
 from aiortu.core.codes import DeviceIdReadCode
-from aiortu.core.pdu import MAX_PDU_LENGTH
-from aiortu.core.pdu_device_id import ReadDeviceIdentificationResponse
+from aiortu.core.pdu import MAX_PDU_LENGTH, ReadDeviceIdentificationResponse
 
 __all__ = ("CATEGORY_END", "answer_device_identification", "conformity_level")
 

@@ -1,15 +1,15 @@
 """Poll planning, sans-IO: which read requests cover a set of points, and how to slice
 the replies back into typed values.
 
-A [`Point`][aiortu.core.poll_plan.Point] is one value a poller reads: a name, a unit, a table, a
-protocol address, and for register tables a [`ValueType`][aiortu.core.values.ValueType] in a
-[`Layout`][aiortu.core.values.Layout], with an optional scale.
-[`plan_reads`][aiortu.core.poll_plan.plan_reads] groups the points by unit and table, sorts them by
+A [`Point`][aiortu.core.model.Point] is one value a poller reads: a name, a unit, a table, a
+protocol address, and for register tables a [`ValueType`][aiortu.core.model.ValueType] in a
+[`Layout`][aiortu.core.model.Layout], with an optional scale.
+[`plan_reads`][aiortu.core.model.plan_reads] groups the points by unit and table, sorts them by
 address and merges neighbours into one read when the unused elements between them are at most
 `max_gap` (`max_bit_gap` for coils and discrete inputs) and the merged read stays within the spec's
 limits (125 registers, 2000 bits) or smaller ones the caller gives. Each
-[`PlannedRead`][aiortu.core.poll_plan.PlannedRead] knows which slice of its reply belongs to which
-point; [`PlannedRead.decode`][aiortu.core.poll_plan.PlannedRead.decode] turns a reply into values.
+[`PlannedRead`][aiortu.core.model.PlannedRead] knows which slice of its reply belongs to which
+point; [`PlannedRead.decode`][aiortu.core.model.PlannedRead.decode] turns a reply into values.
 
     >>> points = [Point.of("a", 1, "40001"), Point.of("b", 1, "40003", "float32")]
     >>> [(r.address, r.count) for r in plan_reads(points, max_gap=2)]
@@ -23,9 +23,9 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
-from aiortu.core.addressing import ADDRESS_RANGE, Table, parse_reference
 from aiortu.core.errors import InvalidValue
-from aiortu.core.values import Layout, ValueType, decode_value
+from aiortu.core.model._addressing import ADDRESS_RANGE, Table, parse_reference
+from aiortu.core.model._values import Layout, ValueType, decode_value
 
 __all__ = (
     "MAX_READ_BITS",
@@ -63,7 +63,7 @@ def _layout(layout: Layout | str) -> Layout:
 class Point:
     """One value to poll: `name`, `unit` (1..247), `table`, protocol `address`.
 
-    For register tables `type` (a [`ValueType`][aiortu.core.values.ValueType] or its name,
+    For register tables `type` (a [`ValueType`][aiortu.core.model.ValueType] or its name,
     default `uint16`) and `layout` say how the value sits in its registers; `scale`,
     when given, multiplies the decoded number (a raw 215 with scale 0.1 reads 21.5). For
     coils and discrete inputs the value is a `bool` and `type`, `layout` and `scale`
@@ -133,7 +133,7 @@ class Point:
 
     def decode(self, elements: Sequence[int | bool]) -> bool | int | float:
         """The point's value from its `elements` (exactly
-        [`width`][aiortu.core.poll_plan.Point.width] of them)."""
+        [`width`][aiortu.core.model.Point.width] of them)."""
         if self.table.is_bit:
             return bool(elements[0])
         value = decode_value([int(e) for e in elements], self.type, self.layout)
@@ -152,7 +152,7 @@ class PointSlice:
 @dataclass(frozen=True, slots=True)
 class PlannedRead:
     """One read request: `count` elements of `table` from `address` on `unit`, and the
-    [`PointSlice`][aiortu.core.poll_plan.PointSlice]s it serves, in address order."""
+    [`PointSlice`][aiortu.core.model.PointSlice]s it serves, in address order."""
 
     unit: int
     table: Table
@@ -169,7 +169,7 @@ class PlannedRead:
         """Each point of this read with its value, from the reply's `elements`.
 
         Raises [`InvalidValue`][aiortu.errors.InvalidValue] if `elements` is shorter than
-        [`count`][aiortu.core.poll_plan.PlannedRead].
+        [`count`][aiortu.core.model.PlannedRead].
         """
         if len(elements) < self.count:
             raise InvalidValue("len(elements)", len(elements), f"at least {self.count}")

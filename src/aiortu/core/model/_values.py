@@ -1,7 +1,7 @@
 """Typed values in 16-bit registers: integers, floats and strings, in every word layout.
 
 A register holds 16 bits; wider values span 2 or 4 consecutive registers, and devices disagree on
-the order of their bytes. [`Layout`][aiortu.core.values.Layout] names the four orders users meet,
+the order of their bytes. [`Layout`][aiortu.core.model.Layout] names the four orders users meet,
 after the bytes of a 32-bit value written big-endian as `A B C D` (`A` the most significant), listed
 in the order they sit in the registers:
 
@@ -14,8 +14,8 @@ BADC    BA DC             BA DC FE HG            words in order, the two bytes o
 DCBA    DC BA             HG FE DC BA            little-endian: everything reversed
 ======  ================  =====================  =============================
 
-So a layout is two independent switches, [`Layout.word_swap`][aiortu.core.values.Layout.word_swap]
-and [`Layout.byte_swap`][aiortu.core.values.Layout.byte_swap], and extends to any number of
+So a layout is two independent switches, [`Layout.word_swap`][aiortu.core.model.Layout.word_swap]
+and [`Layout.byte_swap`][aiortu.core.model.Layout.byte_swap], and extends to any number of
 registers. A 16-bit value has one word: ABCD and CDAB leave it as it is, BADC and DCBA swap its two
 bytes.
 
@@ -141,7 +141,7 @@ _FLOAT_RANGES = {
 
 
 def as_value_type(kind: ValueType | str) -> ValueType:
-    """`kind` as a [`ValueType`][aiortu.core.values.ValueType]; raise InvalidValue if it names
+    """`kind` as a [`ValueType`][aiortu.core.model.ValueType]; raise InvalidValue if it names
     none."""
     try:
         return ValueType(kind)
@@ -150,7 +150,7 @@ def as_value_type(kind: ValueType | str) -> ValueType:
 
 
 def as_layout(layout: Layout | str) -> Layout:
-    """`layout` as a [`Layout`][aiortu.core.values.Layout]; raise InvalidValue if it names none."""
+    """`layout` as a [`Layout`][aiortu.core.model.Layout]; raise InvalidValue if it names none."""
     try:
         return Layout(layout)
     except (ValueError, TypeError):
@@ -231,7 +231,7 @@ def encode_value(
 def decode_value(
     registers: Sequence[int], kind: ValueType | str, layout: Layout | str = Layout.ABCD
 ) -> int | float:
-    """The `kind` held in `registers` (exactly [`register_count`][aiortu.core.values.register_count]
+    """The `kind` held in `registers` (exactly [`register_count`][aiortu.core.model.register_count]
     of them) in `layout`."""
     kind = as_value_type(kind)
     layout = as_layout(layout)

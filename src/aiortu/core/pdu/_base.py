@@ -1,25 +1,4 @@
-"""Protocol data units: the base classes, the registry, and decoding by function code.
-
-A PDU is the function code and its data, without the unit address and the CRC of the RTU frame
-around it (see [`aiortu.core.frame`][aiortu.core.frame]). Every public function code has a request
-class and a response class in one of the `pdu_*` modules; each is an immutable dataclass that checks
-the spec's limits when it is built and encodes itself to bytes:
-
-    >>> ReadHoldingRegistersRequest(address=0x6B, count=3).encode().hex(" ")
-    '03 00 6b 00 03'
-
-Errors follow who caused them. Building an object with a field out of range raises
-[`InvalidRequest`][aiortu.errors.InvalidRequest] (requests) or
-[`InvalidValue`][aiortu.errors.InvalidValue] (responses), naming the field, the value and the
-allowed range. Decoding bytes that break the spec raises
-[`MalformedPDU`][aiortu.errors.MalformedPDU] and nothing else: never an `IndexError` or a
-`struct.error` from inside.
-
-An exception response is a value, [`ExceptionPDU`][aiortu.core.pdu.ExceptionPDU], that the caller
-can inspect; the master turns it into [`ExceptionResponse`][aiortu.errors.ExceptionResponse] at its
-boundary. Function codes without a class (the user-defined ones, vendor extensions) travel as
-[`RawPDU`][aiortu.core.pdu.RawPDU].
-"""
+"""The base classes of every PDU, the exception and raw PDUs, and the packing helpers."""
 
 from __future__ import annotations
 
@@ -27,7 +6,7 @@ import contextlib
 import struct
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import ClassVar, Self, TypeVar
+from typing import ClassVar, Self
 
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode
 from aiortu.core.errors import InvalidRequest, InvalidValue, MalformedPDU
@@ -42,13 +21,8 @@ __all__ = (
     "RawPDU",
     "Request",
     "Response",
-    "decode_request",
-    "decode_response",
-    "known_function_codes",
     "pack_bits",
     "pack_registers",
-    "register",
-    "register_decoders",
     "unpack_bits",
     "unpack_registers",
 )
@@ -295,94 +269,6 @@ class RawPDU(Request, Response):
 
 
 RawPDU.response_class = RawPDU
-
-
-_RequestT = TypeVar("_RequestT", bound=type[Request])
-
-_REQUESTS: dict[int, type[Request]] = {}
-_RESPONSES: dict[int, type[Response]] = {}
-_SUB_DECODERS: dict[int, tuple[Callable[[bytes], Request], Callable[[bytes], Response]]] = {}
-
-
-def register(request_class: _RequestT) -> _RequestT:
-    """Class decorator: decode this code with `request_class` and its `response_class`."""
-    code = request_class.function_code
-    if code in _REQUESTS:
-        raise RuntimeError(f"function code 0x{code:02X} registered twice")
-    _REQUESTS[code] = request_class
-    _RESPONSES[code] = request_class.response_class
-    return request_class
-
-
-def register_decoders(
-    function_code: int,
-    decode_request: Callable[[bytes], Request],
-    decode_response: Callable[[bytes], Response],
-) -> None:
-    """Register decoders for a function code shared by several classes (2B carries MEI types)."""
-    _SUB_DECODERS[function_code] = (decode_request, decode_response)
-
-
-def _function_code(pdu: bytes) -> int:
-    if not pdu:
-        raise MalformedPDU(
-            "empty PDU", field="length", value=0, allowed=range(1, MAX_PDU_LENGTH + 1)
-        )
-    if len(pdu) > MAX_PDU_LENGTH:
-        raise MalformedPDU(
-            "PDU too long", field="length", value=len(pdu), allowed=range(1, MAX_PDU_LENGTH + 1)
-        )
-    return pdu[0]
-
-
-def decode_request(pdu: bytes) -> Request:
-    """Decode a request PDU into its class, or into [`RawPDU`][aiortu.core.pdu.RawPDU] for an
-    unknown code.
-
-    Raises [`MalformedPDU`][aiortu.errors.MalformedPDU] for function code 0 or >= 0x80, and for a
-    known function code whose data breaks the spec (its `exception_code` says which
-    exception a slave should answer).
-    """
-    code = _function_code(pdu)
-    if code == 0 or code & EXCEPTION_BIT:
-        raise MalformedPDU(
-            "invalid request function code",
-            field="function_code",
-            value=code,
-            allowed=range(1, EXCEPTION_BIT),
-            exception_code=ExceptionCode.ILLEGAL_FUNCTION,
-        )
-    request_class = _REQUESTS.get(code)
-    if request_class is not None:
-        return request_class.decode(pdu)
-    sub = _SUB_DECODERS.get(code)
-    if sub is not None:
-        return sub[0](pdu)
-    return RawPDU.decode(pdu)
-
-
-def decode_response(pdu: bytes) -> Response | ExceptionPDU:
-    """Decode a reply PDU: an [`ExceptionPDU`][aiortu.core.pdu.ExceptionPDU], a known response, or
-    [`RawPDU`][aiortu.core.pdu.RawPDU]."""
-    code = _function_code(pdu)
-    if code & EXCEPTION_BIT:
-        return ExceptionPDU.decode(pdu)
-    if code == 0:
-        raise MalformedPDU(
-            "invalid function code", field="function_code", value=0, allowed=range(1, EXCEPTION_BIT)
-        )
-    response_class = _RESPONSES.get(code)
-    if response_class is not None:
-        return response_class.decode(pdu)
-    sub = _SUB_DECODERS.get(code)
-    if sub is not None:
-        return sub[1](pdu)
-    return RawPDU.decode(pdu)
-
-
-def known_function_codes() -> frozenset[int]:
-    """The function codes that decode into a class of their own."""
-    return frozenset(_REQUESTS) | frozenset(_SUB_DECODERS)
 
 
 def pack_registers(values: Iterable[int]) -> bytes:

@@ -3,7 +3,7 @@
 
 Bits travel packed eight to a byte, the first bit in the least significant position, the last byte
 padded with zeros. A decoded read response therefore holds every bit of its bytes, padding included;
-[`ReadCoilsRequest.bits_of`][aiortu.core.pdu_bits.ReadCoilsRequest.bits_of] trims them to the count
+[`ReadCoilsRequest.bits_of`][aiortu.core.pdu.ReadCoilsRequest.bits_of] trims them to the count
 asked.
 """
 
@@ -14,13 +14,12 @@ from typing import ClassVar, Self
 
 from aiortu.core.codes import ExceptionCode, FunctionCode
 from aiortu.core.errors import MalformedPDU
-from aiortu.core.pdu import (
+from aiortu.core.pdu._base import (
     ADDRESS_RANGE,
     Request,
     Response,
     pack_bits,
     pack_registers,
-    register,
     unpack_bits,
     unpack_registers,
 )
@@ -128,7 +127,7 @@ class ReadCoilsRequest(Request):
 @dataclass(frozen=True, slots=True)
 class ReadDiscreteInputsResponse(ReadCoilsResponse):
     """Reply to read discrete inputs; the same layout as
-    [`ReadCoilsResponse`][aiortu.core.pdu_bits.ReadCoilsResponse]."""
+    [`ReadCoilsResponse`][aiortu.core.pdu.ReadCoilsResponse]."""
 
     function_code: ClassVar[int] = FunctionCode.READ_DISCRETE_INPUTS
 
@@ -300,9 +299,3 @@ class WriteMultipleCoilsRequest(Request):
         assert isinstance(response, WriteMultipleCoilsResponse)
         self._check_echo("address", response.address, self.address)
         self._check_echo("count", response.count, len(self.values))
-
-
-register(ReadCoilsRequest)
-register(ReadDiscreteInputsRequest)
-register(WriteSingleCoilRequest)
-register(WriteMultipleCoilsRequest)

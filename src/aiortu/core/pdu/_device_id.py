@@ -19,13 +19,12 @@ from typing import ClassVar, Self
 
 from aiortu.core.codes import MEI_READ_DEVICE_IDENTIFICATION, DeviceIdReadCode, FunctionCode
 from aiortu.core.errors import MalformedPDU
-from aiortu.core.pdu import (
+from aiortu.core.pdu._base import (
     BYTE_RANGE,
     MAX_PDU_LENGTH,
     RawPDU,
     Request,
     Response,
-    register_decoders,
 )
 
 __all__ = (
@@ -68,7 +67,7 @@ class ReadDeviceIdentificationResponse(Response):
     """Reply to read device identification: some objects of the device, in the device's order.
 
     `read_code` echoes the request's; `conformity_level` is one of
-    [`CONFORMITY_LEVELS`][aiortu.core.pdu_device_id.CONFORMITY_LEVELS]; `objects` is a tuple of
+    [`CONFORMITY_LEVELS`][aiortu.core.pdu.CONFORMITY_LEVELS]; `objects` is a tuple of
     `(object id, value)` pairs, ids 0..255 and values of bytes, as many as fit the 253-byte PDU (a
     value at most 244 bytes). When `more_follows` is true, `next_object_id` names the object to ask
     for next; the spec wants it 0 otherwise, which is not enforced because devices differ.
@@ -244,8 +243,3 @@ def decode_mei_response(pdu: bytes) -> Response:
     if pdu[1] == MEI_READ_DEVICE_IDENTIFICATION:
         return ReadDeviceIdentificationResponse.decode(pdu)
     return RawPDU.decode(pdu)
-
-
-register_decoders(
-    FunctionCode.ENCAPSULATED_INTERFACE_TRANSPORT, decode_mei_request, decode_mei_response
-)

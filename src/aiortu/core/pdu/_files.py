@@ -8,8 +8,8 @@ sub-requests is bounded by what fits, and a read request is refused when its rep
 not fit.
 
 The sub-requests are small frozen dataclasses
-([`FileRecordRequest`][aiortu.core.pdu_files.FileRecordRequest],
-[`FileRecord`][aiortu.core.pdu_files.FileRecord]) that only normalise their fields; the PDU carrying
+([`FileRecordRequest`][aiortu.core.pdu.FileRecordRequest],
+[`FileRecord`][aiortu.core.pdu.FileRecord]) that only normalise their fields; the PDU carrying
 them checks their ranges, so that an error names the sub-request by its index and is an
 [`InvalidRequest`][aiortu.errors.InvalidRequest] in a request and an
 [`InvalidValue`][aiortu.errors.InvalidValue] in a reply. In decoded requests, a wrong reference
@@ -25,14 +25,13 @@ from typing import ClassVar, Self
 
 from aiortu.core.codes import ExceptionCode, FunctionCode
 from aiortu.core.errors import MalformedPDU
-from aiortu.core.pdu import (
+from aiortu.core.pdu._base import (
     MAX_PDU_LENGTH,
     PDU,
     REGISTER_RANGE,
     Request,
     Response,
     pack_registers,
-    register,
     unpack_registers,
 )
 
@@ -75,7 +74,7 @@ _WRITE_BYTE_COUNT = range(_SUB_REQUEST_SIZE + 2, MAX_PDU_LENGTH - 1)
 
 @dataclass(frozen=True, slots=True)
 class FileRecordRequest:
-    """One sub-request of [`ReadFileRecordRequest`][aiortu.core.pdu_files.ReadFileRecordRequest]:
+    """One sub-request of [`ReadFileRecordRequest`][aiortu.core.pdu.ReadFileRecordRequest]:
     read `record_length` records of file `file_number` from record `record_number`.
 
     The ranges (file 1..65535, records 0..9999, at least one record, not past record 9999)
@@ -217,7 +216,7 @@ def _read_response_length(record_lengths: Iterable[int]) -> int:
 
 @dataclass(frozen=True, slots=True)
 class ReadFileRecordRequest(Request):
-    """Read file records: 1..35 [`FileRecordRequest`][aiortu.core.pdu_files.FileRecordRequest]
+    """Read file records: 1..35 [`FileRecordRequest`][aiortu.core.pdu.FileRecordRequest]
     sub-requests in one PDU.
 
     Each reads 1 or more records of a file (1..65535) from a record number (0..9999), not
@@ -388,7 +387,7 @@ class WriteFileRecordResponse(Response):
 
 @dataclass(frozen=True, slots=True)
 class WriteFileRecordRequest(Request):
-    """Write file records: one or more [`FileRecord`][aiortu.core.pdu_files.FileRecord] sub-records
+    """Write file records: one or more [`FileRecord`][aiortu.core.pdu.FileRecord] sub-records
     in one PDU.
 
     Each writes 1 or more values (0..65535) to a file (1..65535) from a record number
@@ -424,7 +423,3 @@ class WriteFileRecordRequest(Request):
                 value=response.records,
                 allowed=self.records,
             )
-
-
-register(ReadFileRecordRequest)
-register(WriteFileRecordRequest)

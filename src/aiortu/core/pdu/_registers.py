@@ -2,7 +2,7 @@
 register writes (06, 10, 16, 17) and the FIFO queue (18).
 
 Registers are 16-bit big-endian words on the wire and `int` 0..65535 here; typed values
-(floats, 32-bit integers, strings) are converted by [`aiortu.core.values`][aiortu.core.values].
+(floats, 32-bit integers, strings) are converted by [`aiortu.core.model`][aiortu.core.model].
 """
 
 from __future__ import annotations
@@ -12,13 +12,12 @@ from typing import ClassVar, Self
 
 from aiortu.core.codes import FunctionCode
 from aiortu.core.errors import MalformedPDU
-from aiortu.core.pdu import (
+from aiortu.core.pdu._base import (
     ADDRESS_RANGE,
     REGISTER_RANGE,
     Request,
     Response,
     pack_registers,
-    register,
     unpack_registers,
 )
 
@@ -130,7 +129,7 @@ class ReadHoldingRegistersRequest(Request):
 @dataclass(frozen=True, slots=True)
 class ReadInputRegistersResponse(ReadHoldingRegistersResponse):
     """Reply to read input registers; the same layout as
-    [`ReadHoldingRegistersResponse`][aiortu.core.pdu_registers.ReadHoldingRegistersResponse]."""
+    [`ReadHoldingRegistersResponse`][aiortu.core.pdu.ReadHoldingRegistersResponse]."""
 
     function_code: ClassVar[int] = FunctionCode.READ_INPUT_REGISTERS
 
@@ -319,7 +318,7 @@ class MaskWriteRegisterRequest(Request):
     """Change the bits of the holding register at `address` through two 16-bit masks.
 
     The register becomes `(current AND and_mask) OR (or_mask AND NOT and_mask)`; see
-    [`apply`][aiortu.core.pdu_registers.MaskWriteRegisterRequest.apply]. Both masks are 0..65535.
+    [`apply`][aiortu.core.pdu.MaskWriteRegisterRequest.apply]. Both masks are 0..65535.
     May be broadcast.
     """
 
@@ -363,7 +362,7 @@ class ReadWriteMultipleRegistersResponse(ReadHoldingRegistersResponse):
     """Reply to read/write multiple registers: the 1..125 registers read.
 
     The same layout as
-    [`ReadHoldingRegistersResponse`][aiortu.core.pdu_registers.ReadHoldingRegistersResponse].
+    [`ReadHoldingRegistersResponse`][aiortu.core.pdu.ReadHoldingRegistersResponse].
     """
 
     function_code: ClassVar[int] = FunctionCode.READ_WRITE_MULTIPLE_REGISTERS
@@ -500,12 +499,3 @@ class ReadFifoQueueRequest(Request):
         cls._expect_function_code(pdu)
         cls._expect_length(pdu, 3)
         return cls._build(lambda: cls(*unpack_registers(pdu, 1, 1)))
-
-
-register(ReadHoldingRegistersRequest)
-register(ReadInputRegistersRequest)
-register(WriteSingleRegisterRequest)
-register(WriteMultipleRegistersRequest)
-register(MaskWriteRegisterRequest)
-register(ReadWriteMultipleRegistersRequest)
-register(ReadFifoQueueRequest)

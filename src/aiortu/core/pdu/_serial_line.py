@@ -4,7 +4,7 @@ get comm event counter (0B), get comm event log (0C) and report server ID (11).
 These functions read the state of a device's serial interface rather than its data tables, so their
 replies carry status words, counters and device-specific bytes. Diagnostics carries a sub-function;
 the spec fixes the data of the sub-functions it defines (see
-[`DiagnosticsRequest`][aiortu.core.pdu_serial_line.DiagnosticsRequest]), and any other sub-function
+[`DiagnosticsRequest`][aiortu.core.pdu.DiagnosticsRequest]), and any other sub-function
 travels with its data unchecked so that vendor extensions still round trip.
 """
 
@@ -15,14 +15,13 @@ from typing import ClassVar, Self
 
 from aiortu.core.codes import DiagnosticSubFunction, FunctionCode
 from aiortu.core.errors import MalformedPDU
-from aiortu.core.pdu import (
+from aiortu.core.pdu._base import (
     BYTE_RANGE,
     MAX_PDU_LENGTH,
     PDU,
     REGISTER_RANGE,
     Request,
     Response,
-    register,
 )
 
 __all__ = (
@@ -118,7 +117,7 @@ class ReadExceptionStatusResponse(Response):
     """Reply to read exception status: eight device-defined status bits in one byte.
 
     The meaning of each bit is up to the device;
-    [`bits`][aiortu.core.pdu_serial_line.ReadExceptionStatusResponse.bits] lists them LSB first.
+    [`bits`][aiortu.core.pdu.ReadExceptionStatusResponse.bits] lists them LSB first.
     """
 
     function_code: ClassVar[int] = FunctionCode.READ_EXCEPTION_STATUS
@@ -186,7 +185,7 @@ class DiagnosticsResponse(Response):
     """Reply to diagnostics: the sub-function echoed and its data.
 
     For the counters and the diagnostic register (02, 0A..12, 14) the data is one 16-bit value
-    ([`value`][aiortu.core.pdu_serial_line.DiagnosticsResponse.value]); for return query data (00)
+    ([`value`][aiortu.core.pdu.DiagnosticsResponse.value]); for return query data (00)
     it echoes the request's even-length data; for 01 and 03 it echoes the request's word. A reply to
     force listen-only mode (04) never comes on the wire but may be built, with data 0x0000.
     Sub-functions the spec does not define for a serial line keep up to 250 data bytes unchecked.
@@ -414,7 +413,7 @@ class ReportServerIdResponse(Response):
     additional data. For the common one-byte id this is exact. An id longer than one byte that holds
     a 0x00 or 0xFF after its first byte decodes split at the wrong place, but nothing is lost:
     encoding the decoded object gives the same bytes back. When a device documents its id length,
-    [`with_id_length`][aiortu.core.pdu_serial_line.ReportServerIdResponse.with_id_length] re-splits
+    [`with_id_length`][aiortu.core.pdu.ReportServerIdResponse.with_id_length] re-splits
     a decoded reply. Limits: `server_id` at least 1 byte, and the whole PDU 253 bytes (id +
     additional data at most 250).
     """
@@ -489,10 +488,3 @@ class ReportServerIdRequest(_NoFieldsRequest):
 
     function_code: ClassVar[int] = FunctionCode.REPORT_SERVER_ID
     response_class: ClassVar[type[Response]] = ReportServerIdResponse
-
-
-register(ReadExceptionStatusRequest)
-register(DiagnosticsRequest)
-register(GetCommEventCounterRequest)
-register(GetCommEventLogRequest)
-register(ReportServerIdRequest)

@@ -1,6 +1,6 @@
 """Words for PDUs: one-line descriptions and JSON-able dicts of requests and replies.
 
-Used by [`aiortu.core.bus_decoder`][aiortu.core.bus_decoder] and by traces. A request reads as what
+Used by [`aiortu.core.rtu`][aiortu.core.rtu] and by traces. A request reads as what
 it asks (`read holding registers 107..109 (3)`, `write coil 172 = ON`), a reply as what it says
 (`reply [44609, 22098, 17216]`), and a reply given the request it answers names the addresses of its
 values (`reply holding 107..109 = [44609, 22098, 17216]`). Addresses are protocol addresses (from
@@ -15,8 +15,8 @@ from collections.abc import Iterable
 from typing import Any
 
 from aiortu.core.codes import DeviceIdObject, ExceptionCode, FunctionCode
-from aiortu.core.pdu import PDU, ExceptionPDU, RawPDU, Request, Response
-from aiortu.core.pdu_bits import (
+from aiortu.core.pdu._base import PDU, ExceptionPDU, RawPDU, Request, Response
+from aiortu.core.pdu._bits import (
     ReadCoilsRequest,
     ReadCoilsResponse,
     WriteMultipleCoilsRequest,
@@ -24,18 +24,18 @@ from aiortu.core.pdu_bits import (
     WriteSingleCoilRequest,
     WriteSingleCoilResponse,
 )
-from aiortu.core.pdu_device_id import (
+from aiortu.core.pdu._device_id import (
     ReadDeviceIdentificationRequest,
     ReadDeviceIdentificationResponse,
 )
-from aiortu.core.pdu_files import (
+from aiortu.core.pdu._files import (
     FileRecord,
     ReadFileRecordRequest,
     ReadFileRecordResponse,
     WriteFileRecordRequest,
     WriteFileRecordResponse,
 )
-from aiortu.core.pdu_registers import (
+from aiortu.core.pdu._registers import (
     MaskWriteRegisterRequest,
     MaskWriteRegisterResponse,
     ReadFifoQueueRequest,
@@ -48,7 +48,7 @@ from aiortu.core.pdu_registers import (
     WriteSingleRegisterRequest,
     WriteSingleRegisterResponse,
 )
-from aiortu.core.pdu_serial_line import (
+from aiortu.core.pdu._serial_line import (
     DiagnosticsRequest,
     DiagnosticsResponse,
     GetCommEventCounterResponse,

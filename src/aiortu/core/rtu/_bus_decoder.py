@@ -1,10 +1,10 @@
 """What the frames on a bus mean: requests, replies, their pairing, and one-line descriptions.
 
 A passive observer of an RTU line sees frames without being told who sent them. A
-[`BusDecoder`][aiortu.core.bus_decoder.BusDecoder] is fed what a receiver in the `MONITOR` role
-yields ([`FrameReceived`][aiortu.core.receiver.FrameReceived] and
-[`FrameDiscarded`][aiortu.core.receiver.FrameDiscarded]) and turns each into a
-[`DecodedFrame`][aiortu.core.bus_decoder.DecodedFrame]: the unit, the direction (request, reply,
+[`BusDecoder`][aiortu.core.rtu.BusDecoder] is fed what a receiver in the `MONITOR` role
+yields ([`FrameReceived`][aiortu.core.rtu.FrameReceived] and
+[`FrameDiscarded`][aiortu.core.rtu.FrameDiscarded]) and turns each into a
+[`DecodedFrame`][aiortu.core.rtu.DecodedFrame]: the unit, the direction (request, reply,
 exception reply, broadcast, or unknown), the decoded PDU or the decode error, the CRC status, a
 one-line description and a JSON-able dict:
 
@@ -20,8 +20,8 @@ How a frame's direction is told, in order:
    exception reply.
 2. Otherwise the frame is decoded both as a request and as a reply. When only one succeeds, that is
    the direction. (Decoding checks the exact length, so this is where the layouts of
-   [`expected_request_length`][aiortu.core.frame.expected_request_length] and
-   [`expected_response_length`][aiortu.core.frame.expected_response_length] tell a request from a
+   [`expected_request_length`][aiortu.core.rtu.expected_request_length] and
+   [`expected_response_length`][aiortu.core.rtu.expected_response_length] tell a request from a
    reply.)
 3. When both succeed (05, 06, 08, 15 and 16 echo their request; user-defined codes have
    no known layout; a few reads such as `01 03 ..` fit both), the conversation decides:
@@ -35,7 +35,7 @@ addresses it carries. A request that gets no reply stays pending until the next 
 a frame that looks like its mangled reply, or, with `reply_timeout`, until that long has
 passed.
 
-[`describe_frame`][aiortu.core.bus_decoder.describe_frame] describes one frame on its own, for
+[`describe_frame`][aiortu.core.rtu.describe_frame] describes one frame on its own, for
 traces.
 """
 
@@ -47,26 +47,16 @@ from dataclasses import dataclass
 from typing import Any
 
 # Importing the PDU modules registers their classes for decode_request/decode_response.
-from aiortu.core import pdu_bits, pdu_device_id, pdu_files, pdu_registers  # noqa: F401
 from aiortu.core.codes import BROADCAST_UNIT, EXCEPTION_BIT
-from aiortu.core.crc import crc16
 from aiortu.core.errors import CRCError, FrameError, MalformedPDU
-from aiortu.core.frame import (
-    CANNOT_KNOW,
-    MIN_FRAME_LENGTH,
-    expected_request_length,
-    expected_response_length,
-)
 from aiortu.core.pdu import (
     PDU,
+    DiagnosticsRequest,
     ExceptionPDU,
     Request,
     Response,
     decode_request,
     decode_response,
-)
-from aiortu.core.pdu_serial_line import DiagnosticsRequest
-from aiortu.core.pdu_text import (
     describe_reply,
     describe_request,
     enum_name,
@@ -75,7 +65,14 @@ from aiortu.core.pdu_text import (
     pdu_to_dict,
     table_access,
 )
-from aiortu.core.receiver import DiscardReason, FrameDiscarded, FrameReceived
+from aiortu.core.rtu._crc import crc16
+from aiortu.core.rtu._frame import (
+    CANNOT_KNOW,
+    MIN_FRAME_LENGTH,
+    expected_request_length,
+    expected_response_length,
+)
+from aiortu.core.rtu._receiver import DiscardReason, FrameDiscarded, FrameReceived
 
 __all__ = (
     "BusDecoder",

@@ -1,14 +1,14 @@
 """RTU frames: unit address, PDU and CRC, and the length of a frame from its first bytes.
 
 An RTU frame (the spec's ADU) is `unit + PDU + CRC`, 4 to 256 bytes, the CRC sent low byte first.
-[`encode_frame`][aiortu.core.frame.encode_frame] and
-[`decode_frame`][aiortu.core.frame.decode_frame] build and check whole frames.
+[`encode_frame`][aiortu.core.rtu.encode_frame] and
+[`decode_frame`][aiortu.core.rtu.decode_frame] build and check whole frames.
 
 The receiver does not have to wait for t3.5 of silence to know that a frame has ended: for every
 public function code the length follows from at most the first few bytes (the function code and, for
 variable-length PDUs, a byte count). The predictors here answer, for the bytes received so far,
-either the total frame length, [`NEED_MORE`][aiortu.core.frame.NEED_MORE] (a few more bytes will
-tell), or [`CANNOT_KNOW`][aiortu.core.frame.CANNOT_KNOW] (a custom function code, or bytes that
+either the total frame length, [`NEED_MORE`][aiortu.core.rtu.NEED_MORE] (a few more bytes will
+tell), or [`CANNOT_KNOW`][aiortu.core.rtu.CANNOT_KNOW] (a custom function code, or bytes that
 break the layout). A request and a reply with the same function code usually have different layouts,
 so there is one predictor for each direction.
 """
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 from typing import Final
 
 from aiortu.core.codes import EXCEPTION_BIT, MEI_READ_DEVICE_IDENTIFICATION
-from aiortu.core.crc import crc16
 from aiortu.core.errors import CRCError, InvalidValue, MalformedPDU
+from aiortu.core.rtu._crc import crc16
 
 __all__ = (
     "CANNOT_KNOW",
@@ -201,8 +201,8 @@ def _predict_mei(frame: bytes | bytearray, reply: bool) -> int:
 def expected_request_length(frame: bytes | bytearray) -> int:
     """The total length of the request frame that starts with `frame`.
 
-    Returns the length in bytes (unit and CRC included), [`NEED_MORE`][aiortu.core.frame.NEED_MORE],
-    or [`CANNOT_KNOW`][aiortu.core.frame.CANNOT_KNOW] for function codes without a known layout.
+    Returns the length in bytes (unit and CRC included), [`NEED_MORE`][aiortu.core.rtu.NEED_MORE],
+    or [`CANNOT_KNOW`][aiortu.core.rtu.CANNOT_KNOW] for function codes without a known layout.
 
     >>> expected_request_length(bytes.fromhex("11 03 00"))
     8
@@ -213,8 +213,8 @@ def expected_request_length(frame: bytes | bytearray) -> int:
 def expected_response_length(frame: bytes | bytearray) -> int:
     """The total length of the reply frame that starts with `frame`.
 
-    Returns the length in bytes (unit and CRC included), [`NEED_MORE`][aiortu.core.frame.NEED_MORE],
-    or [`CANNOT_KNOW`][aiortu.core.frame.CANNOT_KNOW] for function codes without a known layout.
+    Returns the length in bytes (unit and CRC included), [`NEED_MORE`][aiortu.core.rtu.NEED_MORE],
+    or [`CANNOT_KNOW`][aiortu.core.rtu.CANNOT_KNOW] for function codes without a known layout.
 
     >>> expected_response_length(bytes.fromhex("11 03 06"))
     11

@@ -2,14 +2,14 @@
 
 When bytes end in silence, or overflow the 256-byte buffer, without making one valid frame (garbage
 glued to a reply, a flood of noise with requests inside), the receiver asks a
-[`FrameSearch`][aiortu.core.frame_search.FrameSearch] where valid frames start in them. A frame is
+`FrameSearch` where valid frames start in them. A frame is
 found only where its CRC checks at the length its first bytes predict, so a search never accepts a
 frame whose CRC fails.
 
 The search is cheap on noise: a precompiled pattern finds the offsets where an expected unit address
 is followed by a function code with a known layout; a length is predicted only there, and the CRC is
 checked only when the predicted frame is all in the buffer. The search also remembers what it has
-judged ([`FrameSearch.keep`][aiortu.core.frame_search.FrameSearch.keep]), so bytes kept after an
+judged (`FrameSearch.keep`), so bytes kept after an
 overflow are not searched again: a flood costs a pattern scan per byte, not a prediction per offset
 per overflow.
 """
@@ -21,8 +21,8 @@ from collections.abc import Callable, Iterable, Iterator
 from typing import Final
 
 from aiortu.core.codes import MEI_READ_DEVICE_IDENTIFICATION
-from aiortu.core.crc import crc16
-from aiortu.core.frame import (
+from aiortu.core.rtu._crc import crc16
+from aiortu.core.rtu._frame import (
     CANNOT_KNOW,
     MAX_FRAME_LENGTH,
     MIN_FRAME_LENGTH,
@@ -90,7 +90,7 @@ class FrameSearch:
     def frame_at(self, buffer: bytearray, offset: int) -> int:
         """The length of a valid frame starting at `offset`, or NEED_MORE / CANNOT_KNOW.
 
-        Only for offsets [`offsets`][aiortu.core.frame_search.FrameSearch.offsets] gave: unit
+        Only for offsets `offsets` gave: unit
         address and function code are known.
         """
         function_code = buffer[offset + 1]

@@ -9,15 +9,15 @@ The machine follows the receiver of MODBUS-NOTES.md (after the serial line spec)
                                                             with a good CRC -->  RESPONSE
     RESPONSE checking the frame; handing it on           -- checked -->  IDLE
 
-and [`TRANSITIONS`][aiortu.core.receiver.TRANSITIONS] is that diagram as data: each (state, event)
+and `TRANSITIONS` is that diagram as data: each (state, event)
 pair names the next state and the action. A pair missing from the table is a bug and raises
-[`ReceiverError`][aiortu.core.receiver.ReceiverError], never a silent no-op. The documentation draws
+[`ReceiverError`][aiortu.core.rtu.ReceiverError], never a silent no-op. The documentation draws
 its diagram from the same table.
 
 Two things go beyond the timer-driven spec, as DESIGN.md explains:
 
 * It is length-aware. Once the first bytes tell a frame's length (see
-  [`aiortu.core.frame`][aiortu.core.frame]) and the CRC checks at that length, the frame is complete
+  [`aiortu.core.rtu`][aiortu.core.rtu]) and the CRC checks at that length, the frame is complete
   at once, without waiting for t3.5 of silence. Silence still ends frames whose length cannot be
   predicted. Its role says which layouts to expect: a master expects replies; a slave expects
   requests for its own units and either layout for other units, since on a multi-drop bus it also
@@ -31,19 +31,19 @@ Two things go beyond the timer-driven spec, as DESIGN.md explains:
   frame whose CRC fails is never accepted. The search is cheap even in a flood of noise:
   a precompiled pattern finds where a unit address and a function code with a known
   layout may start a frame (see `Receiver._salvage`). A slave searches garbage for
-  its own requests only (see [`Role.SLAVE`][aiortu.core.receiver.Role.SLAVE]).
+  its own requests only (see [`Role.SLAVE`][aiortu.core.rtu.Role.SLAVE]).
 
-Timing comes in as arguments: [`Receiver.feed`][aiortu.core.receiver.Receiver.feed] takes a chunk
-and the time it arrived, [`Receiver.expire`][aiortu.core.receiver.Receiver.expire] the current time,
-and [`Receiver.next_deadline`][aiortu.core.receiver.Receiver.next_deadline] tells the caller when to
-call [`expire`][aiortu.core.receiver.Receiver.expire] next. Chunks are assumed to hold back-to-back
+Timing comes in as arguments: [`Receiver.feed`][aiortu.core.rtu.Receiver.feed] takes a chunk
+and the time it arrived, [`Receiver.expire`][aiortu.core.rtu.Receiver.expire] the current time,
+and [`Receiver.next_deadline`][aiortu.core.rtu.Receiver.next_deadline] tells the caller when to
+call [`expire`][aiortu.core.rtu.Receiver.expire] next. Chunks are assumed to hold back-to-back
 characters that ended arriving at the given time, which is what a serial driver or a USB adapter
 hands over.
 
 The t1.5 rule comes in two modes. `strict` follows the spec: a gap of more than t1.5 inside a frame
 discards it, and t3.5 of silence ends a frame. `tolerant` (the default) ignores gaps inside frames,
 because USB adapters and virtual lines deliver bytes in bursts, and ends a frame only after a longer
-silence ([`TOLERANT_FRAME_SILENCE`][aiortu.core.receiver.TOLERANT_FRAME_SILENCE], or t3.5 when that
+silence ([`TOLERANT_FRAME_SILENCE`][aiortu.core.rtu.TOLERANT_FRAME_SILENCE], or t3.5 when that
 is longer). INIT ends on t3.5 of silence in both modes, as the spec says: on a line that is never
 quiet for the longer bound (a master polling back to back), a receiver that started listening would
 otherwise stay deaf, then hand on frames it had gathered as noise long after they came.
@@ -57,8 +57,8 @@ from dataclasses import dataclass
 from typing import Final
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.crc import crc16
-from aiortu.core.frame import (
+from aiortu.core.rtu._crc import crc16
+from aiortu.core.rtu._frame import (
     CANNOT_KNOW,
     MAX_FRAME_LENGTH,
     MIN_FRAME_LENGTH,
@@ -66,8 +66,8 @@ from aiortu.core.frame import (
     expected_request_length,
     expected_response_length,
 )
-from aiortu.core.frame_search import LAST_UNIT, FrameSearch
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu._frame_search import LAST_UNIT, FrameSearch
+from aiortu.core.serial import LineSettings
 
 __all__ = (
     "TOLERANT_FRAME_SILENCE",
@@ -230,10 +230,10 @@ class Receiver:
     """The RTU receiver of one line (see the module docstring).
 
     `settings` give the character time, t1.5 and t3.5. `role` chooses the layouts to expect; `units`
-    are a slave's own unit addresses (for [`Role.SLAVE`][aiortu.core.receiver.Role.SLAVE]). `timing`
+    are a slave's own unit addresses (for [`Role.SLAVE`][aiortu.core.rtu.Role.SLAVE]). `timing`
     is `"tolerant"` (default) or `"strict"`. `frame_silence` overrides the silence that ends a frame
     (default: t3.5 in strict mode, the longer of t3.5 and
-    [`TOLERANT_FRAME_SILENCE`][aiortu.core.receiver.TOLERANT_FRAME_SILENCE] in tolerant mode).
+    [`TOLERANT_FRAME_SILENCE`][aiortu.core.rtu.TOLERANT_FRAME_SILENCE] in tolerant mode).
 
     `now` is when it starts listening: given, it starts in INIT (a frame under way when
     the port opened is not taken for a whole one); left out, in IDLE.
@@ -353,10 +353,10 @@ class Receiver:
     def take_expected_frame(self, data: bytes, now: float, checked: bytes | None = None) -> bool:
         """Take `data`, a chunk that finished arriving at `now`, if it is one frame with a
         good CRC reaching an idle receiver; return whether it was. False changes nothing:
-        give the chunk to [`feed`][aiortu.core.receiver.Receiver.feed].
+        give the chunk to [`feed`][aiortu.core.rtu.Receiver.feed].
 
-        This is what [`feed`][aiortu.core.receiver.Receiver.feed] does with such a chunk, without
-        building its [`FrameReceived`][aiortu.core.receiver.FrameReceived], for a caller that has
+        This is what [`feed`][aiortu.core.rtu.Receiver.feed] does with such a chunk, without
+        building its [`FrameReceived`][aiortu.core.rtu.FrameReceived], for a caller that has
         already matched the chunk's length to the layout of the frame it expects (a link told what
         reply to look for): only the state and the CRC are left to check here. `checked` is a frame
         whose CRC was found good before (the last reply to the same request): a chunk equal to it
@@ -375,7 +375,7 @@ class Receiver:
         return self._expire(now, out)
 
     def next_deadline(self) -> float | None:
-        """When [`expire`][aiortu.core.receiver.Receiver.expire] should next be called, or `None` if
+        """When [`expire`][aiortu.core.rtu.Receiver.expire] should next be called, or `None` if
         no timer runs."""
         if self.state is ReceiverState.IDLE or self._last is None:
             return None
@@ -580,7 +580,7 @@ class Receiver:
         in the buffer; otherwise the buffer is emptied.
 
         Where frames may start, and whether one does, is
-        [`FrameSearch`][aiortu.core.frame_search.FrameSearch]'s business; after an overflow it
+        `FrameSearch`'s business; after an overflow it
         remembers what it judged in the bytes kept.
         """
         buffer = self._buffer

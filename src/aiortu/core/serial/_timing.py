@@ -115,7 +115,7 @@ class LineSettings:
 
     def transaction_rate(self, request_length: int, reply_length: int) -> float:
         """The wire-limited request/reply pairs per second (see
-        [`transaction_time`][aiortu.core.timing.LineSettings.transaction_time])."""
+        [`transaction_time`][aiortu.core.serial.LineSettings.transaction_time])."""
         return 1.0 / self.transaction_time(request_length, reply_length)
 
     def __str__(self) -> str:
