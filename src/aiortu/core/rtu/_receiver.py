@@ -1,6 +1,6 @@
 """The RTU receiver: bytes and times in, frames out. A state machine written as a table.
 
-The machine follows the receiver of MODBUS-NOTES.md (after the serial line spec):
+The machine follows the receiver of the Modbus over Serial Line spec (v1.02, section 2.5.1.1):
 
     INIT     wait for silence; bytes here are noise      -- silence -->  IDLE
     IDLE     waiting for a frame                         -- a byte -->   START
@@ -14,7 +14,7 @@ pair names the next state and the action. A pair missing from the table is a bug
 [`ReceiverError`][aiortu.core.rtu.ReceiverError], never a silent no-op. The documentation draws
 its diagram from the same table.
 
-Two things go beyond the timer-driven spec, as DESIGN.md explains:
+Two things go beyond the timer-driven spec (docs/protocol.md explains why):
 
 * It is length-aware. Once the first bytes tell a frame's length (see
   [`aiortu.core.rtu`][aiortu.core.rtu]) and the CRC checks at that length, the frame is complete
