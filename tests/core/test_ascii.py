@@ -25,7 +25,7 @@ from aiortu.core.ascii import (
     lrc,
 )
 from aiortu.core.errors import FrameError, InvalidValue, LRCError
-from aiortu.core.receiver import ReceiverError
+from aiortu.core.rtu import ReceiverError
 
 READ = encode_ascii_frame(1, bytes.fromhex("03 00 00 00 01"))
 pdus = st.binary(min_size=1, max_size=253)

@@ -16,7 +16,7 @@ from typing import Any
 
 from anyio.abc import ByteStream
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.transport._ascii_stream import ASCII_BYTESIZE, AsciiStream, check_ascii_settings
 from aiortu.transport._authorization import (

@@ -40,8 +40,8 @@ from aiortu.core.ascii import (
     AsciiReceiver,
     encode_ascii_frame,
 )
-from aiortu.core.crc import crc16
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import crc16
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
 
 __all__ = ("ASCII_BYTESIZE", "AsciiStream", "check_ascii_settings")

@@ -19,7 +19,7 @@ from typing import Final
 
 from aiortu.core.ascii._lrc import lrc
 from aiortu.core.errors import FrameError, InvalidValue, LRCError
-from aiortu.core.frame import Frame
+from aiortu.core.rtu import Frame
 
 __all__ = (
     "ASCII_START",

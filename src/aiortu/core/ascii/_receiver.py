@@ -10,7 +10,7 @@ The machine is the serial line spec's (2.5.2.1, figure 14):
 
 and [`ASCII_TRANSITIONS`][aiortu.core.ascii.ASCII_TRANSITIONS] is that diagram as data: each
 (state, event) pair names the next state and the action. A pair missing from the table is a bug
-and raises [`ReceiverError`][aiortu.core.receiver.ReceiverError], never a silent no-op. The
+and raises [`ReceiverError`][aiortu.core.rtu.ReceiverError], never a silent no-op. The
 documentation draws its diagram from the same table.
 
 A gap between two characters of a frame longer than the inter-character timeout (1 s by
@@ -41,8 +41,8 @@ from typing import Final
 
 from aiortu.core.ascii._frame import ASCII_START, CR, LF, MAX_ASCII_FRAME_LENGTH, check_ascii_body
 from aiortu.core.errors import FrameError, InvalidValue, LRCError
-from aiortu.core.receiver import ReceiverError
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import ReceiverError
+from aiortu.core.serial import LineSettings
 
 __all__ = (
     "ASCII_TRANSITIONS",
