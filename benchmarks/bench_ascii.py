@@ -12,7 +12,7 @@ baud plus a little, so each one starts from IDLE; each is checked to come out. T
 (the RTU receiver as a slave and a master) are the reference. Workloads are timed
 interleaved round by round; the table gives the median frames per second of wall time and
 the median CPU time per frame (``process_time``), which moves less with a shared machine's
-load.
+load; the target is checked on CPU time.
 """
 
 from __future__ import annotations
@@ -123,8 +123,11 @@ def section_receiver(args: argparse.Namespace) -> list[str]:
         ]
         for case in workloads
     ]
+    # The verdict is on CPU time, which moves less with a shared machine's load than wall time.
     whole = min(
-        statistics.median(case.rates) for case in workloads if case.ascii and not case.bytewise
+        1e6 / statistics.median(case.cpu_us)
+        for case in workloads
+        if case.ascii and not case.bytewise
     )
     verdict = "met" if whole >= TARGET_FRAMES_PER_SECOND else "MISSED"
     return [
@@ -135,7 +138,7 @@ def section_receiver(args: argparse.Namespace) -> list[str]:
         ),
         "",
         f"Target: {TARGET_FRAMES_PER_SECOND:,} ASCII frames/s fed whole: {verdict} "
-        f"(slowest whole: {whole:,.0f}).",
+        f"(slowest whole: {whole:,.0f} frames per CPU second).",
     ]
 
 
