@@ -35,6 +35,10 @@ EXPECTED = {
         "logger: registers 0..2 = [215, 7, 8]",
         "the device: setpoint 215",
     ],
+    "modbus_ascii.py": [
+        "registers 0..2 = [215, 7, 8]",
+        "ASCII frames the slave received: 2",
+    ],
     "modbus_udp.py": [
         "registers 0..2 = [215, 7, 8]",
         "requests 2, replies 2, from strangers 0, refused 0",

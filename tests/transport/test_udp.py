@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import logging
 import random
+import re
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
+from pathlib import Path
 
 import anyio
 import anyio.abc
@@ -23,6 +25,7 @@ from aiortu.transport import (
     parse_listen_url,
     parse_port_url,
 )
+from tests.cli_helpers import run_aiortu, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -268,3 +271,25 @@ def test_modbus_udp_runs_on_both_backends(backend: str) -> None:
                 assert await master.read_holding_registers(17, 2, 3) == [3, 0, 9]
 
     anyio.run(scenario, backend=backend)
+
+
+def test_the_command_serves_and_reads_modbus_udp(tmp_path: Path) -> None:
+    config = tmp_path / "device.toml"
+    config.write_text(
+        "[[slave]]\nunit = 17\n[[slave.holding_registers]]\nstart = 0\nvalues = [5, 6, 7]\n",
+        encoding="utf-8",
+    )
+    server = start_aiortu("serve", "udp://127.0.0.1:0", "--config", str(config))
+    try:
+        assert server.stderr is not None
+        first = server.stderr.readline()
+        found = re.search(r"on udp://127\.0\.0\.1:0 \(port (\d+)\)", first)
+        assert found, first
+        read = run_aiortu(
+            "read", f"udp://127.0.0.1:{found[1]}", "--unit", "17", "--table", "holding",
+            "--address", "0", "--count", "3",
+        )  # fmt: skip
+        assert read.returncode == 0, read.stderr
+        assert read.stdout.split() == ["0", "5", "1", "6", "2", "7"]
+    finally:
+        stop(server)
