@@ -43,13 +43,12 @@ import anyio
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import benchlib
+from tests.transport.certificates import Authority
 
 import aiortu
-from tests.transport.certificates import Authority
 
 PEERS = str(Path(__file__).resolve().parents[1] / "tests" / "transport" / "pymodbus_peers.py")
 LINE: dict[str, Any] = {"baudrate": 19200, "bytesize": 8, "parity": "N", "stopbits": 2}
-Run = Callable[[int], Awaitable[None]]
 
 
 def _serve_aiortu(argv: list[str]) -> None:
@@ -140,6 +139,19 @@ async def _pymodbus_run(make: Callable[[], Any], count: int, clock: Clock) -> fl
         client.close()
 
 
+Contender = tuple[Callable[[int, Clock], Awaitable[float]], int | None]
+
+
+def ours(opener: Callable[[], Any], pid: int | None = None) -> Contender:
+    """aiortu's master on `opener`; its CPU counted, or process `pid`'s."""
+    return (lambda count, clock: _aiortu_run(opener, count, clock)), pid
+
+
+def pymodbus_side(make: Callable[[], Any]) -> Contender:
+    """pymodbus's client made by `make`; this process's CPU counted."""
+    return (lambda count, clock: _pymodbus_run(make, count, clock)), None
+
+
 def _cpu_per_request(run: Callable[..., Awaitable[float]], count: int, pid: int | None) -> float:
     """Microseconds of CPU per request: this process's, or process `pid`'s."""
 
@@ -175,24 +187,30 @@ def _section(
     import pymodbus.client as pm  # noqa: F401 - fails early without pymodbus
 
     with benchlib.Children() as children:
-        ours, our_port = _start(children, [sys.executable, __file__, "--serve-aiortu", *serve_argv])
-        theirs, their_port = _start(children, [sys.executable, "-W", "ignore", PEERS, *serve_argv])
+        our_server, our_port = _start(
+            children, [sys.executable, __file__, "--serve-aiortu", *serve_argv]
+        )
+        their_server, their_port = _start(
+            children, [sys.executable, "-W", "ignore", PEERS, *serve_argv]
+        )
+        to_ours = aiortu_reads(aiortu_url(our_port), **master_options)
+        to_theirs = aiortu_reads(aiortu_url(their_port), **master_options)
         master_rows = _compare(
             args,
             f"{label}: master",
             {
-                "aiortu": (lambda n, clock: _aiortu_run(aiortu_reads(aiortu_url(our_port), **master_options), n, clock), None),
-                "pymodbus": (lambda n, clock: _pymodbus_run(lambda: pymodbus_client(our_port), n, clock), None),
+                "aiortu": ours(to_ours),
+                "pymodbus": pymodbus_side(lambda: pymodbus_client(our_port)),
             },
-        )  # fmt: skip
+        )
         server_rows = _compare(
             args,
             f"{label}: server",
             {
-                "aiortu": (lambda n, clock: _aiortu_run(aiortu_reads(aiortu_url(our_port), **master_options), n, clock), ours.pid),
-                "pymodbus": (lambda n, clock: _aiortu_run(aiortu_reads(aiortu_url(their_port), **master_options), n, clock), theirs.pid),
+                "aiortu": ours(to_ours, our_server.pid),
+                "pymodbus": ours(to_theirs, their_server.pid),
             },
-        )  # fmt: skip
+        )
     return [*master_rows, *server_rows]
 
 
@@ -235,8 +253,12 @@ def section_ascii(args: argparse.Namespace) -> list[str]:
         # Two socat pairs: one line to each server.
         our_master, our_slave = children.socat_pair()
         their_master, their_slave = children.socat_pair()
-        ours, _ = _start(children, [sys.executable, __file__, "--serve-aiortu", "ascii", our_slave])
-        theirs, _ = _start(children, [sys.executable, "-W", "ignore", PEERS, "ascii", their_slave])
+        our_server, _ = _start(
+            children, [sys.executable, __file__, "--serve-aiortu", "ascii", our_slave]
+        )
+        their_server, _ = _start(
+            children, [sys.executable, "-W", "ignore", PEERS, "ascii", their_slave]
+        )
 
         def aiortu_on(path: str) -> Callable[[], Any]:
             return lambda: aiortu.open_master(path, framing="ascii", timeout=2.0, retries=0, **LINE)
@@ -250,22 +272,16 @@ def section_ascii(args: argparse.Namespace) -> list[str]:
             args,
             "ASCII: master",
             {
-                "aiortu": (lambda n, clock: _aiortu_run(aiortu_on(our_master), n, clock), None),
-                "pymodbus": (
-                    lambda n, clock: _pymodbus_run(lambda: pymodbus_on(our_master), n, clock),
-                    None,
-                ),
+                "aiortu": ours(aiortu_on(our_master)),
+                "pymodbus": pymodbus_side(lambda: pymodbus_on(our_master)),
             },
         )
         server_rows = _compare(
             args,
             "ASCII: server",
             {
-                "aiortu": (lambda n, clock: _aiortu_run(aiortu_on(our_master), n, clock), ours.pid),
-                "pymodbus": (
-                    lambda n, clock: _aiortu_run(aiortu_on(their_master), n, clock),
-                    theirs.pid,
-                ),
+                "aiortu": ours(aiortu_on(our_master), our_server.pid),
+                "pymodbus": ours(aiortu_on(their_master), their_server.pid),
             },
         )
     return [*master_rows, *server_rows]
@@ -295,10 +311,10 @@ def section_handshakes(args: argparse.Namespace) -> list[str]:
             args,
             "request on an open connection",
             {
-                "TLS": (lambda n, clock: _aiortu_run(aiortu_reads(f"tls://127.0.0.1:{tls_port}", **options), n, clock), None),
-                "plain TCP": (lambda n, clock: _aiortu_run(aiortu_reads(f"tcp://127.0.0.1:{tcp_port}"), n, clock), None),
+                "TLS": ours(aiortu_reads(f"tls://127.0.0.1:{tls_port}", **options)),
+                "plain TCP": ours(aiortu_reads(f"tcp://127.0.0.1:{tcp_port}")),
             },
-        )  # fmt: skip
+        )
     return [
         f"Mutual-TLS handshakes per second to aiortu's server (connect, handshake, close): "
         f"{statistics.median(rates):,.0f} (median of {args.rounds} rounds)",
@@ -311,8 +327,10 @@ def section_handshakes(args: argparse.Namespace) -> list[str]:
 
 def _ratios(lines: list[str]) -> list[str]:
     """The rows of a section as a table, with aiortu's CPU as a share of pymodbus's."""
-    out = ["| transport: side | aiortu CPU us/request | pymodbus CPU us/request | aiortu / pymodbus |",
-           "|---|---|---|---|"]  # fmt: skip
+    out = [
+        "| transport: side | aiortu CPU us/request | pymodbus CPU us/request | aiortu / pymodbus |",
+        "|---|---|---|---|",
+    ]
     for ours, theirs in zip(lines[0::2], lines[1::2], strict=True):
         title = ours.split("|")[1].strip()
         mine, other = float(ours.split("|")[3]), float(theirs.split("|")[3])
