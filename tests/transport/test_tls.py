@@ -307,16 +307,16 @@ async def test_the_master_refuses_an_untrusted_server(pki: dict[str, Any]) -> No
 
 async def test_settings_errors_are_one_sentence(pki: dict[str, Any], tmp_path: Path) -> None:
     server: Issued = pki["server"]
-    with pytest.raises(InvalidValue, match=r"^Modbus/TCP Security needs the server's certificate "
-                       r"and private key: keyfile is missing$"):  # fmt: skip
+    with pytest.raises(InvalidValue, match=r"^keyfile is missing: Modbus/TCP Security needs "
+                       r"the server's certificate and private key$"):  # fmt: skip
         async with aiortu.serve(
             "tls://127.0.0.1:0", {1: _store()}, certfile=server.certfile,
             cafile=pki["ca"].cafile, rules=RULES,
         ):  # fmt: skip
             pass
-    with pytest.raises(InvalidValue, match=r"client's certificate and private key: certfile"):
+    with pytest.raises(InvalidValue, match=r"^certfile is missing: .* the client's certificate"):
         await aiortu.transport.open_stream("tls://127.0.0.1:802", cafile=pki["ca"].cafile)
-    with pytest.raises(InvalidValue, match=r"^cannot load the TLS cafile \(No such file"):
+    with pytest.raises(InvalidValue, match=r"^cannot load the TLS cafile: No such file"):
         await aiortu.transport.open_stream(
             "tls://127.0.0.1:802",
             certfile=server.certfile,

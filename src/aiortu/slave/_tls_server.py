@@ -29,6 +29,7 @@ from anyio.streams.tls import TLSAttribute
 from aiortu._log import get_logger
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.mbap import Adu
+from aiortu.errors import InvalidValue
 from aiortu.slave._answer_at_once import exception_pdu
 from aiortu.slave._tcp_server import ModbusTcpServer, _Outgoing
 from aiortu.transport import (
@@ -80,13 +81,18 @@ class ModbusTlsServer(ModbusTcpServer):
         *,
         certfile: str | Path | None = None,
         keyfile: str | Path | None = None,
-        cafile: str | Path,
-        rules: RoleRules | str | Path,
+        cafile: str | Path | None = None,
+        rules: RoleRules | str | Path | None = None,
         **options: Any,
     ) -> None:
         super().__init__(units, **options)
         self.tls_context = server_tls_context(certfile, keyfile, cafile)
         """The server's TLS context (TLS 1.2 or later, client certificates required)."""
+        if rules is None:
+            raise InvalidValue(
+                "rules", None, "given", "a tls:// server grants each role what its rules allow",
+                message="rules is missing",
+            )  # fmt: skip
         self.rules = rules if isinstance(rules, RoleRules) else load_rules(rules)
         """The rights of each role."""
         self.denied = 0

@@ -149,17 +149,26 @@ def certificate_role(der: bytes) -> str | None:
 
 
 def _context(
-    purpose: ssl.Purpose, certfile: PathLike | None, keyfile: PathLike | None, cafile: PathLike
+    purpose: ssl.Purpose,
+    certfile: PathLike | None,
+    keyfile: PathLike | None,
+    cafile: PathLike | None,
 ) -> ssl.SSLContext:
     side = "server" if purpose is ssl.Purpose.CLIENT_AUTH else "client"
+    if cafile is None:
+        peers = "clients" if purpose is ssl.Purpose.CLIENT_AUTH else "servers"
+        raise InvalidValue(
+            "cafile", None, "given", f"Modbus/TCP Security trusts the {peers} its CAs signed",
+            message="cafile is missing",
+        )  # fmt: skip
     if certfile is None or keyfile is None:
         missing = "certfile" if certfile is None else "keyfile"
         raise InvalidValue(
             missing,
             None,
-            "a path",
-            message=f"Modbus/TCP Security needs the {side}'s certificate and private key: "
-            f"{missing} is missing",
+            "given",
+            f"Modbus/TCP Security needs the {side}'s certificate and private key",
+            message=f"{missing} is missing",
         )
     context = ssl.create_default_context(purpose)
     context.minimum_version = ssl.TLSVersion.TLSv1_2
@@ -176,14 +185,14 @@ def _context(
 
 
 def _unreadable(name: str, path: PathLike, error: OSError) -> InvalidValue:
-    reason = getattr(error, "strerror", None) or getattr(error, "reason", None) or error
+    reason = getattr(error, "strerror", None) or getattr(error, "reason", None) or str(error)
     return InvalidValue(
-        name, str(path), "readable PEM files", message=f"cannot load the TLS {name} ({reason})"
+        name, str(path), "readable PEM", str(reason), message=f"cannot load the TLS {name}"
     )
 
 
 def server_tls_context(
-    certfile: PathLike | None, keyfile: PathLike | None, cafile: PathLike
+    certfile: PathLike | None, keyfile: PathLike | None, cafile: PathLike | None
 ) -> ssl.SSLContext:
     """A server's TLS context: TLS 1.2 or later, its certificate and key, and a client
     certificate signed by one of the CAs in `cafile` required.
@@ -194,7 +203,7 @@ def server_tls_context(
 
 
 def client_tls_context(
-    certfile: PathLike | None, keyfile: PathLike | None, cafile: PathLike
+    certfile: PathLike | None, keyfile: PathLike | None, cafile: PathLike | None
 ) -> ssl.SSLContext:
     """A client's TLS context: TLS 1.2 or later, its certificate and key, and the server's
     certificate checked against the CAs in `cafile` and its name against the host."""
@@ -255,7 +264,7 @@ async def open_modbus_tls(
     *,
     certfile: PathLike | None = None,
     keyfile: PathLike | None = None,
-    cafile: PathLike,
+    cafile: PathLike | None = None,
     connect_timeout: float = 5.0,
     counters: ModbusTcpCounters | None = None,
 ) -> ModbusTcpStream:
