@@ -616,7 +616,8 @@ async def serve(
     - A serial device path, or `rtu+tcp://host:port` to connect to a serial device server: yields
       the running [`Slave`][aiortu.slave.Slave]. The line settings are the spec's 19200 8E1 by
       default; `options` go to [`aiortu.transport.open_stream`][aiortu.transport.open_stream]
-      (`exclusive`, `rs485`, `local_echo`, `connect_timeout`).
+      (`exclusive`, `rs485`, `local_echo`, `connect_timeout`, and `framing="ascii"` for Modbus
+      ASCII; `ascii+tcp://host:port` connects in ASCII).
     - `tcp://host:port`: listens for Modbus TCP and yields the running
       [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]; `options` go to it
       (`max_connections`, `idle_timeout`, `unit_aliases`, `answer_unknown_units`,
