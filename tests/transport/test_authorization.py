@@ -49,9 +49,28 @@ def _touched(request: PDU) -> list[tuple[int, int]]:
     return [(fields["address"], fields["address"] + count - 1)]
 
 
+def _near(request: PDU) -> st.SearchStrategy[tuple[tuple[int, int], ...]]:
+    """Address ranges that end around the request's own: inside, just short, just over."""
+    touched = _touched(request) or [(0, 0)]
+    edges = st.sampled_from(touched).flatmap(
+        lambda span: st.tuples(
+            st.integers(max(span[0] - 2, 0), span[0] + 1),
+            st.integers(max(span[1] - 1, 0), min(span[1] + 2, 0xFFFF)),
+        )
+    )
+    return st.lists(edges.map(lambda pair: tuple(sorted(pair))), min_size=1, max_size=3).map(tuple)
+
+
 @settings(max_examples=400)
-@given(rules, requests, st.integers(0, 255))
-def test_a_rule_allows_exactly_what_it_grants(rule: AccessRule, request: PDU, unit: int) -> None:
+@given(rules, requests, st.integers(0, 255), st.data())
+def test_a_rule_allows_exactly_what_it_grants(
+    rule: AccessRule, request: PDU, unit: int, data: st.DataObject
+) -> None:
+    if rule.addresses is not None and data.draw(st.booleans()):
+        # Ranges that end around the request's own: inside, just short, just over.
+        rule = AccessRule(
+            rule.function_codes, rule.units, data.draw(_near(request)), rule.read_only
+        )
     code = request.function_code
     expected = (
         code in rule.function_codes
