@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import ssl
 from collections.abc import AsyncIterator
@@ -278,8 +279,19 @@ async def test_a_plaintext_client_on_a_tls_port_is_refused_in_one_sentence(
                     pass
         with pytest.raises(Exception):  # noqa: B017, PT011 - whatever came back is no ADU
             decode_adu(reply)
+        for _ in range(3):  # more of them: counted, logged at debug level
+            stream = await anyio.connect_tcp("127.0.0.1", server.port)
+            async with stream:
+                await stream.send(b"GET / HTTP/1.0\r\n\r\n")
+                with (
+                    anyio.fail_after(5),
+                    contextlib.suppress(anyio.EndOfStream, anyio.BrokenResourceError),
+                ):
+                    while True:
+                        await stream.receive()
+        assert server.handshake_failures == 4
     lines = [r for r in caplog.records if "closed the connection of" in r.getMessage()]
-    assert len(lines) == 1
+    assert len(lines) == 1, "one warning, then counts"
     assert lines[0].getMessage().endswith("it does not speak TLS (a plaintext Modbus TCP client?)")
     assert all(r.exc_info is None for r in caplog.records), "no traceback in the log"
 

@@ -9,7 +9,8 @@ answered with exception 01 (illegal function), counted in
 [`denied`][aiortu.slave.ModbusTlsServer.denied] and logged with the role, the peer and why (the
 first refusal of a connection as a warning, the rest at debug level, so that a client cannot
 flood the log). A client that fails the handshake (plain TCP, no certificate, an expired or
-untrusted one) is closed and logged in one sentence.
+untrusted one) is closed and logged in one sentence (the first as a warning, the rest at debug
+level; all counted in [`handshake_failures`][aiortu.slave.ModbusTlsServer.handshake_failures]).
 `aiortu.serve("tls://0.0.0.0:802", {1: store}, certfile=..., keyfile=..., cafile=...,
 rules="rules.toml")` runs one.
 """
@@ -97,6 +98,13 @@ class ModbusTlsServer(ModbusTcpServer):
         """The rights of each role."""
         self.denied = 0
         """Requests refused by the rules (answered with exception 01)."""
+        self._listener: TlsListener | None = None
+
+    @property
+    def handshake_failures(self) -> int:
+        """Connections closed because their TLS handshake failed (the first is logged as a
+        warning, the rest at debug level)."""
+        return 0 if self._listener is None else self._listener.handshake_failures
 
     async def serve(
         self,
@@ -105,7 +113,7 @@ class ModbusTlsServer(ModbusTcpServer):
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
         """Accept TLS connections on the TCP `listener` and serve each, until cancelled."""
-        secure = TlsListener(
+        secure = self._listener = TlsListener(
             listener, self.tls_context, standard_compatible=False,
             handshake_timeout=HANDSHAKE_TIMEOUT,
         )  # fmt: skip

@@ -238,20 +238,32 @@ def describe_tls_failure(error: BaseException) -> str:
 
 class TlsListener(TLSListener):
     """anyio's TLS listener that logs a failed handshake in one sentence (who, and why), not
-    with a traceback, and passes on the listening address of the listener it wraps."""
+    with a traceback, and passes on the listening address of the listener it wraps.
 
-    @staticmethod
-    async def handle_handshake_error(exc: BaseException, stream: anyio.abc.AnyByteStream) -> None:
+    The first failed handshake is logged as a warning and the later ones at debug level, so
+    that a flood of them costs counts, not log lines:
+    [`handshake_failures`][aiortu.transport.TlsListener.handshake_failures] counts them all.
+    """
+
+    handshake_failures: int = 0
+    """Handshakes that failed (plaintext, no certificate, an expired or untrusted one, ...)."""
+
+    async def handle_handshake_error(  # type: ignore[override]
+        self, exc: BaseException, stream: anyio.abc.AnyByteStream
+    ) -> None:
         peer = peer_address(stream) if isinstance(stream, anyio.abc.ByteStream) else "a client"
-        await anyio.aclose_forcefully(stream)
         if isinstance(exc, anyio.get_cancelled_exc_class()) or not isinstance(exc, Exception):
+            await anyio.aclose_forcefully(stream)
             raise exc
+        # Counted before the close, which is what the client sees.
+        self.handshake_failures += 1
         _log.log(
-            logging.WARNING,
+            logging.WARNING if self.handshake_failures == 1 else logging.DEBUG,
             "Modbus/TCP Security: closed the connection of %s: %s",
             peer,
             describe_tls_failure(exc),
         )
+        await anyio.aclose_forcefully(stream)
 
     @property
     def extra_attributes(self) -> Mapping[Any, Callable[[], Any]]:
