@@ -293,3 +293,12 @@ def test_the_command_serves_and_reads_modbus_udp(tmp_path: Path) -> None:
         assert read.stdout.split() == ["0", "5", "1", "6", "2", "7"]
     finally:
         stop(server)
+
+
+async def test_modbus_udp_over_ipv6_loopback() -> None:
+    async with (
+        aiortu.serve("udp://[::1]:0", {17: _store()}) as server,
+        aiortu.open_master(f"udp://[::1]:{server.port}", timeout=1.0) as master,
+    ):
+        assert await master.read_holding_registers(17, 0, 3) == [1, 2, 3]
+        assert master.link.stream.counters.strangers == 0
