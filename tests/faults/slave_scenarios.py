@@ -18,7 +18,7 @@ from aiortu.core.crc import crc16
 from aiortu.core.errors import ModbusError
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Response, decode_request, decode_response
-from aiortu.slave._server import Slave
+from aiortu.slave import Slave
 from aiortu.slave._store import Block, MemoryStore, ServerId
 from aiortu.testing._virtual_bus import virtual_pair
 from tests.slave.helpers import RawMaster

@@ -25,8 +25,8 @@ from aiortu.core.pdu import RawPDU
 from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
 from aiortu.core.receiver import FrameReceived
 from aiortu.core.slave_machine import SlaveState
+from aiortu.slave import Slave
 from aiortu.slave._answer_at_once import FAST_PATHS, Taken
-from aiortu.slave._server import Slave
 from aiortu.slave._store import Table
 from aiortu.testing._virtual_bus import virtual_pair
 

@@ -29,7 +29,7 @@ from aiortu.core.frame import CANNOT_KNOW, encode_frame, expected_response_lengt
 from aiortu.core.receiver import ReceiverState
 from aiortu.core.slave_machine import SlaveState
 from aiortu.core.timing import LineSettings
-from aiortu.slave._server import Slave
+from aiortu.slave import Slave
 from aiortu.slave._store import Block, MemoryStore, Table
 from aiortu.testing._virtual_bus import virtual_pair
 from aiortu.transport import open_stream

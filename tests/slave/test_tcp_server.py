@@ -13,8 +13,8 @@ import pytest
 
 from aiortu.core.pdu import RawPDU
 from aiortu.errors import InvalidValue
+from aiortu.slave import RtuOverTcpServer, serve
 from aiortu.slave._handlers import Reply, RequestContext
-from aiortu.slave._server import RtuOverTcpServer, serve
 from aiortu.slave._store import MemoryStore, Table
 from aiortu.slave._tcp_server import ModbusTcpServer
 from tests.slave.helpers import slave_line

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
-from aiortu.core.pdu import RawPDU, Request, Response, decode_request
+from aiortu.core.pdu import RawPDU, Request, Response, decode_request, encode_exception
 from aiortu.errors import ConnectionLost, MalformedPDU, ModbusError
 from aiortu.master import Master
 
@@ -46,7 +46,7 @@ class _AsReceived(RawPDU):
 
 def exception_reply(pdu: bytes, code: ExceptionCode) -> bytes:
     """The exception reply PDU to request `pdu` with `code`."""
-    return bytes(((pdu[0] | 0x80) & 0xFF, code))
+    return encode_exception(pdu[0], code)
 
 
 def request_of(pdu: bytes) -> Request:

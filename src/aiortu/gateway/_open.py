@@ -21,9 +21,15 @@ from aiortu.gateway._server import (
     DEFAULT_MAX_IN_FLIGHT,
     Gateway,
 )
-from aiortu.gateway._unix import listen_unix, remove_socket, unix_path
 from aiortu.master import Master, open_master
-from aiortu.transport import MODBUS_TCP_SCHEME, listen_tcp, parse_listen_url
+from aiortu.transport import (
+    MODBUS_TCP_SCHEME,
+    listen_tcp,
+    listen_unix,
+    parse_listen_url,
+    parse_unix_url,
+    remove_socket,
+)
 
 __all__ = ("Listen", "gateway")
 
@@ -44,7 +50,7 @@ def _listen(item: str | Listen) -> Listen:
     listen = item if isinstance(item, Listen) else Listen(item)
     if type(listen.priority) is not int:
         raise InvalidValue("priority", listen.priority, "an int (lower values go first)")
-    if unix_path(listen.url) is None:
+    if parse_unix_url(listen.url) is None:
         parse_listen_url(listen.url)  # raises for a bad one, before anything is opened
     return listen
 
@@ -82,17 +88,17 @@ async def _open_lines(
 async def _listener(
     stack: contextlib.AsyncExitStack, url: str
 ) -> anyio.abc.Listener[anyio.abc.ByteStream]:
-    path = unix_path(url)
-    if path is not None:
-        listener = await listen_unix(path, url)
-        stack.callback(remove_socket, path)
+    unix = parse_unix_url(url)
+    if unix is not None:
+        listener = await listen_unix(unix, url)
+        stack.callback(remove_socket, unix.path)
         return listener
     address = parse_listen_url(url)
     return await listen_tcp(address.host, address.port, url=url)
 
 
 def _rtu_framing(url: str) -> bool:
-    return unix_path(url) is None and parse_listen_url(url).scheme != MODBUS_TCP_SCHEME
+    return parse_unix_url(url) is None and parse_listen_url(url).scheme != MODBUS_TCP_SCHEME
 
 
 @contextlib.asynccontextmanager

@@ -49,11 +49,18 @@ from aiortu.errors import InvalidValue
 from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._fair_queue import FairQueue, Lane
 from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
-from aiortu.gateway._framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import GatewayStatistics, LineStatistics
 from aiortu.master import Master
-from aiortu.transport import peer_address
+from aiortu.transport import (
+    RTU_SILENCE,
+    ConnectionLimit,
+    Framing,
+    MbapFraming,
+    RtuFraming,
+    peer_address,
+    serve_listener,
+)
 
 __all__ = (
     "DEFAULT_IDLE_TIMEOUT",
@@ -141,7 +148,7 @@ class _Connection:
         self.priority = priority
         self.framing = framing
         self.lanes: dict[_Line, Lane[_Job]] = {}
-        self.client = _host(stream)
+        self.client = _host(stream) or "local"
         # Without transaction ids, one request at a time keeps the replies in order.
         self.slots = anyio.Semaphore(1 if framing.in_order else max_in_flight)
         self.in_flight = 0
@@ -243,8 +250,6 @@ class Gateway:
         """The master whose engine serves the (first) line."""
         self.max_in_flight = max_in_flight
         """Requests a connection may have waiting for their replies."""
-        self.max_connections = max_connections
-        """Connections served at once; more are closed at once."""
         self.idle_timeout = float(idle_timeout)
         """Seconds of silence, with no request waiting, after which a connection is closed."""
         self.default_unit = default_unit
@@ -261,14 +266,22 @@ class Gateway:
         self.unix_paths: list[str] = []
         """The path of each Unix socket listener [`serve`][aiortu.gateway.Gateway.serve]
         serves."""
-        self._connections = 0
-        self._refusing = False
+        self._limit = ConnectionLimit("gateway", max_connections, self.counters)
         self._tasks: anyio.abc.TaskGroup | None = None
 
     @property
     def connections(self) -> int:
         """The connections open now."""
-        return self._connections
+        return self._limit.open
+
+    @property
+    def max_connections(self) -> int:
+        """Connections served at once, over every listener; more are closed at once."""
+        return self._limit.max_connections
+
+    @max_connections.setter
+    def max_connections(self, value: int) -> None:
+        self._limit.max_connections = value
 
     @property
     def port(self) -> int:
@@ -413,37 +426,12 @@ class Gateway:
         task_status.started()
 
         async def accepted(stream: anyio.abc.ByteStream) -> None:
-            await self._accepted(stream, priority, rtu_framing)
-
-        async with listener:
-            await listener.serve(accepted)
-
-    async def _accepted(
-        self, stream: anyio.abc.ByteStream, priority: int, rtu_framing: bool
-    ) -> None:
-        if self._connections >= self.max_connections:
-            self.counters.connections_refused += 1
-            if not self._refusing:
-                self._refusing = True
-                _log.warning(
-                    "gateway: %d connections open, the most allowed; closing %s "
-                    "(logged once until one closes)",
-                    self._connections,
-                    peer_address(stream),
-                )
-            await stream.aclose()
-            return
-        self._connections += 1
-        self.counters.connections_accepted += 1
-        self.statistics.client(_host(stream)).connections += 1
-        try:
+            client = _host(stream)
+            if client is not None:
+                self.statistics.client(client).connections += 1
             await self.serve_connection(stream, priority, rtu_framing=rtu_framing)
-        except Exception:
-            # One connection's failure never ends the others, nor the gateway.
-            _log.exception("gateway: serving %s failed; connection closed", peer_address(stream))
-        finally:
-            self._connections -= 1
-            self._refusing = False
+
+        await serve_listener(listener, accepted, self._limit)
 
     async def serve_connection(
         self, stream: anyio.abc.ByteStream, priority: int = 0, *, rtu_framing: bool = False
@@ -527,9 +515,13 @@ class Gateway:
         return None
 
 
-def _host(stream: anyio.abc.ByteStream) -> str:
-    """The client's host, for statistics (its port changes with every connection)."""
-    address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
+def _host(stream: anyio.abc.ByteStream) -> str | None:
+    """The client's host, for statistics (its port changes with every connection); None for a
+    client already gone."""
+    try:
+        address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
+    except OSError:
+        return None
     if isinstance(address, tuple):
         return str(address[0])
     return "unix" if isinstance(address, str) else "local"

@@ -44,10 +44,9 @@ and detached.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import AsyncIterator, Callable, Mapping
-from contextlib import asynccontextmanager
+from collections.abc import Callable, Mapping
 from types import TracebackType
-from typing import Any, Self
+from typing import Self
 
 import anyio
 import anyio.abc
@@ -55,7 +54,7 @@ import anyio.lowlevel
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.data_model import AsyncDataStore, DataStore, Table
+from aiortu.core.data_model import AsyncDataStore, DataStore
 from aiortu.core.frame import encode_frame
 from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
 from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine, SlaveState
@@ -64,31 +63,9 @@ from aiortu.errors import ConnectionLost, InvalidValue
 from aiortu.line import Link, LinkEvent, Waiter
 from aiortu.slave._answer_at_once import AnswerAtOnce, Taken
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, AfterHook, BeforeHook, Dispatcher
-from aiortu.slave._handlers import (
-    BUILTIN_HANDLERS,
-    Handler,
-    Reply,
-)
-from aiortu.slave._routes import RangeHandler
-from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS, ModbusTcpServer, listening_address
-from aiortu.transport import (
-    MODBUS_TCP_SCHEME,
-    TCP_SCHEME,
-    ListenAddress,
-    listen_tcp,
-    open_stream,
-    parse_listen_url,
-)
+from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
 
-__all__ = (
-    "AfterHook",
-    "BeforeHook",
-    "RtuOverTcpServer",
-    "Server",
-    "Slave",
-    "TraceCallback",
-    "serve",
-)
+__all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback")
 
 _log = get_logger(__name__)
 
@@ -403,262 +380,3 @@ class Slave(Dispatcher):
             machine.reply_sent()
         else:
             machine.no_reply()
-
-
-class RtuOverTcpServer:
-    """RTU framing over TCP, listening: each connection is a line served by its own
-    [`Slave`][aiortu.slave.Slave] (`frame_gap` 0, its own machine and counters), all on the same
-    `units`' stores. For serial device servers that connect in.
-
-    [`set_handler`][aiortu.slave.RtuOverTcpServer.set_handler],
-    [`route`][aiortu.slave.RtuOverTcpServer.route],
-    [`before_request`][aiortu.slave.RtuOverTcpServer.before_request] and
-    [`after_request`][aiortu.slave.RtuOverTcpServer.after_request] apply to the lines connected now
-    and to every later one. At most `max_connections` lines at once; more are closed at once. There
-    is no idle timeout: a line is quiet whenever no master polls.
-    """
-
-    def __init__(
-        self,
-        units: Mapping[int, DataStore | AsyncDataStore],
-        settings: LineSettings | None = None,
-        *,
-        timing: TimingMode | str = TimingMode.TOLERANT,
-        handlers: Mapping[int, Handler] | None = None,
-        trace: TraceCallback | None = None,
-        max_connections: int = DEFAULT_MAX_CONNECTIONS,
-    ) -> None:
-        if type(max_connections) is not int or max_connections < 1:
-            raise InvalidValue("max_connections", max_connections, "an int of at least 1")
-        self.units: dict[int, DataStore | AsyncDataStore] = dict(units)
-        """The data store of each unit served."""
-        self.slaves: set[Slave] = set()
-        """The slave of each line connected now."""
-        self.max_connections = max_connections
-        """Lines served at once; more are closed at once."""
-        self.local_address: tuple[str, int] | None = None
-        """The host and port [`serve`][aiortu.slave.RtuOverTcpServer.serve] listens on, once it
-        does."""
-        self.connection_error: Exception | None = None
-        """Why [`serve`][aiortu.slave.RtuOverTcpServer.serve] stopped, when the listener failed."""
-        self._settings = settings
-        self._timing = timing
-        self._trace = trace
-        self._setup: list[Callable[[Slave], object]] = []
-        self._stopped = anyio.Event()
-        for unit in self.units:
-            if unit not in _UNIT_RANGE:
-                raise InvalidValue("unit", unit, _UNIT_RANGE)
-        for function_code, handler in (handlers or {}).items():
-            if function_code not in _FUNCTION_CODE_RANGE:
-                raise InvalidValue("function_code", function_code, _FUNCTION_CODE_RANGE)
-            self.set_handler(function_code, handler)
-
-    @property
-    def port(self) -> int:
-        """The port [`serve`][aiortu.slave.RtuOverTcpServer.serve] listens on (useful after asking
-        for port 0)."""
-        if self.local_address is None:
-            raise RuntimeError("the server is not listening yet")
-        return self.local_address[1]
-
-    def _apply(self, call: Callable[[Slave], object]) -> None:
-        self._setup.append(call)
-        for slave in self.slaves:
-            call(slave)
-
-    def set_handler(self, function_code: int, handler: Handler | None) -> None:
-        """As [`Slave.set_handler`][aiortu.slave.Slave.set_handler], on every line."""
-        self._apply(lambda slave: slave.set_handler(function_code, handler))
-
-    def route(self, table: Table | str, addresses: range, handler: RangeHandler) -> None:
-        """As [`Slave.route`][aiortu.slave.Slave.route] (every unit), on every line."""
-        self._apply(lambda slave: slave.route(table, addresses, handler))
-
-    def before_request(self, hook: BeforeHook) -> Callable[[], None]:
-        """As [`Slave.before_request`][aiortu.slave.Slave.before_request], on every line; returns
-        the remover."""
-        return self._hook(lambda slave: slave.before_request(hook))
-
-    def after_request(self, hook: AfterHook) -> Callable[[], None]:
-        """As [`Slave.after_request`][aiortu.slave.Slave.after_request], on every line; returns the
-        remover."""
-        return self._hook(lambda slave: slave.after_request(hook))
-
-    def _hook(self, add: Callable[[Slave], Callable[[], None]]) -> Callable[[], None]:
-        removers: list[Callable[[], None]] = []
-
-        def add_to(slave: Slave) -> None:
-            removers.append(add(slave))
-
-        def remove() -> None:
-            if add_to in self._setup:
-                self._setup.remove(add_to)
-            for remover in removers:
-                remover()
-
-        self._apply(add_to)
-        return remove
-
-    async def wait_stopped(self) -> None:
-        """Wait until [`serve`][aiortu.slave.RtuOverTcpServer.serve] has ended (the listener failed
-        or closed)."""
-        await self._stopped.wait()
-
-    async def serve(
-        self,
-        listener: anyio.abc.Listener[anyio.abc.ByteStream],
-        *,
-        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
-    ) -> None:
-        """Accept lines from `listener` and serve each, until cancelled."""
-        try:
-            self.local_address = listening_address(listener)
-            task_status.started()
-            async with listener:
-                await listener.serve(self.serve_connection)
-        except Exception as error:
-            self.connection_error = error
-            _log.error("RTU over TCP: the listener failed: %s", error)
-        finally:
-            self._stopped.set()
-
-    async def serve_connection(self, stream: anyio.abc.ByteStream) -> None:
-        """Serve one line until it closes."""
-        if len(self.slaves) >= self.max_connections:
-            _log.warning("RTU over TCP: %d lines connected, the most allowed", len(self.slaves))
-            await stream.aclose()
-            return
-        slave = Slave(
-            stream, self.units, self._settings, frame_gap=0, timing=self._timing, trace=self._trace
-        )
-        for call in self._setup:
-            call(slave)
-        self.slaves.add(slave)
-        try:
-            await slave.serve()
-        except ConnectionLost:
-            pass
-        except Exception:
-            # One line's failure never ends the others, nor the server.
-            _log.exception("RTU over TCP: a line failed; it is closed")
-        finally:
-            self.slaves.discard(slave)
-            await stream.aclose()
-
-
-Server = Slave | ModbusTcpServer | RtuOverTcpServer
-"""What [`serve`][aiortu.slave.serve] yields: a [`Slave`][aiortu.slave.Slave] on a port, a server on
-a listen URL."""
-
-_WILDCARDS = frozenset({"0.0.0.0", "::"})
-
-
-def _listen_address(port_or_url: str, listen: bool | None) -> ListenAddress | None:
-    """Where `port_or_url` listens, or None when it is a port to open (see serve)."""
-    scheme = port_or_url.partition("://")[0].lower() if "://" in port_or_url else ""
-    if scheme == MODBUS_TCP_SCHEME:
-        return parse_listen_url(port_or_url)
-    if scheme == TCP_SCHEME:
-        address = parse_listen_url(port_or_url)
-        if listen or (listen is None and (address.port == 0 or address.host in _WILDCARDS)):
-            return address
-        return None
-    if listen:
-        raise InvalidValue(
-            "port", port_or_url, "tcp://host:port or rtu+tcp://host:port", "only a URL listens"
-        )
-    return None
-
-
-@asynccontextmanager
-async def _running(
-    server: ModbusTcpServer | RtuOverTcpServer, address: ListenAddress, url: str
-) -> AsyncIterator[None]:
-    """Listen on `address` and run `server` for the duration of the `async with`."""
-    listener = await listen_tcp(address.host, address.port, url=url)
-    group = anyio.create_task_group()
-    await group.__aenter__()
-    try:
-        await group.start(server.serve, listener)
-        yield
-    finally:
-        group.cancel_scope.cancel()
-        # The body's own exception propagates as it is, not wrapped in an ExceptionGroup.
-        await group.__aexit__(None, None, None)
-
-
-@asynccontextmanager
-async def serve(
-    port_or_url: str,
-    units: Mapping[int, DataStore | AsyncDataStore],
-    *,
-    baudrate: int = 19200,
-    parity: str = "E",
-    stopbits: float = 1,
-    bytesize: int = 8,
-    frame_gap: float | None = None,
-    timing: TimingMode | str = TimingMode.TOLERANT,
-    handlers: Mapping[int, Handler] | None = None,
-    trace: TraceCallback | None = None,
-    listen: bool | None = None,
-    **options: Any,
-) -> AsyncIterator[Server]:
-    """Open `port_or_url`, or listen on it, and serve `units` for the duration of the
-    `async with`.
-
-    - A serial device path, or `rtu+tcp://host:port` to connect to a serial device server: yields
-      the running [`Slave`][aiortu.slave.Slave]. The line settings are the spec's 19200 8E1 by
-      default; `options` go to [`aiortu.transport.open_stream`][aiortu.transport.open_stream]
-      (`exclusive`, `rs485`, `local_echo`, `connect_timeout`).
-    - `tcp://host:port`: listens for Modbus TCP and yields the running
-      [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]; `options` go to it
-      (`max_connections`, `idle_timeout`, `unit_aliases`, `answer_unknown_units`,
-      `serial_line_codes`).
-    - `rtu+tcp://host:port` with `listen` true, or with a wildcard host (`0.0.0.0`, `[::]`) or port
-      0 (addresses nobody can connect to): listens for RTU framing over TCP and yields the running
-      [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (option `max_connections`).
-
-    Port 0 asks the system for a free port (see the server's `port`). Raises the
-    transport's [`PortError`][aiortu.errors.PortError] subclasses when the port cannot be
-    opened or listened on.
-    """
-    settings = LineSettings(baudrate, bytesize, parity, stopbits)
-    address = _listen_address(port_or_url, listen)
-    if address is not None:
-        server: ModbusTcpServer | RtuOverTcpServer
-        if address.scheme == MODBUS_TCP_SCHEME:
-            server = ModbusTcpServer(units, handlers=handlers, trace=trace, **options)
-        else:
-            server = RtuOverTcpServer(
-                units, settings, timing=timing, handlers=handlers, trace=trace, **options
-            )
-        async with _running(server, address, port_or_url):
-            yield server
-        return
-
-    def make(stream: anyio.abc.ByteStream) -> Slave:
-        return Slave(
-            stream, units, settings, frame_gap=frame_gap, timing=timing, handlers=handlers,
-            trace=trace,
-        )  # fmt: skip
-
-    slave = await _on_port(port_or_url, settings, options, make)
-    async with slave:
-        yield slave
-
-
-async def _on_port(
-    port: str,
-    settings: LineSettings,
-    options: dict[str, Any],
-    make: Callable[[anyio.abc.ByteStream], Slave],
-) -> Slave:
-    """`make`'s [`Slave`][aiortu.slave.Slave] on `port`, opened with `settings` and the
-    transport's `options`; the port is closed again if the slave cannot be made."""
-    stream = await open_stream(port, settings, **options)
-    try:
-        return make(stream)
-    except BaseException:
-        await stream.aclose()
-        raise
