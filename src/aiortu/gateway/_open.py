@@ -149,7 +149,6 @@ async def gateway(
         http = None if where is None else await listen_tcp(where.host, where.port, url=metrics)
         tasks = await stack.enter_async_context(anyio.create_task_group())
         stack.callback(tasks.cancel_scope.cancel)
-        await tasks.start(server.run)
         for listener, item in listeners:
             serve = functools.partial(
                 server.serve, listener, priority=item.priority, rtu_framing=_rtu_framing(item.url)

@@ -1,15 +1,17 @@
 """The line server: network clients share one serial line through its master's engine.
 
 [`Gateway`][aiortu.gateway.Gateway] reads requests from any number of connections and hands
-them to the line one at a time, fairly. What it decides:
+each to the engine of its line at once, with a key that keeps the line fair. What it decides:
 
 - **Forwarding.** Every request goes out at frame level, whatever its function code (see
   [`aiortu.gateway`][aiortu.gateway]); the reply carries the client's transaction id and unit id.
 - **Fairness.** Connections are served in turn (round-robin), those of a listener with a lower
-  `priority` value first; the gateway hands the engine at most two requests at a time, so a
+  `priority` value first: each request takes its connection's next turn on the line, never
+  earlier than the line's current turn, and the engine's queue goes by (priority, turn), so a
   quiet client's request waits for one request of each busy client, not for their queues.
 - **Pipelining.** A connection may have `max_in_flight` requests waiting for their replies;
-  the gateway reads nothing more from it until one is answered (TCP then holds the client back).
+  the gateway reads nothing more from it until one is answered (TCP then holds the client back,
+  from its first byte: see [`serve_listener`][aiortu.transport.serve_listener]).
 - **Lines.** Each line has its own master, queue and window; a request goes to the line whose
   unit range holds its unit id, and a unit no line serves gets exception 0A at once.
 - **Unit ids.** Unit 0 is a broadcast: executed on every line, followed by the master's
@@ -28,8 +30,14 @@ them to the line one at a time, fairly. What it decides:
 - **Framing.** A connection speaks Modbus TCP, or RTU frames over TCP (see
   [`serve_connection`][aiortu.gateway.Gateway.serve_connection]).
 - **Limits.** At most `max_connections` at once (more are closed at once); a connection with
-  nothing waiting that sends nothing for `idle_timeout` seconds is closed; a malformed MBAP
-  header closes that connection only, logged once.
+  nothing waiting that sends nothing for `idle_timeout` seconds is closed, and so is one whose
+  reply could not be written for `idle_timeout` (it reads nothing), while one whose request
+  waits for a slow line is not idle; a malformed MBAP header closes that connection only,
+  logged once.
+- **Clients that leave.** A client that resets its connection, or to which a reply cannot be
+  written, has its queued requests dropped before they reach the line; one on the wire
+  completes there. A client that half-closes (a request, then end of stream) gets the replies
+  to the requests already read, then the connection closes.
 """
 
 from __future__ import annotations
@@ -47,7 +55,7 @@ from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
 from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.errors import InvalidValue
 from aiortu.gateway._cache import ReadCache
-from aiortu.gateway._fair_queue import FairQueue, Lane
+from aiortu.gateway._connection import GONE, Connection, Turns
 from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import GatewayStatistics, LineStatistics
@@ -81,15 +89,11 @@ DEFAULT_MAX_CONNECTIONS: Final = 32
 DEFAULT_IDLE_TIMEOUT: Final = 120.0
 """Seconds a connection with nothing waiting may stay silent, unless told otherwise."""
 
-_ENGINE_WINDOW = 2
-"""Requests handed to the engine at once: one on the line, one ready to follow it."""
-
 _READ_SIZE = 4096
 _UNIT_RANGE = range(1, 248)
 _ALL_UNITS = 0xFF
 _NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
 _NO_PATH = ExceptionCode.GATEWAY_PATH_UNAVAILABLE
-_GONE = (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError)
 
 
 @dataclass(slots=True)
@@ -120,83 +124,45 @@ class GatewayCounters:
     """Reads answered from the read cache: no transaction of their own."""
 
 
-class _Line:
-    """One line: its master, the units routed to it, its queue, window, shared reads, cache."""
+class _Line(Turns):
+    """One line: its master, the units routed to it, its current turn, shared reads, cache."""
 
     def __init__(
         self, line: GatewayLine, name: str, cache: ReadCache | None, stats: LineStatistics
     ) -> None:
+        super().__init__()
         if not isinstance(line.port, Master):
             raise InvalidValue("port", line.port, "a running Master (gateway() opens ports)")
         self.name = name
         self.master = line.port
         self.units = line.units
-        self.queue: FairQueue[_Job] = FairQueue()
-        self.window = anyio.Semaphore(_ENGINE_WINDOW)
         self.shared: dict[tuple[int, bytes], _Shared] = {}
         self.cache = cache
         self.stats = stats
 
 
-class _Connection:
-    """One client: its lane in the fair queue, its in-flight slots, its writer."""
-
-    def __init__(
-        self, stream: anyio.abc.ByteStream, priority: int, max_in_flight: int, framing: Framing
-    ) -> None:
-        self.stream = stream
-        self.priority = priority
-        self.framing = framing
-        self.lanes: dict[_Line, Lane[_Job]] = {}
-        self.client = _host(stream) or "local"
-        # Without transaction ids, one request at a time keeps the replies in order.
-        self.slots = anyio.Semaphore(1 if framing.in_order else max_in_flight)
-        self.in_flight = 0
-        self.open = True
-        self._send_lock = anyio.Lock()
-
-    def lane(self, line: _Line) -> Lane[_Job]:
-        """The connection's lane in the queue of `line`."""
-        lane = self.lanes.get(line)
-        if lane is None:
-            lane = self.lanes[line] = Lane(self.priority)
-        return lane
-
-    async def answer(self, adu: Adu, reply: bytes | None) -> None:
-        """Send `reply` with the request's ids (None: nothing to send), and free the slot."""
-        try:
-            if reply is not None and self.open:
-                async with self._send_lock:
-                    await self.stream.send(self.framing.encode(adu, reply))
-        except _GONE:
-            self.open = False
-        finally:
-            self.in_flight -= 1
-            self.slots.release()
-
-
 @dataclass(slots=True)
-class _Job:
-    connection: _Connection
+class _Request:
+    connection: Connection
     adu: Adu
     unit: int
-    line: _Line
     """The unit on the line (unit 255 mapped)."""
+    line: _Line
 
 
 @dataclass(slots=True)
 class _Shared:
-    """A read on the line that identical reads wait for."""
+    """A read on the line that identical reads wait for; `reply` stays None when the read's
+    own client left before its reply came (the others then ask again)."""
 
-    reply: bytes
+    reply: bytes | None = None
     done: anyio.Event = field(default_factory=anyio.Event)
 
 
 class Gateway:
     """A line server in front of `master` (see the module docstring for what it decides).
 
-    Run it with [`run`][aiortu.gateway.Gateway.run] (the dispatcher) and serve connections with
-    [`serve`][aiortu.gateway.Gateway.serve] (a listener) or
+    Serve connections with [`serve`][aiortu.gateway.Gateway.serve] (a listener) or
     [`serve_connection`][aiortu.gateway.Gateway.serve_connection];
     [`gateway`][aiortu.gateway.gateway] does it all for listen URLs.
 
@@ -267,7 +233,6 @@ class Gateway:
         """The path of each Unix socket listener [`serve`][aiortu.gateway.Gateway.serve]
         serves."""
         self._limit = ConnectionLimit("gateway", max_connections, self.counters)
-        self._tasks: anyio.abc.TaskGroup | None = None
 
     @property
     def connections(self) -> int:
@@ -289,120 +254,6 @@ class Gateway:
         if not self.local_addresses:
             raise RuntimeError("the gateway is not listening yet")
         return self.local_addresses[0][1]
-
-    # -- the dispatcher ----------------------------------------------------------------
-
-    async def run(
-        self, *, task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED
-    ) -> None:
-        """Hand queued requests to each line in turn, until cancelled."""
-        async with anyio.create_task_group() as tasks:
-            self._tasks = tasks
-            for line in self._lines:
-                tasks.start_soon(self._dispatch, line, tasks)
-            task_status.started()
-            try:
-                await anyio.sleep_forever()
-            finally:
-                self._tasks = None
-
-    async def _dispatch(self, line: _Line, tasks: anyio.abc.TaskGroup) -> None:
-        while True:
-            await line.window.acquire()
-            job = await line.queue.take()
-            tasks.start_soon(self._run_job, job)
-
-    async def _run_job(self, job: _Job) -> None:
-        released = False
-
-        def release() -> None:
-            nonlocal released
-            if not released:
-                released = True
-                job.line.window.release()
-
-        reply: bytes | None = None
-        try:
-            reply = await self._reply(job, release)
-        except Exception:
-            # A bug must cost one request, not every connection.
-            _log.exception("gateway: forwarding a request failed; answered with exception 0B")
-            reply = exception_reply(job.adu.pdu, _NO_RESPONSE)
-        finally:
-            release()
-            if reply is not None:
-                self.statistics.answered(job.line.name, job.unit, reply)
-            await self._answer(job.connection, job.adu, reply)
-
-    async def _answer(self, connection: _Connection, adu: Adu, reply: bytes | None) -> None:
-        if reply is not None:
-            self.statistics.client(connection.client).replies += 1
-        await connection.answer(adu, reply)
-
-    async def _reply(self, job: _Job, release: Callable[[], None]) -> bytes | None:
-        """The reply to `job` from the line; `release` frees its place in the engine window
-        early when the cache or another read's transaction answers it."""
-        pdu, unit, line = job.adu.pdu, job.unit, job.line
-        if unit == BROADCAST_UNIT:
-            await self._broadcast(pdu, job.connection.priority)
-            return None
-        if pdu[0] not in COALESCED_CODES:
-            for other in [k for k in line.shared if k[0] == unit]:
-                del line.shared[other]  # later reads of this unit must follow the write
-            if line.cache is not None:
-                line.cache.invalidate(unit, pdu)
-            self._count_transaction(line)
-            return await forward(line.master, unit, pdu, job.connection.priority)
-        cache = line.cache if line.cache is not None and line.cache.cacheable(pdu) else None
-        if cache is not None and (cached := cache.get(unit, pdu)) is not None:
-            release()
-            self.counters.cache_hits += 1
-            line.stats.cache_hits += 1
-            return cached
-        generation = cache.generation(unit) if cache is not None else (0, 0)
-        reply = await self._shared_read(job, release)
-        if cache is not None:
-            cache.put(unit, pdu, reply, generation)
-        return reply
-
-    async def _broadcast(self, pdu: bytes, priority: int) -> None:
-        """Send `pdu` to every unit of every line: a broadcast may write anything."""
-        for line in self._lines:
-            line.shared.clear()
-            if line.cache is not None:
-                line.cache.clear()
-            if await forward_broadcast(line.master, pdu, priority):
-                self._count_transaction(line)
-                self.counters.broadcasts += 1
-                line.stats.broadcasts += 1
-
-    def _count_transaction(self, line: _Line) -> None:
-        self.counters.transactions += 1
-        line.stats.transactions += 1
-
-    async def _shared_read(self, job: _Job, release: Callable[[], None]) -> bytes:
-        """The reply to read `job`, shared with identical reads in flight at the same moment."""
-        pdu, unit, line = job.adu.pdu, job.unit, job.line
-        if not self.coalesce:
-            self._count_transaction(line)
-            return await forward(line.master, unit, pdu, job.connection.priority)
-        key = (unit, pdu)
-        shared = line.shared.get(key)
-        if shared is not None:
-            release()
-            self.counters.coalesced += 1
-            line.stats.coalesced += 1
-            await shared.done.wait()
-            return shared.reply
-        shared = line.shared[key] = _Shared(exception_reply(pdu, _NO_RESPONSE))
-        self._count_transaction(line)
-        try:
-            shared.reply = await forward(line.master, unit, pdu, job.connection.priority)
-        finally:
-            if line.shared.get(key) is shared:
-                del line.shared[key]
-            shared.done.set()
-        return shared.reply
 
     # -- connections -------------------------------------------------------------------
 
@@ -436,9 +287,10 @@ class Gateway:
     async def serve_connection(
         self, stream: anyio.abc.ByteStream, priority: int = 0, *, rtu_framing: bool = False
     ) -> None:
-        """Serve one connection until the client closes it, it stays idle for
-        [`idle_timeout`][aiortu.gateway.Gateway.idle_timeout], or it sends a malformed header;
-        then close it. Needs [`run`][aiortu.gateway.Gateway.run] running.
+        """Serve one connection until the client closes it (the replies to the requests it sent
+        before are sent first), stays idle for
+        [`idle_timeout`][aiortu.gateway.Gateway.idle_timeout], or sends a malformed header;
+        then close it.
 
         The connection speaks Modbus TCP, or with `rtu_framing` RTU frames (unit, PDU, CRC) as
         a serial device server does: a frame whose length its function code does not tell ends
@@ -446,49 +298,80 @@ class Gateway:
         transaction id the connection has one request on the line at a time.
         """
         framing: Framing = RtuFraming() if rtu_framing else MbapFraming()
-        connection = _Connection(stream, priority, self.max_in_flight, framing)
+        connection = Connection(
+            stream,
+            framing,
+            priority=priority,
+            window=1 if framing.in_order else self.max_in_flight,
+            idle_timeout=self.idle_timeout,
+            client=_host(stream) or "local",
+        )
         try:
-            while (adus := await self._next_requests(connection)) is not None:
-                for adu in adus:
-                    await connection.slots.acquire()
-                    connection.in_flight += 1
-                    self._accept(connection, adu)
-        except _GONE:
-            return
+            async with anyio.create_task_group() as tasks:
+                connection.tasks = tasks
+                await self._read(connection)
+                # End of stream: the requests read go on; wait for their replies.
+                while connection.in_flight:
+                    if not await connection.wait_freed():
+                        self._idle(connection, "reads no reply")
         finally:
             connection.open = False
-            for line, lane in connection.lanes.items():
-                line.queue.drop(lane)
             await stream.aclose()
 
-    async def _next_requests(self, connection: _Connection) -> list[Adu] | None:
-        """The requests the connection's next bytes (or silence) complete; None to close it."""
+    async def _read(self, connection: Connection) -> None:
+        """Read and start the connection's requests, each once its window has room, until the
+        client ends its stream (return) or leaves (the connection's requests cancelled)."""
+        while (adus := await self._next_requests(connection)) is not None:
+            for adu in adus:
+                if not await connection.room():
+                    self._idle(connection, "reads no reply")
+                await self._accept(connection, adu)
+
+    async def _next_requests(self, connection: Connection) -> list[Adu] | None:
+        """The requests the connection's next bytes (or silence) complete; None at the end of
+        the client's stream. A connection to close leaves."""
         stream, framing = connection.stream, connection.framing
         while True:
             silence = framing.waiting_for_silence()
-            with anyio.move_on_after(RTU_SILENCE if silence else self.idle_timeout) as timer:
-                data = await stream.receive(_READ_SIZE)
+            try:
+                with anyio.move_on_after(RTU_SILENCE if silence else self.idle_timeout) as timer:
+                    data = await stream.receive(_READ_SIZE)
+            except anyio.EndOfStream:
+                return None
+            except GONE:
+                connection.leave()
+                return None
             if not timer.cancelled_caught:
                 break
             if silence:
                 return framing.silence()
-            if not connection.in_flight:
-                self.counters.connections_idle += 1
-                _log.info(
-                    "gateway: %s idle for %g s, closed", peer_address(stream), self.idle_timeout
-                )
-                return None
-            # Not idle: the client waits for the line.
+            if not connection.in_flight or connection.stalled():
+                # Silent with nothing waiting, or not reading its replies.
+                self._idle(connection, "idle")
+            # Otherwise not idle: the client waits for the line.
         try:
             return framing.feed(data)
         except MalformedHeader as error:
             self.counters.connections_malformed += 1
-            _log.warning("gateway: %s sent %s; connection closed", peer_address(stream), error)
+            _log.warning(
+                "gateway: %s sent %s; connection closed", peer_address(connection.stream), error
+            )
+            connection.leave()
             return None
 
-    def _accept(self, connection: _Connection, adu: Adu) -> None:
-        """Queue `adu` for its line, or answer it at once when its unit id names no unit (0B)
-        or a unit no line serves (0A)."""
+    def _idle(self, connection: Connection, why: str) -> None:
+        self.counters.connections_idle += 1
+        _log.info(
+            "gateway: %s %s for %g s, closed",
+            peer_address(connection.stream),
+            why,
+            self.idle_timeout,
+        )
+        connection.leave()
+
+    async def _accept(self, connection: Connection, adu: Adu) -> None:
+        """Start `adu` on its line, or answer it at once: from the cache, or with an exception
+        when its unit id names no unit (0B) or a unit no line serves (0A)."""
         self.counters.requests += 1
         self.statistics.client(connection.client).requests += 1
         unit = adu.unit
@@ -497,13 +380,22 @@ class Gateway:
         line = self._route(unit)
         if line is None:
             self.counters.refused_units += 1
-            assert self._tasks is not None, "Gateway.run is not running"
             code = _NO_PATH if unit in _UNIT_RANGE else _NO_RESPONSE
-            refusal = exception_reply(adu.pdu, code)
-            self._tasks.start_soon(self._answer, connection, adu, refusal)
+            await self._answer(connection, adu, exception_reply(adu.pdu, code))
             return
         self.statistics.unit(line.name, unit).requests += 1
-        line.queue.put(connection.lane(line), _Job(connection, adu, unit, line))
+        cached = self._cached(line, unit, adu.pdu)
+        if cached is not None:
+            self.statistics.answered(line.name, unit, cached)
+            await self._answer(connection, adu, cached)
+            return
+        assert connection.tasks is not None
+        connection.in_flight += 1
+        connection.tasks.start_soon(self._request, _Request(connection, adu, unit, line))
+
+    async def _answer(self, connection: Connection, adu: Adu, reply: bytes) -> None:
+        self.statistics.client(connection.client).replies += 1
+        await connection.send(adu, reply)
 
     def _route(self, unit: int) -> _Line | None:
         """The line of `unit` (the first line for a broadcast, which goes on every line)."""
@@ -513,6 +405,102 @@ class Gateway:
             if unit in line.units:
                 return line
         return None
+
+    # -- one request on the line ---------------------------------------------------------
+
+    async def _request(self, request: _Request) -> None:
+        """Get `request`'s reply from its line and send it; its window place is freed after."""
+        connection = request.connection
+        try:
+            try:
+                reply = await self._reply(request)
+            except Exception:
+                # A bug must cost one request, not every connection.
+                _log.exception("gateway: forwarding a request failed; answered with exception 0B")
+                reply = exception_reply(request.adu.pdu, _NO_RESPONSE)
+            if reply is not None:
+                self.statistics.answered(request.line.name, request.unit, reply)
+                await self._answer(connection, request.adu, reply)
+        finally:
+            connection.done()
+
+    def _cached(self, line: _Line, unit: int, pdu: bytes) -> bytes | None:
+        """The cache's reply to read `pdu`, counted; None when it has none."""
+        cache = line.cache
+        if cache is None or not cache.cacheable(pdu):
+            return None
+        cached = cache.get(unit, pdu)
+        if cached is not None:
+            self.counters.cache_hits += 1
+            line.stats.cache_hits += 1
+        return cached
+
+    async def _reply(self, request: _Request) -> bytes | None:
+        """The reply to `request` from the line (None for a broadcast)."""
+        pdu, unit, line = request.adu.pdu, request.unit, request.line
+        turn = request.connection.turn(line)
+        priority = request.connection.priority
+        try:
+            if unit == BROADCAST_UNIT:
+                await self._broadcast(pdu, priority, turn)
+                return None
+            if pdu[0] not in COALESCED_CODES:
+                for other in [k for k in line.shared if k[0] == unit]:
+                    del line.shared[other]  # later reads of this unit must follow the write
+                if line.cache is not None:
+                    line.cache.invalidate(unit, pdu)
+                self._count_transaction(line)
+                return await forward(line.master, unit, pdu, priority, turn)
+            cache = line.cache if line.cache is not None and line.cache.cacheable(pdu) else None
+            generation = cache.generation(unit) if cache is not None else (0, 0)
+            reply = await self._shared_read(request, priority, turn)
+            if cache is not None:
+                cache.put(unit, pdu, reply, generation)
+            return reply
+        finally:
+            line.now = max(line.now, turn)
+
+    async def _broadcast(self, pdu: bytes, priority: int, turn: int) -> None:
+        """Send `pdu` to every unit of every line: a broadcast may write anything."""
+        for line in self._lines:
+            line.shared.clear()
+            if line.cache is not None:
+                line.cache.clear()
+            if await forward_broadcast(line.master, pdu, priority, turn):
+                self._count_transaction(line)
+                self.counters.broadcasts += 1
+                line.stats.broadcasts += 1
+
+    def _count_transaction(self, line: _Line) -> None:
+        self.counters.transactions += 1
+        line.stats.transactions += 1
+
+    async def _shared_read(self, request: _Request, priority: int, turn: int) -> bytes:
+        """The reply to read `request`, shared with identical reads in flight at the same
+        moment (the key holds the unit and the whole PDU)."""
+        pdu, unit, line = request.adu.pdu, request.unit, request.line
+        if not self.coalesce:
+            self._count_transaction(line)
+            return await forward(line.master, unit, pdu, priority, turn)
+        key = (unit, pdu)
+        while (shared := line.shared.get(key)) is not None:
+            self.counters.coalesced += 1
+            line.stats.coalesced += 1
+            await shared.done.wait()
+            if shared.reply is not None:
+                return shared.reply
+            # Its client left before the reply: ask again.
+            self.counters.coalesced -= 1
+            line.stats.coalesced -= 1
+        shared = line.shared[key] = _Shared()
+        self._count_transaction(line)
+        try:
+            shared.reply = await forward(line.master, unit, pdu, priority, turn)
+        finally:
+            if line.shared.get(key) is shared:
+                del line.shared[key]
+            shared.done.set()
+        return shared.reply
 
 
 def _host(stream: anyio.abc.ByteStream) -> str | None:
