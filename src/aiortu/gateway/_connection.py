@@ -9,7 +9,7 @@
 - **Leaving.** `leave` cancels the connection's requests: those still queued are dropped
   before they reach the line, one on the wire completes there (the engine finishes it).
 - **Stalls.** A reply that cannot be written (the client reads nothing) for `idle_timeout`
-  seconds makes the connection idle: `stalled` tells the reader, which closes it.
+  seconds makes the connection idle: `send` says so, and the gateway closes it.
 """
 
 from __future__ import annotations
@@ -64,7 +64,6 @@ class Connection:
         self._turns: dict[Turns, int] = {}
         self._freed: anyio.Event | None = None
         self._send_lock = anyio.Lock(fast_acquire=True)
-        self._sending_since: float | None = None
 
     def turn(self, line: Turns) -> int:
         """The connection's next turn on `line` (see the module docstring)."""
@@ -72,21 +71,15 @@ class Connection:
         self._turns[line] = turn + 1
         return turn
 
-    async def room(self) -> bool:
-        """Wait until the window has room; False when the client stalled meanwhile."""
+    async def room(self) -> None:
+        """Wait until the window has room."""
         while self.in_flight >= self.window:
-            if not await self.wait_freed():
-                return False
-        return True
+            await self.freed()
 
-    async def wait_freed(self) -> bool:
-        """Wait until a request is answered, or `idle_timeout`; False when the client stalled
-        (a reply could not be written all that time)."""
+    async def freed(self) -> None:
+        """Wait until a request is answered."""
         freed = self._freed = anyio.Event()
-        with anyio.move_on_after(self.idle_timeout):
-            await freed.wait()
-            return True
-        return not self.stalled()
+        await freed.wait()
 
     def done(self) -> None:
         """A request is answered (or dropped): its place in the window is free."""
@@ -96,24 +89,20 @@ class Connection:
             self._freed = None
             freed.set()
 
-    def stalled(self) -> bool:
-        """Whether a reply has waited `idle_timeout` to be written: the client reads nothing."""
-        since = self._sending_since
-        return since is not None and anyio.current_time() - since >= self.idle_timeout * 0.99
-
-    async def send(self, request: Adu, reply: bytes) -> None:
-        """Send `reply` with `request`'s ids; a client gone leaves (see `leave`)."""
+    async def send(self, request: Adu, reply: bytes) -> bool:
+        """Send `reply` with `request`'s ids; a client gone leaves (see `leave`). False when
+        the reply could not be written for `idle_timeout` seconds: the client reads nothing."""
         if not self.open:
-            return
+            return True
         data = self.framing.encode(request, reply)
-        async with self._send_lock:
-            self._sending_since = anyio.current_time()
-            try:
-                await self.stream.send(data)
-            except GONE:
-                self.leave()
-            finally:
-                self._sending_since = None
+        with anyio.move_on_after(self.idle_timeout):
+            async with self._send_lock:
+                try:
+                    await self.stream.send(data)
+                except GONE:
+                    self.leave()
+            return True
+        return not self.open
 
     def leave(self) -> None:
         """The client has gone, or is sent away: drop its requests (see the module docstring)."""

@@ -21,6 +21,7 @@ from aiortu.gateway._server import (
     DEFAULT_MAX_IN_FLIGHT,
     Gateway,
 )
+from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS
 from aiortu.master import Master, open_master
 from aiortu.transport import (
     MODBUS_TCP_SCHEME,
@@ -114,6 +115,7 @@ async def gateway(
     cache_ms: float = 0,
     clock: Callable[[], float] = time.monotonic,
     metrics: str | None = None,
+    client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     **master_options: Any,
 ) -> AsyncIterator[Gateway]:
     """Share serial lines with network clients: yield a running
@@ -144,6 +146,7 @@ async def gateway(
             coalesce=coalesce,
             cache_ms=cache_ms,
             clock=clock,
+            client_statistics=client_statistics,
         )
         listeners = [(await _listener(stack, item.url), item) for item in listens]
         http = None if where is None else await listen_tcp(where.host, where.port, url=metrics)

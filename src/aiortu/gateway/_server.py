@@ -58,7 +58,7 @@ from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._connection import GONE, Connection, Turns
 from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
-from aiortu.gateway._stats import GatewayStatistics, LineStatistics
+from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS, GatewayStatistics, LineStatistics
 from aiortu.master import Master
 from aiortu.transport import (
     RTU_SILENCE,
@@ -173,9 +173,9 @@ class Gateway:
     (01 to 04) of the same unit and block as one answered at most that many milliseconds ago is
     answered again without the line; `clock` gives the cache's time in seconds.
 
-    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a `max_in_flight` or
-    `max_connections` below 1, an `idle_timeout` that is not positive, a `default_unit`
-    outside 1..247, a negative `cache_ms`, or lines whose unit ranges overlap.
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a `max_in_flight`,
+    `max_connections` or `client_statistics` below 1, an `idle_timeout` that is not positive, a
+    `default_unit` outside 1..247, a negative `cache_ms`, or lines whose unit ranges overlap.
     """
 
     def __init__(
@@ -189,20 +189,21 @@ class Gateway:
         coalesce: bool = True,
         cache_ms: float = 0,
         clock: Callable[[], float] = time.monotonic,
+        client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     ) -> None:
         lines = [GatewayLine(master)] if isinstance(master, Master) else list(master)
         check_lines(lines)
-        if not (isinstance(cache_ms, (int, float)) and cache_ms >= 0):
-            raise InvalidValue("cache_ms", cache_ms, "a number of milliseconds, 0 or more")
-        for name, value in (("max_in_flight", max_in_flight), ("max_connections", max_connections)):
-            if type(value) is not int or value < 1:
-                raise InvalidValue(name, value, "an int of at least 1")
-        if not (isinstance(idle_timeout, (int, float)) and idle_timeout > 0):
-            raise InvalidValue("idle_timeout", idle_timeout, "a positive number of seconds")
-        if default_unit is not None and default_unit not in _UNIT_RANGE:
-            raise InvalidValue("default_unit", default_unit, _UNIT_RANGE)
-        self.statistics = GatewayStatistics()
-        """Counters per line, unit and client."""
+        _check_options(
+            max_in_flight=max_in_flight,
+            max_connections=max_connections,
+            client_statistics=client_statistics,
+            idle_timeout=idle_timeout,
+            default_unit=default_unit,
+            cache_ms=cache_ms,
+        )
+        self.statistics = GatewayStatistics(max_clients=client_statistics)
+        """Counters per line, unit and client (the `client_statistics` most recent hosts one
+        by one, the others added up)."""
         self._lines = [
             _Line(
                 line,
@@ -310,10 +311,7 @@ class Gateway:
             async with anyio.create_task_group() as tasks:
                 connection.tasks = tasks
                 await self._read(connection)
-                # End of stream: the requests read go on; wait for their replies.
-                while connection.in_flight:
-                    if not await connection.wait_freed():
-                        self._idle(connection, "reads no reply")
+                # End of stream: the requests read go on, and their replies are sent.
         finally:
             connection.open = False
             await stream.aclose()
@@ -323,8 +321,7 @@ class Gateway:
         client ends its stream (return) or leaves (the connection's requests cancelled)."""
         while (adus := await self._next_requests(connection)) is not None:
             for adu in adus:
-                if not await connection.room():
-                    self._idle(connection, "reads no reply")
+                await connection.room()
                 await self._accept(connection, adu)
 
     async def _next_requests(self, connection: Connection) -> list[Adu] | None:
@@ -345,10 +342,10 @@ class Gateway:
                 break
             if silence:
                 return framing.silence()
-            if not connection.in_flight or connection.stalled():
-                # Silent with nothing waiting, or not reading its replies.
+            if not connection.in_flight:
                 self._idle(connection, "idle")
-            # Otherwise not idle: the client waits for the line.
+                return None
+            # Not idle: the client waits for the line.
         try:
             return framing.feed(data)
         except MalformedHeader as error:
@@ -360,6 +357,8 @@ class Gateway:
             return None
 
     def _idle(self, connection: Connection, why: str) -> None:
+        if not connection.open:
+            return  # closed already
         self.counters.connections_idle += 1
         _log.info(
             "gateway: %s %s for %g s, closed",
@@ -395,7 +394,8 @@ class Gateway:
 
     async def _answer(self, connection: Connection, adu: Adu, reply: bytes) -> None:
         self.statistics.client(connection.client).replies += 1
-        await connection.send(adu, reply)
+        if not await connection.send(adu, reply):
+            self._idle(connection, "read no reply")
 
     def _route(self, unit: int) -> _Line | None:
         """The line of `unit` (the first line for a broadcast, which goes on every line)."""
@@ -501,6 +501,31 @@ class Gateway:
                 del line.shared[key]
             shared.done.set()
         return shared.reply
+
+
+def _check_options(
+    *,
+    max_in_flight: int,
+    max_connections: int,
+    client_statistics: int,
+    idle_timeout: float,
+    default_unit: int | None,
+    cache_ms: float,
+) -> None:
+    """Raise InvalidValue for the first of the gateway's options that is wrong."""
+    if not (isinstance(cache_ms, (int, float)) and cache_ms >= 0):
+        raise InvalidValue("cache_ms", cache_ms, "a number of milliseconds, 0 or more")
+    for name, value in (
+        ("max_in_flight", max_in_flight),
+        ("max_connections", max_connections),
+        ("client_statistics", client_statistics),
+    ):
+        if type(value) is not int or value < 1:
+            raise InvalidValue(name, value, "an int of at least 1")
+    if not (isinstance(idle_timeout, (int, float)) and idle_timeout > 0):
+        raise InvalidValue("idle_timeout", idle_timeout, "a positive number of seconds")
+    if default_unit is not None and default_unit not in _UNIT_RANGE:
+        raise InvalidValue("default_unit", default_unit, _UNIT_RANGE)
 
 
 def _host(stream: anyio.abc.ByteStream) -> str | None:
