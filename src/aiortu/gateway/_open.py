@@ -93,9 +93,11 @@ async def _listener(
     if unix is not None:
         listener = await listen_unix(unix, url)
         stack.callback(remove_socket, unix.path)
-        return listener
-    address = parse_listen_url(url)
-    return await listen_tcp(address.host, address.port, url=url)
+    else:
+        address = parse_listen_url(url)
+        listener = await listen_tcp(address.host, address.port, url=url)
+    stack.push_async_callback(listener.aclose)
+    return listener
 
 
 def _rtu_framing(url: str) -> bool:
@@ -137,6 +139,12 @@ async def gateway(
     lines = _lines(serial_port_or_master, master_options)
     where = parse_metrics_url(metrics) if metrics is not None else None
     async with contextlib.AsyncExitStack() as stack:
+        # Listeners first: an address that cannot be had fails before any line is opened (and
+        # before any task group, which would wrap the error).
+        listeners = [(await _listener(stack, item.url), item) for item in listens]
+        http = None if where is None else await listen_tcp(where.host, where.port, url=metrics)
+        if http is not None:
+            stack.push_async_callback(http.aclose)
         server = Gateway(
             await _open_lines(stack, lines, master_options),
             max_in_flight=max_in_flight,
@@ -148,8 +156,6 @@ async def gateway(
             clock=clock,
             client_statistics=client_statistics,
         )
-        listeners = [(await _listener(stack, item.url), item) for item in listens]
-        http = None if where is None else await listen_tcp(where.host, where.port, url=metrics)
         tasks = await stack.enter_async_context(anyio.create_task_group())
         stack.callback(tasks.cancel_scope.cancel)
         for listener, item in listeners:
