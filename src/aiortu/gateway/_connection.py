@@ -20,7 +20,7 @@ import anyio
 import anyio.abc
 
 from aiortu.core.mbap import Adu
-from aiortu.transport import Framing
+from aiortu.transport import Framing, write_now
 
 __all__ = ("GONE", "Connection", "Turns")
 
@@ -95,6 +95,8 @@ class Connection:
         if not self.open:
             return True
         data = self.framing.encode(request, reply)
+        if not self._send_lock.locked() and write_now(self.stream, data):
+            return True
         with anyio.move_on_after(self.idle_timeout):
             async with self._send_lock:
                 try:

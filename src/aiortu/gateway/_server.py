@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Final
 
 import anyio
@@ -156,7 +156,8 @@ class _Shared:
     own client left before its reply came (the others then ask again)."""
 
     reply: bytes | None = None
-    done: anyio.Event = field(default_factory=anyio.Event)
+    done: anyio.Event | None = None
+    """Made by the first read that waits (most reads have none)."""
 
 
 class Gateway:
@@ -486,6 +487,8 @@ class Gateway:
         while (shared := line.shared.get(key)) is not None:
             self.counters.coalesced += 1
             line.stats.coalesced += 1
+            if shared.done is None:
+                shared.done = anyio.Event()
             await shared.done.wait()
             if shared.reply is not None:
                 return shared.reply
@@ -499,7 +502,8 @@ class Gateway:
         finally:
             if line.shared.get(key) is shared:
                 del line.shared[key]
-            shared.done.set()
+            if shared.done is not None:
+                shared.done.set()
         return shared.reply
 
 

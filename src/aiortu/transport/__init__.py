@@ -32,6 +32,7 @@ from aiortu.transport._listen import (
     peer_address,
     remove_socket,
     serve_listener,
+    write_now,
 )
 from aiortu.transport._mbap_stream import (
     FramedStream,
@@ -94,6 +95,7 @@ __all__ = (
     "peer_address",
     "remove_socket",
     "serve_listener",
+    "write_now",
 )
 
 _SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo"})

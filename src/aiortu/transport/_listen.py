@@ -51,6 +51,7 @@ __all__ = (
     "peer_address",
     "remove_socket",
     "serve_listener",
+    "write_now",
 )
 
 _log = get_logger(__name__)
@@ -216,6 +217,26 @@ def _hold_back(stream: anyio.abc.ByteStream) -> None:
     transport = getattr(stream, "_transport", None)
     if isinstance(transport, asyncio.Transport) and not transport.is_closing():
         transport.pause_reading()
+
+
+def write_now(stream: anyio.abc.ByteStream, data: bytes) -> bool:
+    """Write `data` to `stream` at once, without a task switch, where the stream is an accepted
+    asyncio TCP stream whose transport holds nothing unsent; False (nothing written) elsewhere,
+    for the caller to `await stream.send(data)`.
+
+    anyio's `send()` ends with an event-loop turn even when the kernel took every byte; a
+    server that answers a request per turn pays for it on every reply. What the kernel does
+    not take stays in the transport's buffer, and the next `write_now` then declines: the
+    caller's `send()` waits for it to drain, so back-pressure holds as with `send()`."""
+    transport = getattr(stream, "_transport", None)
+    if (
+        isinstance(transport, asyncio.WriteTransport)
+        and not transport.is_closing()
+        and not transport.get_write_buffer_size()
+    ):
+        transport.write(data)
+        return True
+    return False
 
 
 def _connected(stream: anyio.abc.ByteStream) -> bool:
