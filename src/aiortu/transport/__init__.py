@@ -20,7 +20,6 @@ from aiortu.core.timing import LineSettings
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._listen import (
-    UNIX_PREFIX,
     AcceptCounters,
     ConnectionCounters,
     ConnectionLimit,
@@ -60,7 +59,6 @@ __all__ = (
     "MODBUS_TCP_SCHEME",
     "RTU_SILENCE",
     "TCP_SCHEME",
-    "UNIX_PREFIX",
     "AcceptCounters",
     "ConnectionCounters",
     "ConnectionLimit",

@@ -39,7 +39,6 @@ from aiortu._log import get_logger
 from aiortu.errors import InvalidValue, PortBusy, PortError, PortNotFound, PortPermissionDenied
 
 __all__ = (
-    "UNIX_PREFIX",
     "AcceptCounters",
     "ConnectionCounters",
     "ConnectionLimit",
@@ -57,6 +56,7 @@ __all__ = (
 _log = get_logger(__name__)
 
 UNIX_PREFIX: Final = "unix:"
+"""What starts a Unix socket listen URL."""
 
 _ACCEPT_ERRORS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
 _FIRST_BACK_OFF = 0.01
