@@ -13,7 +13,7 @@ import sys
 
 import anyio
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.gateway import gateway
 from aiortu.master import Master
 from aiortu.slave import Slave, serve

@@ -15,9 +15,8 @@ import anyio
 import anyio.abc
 import pytest
 
-from aiortu.core.crc import crc16
-from aiortu.core.frame import MAX_FRAME_LENGTH, encode_frame
 from aiortu.core.pdu import ExceptionPDU, encode_exception
+from aiortu.core.rtu import MAX_FRAME_LENGTH, crc16, encode_frame
 from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.transport import (
     ConnectionLimit,

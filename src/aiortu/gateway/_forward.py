@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
-from aiortu.core.master_transaction import RetryPolicy, Transaction
+from aiortu.core.machines import RetryPolicy, Transaction
 from aiortu.core.pdu import (
     ExceptionPDU,
     RawPDU,

@@ -9,9 +9,9 @@ import anyio
 import anyio.abc
 
 from aiortu._log import get_logger
-from aiortu.core.data_model import AsyncDataStore, DataStore, Table
-from aiortu.core.receiver import TimingMode
-from aiortu.core.timing import LineSettings
+from aiortu.core.model import AsyncDataStore, DataStore, Table
+from aiortu.core.rtu import TimingMode
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue
 from aiortu.slave._dispatch import AfterHook, BeforeHook
 from aiortu.slave._handlers import Handler

@@ -9,9 +9,9 @@ from typing import Any
 import anyio
 import anyio.abc
 
-from aiortu.core.data_model import AsyncDataStore, DataStore
-from aiortu.core.receiver import TimingMode
-from aiortu.core.timing import LineSettings
+from aiortu.core.model import AsyncDataStore, DataStore
+from aiortu.core.rtu import TimingMode
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.slave._handlers import Handler
 from aiortu.slave._rtu_over_tcp import RtuOverTcpServer

@@ -48,10 +48,10 @@ import anyio.abc
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
-from aiortu.core.data_model import AsyncDataStore, DataStore
+from aiortu.core.machines import SlaveMachine
 from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
+from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.pdu import encode_exception
-from aiortu.core.slave_machine import SlaveMachine
 from aiortu.errors import InvalidValue
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
