@@ -9,6 +9,7 @@ any reply with its function code (or the exception form) answers it.
 
 from __future__ import annotations
 
+from collections.abc import Awaitable
 from dataclasses import dataclass
 
 from aiortu._log import get_logger
@@ -117,13 +118,14 @@ async def forward_broadcast(master: Master, pdu: bytes, priority: int, order: in
     return True
 
 
-async def on_the_line(
+def on_the_line(
     master: Master, transaction: Transaction, priority: int, order: int
-) -> Response | ExceptionPDU | None:
+) -> Awaitable[Response | ExceptionPDU | None]:
     """Run `transaction` on the line of `master`: the gateway's one call into the engine.
 
     Queued transactions go by the listener's `priority`, then by `order`, the connection's
     turn (see [`Gateway`][aiortu.gateway.Gateway]: fairness between connections is this key).
     A caller cancelled while queued is dropped from the queue; one whose request is on the wire
-    leaves it to complete, without retries."""
-    return await master.engine.submit(transaction, priority, order)
+    leaves it to complete, without retries. (A plain function: one coroutine frame less on
+    every resumption of the transaction.)"""
+    return master.engine.submit(transaction, priority, order)

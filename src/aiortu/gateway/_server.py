@@ -90,6 +90,7 @@ DEFAULT_IDLE_TIMEOUT: Final = 120.0
 """Seconds a connection with nothing waiting may stay silent, unless told otherwise."""
 
 _READ_SIZE = 4096
+_REQUEST_TASK = "gateway request"  # named here: anyio would work a name out per task
 _UNIT_RANGE = range(1, 248)
 _ALL_UNITS = 0xFF
 _NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
@@ -391,7 +392,9 @@ class Gateway:
             return
         assert connection.tasks is not None
         connection.in_flight += 1
-        connection.tasks.start_soon(self._request, _Request(connection, adu, unit, line))
+        connection.tasks.start_soon(
+            self._request, _Request(connection, adu, unit, line), name=_REQUEST_TASK
+        )
 
     async def _answer(self, connection: Connection, adu: Adu, reply: bytes) -> None:
         self.statistics.client(connection.client).replies += 1
