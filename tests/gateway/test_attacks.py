@@ -67,6 +67,32 @@ async def test_a_departed_clients_queued_requests_never_reach_the_line() -> None
         assert store.get(Table.HOLDING_REGISTERS, 0, 8) == [1, 0xABCD, 7, 0, 0, 0, 0, 0]
 
 
+async def test_a_departed_clients_requests_behind_another_clients_never_reach_the_line() -> None:
+    gate = Gate()
+    store = device()
+    async with line({UNIT: store}, max_in_flight=8, master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as other:
+            await other.send("03 0000 0001", UNIT, 1)
+            await _until(lambda: gate.held == 1)  # the other client's read holds the line
+            sock = socket.create_connection(("127.0.0.1", bench.gateway.port))
+            sock.sendall(
+                b"".join(
+                    encode_adu(index, UNIT, bytes.fromhex(f"06 {index:04X} 0001"))
+                    for index in range(1, 5)
+                )
+            )
+            await _until(lambda: bench.gateway.counters.requests == 5)
+            _reset(sock)  # four writes queued, none on the wire
+            await _until(lambda: bench.gateway.connections == 1)
+            gate.opened.set()
+            reply = await other.receive()
+            assert reply is not None
+            await anyio.sleep(0.2)  # time for a queued write to go out, were one left
+        assert bench.messages == 1
+        assert store.get(Table.HOLDING_REGISTERS, 1, 4) == [0xABCD, 7, 0, 0]
+
+
 async def test_a_half_closed_client_still_gets_its_reply() -> None:
     async with line() as bench:
         async with await anyio.connect_tcp("127.0.0.1", bench.gateway.port) as stream:

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Final
 
 import anyio
@@ -58,6 +59,8 @@ class Connection:
         self.client = client
         self.in_flight = 0
         """Requests started and not answered yet."""
+        self.heard = time.monotonic()
+        """When the client last sent bytes or was answered (`time.monotonic()`)."""
         self.open = True
         self.tasks: anyio.abc.TaskGroup | None = None
         """The connection's requests (set while it is served)."""
@@ -84,6 +87,7 @@ class Connection:
     def done(self) -> None:
         """A request is answered (or dropped): its place in the window is free."""
         self.in_flight -= 1
+        self.heard = time.monotonic()
         freed = self._freed
         if freed is not None:
             self._freed = None

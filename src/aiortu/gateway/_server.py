@@ -312,11 +312,25 @@ class Gateway:
         try:
             async with anyio.create_task_group() as tasks:
                 connection.tasks = tasks
+                tasks.start_soon(self._watch_idle, connection)
                 await self._read(connection)
                 # End of stream: the requests read go on, and their replies are sent.
+                while connection.in_flight:
+                    await connection.freed()
+                tasks.cancel_scope.cancel()  # the watch
         finally:
             connection.open = False
             await stream.aclose()
+
+    async def _watch_idle(self, connection: Connection) -> None:
+        """Close `connection` once it has been silent for `idle_timeout` with nothing waiting:
+        one timer per connection, not a deadline per read (the reader only notes the time)."""
+        while True:
+            quiet = time.monotonic() - connection.heard
+            if quiet >= self.idle_timeout and not connection.in_flight:
+                self._idle(connection, "idle")
+                return
+            await anyio.sleep(max(self.idle_timeout - quiet, 0.0) or self.idle_timeout)
 
     async def _read(self, connection: Connection) -> None:
         """Read and start the connection's requests, each once its window has room, until the
@@ -330,24 +344,20 @@ class Gateway:
         """The requests the connection's next bytes (or silence) complete; None at the end of
         the client's stream. A connection to close leaves."""
         stream, framing = connection.stream, connection.framing
-        while True:
-            silence = framing.waiting_for_silence()
-            try:
-                with anyio.move_on_after(RTU_SILENCE if silence else self.idle_timeout) as timer:
+        try:
+            if framing.waiting_for_silence():
+                with anyio.move_on_after(RTU_SILENCE):
                     data = await stream.receive(_READ_SIZE)
-            except anyio.EndOfStream:
-                return None
-            except GONE:
-                connection.leave()
-                return None
-            if not timer.cancelled_caught:
-                break
-            if silence:
+                    connection.heard = time.monotonic()
+                    return framing.feed(data)
                 return framing.silence()
-            if not connection.in_flight:
-                self._idle(connection, "idle")
-                return None
-            # Not idle: the client waits for the line.
+            data = await stream.receive(_READ_SIZE)
+            connection.heard = time.monotonic()
+        except anyio.EndOfStream:
+            return None
+        except GONE:
+            connection.leave()
+            return None
         try:
             return framing.feed(data)
         except MalformedHeader as error:
