@@ -27,6 +27,7 @@ from aiortu.transport import (
     MODBUS_TCP_SCHEME,
     listen_tcp,
     listen_unix,
+    listening_address,
     parse_listen_url,
     parse_unix_url,
     remove_socket,
@@ -93,6 +94,9 @@ async def _listener(
     if unix is not None:
         listener = await listen_unix(unix, url)
         stack.callback(remove_socket, unix.path)
+    elif url.startswith("http://"):
+        where = parse_metrics_url(url)
+        listener = await listen_tcp(where.host, where.port, url=url)
     else:
         address = parse_listen_url(url)
         listener = await listen_tcp(address.host, address.port, url=url)
@@ -142,9 +146,7 @@ async def gateway(
         # Listeners first: an address that cannot be had fails before any line is opened (and
         # before any task group, which would wrap the error).
         listeners = [(await _listener(stack, item.url), item) for item in listens]
-        http = None if where is None else await listen_tcp(where.host, where.port, url=metrics)
-        if http is not None:
-            stack.push_async_callback(http.aclose)
+        http = None if where is None or metrics is None else await _listener(stack, metrics)
         server = Gateway(
             await _open_lines(stack, lines, master_options),
             max_in_flight=max_in_flight,
@@ -164,8 +166,6 @@ async def gateway(
             )
             await tasks.start(serve)
         if http is not None and where is not None:
-            address = http.extra(anyio.abc.SocketAttribute.local_address)
-            assert isinstance(address, tuple)
-            server.metrics_address = (str(address[0]), int(address[1]))
+            server.metrics_address = listening_address(http)
             tasks.start_soon(serve_metrics, http, where.path, server.statistics.prometheus)
         yield server
