@@ -122,9 +122,11 @@ async def test_a_client_that_never_reads_is_closed_as_idle() -> None:
 
 
 def _send_until_blocked(sock: socket.socket, chunk: bytes) -> int:
+    """Send `chunk` over and over without reading; stop once the server has taken nothing
+    for 2 s (or after 96 MiB). Return the bytes sent."""
     sock.settimeout(2.0)
     sent = 0
-    while sent < 64 << 20:
+    while sent < 96 << 20:
         try:
             sent += sock.send(chunk)
         except (TimeoutError, ConnectionError):
@@ -180,3 +182,37 @@ def test_the_statistics_bound_holds_for_any_number_of_hosts() -> None:
         assert len(statistics.clients) <= 17
     assert sum(each.requests for each in statistics.clients.values()) == 20_000
     assert len(list(statistics.summary())) <= 17 + 1
+
+
+def _kernel_buffers() -> int:
+    """The most a paused connection can hold in the kernel: the receiver's and the sender's
+    buffers at their largest (the tcp_rmem and tcp_wmem maximums)."""
+    total = 0
+    for name in ("tcp_rmem", "tcp_wmem"):
+        with open(f"/proc/sys/net/ipv4/{name}") as file:
+            total += int(file.read().split()[2])
+    return total
+
+
+@pytest.mark.parametrize("server", ["gateway", "serve tcp://"])
+async def test_a_pipelining_client_that_never_reads_is_held_back_by_tcp(server: str) -> None:
+    """Requests streamed faster than a slow unit answers, replies never read: the client can
+    send no more than the kernel's buffers hold and what the server reads for its window."""
+    from aiortu.slave import serve
+
+    async def slow(request: object, context: RequestContext) -> None:
+        await anyio.sleep(0.05)
+
+    bound = _kernel_buffers() + (1 << 20)
+    read = encode_adu(1, UNIT, bytes.fromhex("03 0000 0001")) * 4096
+    async with line(master_options={"timeout": 5.0}) as bench:
+        bench.slave.before_request(slow)
+        async with serve("tcp://127.0.0.1:0", {UNIT: device()}) as tcp_server:
+            tcp_server.before_request(slow)
+            port = bench.gateway.port if server == "gateway" else tcp_server.port
+            with socket.create_connection(("127.0.0.1", port)) as sock:
+                # Bytes waiting before the server's first read: where anyio's accept left
+                # the connection reading for good.
+                sock.sendall(read[:65536])
+                sent = await anyio.to_thread.run_sync(_send_until_blocked, sock, read)
+    assert 0 < sent <= bound, f"{sent} bytes taken, more than the {bound} TCP can hold"
