@@ -30,8 +30,8 @@ from anyio.streams.tls import TLSAttribute
 from aiortu._log import get_logger
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.mbap import Adu
+from aiortu.core.pdu import encode_exception
 from aiortu.errors import InvalidValue
-from aiortu.slave._answer_at_once import exception_pdu
 from aiortu.slave._tcp_server import ModbusTcpServer, _Outgoing
 from aiortu.transport import (
     ROLE_OID,
@@ -161,4 +161,4 @@ class ModbusTlsServer(ModbusTcpServer):
             refusal,
         )
         client.warned = True
-        return self._sent(adu, exception_pdu(adu.pdu[0], ExceptionCode.ILLEGAL_FUNCTION))
+        return self._sent(adu, encode_exception(adu.pdu[0], ExceptionCode.ILLEGAL_FUNCTION))

@@ -28,6 +28,20 @@ from aiortu.transport._authorization import (
 )
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
+from aiortu.transport._listen import (
+    AcceptCounters,
+    ConnectionCounters,
+    ConnectionLimit,
+    UnixAddress,
+    listen_tcp,
+    listen_unix,
+    listening_address,
+    parse_unix_url,
+    peer_address,
+    remove_socket,
+    serve_listener,
+    write_now,
+)
 from aiortu.transport._mbap_stream import (
     FramedStream,
     ModbusTcpCounters,
@@ -36,7 +50,8 @@ from aiortu.transport._mbap_stream import (
 )
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
-from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp, peer_address
+from aiortu.transport._server_framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
+from aiortu.transport._tcp import open_rtu_over_tcp
 from aiortu.transport._tls import (
     ROLE_OID,
     CertificateError,
@@ -75,17 +90,23 @@ __all__ = (
     "MODBUS_TCP_SCHEME",
     "MODBUS_UDP_SCHEME",
     "ROLE_OID",
+    "RTU_SILENCE",
     "TCP_SCHEME",
     "TLS_SCHEME",
     "WRITE_FUNCTION_CODES",
+    "AcceptCounters",
     "AccessRule",
     "AsciiStream",
     "CertificateError",
+    "ConnectionCounters",
+    "ConnectionLimit",
     "DatagramCounters",
     "FileDescriptorStream",
     "FramedStream",
+    "Framing",
     "ListenAddress",
     "LocalEchoFilter",
+    "MbapFraming",
     "ModbusTcpAddress",
     "ModbusTcpCounters",
     "ModbusTcpStream",
@@ -93,11 +114,13 @@ __all__ = (
     "PushStream",
     "RoleRules",
     "RS485Options",
+    "RtuFraming",
     "SerialAddress",
     "SerialAttribute",
     "SerialStream",
     "TcpAddress",
     "TlsListener",
+    "UnixAddress",
     "certificate_role",
     "check_ascii_settings",
     "check_datagram",
@@ -105,6 +128,8 @@ __all__ = (
     "describe_tls_failure",
     "listen_tcp",
     "listen_udp",
+    "listen_unix",
+    "listening_address",
     "load_rules",
     "open_modbus_tcp",
     "open_modbus_tls",
@@ -115,9 +140,13 @@ __all__ = (
     "parse_listen_url",
     "parse_port_url",
     "parse_rules",
+    "parse_unix_url",
     "peer_address",
+    "remove_socket",
     "serve_datagrams",
+    "serve_listener",
     "server_tls_context",
+    "write_now",
 )
 
 _SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo", "framing", "ascii_timeout"})

@@ -35,8 +35,9 @@ from anyio.streams.tls import TLSListener, TLSStream
 
 from aiortu._log import get_logger
 from aiortu.errors import InvalidValue, PortError
+from aiortu.transport._listen import peer_address
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
-from aiortu.transport._tcp import open_tcp_connection, peer_address
+from aiortu.transport._tcp import open_tcp_connection
 from aiortu.transport._url import TLS_SCHEME, format_tcp_url
 
 __all__ = (

@@ -30,8 +30,8 @@ import anyio.abc
 from aiortu._log import get_logger
 from aiortu.core.mbap import MAX_ADU_LENGTH, Adu, decode_adu
 from aiortu.errors import FrameError, InvalidValue, PortNotFound
+from aiortu.transport._listen import _tcp_error as listen_error  # a socket's bind errors
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
-from aiortu.transport._tcp import listen_error
 from aiortu.transport._url import MODBUS_UDP_SCHEME, format_tcp_url
 
 __all__ = (
