@@ -1,0 +1,69 @@
+"""Devices as data, sans-IO: profiles, their loading and checking, read planning and value
+coding.
+
+A [`Profile`][aiortu.core.model.Profile] describes a device (see `docs/profiles.md`);
+[`load_profile`][aiortu.core.model.load_profile] reads one from TOML, checking it against the
+rules of `profile.schema.json` (shipped in this package, at
+[`SCHEMA_PATH`][aiortu.core.model.SCHEMA_PATH]) and the ones a schema cannot say.
+[`ReadPlan`][aiortu.core.model.ReadPlan] turns points into reads and replies into
+values. Nothing here does I/O.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from aiortu.core.model._point_codec import (
+    check_value,
+    check_write,
+    decode_point,
+    encode_point,
+    raw_of,
+    scaled,
+)
+from aiortu.core.model._profile import (
+    DEFAULT_POLL_CLASS,
+    Access,
+    DeviceInfo,
+    Hole,
+    Identification,
+    PlanLimits,
+    PointType,
+    Probe,
+    Profile,
+    ProfilePoint,
+    Value,
+)
+from aiortu.core.model._profile_load import load_profile, parse_profile
+from aiortu.core.model._read_plan import BlockRead, Raw, ReadPlan, describe, plan_blocks
+
+__all__ = (
+    "DEFAULT_POLL_CLASS",
+    "SCHEMA_PATH",
+    "Access",
+    "BlockRead",
+    "DeviceInfo",
+    "Hole",
+    "Identification",
+    "PlanLimits",
+    "PointType",
+    "Probe",
+    "Profile",
+    "ProfilePoint",
+    "Raw",
+    "ReadPlan",
+    "Value",
+    "check_value",
+    "check_write",
+    "decode_point",
+    "describe",
+    "encode_point",
+    "load_profile",
+    "parse_profile",
+    "plan_blocks",
+    "raw_of",
+    "scaled",
+)
+
+SCHEMA_PATH = Path(__file__).with_name("profile.schema.json")
+"""The JSON Schema of the profile format, shipped with the package."""
