@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from aiortu.core.codes import ExceptionCode, FunctionCode
+    from aiortu.core.model import Profile, load_profile
     from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response
     from aiortu.core.timing import LineSettings
     from aiortu.errors import (
@@ -34,10 +35,13 @@ if TYPE_CHECKING:
     from aiortu.gateway import gateway
     from aiortu.master import (
         BroadcastHandle,
+        Device,
         HealthPolicy,
         Master,
         Point,
         Poller,
+        ProfilePoller,
+        Reading,
         ReconnectPolicy,
         Sample,
         UnitHandle,
@@ -50,6 +54,7 @@ if TYPE_CHECKING:
         Change,
         DataStore,
         MemoryStore,
+        ProfileStore,
         Reply,
         RequestContext,
         Slave,
@@ -66,6 +71,7 @@ _LAZY: dict[str, str] = {
     "ConfigError": "aiortu.errors",
     "ConnectionLost": "aiortu.errors",
     "DataStore": "aiortu.slave",
+    "Device": "aiortu.master",
     "ExceptionCode": "aiortu.core.codes",
     "ExceptionPDU": "aiortu.core.pdu",
     "ExceptionResponse": "aiortu.errors",
@@ -78,6 +84,10 @@ _LAZY: dict[str, str] = {
     "MalformedPDU": "aiortu.errors",
     "Master": "aiortu.master",
     "MemoryStore": "aiortu.slave",
+    "Profile": "aiortu.core.model",
+    "ProfilePoller": "aiortu.master",
+    "ProfileStore": "aiortu.slave",
+    "Reading": "aiortu.master",
     "ModbusError": "aiortu.errors",
     "Point": "aiortu.master",
     "Poller": "aiortu.master",
@@ -97,6 +107,7 @@ _LAZY: dict[str, str] = {
     "UnitStats": "aiortu.master",
     "gateway": "aiortu.gateway",
     "load_config": "aiortu.slave",
+    "load_profile": "aiortu.core.model",
     "open_master": "aiortu.master",
     "serve": "aiortu.slave",
 }
@@ -114,6 +125,7 @@ __all__ = (
     "ConfigError",
     "ConnectionLost",
     "DataStore",
+    "Device",
     "ExceptionCode",
     "ExceptionPDU",
     "ExceptionResponse",
@@ -130,7 +142,11 @@ __all__ = (
     "Point",
     "Poller",
     "PortError",
+    "Profile",
+    "ProfilePoller",
+    "ProfileStore",
     "RawPDU",
+    "Reading",
     "ReconnectPolicy",
     "Reply",
     "Request",
@@ -146,6 +162,7 @@ __all__ = (
     "__version__",
     "gateway",
     "load_config",
+    "load_profile",
     "open_master",
     "serve",
 )

@@ -12,20 +12,25 @@ from aiortu.errors import UnitOffline, UnitSkipped
 from aiortu.master._calls import FileRecordLike, RecordRequestLike
 from aiortu.master._client import Master, open_master
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
+from aiortu.master._device import Device, Reading
 from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
+from aiortu.master._profile_poller import ProfilePoller
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
 
 __all__ = (
     "BroadcastHandle",
     "CycleReport",
     "CycleStats",
+    "Device",
     "FileRecordLike",
     "HealthPolicy",
     "LineConnection",
     "Master",
     "Point",
     "Poller",
+    "ProfilePoller",
+    "Reading",
     "ReconnectPolicy",
     "RecordRequestLike",
     "Sample",

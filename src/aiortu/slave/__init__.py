@@ -18,6 +18,7 @@ from aiortu.slave._handlers import (
     Reply,
     RequestContext,
 )
+from aiortu.slave._profile_store import ProfileStore
 from aiortu.slave._routes import RangeAccess, RangeHandler, RoutedStore
 from aiortu.slave._server import (
     AfterHook,
@@ -61,6 +62,7 @@ __all__ = (
     "HandlerResult",
     "MemoryStore",
     "ModbusTcpServer",
+    "ProfileStore",
     "RangeAccess",
     "RangeHandler",
     "Reply",

@@ -11,8 +11,6 @@ values. Nothing here does I/O.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from aiortu.core.model._point_codec import (
     check_value,
     check_write,
@@ -36,6 +34,7 @@ from aiortu.core.model._profile import (
 )
 from aiortu.core.model._profile_load import load_profile, parse_profile
 from aiortu.core.model._read_plan import BlockRead, Raw, ReadPlan, describe, plan_blocks
+from aiortu.core.model._schema_doc import SCHEMA_PATH, schema_reference
 
 __all__ = (
     "DEFAULT_POLL_CLASS",
@@ -63,7 +62,5 @@ __all__ = (
     "plan_blocks",
     "raw_of",
     "scaled",
+    "schema_reference",
 )
-
-SCHEMA_PATH = Path(__file__).with_name("profile.schema.json")
-"""The JSON Schema of the profile format, shipped with the package."""

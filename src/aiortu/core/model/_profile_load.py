@@ -229,6 +229,7 @@ class _Loader:
             for i, entry in enumerate(self.tables(document.get("hole", []), "hole"))
         ]
         self.check_points(points, holes)
+        self.check_widths(points, limits)
         self.check_probes(device, {p.name: p for p in points})
         return Profile(self.source, device, tuple(points), tuple(holes), classes, limits)
 
@@ -334,6 +335,14 @@ class _Loader:
                         f"point {point.name}.address",
                         f"lies in a hole ({_span(hole.table, hole.start, hole.stop)})",
                     )
+
+    def check_widths(self, points: list[ProfilePoint], limits: PlanLimits) -> None:
+        for point in points:
+            largest, _ = limits.for_table(point.table)
+            if point.size > largest:
+                self.where = self.line_of("point", point.name)
+                problem = f"{point.size} registers do not fit in one read (max_block = {largest})"
+                raise self.fail(f"point {point.name}.size", problem)
 
     def check_probes(self, device: DeviceInfo, points: dict[str, ProfilePoint]) -> None:
         self.where = ""

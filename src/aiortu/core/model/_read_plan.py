@@ -95,7 +95,7 @@ class BlockRead:
             else:
                 big = big or self._big.pack(*elements[: self.count])
                 data = big
-            values = unpacker.codec.unpack(data)
+            values = unpacker.codec.unpack_from(data)
             if unpacker.converts:
                 values = tuple(map(_converted, unpacker.points, values))
             raws.extend(zip(unpacker.points, values, strict=True))
