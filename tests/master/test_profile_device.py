@@ -190,7 +190,8 @@ async def test_the_shipped_meter_served_and_polled(seed: int) -> None:
         assert len(device.plan("energy").reads) <= 2
         for name, value in expected.items():
             assert math.isclose(readings[name].value, value, rel_tol=1e-6), f"seed {seed} {name}"
-        assert readings["l1_voltage"].unit == "V"
+        assert readings["l1_voltage"].unit_of_measurement == "V"
+        assert readings["l1_voltage"].unit == 1
 
 
 async def test_the_profile_poller_delivers_every_class() -> None:

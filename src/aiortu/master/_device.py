@@ -4,7 +4,8 @@ name with the profile's checks.
     profile = aiortu.load_profile("sdm630.toml")
     meter = aiortu.Device(master, 1, profile)
     readings = await meter.read()                  # every point
-    print(readings["l1_voltage"].value, readings["l1_voltage"].unit)
+    voltage = readings["l1_voltage"]
+    print(voltage.value, voltage.unit_of_measurement)
     await meter.write("demand_period", 15)
 
 Reads follow the profile's [`ReadPlan`][aiortu.core.model.ReadPlan] (one per poll class); a
@@ -37,9 +38,10 @@ __all__ = ("Device", "Reading")
 
 @dataclass(frozen=True, slots=True)
 class Reading:
-    """One point's result: its `value` (scaled, named), its `raw` value as read, or the
-    `error` that kept it unread (`value` and `raw` are then None)."""
+    """One point's result on unit `unit`: its `value` (scaled, named), its `raw` value as
+    read, or the `error` that kept it unread (`value` and `raw` are then None)."""
 
+    unit: int
     point: ProfilePoint
     value: Value
     raw: Raw | None = None
@@ -51,8 +53,8 @@ class Reading:
         return self.point.name
 
     @property
-    def unit(self) -> str:
-        """The point's unit of measure (`""` when it has none)."""
+    def unit_of_measurement(self) -> str:
+        """The point's unit of measurement (`""` when it has none)."""
         return self.point.unit
 
     @property
@@ -99,7 +101,7 @@ class Device:
         values = plan.values(raws)
         wanted = self.profile.points_of(poll_class)
         return {
-            p.name: Reading(p, values.get(p.name), raws.get(p.name), errors.get(p.name))
+            p.name: Reading(self.unit, p, values.get(p.name), raws.get(p.name), errors.get(p.name))
             for p in wanted
         }
 

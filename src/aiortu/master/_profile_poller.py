@@ -3,7 +3,7 @@
     meters = [aiortu.Device(master, unit, profile) for unit in (1, 2, 3)]
     async with aiortu.ProfilePoller(meters) as poller:
         async for reading in poller:
-            print(reading.name, reading.value, reading.unit)
+            print(reading.unit, reading.name, reading.value, reading.unit_of_measurement)
 
 A cycle of an interval reads, device after device, the poll classes with that interval
 ([`Device.read`][aiortu.master.Device.read]: refused merged reads split and remembered, one

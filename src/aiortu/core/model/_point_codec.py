@@ -140,9 +140,7 @@ def decode_point(
 
 
 def _fail(point: ProfilePoint, value: object, allowed: object, problem: str) -> InvalidValue:
-    return InvalidValue(
-        point.name, value, allowed, problem, message=f"point {point.name}: {problem}"
-    )
+    return InvalidValue(point.name, value, allowed, message=f"point {point.name}: {problem}")
 
 
 def check_value(point: ProfilePoint, value: object) -> Value:

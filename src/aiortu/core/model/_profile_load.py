@@ -527,6 +527,7 @@ class _PointReader:
             checked = check_value(point, value)
             encode_point(point, checked, 0)
         except InvalidValue as error:
-            raise self.fail("value", error.detail or str(error)) from None
+            problem = str(error).removeprefix(f"point {point.name}: ")
+            raise self.fail("value", problem) from None
         # A profile's own starting value need not respect the write limits.
         return replace(point, initial=checked)

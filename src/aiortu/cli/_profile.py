@@ -1,0 +1,311 @@
+"""`aiortu profile`: check device profiles, and read and write a device's points by name.
+
+    aiortu profile check meter.toml                  the profile's summary, or its first error
+    aiortu profile read PORT --unit 1 --profile meter.toml [--point NAME ...]
+    aiortu profile write PORT --unit 1 --profile meter.toml POINT VALUE
+    aiortu profile list                              the profiles aiortu ships
+    aiortu profile reference                         the format reference, in Markdown
+
+A bad profile is one line naming the file, the line, the point and the key (exit 2).
+`aiortu poll --profile` and `aiortu serve --profile` poll and serve the same files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import signal
+import sys
+from collections.abc import Awaitable, Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import anyio
+
+from aiortu.cli import SUMMARIES, Subparsers
+from aiortu.cli._master import (
+    EXIT_CODES_HELP,
+    UsageError,
+    add_line_options,
+    open_from_args,
+    run_master,
+    unit,
+)
+from aiortu.core.model import Profile, ReadPlan, check_write, load_profile, schema_reference
+from aiortu.errors import ConfigError, InvalidValue
+
+if TYPE_CHECKING:
+    from aiortu.slave import MemoryStore, ProfileStore
+
+__all__ = (
+    "SHIPPED",
+    "open_profile",
+    "register",
+    "run_poll",
+    "serve_profile",
+    "shipped_profiles",
+)
+
+SHIPPED = Path(__file__).parents[1] / "core" / "model" / "profiles"
+"""Where the profiles aiortu ships live."""
+
+_EXAMPLES = f"""\
+examples:
+  aiortu profile check meter.toml
+  aiortu profile read /dev/ttyUSB0 --unit 1 --profile eastron-sdm630 --point frequency
+      two points of a shipped profile (a name from 'aiortu profile list', or a file)
+  aiortu profile write tcp://10.0.0.7:502 --unit 1 --profile meter.toml demand_period 15
+  aiortu poll /dev/ttyUSB0 --unit 1,2 --profile meter.toml
+  aiortu serve tcp://127.0.0.1:5020 --profile meter.toml --unit 1 --move 1
+
+{EXIT_CODES_HELP}"""
+
+
+def shipped_profiles() -> dict[str, Path]:
+    """The shipped profiles by name (the file name without `.toml`)."""
+    return {path.stem: path for path in sorted(SHIPPED.glob("*.toml"))}
+
+
+def open_profile(name: str) -> Profile:
+    """The profile in file `name`, or the shipped profile called `name`."""
+    shipped = shipped_profiles()
+    if not Path(name).exists() and name in shipped:
+        return load_profile(shipped[name])
+    return load_profile(name)
+
+
+def register(subparsers: Subparsers) -> None:
+    """Add the `profile` subcommand to `subparsers`."""
+    parser = subparsers.add_parser(
+        "profile",
+        help=SUMMARIES["profile"],
+        description="Check device profiles (TOML), and read or write points by name.",
+        epilog=_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    check = actions.add_parser("check", help="check profiles and summarise them")
+    check.add_argument("files", nargs="+", metavar="FILE", help="profiles to check")
+    check.set_defaults(run=_check)
+    actions.add_parser("list", help="the shipped profiles").set_defaults(run=_list)
+    reference = actions.add_parser("reference", help="print the format reference (Markdown)")
+    reference.set_defaults(run=_reference)
+    read = actions.add_parser("read", help="read points of a device by name")
+    add_line_options(read)
+    read.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    read.add_argument("--profile", required=True, help="a profile file or a shipped name")
+    read.add_argument(
+        "--point", action="append", dest="points", metavar="NAME", help="a point (all if none)"
+    )
+    read.add_argument("--json", action="store_true", help="print one JSON object")
+    read.set_defaults(run=_read)
+    write = actions.add_parser("write", help="write a point of a device by name")
+    add_line_options(write)
+    write.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    write.add_argument("--profile", required=True, help="a profile file or a shipped name")
+    write.add_argument("point", metavar="POINT", help="the point to write")
+    write.add_argument("value", metavar="VALUE", help="a number, true/false, or a name")
+    write.set_defaults(run=_write)
+
+
+def _failed(error: ConfigError | InvalidValue) -> int:
+    print(f"aiortu profile: error: {error}", file=sys.stderr)
+    return 2
+
+
+def summary(profile: Profile) -> str:
+    """What `check` says of a good profile: the device, its points, its reads per class."""
+    device = profile.device
+    lines = [
+        f"{profile.source}: {device.manufacturer} {device.model}, {len(profile.points)} points"
+    ]
+    for poll_class, interval in profile.poll_classes.items():
+        points = profile.points_of(poll_class)
+        if points:
+            reads = len(ReadPlan(profile, points).reads)
+            lines.append(
+                f"  {poll_class}: {len(points)} points in {reads} reads every {interval:g} s"
+            )
+    return "\n".join(lines)
+
+
+def _check(args: argparse.Namespace) -> int:
+    for name in args.files:
+        try:
+            print(summary(open_profile(name)), flush=True)
+        except ConfigError as error:
+            return _failed(error)
+    return 0
+
+
+def _list(args: argparse.Namespace) -> int:
+    for name, path in shipped_profiles().items():
+        device = load_profile(path).device
+        print(f"{name}  {device.manufacturer} {device.model}: {device.description}")
+    return 0
+
+
+def _reference(args: argparse.Namespace) -> int:
+    sys.stdout.write(schema_reference())
+    return 0
+
+
+def _parse_value(text: str) -> object:
+    lowered = text.strip().lower()
+    if lowered in ("true", "on"):
+        return True
+    if lowered in ("false", "off"):
+        return False
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _show(value: object) -> str:
+    if isinstance(value, tuple):
+        return ",".join(value) or "-"
+    return "-" if value is None else str(value)
+
+
+def _read(args: argparse.Namespace) -> int:
+    from aiortu.master import Device
+
+    try:
+        profile = open_profile(args.profile)
+        names = args.points or [p.name for p in profile.points]
+        for name in names:
+            profile.point(name)  # an unknown name fails before the port opens
+    except (ConfigError, InvalidValue) as error:
+        return _failed(error)
+
+    async def body() -> int:
+        async with open_from_args(args) as master:
+            device = Device(master, args.unit, profile)
+            readings = await device.read()
+        failed = 0
+        shown = {name: readings[name] for name in names}
+        if args.json:
+            document = {n: r.value for n, r in shown.items()}
+            print(json.dumps({"unit": args.unit, "values": document}), flush=True)
+        for name, reading in shown.items():
+            if not reading.ok:
+                failed += 1
+                print(f"{name}: {reading.error}", file=sys.stderr)
+            elif not args.json:
+                line = f"{name} {_show(reading.value)} {reading.unit_of_measurement}"
+                print(line.rstrip(), flush=True)
+        return 1 if failed else 0
+
+    return run_master(args, body)
+
+
+def _write(args: argparse.Namespace) -> int:
+    from aiortu.master import Device
+
+    value = _parse_value(args.value)
+    try:
+        profile = open_profile(args.profile)
+        check_write(profile.point(args.point), value)  # refused before the port opens
+    except ConfigError as error:
+        return _failed(error)
+    except InvalidValue as error:
+        return _failed(
+            InvalidValue(error.field, value, error.allowed, message=f"{profile.source}: {error}")
+        )
+
+    async def body() -> int:
+        async with open_from_args(args) as master:
+            await Device(master, args.unit, profile).write(args.point, value)
+        return 0
+
+    return run_master(args, body)
+
+
+def _units(text: str | None) -> list[int]:
+    if not text:
+        raise UsageError("poll --profile needs --unit (one unit, or several comma-separated)")
+    return [unit(part) for part in text.split(",")]
+
+
+def run_poll(args: argparse.Namespace) -> int:
+    """`aiortu poll --profile FILE --unit U[,U...]`: every point of each unit, each poll class
+    on its interval, one line per reading (`UNIT NAME VALUE UNIT`) or one JSON object each."""
+    from aiortu.master import Device, ProfilePoller, Reading
+
+    try:
+        profile = open_profile(args.profile)
+    except ConfigError as error:
+        return _failed(error)
+
+    def show(reading: Reading) -> None:
+        measure = reading.unit_of_measurement
+        if args.json:
+            value = reading.value if reading.ok else None
+            document = {"unit": reading.unit, "name": reading.name, "value": value}
+            print(json.dumps({**document, "unit_of_measurement": measure}), flush=True)
+        else:
+            shown = _show(reading.value) if reading.ok else f"error: {reading.error}"
+            print(f"{reading.unit} {reading.name} {shown} {measure}".rstrip(), flush=True)
+
+    async def body() -> int:
+        units = _units(args.unit)
+        async with open_from_args(args, reconnect=args.reconnect) as master:
+            devices = [Device(master, u, profile) for u in units]
+            poller = ProfilePoller(devices, on_reading=show)
+            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+                async with anyio.create_task_group() as tasks:
+
+                    async def stop_on_signal() -> None:
+                        async for _ in signals:
+                            tasks.cancel_scope.cancel()
+
+                    tasks.start_soon(stop_on_signal)
+                    await poller.run(cycles=args.cycles, duration=args.duration)
+                    tasks.cancel_scope.cancel()
+        return 0
+
+    return run_master(args, body)
+
+
+def serve_profile(
+    args: argparse.Namespace,
+    serve: Callable[[argparse.Namespace, Mapping[int, MemoryStore]], Awaitable[int]],
+) -> int:
+    """`aiortu serve --profile FILE [--unit U] [--move S]`: the profile's simulated device on
+    unit U, served by `serve` (the serve command's loop); with `--move`, its measurements move
+    every S seconds."""
+    from aiortu.cli._arguments import resolve_line_settings
+    from aiortu.cli._messages import library_warnings_on_stderr
+    from aiortu.slave import ProfileStore
+
+    try:
+        store = ProfileStore(open_profile(args.profile))
+    except ConfigError as error:
+        print(f"aiortu serve: error: {error}", file=sys.stderr)
+        return 2
+    if not 1 <= args.unit <= 247:
+        print(f"aiortu serve: error: --unit {args.unit} is outside 1..247", file=sys.stderr)
+        return 2
+    resolve_line_settings(args)
+
+    async def moving() -> int:
+        async with anyio.create_task_group() as tasks:
+            if args.move:
+                tasks.start_soon(_move, store, args.move)
+            code = await serve(args, {args.unit: store})
+            tasks.cancel_scope.cancel()
+        return code
+
+    with library_warnings_on_stderr("serve"):
+        return anyio.run(moving)
+
+
+async def _move(store: ProfileStore, every: float) -> None:
+    rng = random.Random()
+    while True:
+        await anyio.sleep(every)
+        store.move(rng)

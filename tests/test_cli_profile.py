@@ -1,0 +1,109 @@
+"""`aiortu profile`, `serve --profile` and `poll --profile`: a shipped profile served, read,
+written and polled by name in subprocesses, over Modbus TCP on loopback."""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+from pathlib import Path
+
+import pytest
+
+from aiortu.core.model import schema_reference
+from tests.cli_helpers import run_aiortu, start_aiortu, stop
+
+ROOT = Path(__file__).parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def wait_listening(port: int) -> None:
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        with socket.socket() as client:
+            if client.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.05)
+    raise AssertionError(f"nothing listens on {port}")
+
+
+def test_check_summarises_a_good_profile_and_names_the_error_of_a_bad_one(
+    tmp_path: Path,
+) -> None:
+    good = run_aiortu("profile", "check", "eastron-sdm630")
+    assert good.returncode == 0, good.stderr
+    assert "Eastron SDM630, 87 points" in good.stdout
+    assert "normal: 75 points in 4 reads every 1 s" in good.stdout
+    bad = tmp_path / "bad.toml"
+    bad.write_text(
+        '[device]\nmanufacturer = "A"\nmodel = "B"\n\n[[point]]\nname = "x"\n'
+        'address = 0\ntype = "float"\n'
+    )
+    result = run_aiortu("profile", "check", str(bad))
+    assert result.returncode == 2
+    assert result.stderr.strip() == (
+        f"aiortu profile: error: {bad}:6: point x.type: unknown type 'float' "
+        "(known: bool, u16, i16, u32, i32, u64, i64, f32, f64, string, bitfield, enum)"
+    )
+
+
+def test_the_reference_page_is_what_the_schema_writes() -> None:
+    page = (ROOT / "docs/profile-reference.md").read_text(encoding="utf-8")
+    assert page == schema_reference(), "run: aiortu profile reference > docs/profile-reference.md"
+
+
+def test_a_profile_served_read_written_and_polled_by_name() -> None:
+    port = free_port()
+    url = f"tcp://127.0.0.1:{port}"
+    server = start_aiortu("serve", url, "--profile", "eastron-sdm630", "--unit", "3")
+    try:
+        wait_listening(port)
+        common = ("--unit", "3", "--profile", "eastron-sdm630")
+        read = run_aiortu(
+            "profile", "read", url, *common, "--point", "l1_voltage", "--point", "frequency"
+        )
+        assert read.returncode == 0, read.stderr
+        assert read.stdout.splitlines() == ["l1_voltage 230.0 V", "frequency 50.0 Hz"]
+        write = run_aiortu("profile", "write", url, *common, "demand_period", "15")
+        assert write.returncode == 0, write.stderr
+        after = run_aiortu("profile", "read", url, *common, "--point", "demand_period", "--json")
+        assert json.loads(after.stdout) == {"unit": 3, "values": {"demand_period": 15.0}}
+        refused = run_aiortu("profile", "write", url, *common, "demand_period", "99")
+        assert refused.returncode == 2
+        assert refused.stderr.strip().endswith(
+            "eastron-sdm630.toml: point demand_period: value 99 is outside the limits 0..60"
+        )
+        read_only = run_aiortu("profile", "write", url, *common, "l1_voltage", "1")
+        assert "point l1_voltage: is read-only" in read_only.stderr
+        polled = run_aiortu(
+            "poll", url, "--unit", "3", "--profile", "eastron-sdm630", "--cycles", "1", "--json"
+        )
+        assert polled.returncode == 0, polled.stderr
+        lines = [json.loads(line) for line in polled.stdout.splitlines()]
+        assert len(lines) == 87
+        assert {
+            "unit": 3,
+            "name": "l1_voltage",
+            "value": 230.0,
+            "unit_of_measurement": "V",
+        } in lines
+    finally:
+        stop(server)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("serve", "tcp://127.0.0.1:1", "--profile", "eastron-sdm630", "--config", "x.toml"),
+        ("serve", "tcp://127.0.0.1:1"),
+    ],
+)
+def test_serve_wants_one_description(args: tuple[str, ...]) -> None:
+    result = run_aiortu(*args)
+    assert result.returncode == 2
+    assert "give --config or --profile" in result.stderr
