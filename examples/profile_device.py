@@ -15,6 +15,7 @@ from pathlib import Path
 import anyio
 
 import aiortu
+from aiortu.core.model import parse_profile
 from aiortu.testing import VirtualBus
 
 SETTINGS = aiortu.LineSettings(19200, parity="E")
@@ -22,7 +23,8 @@ PROFILE = Path(__file__).parent / "profiles" / "heat-pump.toml"
 
 
 async def main() -> None:
-    profile = aiortu.load_profile(PROFILE)
+    # parse_profile names the file in messages as given; load_profile(PROFILE) gives its path.
+    profile = parse_profile(PROFILE.read_text(encoding="utf-8"), PROFILE.name)
     bus = VirtualBus(2, settings=SETTINGS)
     async with (
         aiortu.Slave(bus.endpoints[1], {7: aiortu.ProfileStore(profile)}, SETTINGS),

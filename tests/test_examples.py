@@ -16,7 +16,7 @@ EXPECTED = {
         "flow_temperature  35.5 °C",
         "mode              heat",
         "setpoint now 48.5",
-        "heat-pump.toml: point setpoint: value 70 is outside the limits 20..55",
+        "refused: heat-pump.toml: point setpoint: value 70 is outside the limits 20..55",
     ],
     "poll_several_devices.py": ["cycle 2 unit 3 voltage3   231.250", "unit 4: offline"],
     "typed_values.py": [
