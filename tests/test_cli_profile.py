@@ -10,8 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from aiortu.core.model import schema_reference
+from aiortu.core.model import parse_profile, schema_reference
 from tests.cli_helpers import run_aiortu, start_aiortu, stop
+from tests.peers.venvs import PYSUNSPEC2, peer_python, sunspec_models
 
 ROOT = Path(__file__).parents[1]
 
@@ -107,3 +108,41 @@ def test_serve_wants_one_description(args: tuple[str, ...]) -> None:
     result = run_aiortu(*args)
     assert result.returncode == 2
     assert "give --config or --profile" in result.stderr
+
+
+def test_a_sunspec_device_served_and_walked_into_a_profile(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    python = peer_python(PYSUNSPEC2, "sunspec2")
+    monkeypatch.setenv("AIORTU_SUNSPEC_MODELS", str(sunspec_models(python)))
+    made = run_aiortu(
+        "profile", "sunspec", "1", "103", "--value", "m103.W=1500", "--value", "m1.Mn=ACME"
+    )
+    assert made.returncode == 0, made.stderr
+    simulated = tmp_path / "sim.toml"
+    simulated.write_text(made.stdout)
+    port = free_port()
+    url = f"tcp://127.0.0.1:{port}"
+    server = start_aiortu("serve", url, "--profile", str(simulated), "--unit", "2")
+    try:
+        wait_listening(port)
+        walked = run_aiortu("profile", "walk", url, "--unit", "2")
+        assert walked.returncode == 0, walked.stderr
+        profile = parse_profile(walked.stdout, "walked.toml")
+        assert profile.device.manufacturer == "ACME"
+        assert profile.point("m103.W").unit == "W"
+        (tmp_path / "walked.toml").write_text(walked.stdout)
+        read = run_aiortu(
+            "profile",
+            "read",
+            url,
+            "--unit",
+            "2",
+            "--profile",
+            str(tmp_path / "walked.toml"),
+            "--point",
+            "m103.W",
+        )
+        assert read.stdout.strip() == "m103.W 1500.0 W"
+    finally:
+        stop(server)

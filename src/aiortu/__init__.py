@@ -47,6 +47,7 @@ if TYPE_CHECKING:
         UnitHandle,
         UnitStats,
         open_master,
+        walk_sunspec,
     )
     from aiortu.slave import (
         AsyncDataStore,
@@ -108,6 +109,7 @@ _LAZY: dict[str, str] = {
     "gateway": "aiortu.gateway",
     "load_config": "aiortu.slave",
     "load_profile": "aiortu.core.model",
+    "walk_sunspec": "aiortu.master",
     "open_master": "aiortu.master",
     "serve": "aiortu.slave",
 }
@@ -165,6 +167,7 @@ __all__ = (
     "load_profile",
     "open_master",
     "serve",
+    "walk_sunspec",
 )
 
 

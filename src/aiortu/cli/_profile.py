@@ -32,7 +32,14 @@ from aiortu.cli._master import (
     run_master,
     unit,
 )
-from aiortu.core.model import Profile, ReadPlan, check_write, load_profile, schema_reference
+from aiortu.core.model import (
+    Profile,
+    ReadPlan,
+    Value,
+    check_write,
+    load_profile,
+    schema_reference,
+)
 from aiortu.errors import ConfigError, InvalidValue
 
 if TYPE_CHECKING:
@@ -53,6 +60,10 @@ SHIPPED = Path(__file__).parents[1] / "core" / "model" / "profiles"
 _EXAMPLES = f"""\
 examples:
   aiortu profile check meter.toml
+  aiortu profile walk tcp://10.0.0.9:502 --unit 1 > inverter.toml
+      a SunSpec device describes itself: its models as a profile
+  aiortu profile sunspec 1 103 160 --repeats 2 --value m103.W=1500 > sim.toml
+      a simulated SunSpec device, to serve with 'aiortu serve --profile sim.toml'
   aiortu profile read /dev/ttyUSB0 --unit 1 --profile eastron-sdm630 --point frequency
       two points of a shipped profile (a name from 'aiortu profile list', or a file)
   aiortu profile write tcp://10.0.0.7:502 --unit 1 --profile meter.toml demand_period 15
@@ -107,6 +118,18 @@ def register(subparsers: Subparsers) -> None:
     write.add_argument("point", metavar="POINT", help="the point to write")
     write.add_argument("value", metavar="VALUE", help="a number, true/false, or a name")
     write.set_defaults(run=_write)
+    walk = actions.add_parser("walk", help="walk a SunSpec device and print its profile")
+    add_line_options(walk)
+    walk.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    walk.add_argument("--models-dir", help="SunSpec's model definitions (default: pysunspec2's)")
+    walk.set_defaults(run=_walk)
+    layout = actions.add_parser("sunspec", help="print the profile of a simulated SunSpec device")
+    layout.add_argument("models", nargs="+", type=int, metavar="MODEL", help="model ids, in order")
+    layout.add_argument("--base", type=int, choices=(40000, 50000, 0), default=40000)
+    layout.add_argument("--repeats", type=int, default=1, help="instances of repeating groups (1)")
+    layout.add_argument("--value", action="append", default=[], metavar="NAME=VALUE")
+    layout.add_argument("--models-dir", help="SunSpec's model definitions (default: pysunspec2's)")
+    layout.set_defaults(run=_sunspec)
 
 
 def _failed(error: ConfigError | InvalidValue) -> int:
@@ -309,3 +332,66 @@ async def _move(store: ProfileStore, every: float) -> None:
     while True:
         await anyio.sleep(every)
         store.move(rng)
+
+
+_ATTRIBUTION = (
+    "Points and their names, types, units and scale factors come from SunSpec's model\n"
+    "definitions (SunSpec Alliance, Apache License 2.0, as pysunspec2 ships them)."
+)
+
+
+def _walk(args: argparse.Namespace) -> int:
+    from aiortu.core.model import SunSpecModels, dump_profile
+    from aiortu.master import walk_sunspec
+
+    try:
+        models = SunSpecModels.locate(args.models_dir)
+    except ConfigError as error:
+        return _failed(error)
+
+    async def body() -> int:
+        async with open_from_args(args) as master:
+            found = await walk_sunspec(master, args.unit, models=models)
+        if found is None:
+            print(f"aiortu profile: unit {args.unit} holds no SunSpec marker", file=sys.stderr)
+            return 1
+        for warning in found.warnings:
+            print(f"aiortu profile: {warning}", file=sys.stderr)
+        listed = ", ".join(str(m.id) for m in found.models)
+        comment = f"SunSpec device at unit {args.unit}: models {listed}.\n{_ATTRIBUTION}"
+        sys.stdout.write(dump_profile(found.profile, comment))
+        return 0
+
+    return run_master(args, body)
+
+
+def _sunspec(args: argparse.Namespace) -> int:
+    from aiortu.core.model import PointType, SunSpecModels, dump_profile, sunspec_layout
+
+    texts = dict(item.partition("=")[::2] for item in args.value)
+    try:
+        models = SunSpecModels.locate(args.models_dir)
+        blank = sunspec_layout(models, args.models, base=args.base, repeats=args.repeats)
+        values: dict[str, Value] = {}
+        for name, text in texts.items():
+            kind = blank.point(name.strip()).type
+            parsed = text if kind in (PointType.STRING, PointType.ENUM) else _parse_value(text)
+            values[name.strip()] = parsed  # type: ignore[assignment]  # checked when laid out
+        profile = sunspec_layout(
+            models,
+            args.models,
+            base=args.base,
+            repeats=args.repeats,
+            values=values,
+            manufacturer=texts.get("m1.Mn", "aiortu"),
+            model=texts.get("m1.Md", "SunSpec device"),
+        )
+    except (ConfigError, InvalidValue) as error:
+        return _failed(error)
+    listed = " ".join(map(str, args.models))
+    comment = (
+        f"A simulated SunSpec device: models {listed} from {args.base}, made by\n"
+        f"'aiortu profile sunspec' (the values given on its command line).\n{_ATTRIBUTION}"
+    )
+    sys.stdout.write(dump_profile(profile, comment))
+    return 0

@@ -17,6 +17,7 @@ from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
 from aiortu.master._profile_poller import ProfilePoller
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
+from aiortu.master._sunspec import FoundModel, SunSpecDevice, walk_sunspec
 
 __all__ = (
     "BroadcastHandle",
@@ -24,6 +25,7 @@ __all__ = (
     "CycleStats",
     "Device",
     "FileRecordLike",
+    "FoundModel",
     "HealthPolicy",
     "LineConnection",
     "Master",
@@ -35,6 +37,7 @@ __all__ = (
     "RecordRequestLike",
     "Sample",
     "StreamOpener",
+    "SunSpecDevice",
     "UnitHandle",
     "UnitHealth",
     "UnitOffline",
@@ -42,4 +45,5 @@ __all__ = (
     "UnitState",
     "UnitStats",
     "open_master",
+    "walk_sunspec",
 )

@@ -7,7 +7,8 @@
 
 Each table's points are laid out in blocks that stop at the profile's holes, so a read across a
 hole (or past the last point) gets exception 02, as the real device answers; the unused
-addresses between points read 0. Every point starts at its `value` from the profile (else 0).
+addresses between points read 0. Every point starts at its `value` from the profile (else at
+its `not_available` raw value, else 0).
 Read-only points of holding registers refuse writes; the device identification objects come
 from the profile's device and its `identify.objects`.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 import math
 import random
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 
 from aiortu.core.addressing import Table
 from aiortu.core.codes import DeviceIdObject, ExceptionCode
@@ -108,6 +110,12 @@ class ProfileStore(MemoryStore):
         for point in sorted(profile.points, key=lambda p: p.name not in factors):
             if point.initial is not None:
                 self.set_value(point.name, point.initial)
+            elif point.not_available is not None and point.type is PointType.STRING:
+                self.set_value(point.name, "")  # all NULs
+            elif point.not_available is not None:
+                # A point with no value says so, as the device would.
+                raw = replace(point, scale=None, offset=None, scale_factor=None)
+                self.set(point.table, point.address, list(encode_point(raw, point.not_available)))
 
     def _factor(self, point: ProfilePoint) -> int | None:
         if point.scale_factor is None:

@@ -32,12 +32,25 @@ from aiortu.core.model._profile import (
     ProfilePoint,
     Value,
 )
+from aiortu.core.model._profile_dump import dump_profile
 from aiortu.core.model._profile_load import load_profile, parse_profile
 from aiortu.core.model._read_plan import BlockRead, Raw, ReadPlan, describe, plan_blocks
 from aiortu.core.model._schema_doc import SCHEMA_PATH, schema_reference
+from aiortu.core.model._sunspec import (
+    END_ID,
+    MARKER,
+    MARKER_BASES,
+    SunSpecModels,
+    model_length,
+    model_points,
+    sunspec_layout,
+)
 
 __all__ = (
     "DEFAULT_POLL_CLASS",
+    "END_ID",
+    "MARKER",
+    "MARKER_BASES",
     "SCHEMA_PATH",
     "Access",
     "BlockRead",
@@ -51,16 +64,21 @@ __all__ = (
     "ProfilePoint",
     "Raw",
     "ReadPlan",
+    "SunSpecModels",
     "Value",
     "check_value",
     "check_write",
     "decode_point",
     "describe",
+    "dump_profile",
     "encode_point",
     "load_profile",
+    "model_length",
+    "model_points",
     "parse_profile",
     "plan_blocks",
     "raw_of",
     "scaled",
     "schema_reference",
+    "sunspec_layout",
 )

@@ -106,7 +106,10 @@ def scaled(point: ProfilePoint, raw: int | float | bool | str, sf: int | None) -
     `sf` is the value of the point's scale factor (None when it has none or it could not be
     read: the value is then None).
     """
-    if isinstance(raw, bool | str):
+    if isinstance(raw, str):
+        # not_available = 0 on a string: all NULs (an empty text) is no value, as in SunSpec.
+        return None if raw == "" and point.not_available == 0 else raw
+    if isinstance(raw, bool):
         return raw
     if point.not_available is not None and raw == point.not_available:
         return None

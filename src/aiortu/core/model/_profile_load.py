@@ -480,9 +480,12 @@ class _PointReader:
     def not_available(self, kind: PointType, size: int) -> int | None:
         if "not_available" not in self.entry:
             return None
-        if not kind.is_integer:
-            raise self.fail("not_available", f"is only for integer points, not {kind}")
         value = self.entry["not_available"]
+        if kind is PointType.STRING:
+            self.loader.integer(value, f"{self.key}.not_available", range(1))
+            return 0  # all NULs
+        if not kind.is_integer:
+            raise self.fail("not_available", f"is only for integer and string points, not {kind}")
         signed = kind.value.startswith("i")
         bits = 16 * size
         allowed = range(-(1 << (bits - 1)), 1 << (bits - 1)) if signed else range(1 << bits)
