@@ -181,10 +181,14 @@ def section_poll(args: argparse.Namespace) -> list[str]:
             cpu, reads[kind] = anyio.run(poll_cpu, kind, cycles)
             cpus.append(cpu)
     rows = [
-        [kind, str(reads[kind]), f"{benchlib.median(cpus) * 1e6:.2f}",
-         f"{min(cpus) * 1e6:.2f}..{max(cpus) * 1e6:.2f}"]
+        [
+            kind,
+            str(reads[kind]),
+            f"{benchlib.median(cpus) * 1e6:.2f}",
+            f"{min(cpus) * 1e6:.2f}..{max(cpus) * 1e6:.2f}",
+        ]
         for kind, cpus in results.items()
-    ]  # fmt: skip
+    ]
     ratio = benchlib.median(results["ProfilePoller"]) / benchlib.median(results["Poller"])
     return [
         f"(c) poll: {METER_POINTS} float32 points over input registers 0..0x17F, unpaced "

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import anyio
 
-from aiortu.cli import SUMMARIES, Subparsers
+from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._master import (
     EXIT_CODES_HELP,
     UsageError,
@@ -60,6 +60,9 @@ SHIPPED = Path(__file__).parents[1] / "core" / "model" / "profiles"
 _EXAMPLES = f"""\
 examples:
   aiortu profile check meter.toml
+  aiortu profile import home-assistant configuration.yaml --out-dir profiles/
+      a profile per unit of each hub of the modbus: section
+  aiortu profile import evcc sdm-meter.yaml --param usage=grid > meter.toml
   aiortu profile walk tcp://10.0.0.9:502 --unit 1 > inverter.toml
       a SunSpec device describes itself: its models as a profile
   aiortu profile sunspec 1 103 160 --repeats 2 --value m103.W=1500 > sim.toml
@@ -123,6 +126,16 @@ def register(subparsers: Subparsers) -> None:
     walk.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
     walk.add_argument("--models-dir", help="SunSpec's model definitions (default: pysunspec2's)")
     walk.set_defaults(run=_walk)
+    imports = actions.add_parser("import", help="convert Home Assistant or evcc files")
+    imports.add_argument("kind", choices=("home-assistant", "evcc"), help="the file's kind")
+    imports.add_argument("file", metavar="FILE", help="the YAML file")
+    imports.add_argument(
+        "--param", action="append", default=[], metavar="NAME=VALUE", help="evcc parameters"
+    )
+    imports.add_argument(
+        "--out-dir", help="write each profile as a file there (default: print them)"
+    )
+    imports.set_defaults(run=_import)
     layout = actions.add_parser("sunspec", help="print the profile of a simulated SunSpec device")
     layout.add_argument("models", nargs="+", type=int, metavar="MODEL", help="model ids, in order")
     layout.add_argument("--base", type=int, choices=(40000, 50000, 0), default=40000)
@@ -394,4 +407,54 @@ def _sunspec(args: argparse.Namespace) -> int:
         f"'aiortu profile sunspec' (the values given on its command line).\n{_ATTRIBUTION}"
     )
     sys.stdout.write(dump_profile(profile, comment))
+    return 0
+
+
+def _yaml(path: str) -> object:
+    """The YAML at `path`; PyYAML is imported only here, and its absence said in one line."""
+    try:
+        import yaml
+    except ImportError:
+        raise CommandFailed("reading YAML needs PyYAML: pip install 'aiortu[import]'") from None
+    try:
+        with open(path, encoding="utf-8") as file:
+            return yaml.safe_load(file)
+    except OSError as error:
+        raise CommandFailed(f"{path}: cannot be read: {error.strerror}") from None
+    except yaml.YAMLError as error:
+        raise CommandFailed(f"{path}: not YAML: {error}".replace("\n", " ")) from None
+
+
+def _import(args: argparse.Namespace) -> int:
+    from aiortu.core.model import dump_profile, profile_from_evcc, profiles_from_home_assistant
+
+    document = _yaml(args.file)
+    source = Path(args.file).name
+    try:
+        if args.kind == "home-assistant":
+            found = {
+                f"{hub}-unit{unit}": (profile, f"Unit {unit} of hub {hub!r} of {source}.")
+                for (hub, unit), profile in profiles_from_home_assistant(document, source).items()
+            }
+        else:
+            import yaml
+
+            if not isinstance(document, dict):
+                raise ConfigError(source, "(file)", "not an evcc template")
+            params = dict(item.partition("=")[::2] for item in args.param)
+            result = profile_from_evcc(document, yaml.safe_load, params=params, source=source)
+            for skipped in result.skipped:
+                print(f"aiortu profile: skipped {skipped}", file=sys.stderr)
+            found = {Path(args.file).stem: (result.profile, f"From the evcc template {source}.")}
+    except ConfigError as error:
+        return _failed(error)
+    for name, (profile, comment) in found.items():
+        text = dump_profile(profile, comment)
+        if args.out_dir is None:
+            sys.stdout.write(text if len(found) == 1 else f"# --- {name}.toml\n{text}\n")
+            continue
+        target = Path(args.out_dir) / f"{name}.toml"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(text, encoding="utf-8")
+        print(target)
     return 0

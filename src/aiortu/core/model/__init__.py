@@ -11,6 +11,8 @@ values. Nothing here does I/O.
 
 from __future__ import annotations
 
+from aiortu.core.model._import_evcc import EvccImport, profile_from_evcc, render_evcc
+from aiortu.core.model._import_ha import profiles_from_home_assistant
 from aiortu.core.model._point_codec import (
     check_value,
     check_write,
@@ -55,6 +57,7 @@ __all__ = (
     "Access",
     "BlockRead",
     "DeviceInfo",
+    "EvccImport",
     "Hole",
     "Identification",
     "PlanLimits",
@@ -77,7 +80,10 @@ __all__ = (
     "model_points",
     "parse_profile",
     "plan_blocks",
+    "profile_from_evcc",
+    "profiles_from_home_assistant",
     "raw_of",
+    "render_evcc",
     "scaled",
     "schema_reference",
     "sunspec_layout",

@@ -84,7 +84,7 @@ def _point(point: ProfilePoint) -> list[str]:
         ("bits", {str(k): v for k, v in point.bits.items()} or None),
         ("value", list(point.initial) if isinstance(point.initial, tuple) else point.initial),
         ("meta", dict(point.meta) or None),
-    ]  # fmt: skip
+    ]
     if point.table.is_bit:
         pairs = [(k, v) for k, v in pairs if k != "type"]
     return ["[[point]]", *_lines(pairs)]

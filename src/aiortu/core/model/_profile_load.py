@@ -54,11 +54,29 @@ _DEFAULTS = frozenset(
 )
 _POINT = frozenset(
     {
-        "name", "table", "address", "type", "size", "layout", "encoding", "scale", "offset",
-        "scale_factor", "not_available", "unit", "description", "access", "min", "max", "poll",
-        "values", "bits", "value", "meta",
+        "name",
+        "table",
+        "address",
+        "type",
+        "size",
+        "layout",
+        "encoding",
+        "scale",
+        "offset",
+        "scale_factor",
+        "not_available",
+        "unit",
+        "description",
+        "access",
+        "min",
+        "max",
+        "poll",
+        "values",
+        "bits",
+        "value",
+        "meta",
     }
-)  # fmt: skip
+)
 _ALIASES = {
     "uint16": "u16",
     "int16": "i16",

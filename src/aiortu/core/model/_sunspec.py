@@ -249,9 +249,15 @@ def sunspec_layout(
     model; `values` sets points by name (scale factors default to 0). Serve it with
     [`ProfileStore`][aiortu.slave.ProfileStore] to simulate a SunSpec device."""
     points = [
-        ProfilePoint("sunspec.marker", Table.HOLDING_REGISTERS, base, PointType.U32, 2,
-                     initial=MARKER[0] << 16 | MARKER[1])
-    ]  # fmt: skip
+        ProfilePoint(
+            "sunspec.marker",
+            Table.HOLDING_REGISTERS,
+            base,
+            PointType.U32,
+            2,
+            initial=MARKER[0] << 16 | MARKER[1],
+        )
+    ]
     address = base + 2
     given = dict(values or {})
     seen: dict[int, int] = {}
