@@ -31,16 +31,17 @@ sys.path.insert(0, __file__.rsplit("/", 1)[0])
 import benchlib
 
 import aiortu
-from aiortu.core.addressing import Table
 from aiortu.core.model import (
     DeviceInfo,
+    Layout,
     PointType,
     Profile,
     ProfilePoint,
     ReadPlan,
+    Table,
+    encode_value,
     load_profile,
 )
-from aiortu.core.values import Layout, encode_value
 from aiortu.testing import VirtualBus
 
 ROOT = Path(__file__).parents[1]

@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from aiortu.core.codes import ExceptionCode, FunctionCode
     from aiortu.core.model import Profile, load_profile
     from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response
-    from aiortu.core.timing import LineSettings
+    from aiortu.core.serial import LineSettings
     from aiortu.errors import (
         ConfigError,
         ConnectionLost,
@@ -81,7 +81,7 @@ _LAZY: dict[str, str] = {
     "HealthPolicy": "aiortu.master",
     "InvalidRequest": "aiortu.errors",
     "InvalidValue": "aiortu.errors",
-    "LineSettings": "aiortu.core.timing",
+    "LineSettings": "aiortu.core.serial",
     "MalformedPDU": "aiortu.errors",
     "Master": "aiortu.master",
     "MemoryStore": "aiortu.slave",

@@ -16,8 +16,13 @@ import yaml
 from pymodbus.client import AsyncModbusTcpClient
 
 import aiortu
-from aiortu.core.addressing import Table
-from aiortu.core.model import PointType, Profile, profile_from_evcc, profiles_from_home_assistant
+from aiortu.core.model import (
+    PointType,
+    Profile,
+    Table,
+    profile_from_evcc,
+    profiles_from_home_assistant,
+)
 
 pytestmark = [pytest.mark.interop, pytest.mark.timeout(60)]
 

@@ -15,8 +15,7 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.addressing import Table
-from aiortu.core.model import SunSpecModels, load_profile, model_length, sunspec_layout
+from aiortu.core.model import SunSpecModels, Table, load_profile, model_length, sunspec_layout
 from aiortu.errors import ConfigError
 from aiortu.testing import VirtualBus
 from tests.peers.venvs import PYSUNSPEC2, peer_python, sunspec_models

@@ -18,7 +18,6 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 
-from aiortu.core.addressing import Table
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.model import (
     BlockRead,
@@ -26,6 +25,7 @@ from aiortu.core.model import (
     ProfilePoint,
     Raw,
     ReadPlan,
+    Table,
     Value,
     check_write,
     encode_point,

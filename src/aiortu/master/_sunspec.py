@@ -19,8 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from aiortu._log import get_logger
-from aiortu.core.addressing import ADDRESS_RANGE, Table
 from aiortu.core.model import (
+    ADDRESS_RANGE,
     END_ID,
     MARKER,
     MARKER_BASES,
@@ -30,6 +30,7 @@ from aiortu.core.model import (
     Profile,
     ProfilePoint,
     SunSpecModels,
+    Table,
     model_points,
 )
 from aiortu.errors import ExceptionResponse

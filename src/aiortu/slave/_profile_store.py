@@ -20,12 +20,12 @@ import random
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
 
-from aiortu.core.addressing import Table
 from aiortu.core.codes import DeviceIdObject, ExceptionCode
 from aiortu.core.model import (
     PointType,
     Profile,
     ProfilePoint,
+    Table,
     Value,
     check_value,
     decode_point,

@@ -8,15 +8,15 @@ from typing import Any
 import pytest
 import yaml
 
-from aiortu.core.addressing import Table
 from aiortu.core.model import (
     Access,
+    Layout,
     PointType,
+    Table,
     profile_from_evcc,
     profiles_from_home_assistant,
     render_evcc,
 )
-from aiortu.core.values import Layout
 from aiortu.errors import ConfigError
 
 EXAMPLES = Path(__file__).parents[3] / "examples" / "imports"

@@ -11,19 +11,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aiortu.core.addressing import Table
 from aiortu.core.model import (
     SCHEMA_PATH,
     Access,
     DeviceInfo,
+    Layout,
     PointType,
     Profile,
     ProfilePoint,
+    Table,
     dump_profile,
     load_profile,
     parse_profile,
 )
-from aiortu.core.values import Layout
 
 ROOT = Path(__file__).parents[3]
 FILES = sorted((ROOT / "src/aiortu/core/model/profiles").glob("*.toml"))

@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from aiortu.core.addressing import Table
-from aiortu.core.model import Access, PointType, load_profile, parse_profile
-from aiortu.core.values import Layout
+from aiortu.core.model import Access, Layout, PointType, Table, load_profile, parse_profile
 from aiortu.errors import ConfigError
 
 HEAD = """

@@ -10,22 +10,22 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aiortu.core.addressing import Table
 from aiortu.core.model import (
     DeviceInfo,
     Hole,
+    Layout,
     PlanLimits,
     PointType,
     Profile,
     ProfilePoint,
     ReadPlan,
+    Table,
     decode_point,
     encode_point,
     load_profile,
     plan_blocks,
     raw_of,
 )
-from aiortu.core.values import Layout
 
 SDM630 = Path(__file__).parents[3] / "src/aiortu/core/model/profiles/eastron-sdm630.toml"
 NUMERIC = [PointType.U16, PointType.I16, PointType.U32, PointType.I32, PointType.U64]

@@ -17,11 +17,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from aiortu.core.addressing import Table
 from aiortu.core.errors import ConfigError
+from aiortu.core.model._addressing import Table
 from aiortu.core.model._import_ha import checked
 from aiortu.core.model._profile import DeviceInfo, PointType, Profile, ProfilePoint
-from aiortu.core.values import Layout
+from aiortu.core.model._values import Layout
 
 __all__ = ("EvccImport", "profile_from_evcc", "render_evcc")
 

@@ -15,8 +15,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from aiortu.core.addressing import Table
 from aiortu.core.errors import ConfigError
+from aiortu.core.model._addressing import Table
 from aiortu.core.model._profile import (
     DEFAULT_POLL_CLASS,
     Access,
@@ -27,7 +27,7 @@ from aiortu.core.model._profile import (
 )
 from aiortu.core.model._profile_dump import dump_profile
 from aiortu.core.model._profile_load import parse_profile
-from aiortu.core.values import Layout
+from aiortu.core.model._values import Layout
 
 __all__ = ("checked", "profiles_from_home_assistant")
 

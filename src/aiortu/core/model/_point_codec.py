@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 from aiortu.core.errors import InvalidValue
 from aiortu.core.model._profile import PointType, ProfilePoint, Value
-from aiortu.core.values import Layout
+from aiortu.core.model._values import Layout
 
 __all__ = (
     "check_value",

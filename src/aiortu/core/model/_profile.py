@@ -10,9 +10,9 @@ import enum
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from aiortu.core.addressing import Table
 from aiortu.core.errors import InvalidValue
-from aiortu.core.values import Layout
+from aiortu.core.model._addressing import Table
+from aiortu.core.model._values import Layout
 
 __all__ = (
     "Access",

@@ -16,8 +16,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from aiortu.core.addressing import Table
 from aiortu.core.errors import ConfigError, InvalidValue
+from aiortu.core.model._addressing import Table
 from aiortu.core.model._point_codec import check_value, encode_point
 from aiortu.core.model._profile import (
     DEFAULT_POLL_CLASS,
@@ -31,7 +31,7 @@ from aiortu.core.model._profile import (
     Profile,
     ProfilePoint,
 )
-from aiortu.core.values import Layout
+from aiortu.core.model._values import Layout
 
 __all__ = ("load_profile", "parse_profile")
 

@@ -19,7 +19,7 @@ import struct
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from aiortu.core.addressing import Table
+from aiortu.core.model._addressing import Table
 from aiortu.core.model._point_codec import (
     packed_little_endian,
     scaled,

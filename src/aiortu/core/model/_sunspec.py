@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from aiortu.core.addressing import Table
 from aiortu.core.errors import ConfigError
+from aiortu.core.model._addressing import Table
 from aiortu.core.model._profile import (
     Access,
     DeviceInfo,
