@@ -146,3 +146,61 @@ def test_a_sunspec_device_served_and_walked_into_a_profile(
         assert read.stdout.strip() == "m103.W 1500.0 W"
     finally:
         stop(server)
+
+
+def test_units_are_matched_against_profiles() -> None:
+    port = free_port()
+    url = f"tcp://127.0.0.1:{port}"
+    pump = str(ROOT / "examples/profiles/heat-pump.toml")
+    server = start_aiortu("serve", url, "--profile", pump, "--unit", "4")
+    try:
+        wait_listening(port)
+        result = run_aiortu(
+            "profile", "match", url, "--unit", "4", "--profile", pump, "--profile", "eastron-sdm630"
+        )
+        assert result.returncode == 0, result.stderr
+        assert result.stdout.splitlines() == [
+            f"unit 4: ACME HP-7 ({pump}) by device identification, probes"
+        ]
+    finally:
+        stop(server)
+
+
+def test_home_assistant_and_evcc_files_are_imported(tmp_path: Path) -> None:
+    ha = run_aiortu(
+        "profile",
+        "import",
+        "home-assistant",
+        str(ROOT / "examples/imports/home-assistant-modbus.yaml"),
+        "--out-dir",
+        str(tmp_path),
+    )
+    assert ha.returncode == 0, ha.stderr
+    written = sorted(p.name for p in tmp_path.iterdir())
+    assert written == ["heating-unit1.toml", "heating-unit2.toml", "heating-unit3.toml"]
+    checked = run_aiortu("profile", "check", *(str(p) for p in sorted(tmp_path.iterdir())))
+    assert checked.returncode == 0, checked.stderr
+    assert "heating-unit1.toml: Home Assistant heating unit 1, 12 points" in checked.stdout
+    evcc = run_aiortu(
+        "profile",
+        "import",
+        "evcc",
+        str(ROOT / "examples/imports/evcc-meter.yaml"),
+        "--param",
+        "usage=pv",
+    )
+    assert evcc.returncode == 0, evcc.stderr
+    assert parse_profile(evcc.stdout, "evcc.toml").point("power").scale == -1.0
+    assert evcc.stderr.strip() == "aiortu profile: skipped soc: no Modbus register (source 'const')"
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(
+        "modbus:\n  - name: hub\n    sensors:\n      - name: X\n        address: 1\n"
+        "        data_type: float16\n"
+    )
+    refused = run_aiortu("profile", "import", "home-assistant", str(bad))
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == (
+        "aiortu profile: error: bad.yaml: hub.sensors[0] (X).data_type: 'float16' has no "
+        "profile type (known: int8, int16, int32, int64, uint8, uint16, uint32, uint64, "
+        "float32, float64, string)"
+    )

@@ -213,3 +213,33 @@ async def test_the_profile_poller_delivers_every_class() -> None:
             await poller.run(cycles=3)
         fast = [r for r in seen if r.name == "a"]
         assert len(fast) >= 2 + 3 * 2
+
+
+async def test_units_match_the_profiles_that_identify_them() -> None:
+    pump = load_profile(Path(__file__).parents[2] / "examples/profiles/heat-pump.toml")
+    meter = load_profile(PROFILES / "eastron-sdm630.toml")  # it says nothing to match by
+    other = parse_profile(
+        HOLEY + '\n[device.identify]\nobjects = { vendor_name = "acme" }\n'
+        'probe = [{ point = "a", equals = [9] }]\n',
+        "other.toml",
+    )
+    stores = {
+        7: aiortu.ProfileStore(pump),
+        8: aiortu.ProfileStore(other),
+        9: aiortu.ProfileStore(parse_profile(HOLEY, "holey.toml")),
+    }
+    stores[8].set_value("a", 9)
+    async with served(stores) as master:
+        found = {
+            unit: [
+                (m.profile.source, m.by)
+                for m in await aiortu.master.match_profiles(master, unit, [pump, meter, other])
+            ]
+            for unit in (7, 8, 9)
+        }
+        stores[8].set_value("a", 1)  # the probe no longer holds
+        again = await aiortu.master.match_profiles(master, 8, [pump, meter, other])
+    assert found[7] == [(pump.source, ("device identification", "probes"))]
+    assert found[8] == [("other.toml", ("device identification", "probes"))]
+    assert found[9] == []  # the objects match, the probe does not
+    assert again == []

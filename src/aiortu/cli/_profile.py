@@ -63,6 +63,8 @@ examples:
   aiortu profile import home-assistant configuration.yaml --out-dir profiles/
       a profile per unit of each hub of the modbus: section
   aiortu profile import evcc sdm-meter.yaml --param usage=grid > meter.toml
+  aiortu profile match /dev/ttyUSB0 --unit 1,2,3 --profile meter.toml --profile pump.toml
+      which profile each unit matches (identification objects, probes, SunSpec marker)
   aiortu profile walk tcp://10.0.0.9:502 --unit 1 > inverter.toml
       a SunSpec device describes itself: its models as a profile
   aiortu profile sunspec 1 103 160 --repeats 2 --value m103.W=1500 > sim.toml
@@ -121,6 +123,18 @@ def register(subparsers: Subparsers) -> None:
     write.add_argument("point", metavar="POINT", help="the point to write")
     write.add_argument("value", metavar="VALUE", help="a number, true/false, or a name")
     write.set_defaults(run=_write)
+    match = actions.add_parser("match", help="which known profiles units match")
+    add_line_options(match)
+    match.add_argument("--unit", required=True, help="unit address(es): 1..247, comma-separated")
+    match.add_argument(
+        "--profile",
+        action="append",
+        dest="profiles",
+        metavar="PROFILE",
+        help="a profile file or shipped name to match (default: every shipped profile)",
+    )
+    match.add_argument("--models-dir", help="SunSpec's model definitions (default: pysunspec2's)")
+    match.set_defaults(run=_match)
     walk = actions.add_parser("walk", help="walk a SunSpec device and print its profile")
     add_line_options(walk)
     walk.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
@@ -263,7 +277,7 @@ def _write(args: argparse.Namespace) -> int:
 
 def _units(text: str | None) -> list[int]:
     if not text:
-        raise UsageError("poll --profile needs --unit (one unit, or several comma-separated)")
+        raise UsageError("--unit is needed with a profile (one unit, or several comma-separated)")
     return [unit(part) for part in text.split(",")]
 
 
@@ -458,3 +472,34 @@ def _import(args: argparse.Namespace) -> int:
         target.write_text(text, encoding="utf-8")
         print(target)
     return 0
+
+
+def _match(args: argparse.Namespace) -> int:
+    from aiortu.core.model import SunSpecModels
+    from aiortu.master import match_profiles
+
+    try:
+        names = args.profiles or list(shipped_profiles())
+        profiles = [open_profile(name) for name in names]
+    except ConfigError as error:
+        return _failed(error)
+    try:
+        models: SunSpecModels | None = SunSpecModels.locate(args.models_dir)
+    except ConfigError:
+        models = None  # no definitions: the SunSpec marker is not looked for
+
+    async def body() -> int:
+        units = _units(args.unit)
+        async with open_from_args(args) as master:
+            for unit in units:
+                found = await match_profiles(master, unit, profiles, sunspec=models)
+                if not found:
+                    print(f"unit {unit}: no known profile matches", flush=True)
+                for match in found:
+                    device = match.profile.device
+                    where = match.profile.source
+                    by = ", ".join(match.by)
+                    print(f"unit {unit}: {device.manufacturer} {device.model} ({where}) by {by}")
+        return 0
+
+    return run_master(args, body)

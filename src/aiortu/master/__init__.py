@@ -14,6 +14,7 @@ from aiortu.master._client import Master, open_master
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
 from aiortu.master._device import Device, Reading
 from aiortu.master._handles import BroadcastHandle, UnitHandle
+from aiortu.master._identify import ProfileMatch, match_profiles
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
 from aiortu.master._profile_poller import ProfilePoller
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
@@ -31,6 +32,7 @@ __all__ = (
     "Master",
     "Point",
     "Poller",
+    "ProfileMatch",
     "ProfilePoller",
     "Reading",
     "ReconnectPolicy",
@@ -44,6 +46,7 @@ __all__ = (
     "UnitSkipped",
     "UnitState",
     "UnitStats",
+    "match_profiles",
     "open_master",
     "walk_sunspec",
 )

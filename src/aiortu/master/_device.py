@@ -15,7 +15,7 @@ Everything goes through the master's public methods.
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 from aiortu.core.codes import ExceptionCode
@@ -105,17 +105,28 @@ class Device:
             for p in wanted
         }
 
+    async def read_points(self, names: Iterable[str]) -> dict[str, Reading]:
+        """Read the points `names` (their plan made once and kept): a
+        [`Reading`][aiortu.master.Reading] each, by name."""
+        key = ",".join(names := list(names))
+        plan = self._plans.get(f"points:{key}")
+        if plan is None:
+            chosen = [self.profile.point(name) for name in names]
+            plan = self._plans[f"points:{key}"] = ReadPlan(self.profile, chosen)
+        raws, errors = await read_plan(plan, self._read_block)
+        values = plan.values(raws)
+        return {
+            n: Reading(self.unit, self.profile.point(n), values.get(n), raws.get(n), errors.get(n))
+            for n in names
+        }
+
     async def read_point(self, name: str) -> Value:
         """The value of the point `name`, with its scale factor applied; raises the error that
         kept it unread."""
-        point = self.profile.point(name)
-        plan = self._plans.get(f"point:{name}")
-        if plan is None:
-            plan = self._plans[f"point:{name}"] = ReadPlan(self.profile, [point])
-        raws, errors = await read_plan(plan, self._read_block)
-        if name in errors:
-            raise errors[name]
-        return plan.values(raws)[name]
+        reading = (await self.read_points([name]))[name]
+        if reading.error is not None:
+            raise reading.error
+        return reading.value
 
     async def write(self, name: str, value: object) -> None:
         """Write `value` to the point `name`: checked against its access, kind and limits

@@ -22,6 +22,7 @@ from dataclasses import replace
 
 from aiortu.core.codes import DeviceIdObject, ExceptionCode
 from aiortu.core.model import (
+    OBJECT_IDS,
     PointType,
     Profile,
     ProfilePoint,
@@ -34,16 +35,6 @@ from aiortu.core.model import (
 from aiortu.slave._store import Block, MemoryStore
 
 __all__ = ("ProfileStore",)
-
-_OBJECT_IDS = {
-    "vendor_name": DeviceIdObject.VENDOR_NAME,
-    "product_code": DeviceIdObject.PRODUCT_CODE,
-    "revision": DeviceIdObject.MAJOR_MINOR_REVISION,
-    "vendor_url": DeviceIdObject.VENDOR_URL,
-    "product_name": DeviceIdObject.PRODUCT_NAME,
-    "model_name": DeviceIdObject.MODEL_NAME,
-    "user_application_name": DeviceIdObject.USER_APPLICATION_NAME,
-}
 
 
 def _blocks(profile: Profile, table: Table) -> list[Block]:
@@ -66,14 +57,14 @@ def _blocks(profile: Profile, table: Table) -> list[Block]:
 
 def _identification(profile: Profile) -> dict[int, str]:
     device = profile.device
-    objects = {
+    objects: dict[int, str] = {
         DeviceIdObject.VENDOR_NAME: device.manufacturer,
         DeviceIdObject.PRODUCT_CODE: device.model,
         DeviceIdObject.MAJOR_MINOR_REVISION: "1.0",
         DeviceIdObject.MODEL_NAME: device.model,
     }
     for name, text in device.identify.objects.items():
-        objects[_OBJECT_IDS[name]] = text
+        objects[OBJECT_IDS[name]] = text
     return {int(key): text for key, text in objects.items()}
 
 

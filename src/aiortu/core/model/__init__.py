@@ -57,6 +57,7 @@ from aiortu.core.model._poll_plan import (
 )
 from aiortu.core.model._profile import (
     DEFAULT_POLL_CLASS,
+    OBJECT_IDS,
     Access,
     DeviceInfo,
     Hole,
@@ -129,6 +130,7 @@ __all__ = (
     "MAX_READ_BITS",
     "MAX_READ_REGISTERS",
     "NUMBER_RANGE",
+    "OBJECT_IDS",
     "PlanLimits",
     "PlannedRead",
     "Point",

@@ -15,6 +15,7 @@ from aiortu.core.model._addressing import Table
 from aiortu.core.model._values import Layout
 
 __all__ = (
+    "OBJECT_IDS",
     "Access",
     "DeviceInfo",
     "Hole",
@@ -30,6 +31,20 @@ __all__ = (
 Value = bool | int | float | str | tuple[str, ...] | None
 """A point's value: a number or a bool, a text (strings, and enums by name), the names of the
 flags set (bitfields), or `None` when the device says it has none."""
+
+
+OBJECT_IDS = {
+    "vendor_name": 0x00,
+    "product_code": 0x01,
+    "revision": 0x02,
+    "vendor_url": 0x03,
+    "product_name": 0x04,
+    "model_name": 0x05,
+    "user_application_name": 0x06,
+}
+"""The device identification objects a profile may name, with their object ids."""
+
+_UNREAD = object()
 
 
 class PointType(enum.StrEnum):
@@ -143,6 +158,19 @@ class Identification:
     def empty(self) -> bool:
         """Whether the profile gives no way to recognise the device."""
         return not self.objects and not self.probes
+
+    def objects_match(self, found: Mapping[int, bytes]) -> bool:
+        """Whether the device identification objects `found` (by id) contain each text the
+        profile asks for, ignoring case."""
+        for name, text in self.objects.items():
+            value = found.get(OBJECT_IDS[name])
+            if value is None or text.lower() not in value.decode("latin-1").lower():
+                return False
+        return True
+
+    def probes_match(self, raws: Mapping[str, object]) -> bool:
+        """Whether each probe's point read (raw values by point name) one of its values."""
+        return all(raws.get(p.point, _UNREAD) in p.equals for p in self.probes)
 
 
 @dataclass(frozen=True, slots=True)
