@@ -107,22 +107,7 @@ def register(subparsers: Subparsers) -> None:
     actions.add_parser("list", help="the shipped profiles").set_defaults(run=_list)
     reference = actions.add_parser("reference", help="print the format reference (Markdown)")
     reference.set_defaults(run=_reference)
-    read = actions.add_parser("read", help="read points of a device by name")
-    add_line_options(read)
-    read.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
-    read.add_argument("--profile", required=True, help="a profile file or a shipped name")
-    read.add_argument(
-        "--point", action="append", dest="points", metavar="NAME", help="a point (all if none)"
-    )
-    read.add_argument("--json", action="store_true", help="print one JSON object")
-    read.set_defaults(run=_read)
-    write = actions.add_parser("write", help="write a point of a device by name")
-    add_line_options(write)
-    write.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
-    write.add_argument("--profile", required=True, help="a profile file or a shipped name")
-    write.add_argument("point", metavar="POINT", help="the point to write")
-    write.add_argument("value", metavar="VALUE", help="a number, true/false, or a name")
-    write.set_defaults(run=_write)
+    _add_device_actions(actions)
     match = actions.add_parser("match", help="which known profiles units match")
     add_line_options(match)
     match.add_argument("--unit", required=True, help="unit address(es): 1..247, comma-separated")
@@ -157,6 +142,26 @@ def register(subparsers: Subparsers) -> None:
     layout.add_argument("--value", action="append", default=[], metavar="NAME=VALUE")
     layout.add_argument("--models-dir", help="SunSpec's model definitions (default: pysunspec2's)")
     layout.set_defaults(run=_sunspec)
+
+
+def _add_device_actions(actions: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The actions that talk to a device: `read` and `write` by name."""
+    read = actions.add_parser("read", help="read points of a device by name")
+    add_line_options(read)
+    read.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    read.add_argument("--profile", required=True, help="a profile file or a shipped name")
+    read.add_argument(
+        "--point", action="append", dest="points", metavar="NAME", help="a point (all if none)"
+    )
+    read.add_argument("--json", action="store_true", help="print one JSON object")
+    read.set_defaults(run=_read)
+    write = actions.add_parser("write", help="write a point of a device by name")
+    add_line_options(write)
+    write.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    write.add_argument("--profile", required=True, help="a profile file or a shipped name")
+    write.add_argument("point", metavar="POINT", help="the point to write")
+    write.add_argument("value", metavar="VALUE", help="a number, true/false, or a name")
+    write.set_defaults(run=_write)
 
 
 def _failed(error: ConfigError | InvalidValue) -> int:
