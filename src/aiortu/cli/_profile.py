@@ -17,9 +17,9 @@ import json
 import random
 import signal
 import sys
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TextIO
 
 import anyio
 
@@ -43,10 +43,12 @@ from aiortu.core.model import (
 from aiortu.errors import ConfigError, InvalidValue
 
 if TYPE_CHECKING:
+    from aiortu.core.serial import LineSettings
     from aiortu.slave import MemoryStore, ProfileStore
 
 __all__ = (
     "SHIPPED",
+    "report_matches",
     "open_profile",
     "register",
     "run_poll",
@@ -508,3 +510,46 @@ def _match(args: argparse.Namespace) -> int:
         return 0
 
     return run_master(args, body)
+
+
+async def report_matches(
+    port: str,
+    found: Sequence[tuple[int, LineSettings]],
+    names: Sequence[str],
+    *,
+    response_timeout: float,
+    out: TextIO,
+) -> None:
+    """For `aiortu scan --profile`: which of the profiles `names` (files or shipped names;
+    every shipped profile when empty) each unit `found` (with the setting it answered at)
+    matches, one line each, reading the unit at that setting."""
+    from aiortu.core.model import SunSpecModels
+    from aiortu.master import match_profiles, open_master
+
+    profiles = [open_profile(name) for name in names or shipped_profiles()]
+    try:
+        models: SunSpecModels | None = SunSpecModels.locate()
+    except ConfigError:
+        models = None
+    by_setting: dict[LineSettings, list[int]] = {}
+    for address, settings in found:
+        by_setting.setdefault(settings, []).append(address)
+    for settings, units in by_setting.items():
+        async with open_master(
+            port,
+            baudrate=settings.baudrate,
+            parity=str(settings.parity),
+            stopbits=settings.stopbits,
+            timeout=response_timeout,
+            retries=0,
+            reconnect=False,
+        ) as master:
+            for address in sorted(set(units)):
+                matches = await match_profiles(master, address, profiles, sunspec=models)
+                names_found = [
+                    f"{m.profile.device.manufacturer} {m.profile.device.model} "
+                    f"({m.profile.source}, by {', '.join(m.by)})"
+                    for m in matches
+                ]
+                out.write(f"unit {address}: {'; '.join(names_found) or 'no known profile'}\n")
+    out.flush()
