@@ -239,7 +239,15 @@ def encode_point(point: ProfilePoint, value: Value, sf: int | None = None) -> tu
         return (int(bool(value)),)
     if kind is PointType.STRING:
         assert isinstance(value, str)
-        data = value.encode(point.encoding, errors="replace")
+        try:
+            data = value.encode(point.encoding)
+        except UnicodeEncodeError as error:
+            raise _fail(
+                point,
+                value,
+                point.encoding,
+                f"text {value!r} has characters {point.encoding} cannot encode ({error.reason})",
+            ) from None
         if len(data) > 2 * point.size:
             raise _fail(
                 point,
