@@ -122,9 +122,11 @@ def _broadcast(
         [
             inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD),
             *parameters,
-            inspect.Parameter("priority", inspect.Parameter.KEYWORD_ONLY, default=0),
+            inspect.Parameter(
+                "priority", inspect.Parameter.KEYWORD_ONLY, default=0, annotation="int"
+            ),
         ],
-        return_annotation=None,
+        return_annotation="None",
     )
     send.__qualname__ = f"BroadcastHandle.{name}"
     return send  # type: ignore[return-value]  # its call is BroadcastMethod's
