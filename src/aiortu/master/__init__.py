@@ -11,13 +11,14 @@ from __future__ import annotations
 from aiortu.errors import UnitOffline, UnitSkipped
 from aiortu.master._client import Master, open_master
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
-from aiortu.master._handles import BroadcastHandle, UnitHandle
+from aiortu.master._handles import BroadcastHandle, BroadcastMethod, UnitHandle
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
 from aiortu.master._records import FileRecordLike, RecordRequestLike
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
 
 __all__ = (
     "BroadcastHandle",
+    "BroadcastMethod",
     "CycleReport",
     "CycleStats",
     "FileRecordLike",

@@ -215,6 +215,7 @@ class Master(Operations):
             stack.callback(task_group.cancel_scope.cancel)
             task_group.start_soon(self.connection.run, name="aiortu master line task")
             self._exit_stack = stack.pop_all()
+        self._entered_in = anyio.get_current_task().id
         return self
 
     async def __aexit__(
@@ -223,9 +224,16 @@ class Master(Operations):
         exc: BaseException | None,
         traceback: TracebackType | None,
     ) -> bool | None:
-        stack, self._exit_stack = self._exit_stack, None
-        if stack is None:
+        if self._exit_stack is None:
             return None
+        if anyio.get_current_task().id != self._entered_in:
+            # The line task runs in a task group of the entering task; no other may end it.
+            raise RuntimeError(
+                "a master must be left in the task that entered it, and this is another"
+                " (the asyncio REPL runs each statement in a task of its own): use `async with`"
+                " in one statement, or aiortu.blocking, whose masters close from any thread"
+            )
+        stack, self._exit_stack = self._exit_stack, None
         return await stack.__aexit__(exc_type, exc, traceback)
 
     @property

@@ -15,11 +15,11 @@ that the slaves can execute it.
 
 from __future__ import annotations
 
-import functools
 import inspect
 from collections.abc import Callable, Coroutine
 from typing import Any, Concatenate, ParamSpec, Protocol, TypeVar, TypeVarTuple, Unpack
 
+from aiortu._derived import derive
 from aiortu.core.addressing import Table, parse_reference
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import InvalidRequest
@@ -59,22 +59,6 @@ _REGISTER_TABLES = {
 }
 
 
-def derived(
-    wrapper: Callable[..., Any], source: Callable[..., Any], drop: int, *, doc: str | None = None
-) -> None:
-    """Give `wrapper` the name, docstring and signature of `source`, whose parameters after
-    `self` lose their first `drop` (the unit a handle binds)."""
-    functools.update_wrapper(wrapper, source, assigned=("__module__", "__name__", "__doc__"))
-    del wrapper.__wrapped__  # type: ignore[attr-defined]  # the signature is set just below
-    signature = inspect.signature(source)
-    parameters = list(signature.parameters.values())
-    wrapper.__signature__ = signature.replace(  # type: ignore[attr-defined]
-        parameters=parameters[:1] + parameters[1 + drop :]
-    )
-    if doc is not None:
-        wrapper.__doc__ = doc
-
-
 def on_unit(
     operation: Callable[Concatenate[Operations, int, _P], Coroutine[Any, Any, _R]],
 ) -> Callable[Concatenate[UnitHandle, _P], Coroutine[Any, Any, _R]]:
@@ -88,8 +72,7 @@ def on_unit(
         result: _R = await method(self.unit, *args, **kwargs)
         return result
 
-    derived(bound, operation, 1)
-    bound.__qualname__ = f"UnitHandle.{name}"
+    derive(bound, operation, "UnitHandle", drop=1)
     return bound
 
 
@@ -117,7 +100,7 @@ def _broadcast(
         " turnaround delay has passed."
     )
     parameters = list(inspect.signature(build).parameters.values())
-    derived(send, operation, 0, doc=doc)
+    derive(send, operation, "BroadcastHandle", doc=doc)
     send.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
         [
             inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD),
@@ -128,7 +111,6 @@ def _broadcast(
         ],
         return_annotation="None",
     )
-    send.__qualname__ = f"BroadcastHandle.{name}"
     return send  # type: ignore[return-value]  # its call is BroadcastMethod's
 
 
