@@ -5,8 +5,8 @@
 
 [`UnitHandle`][aiortu.master.UnitHandle] (`master.slave(17)`) has the master's methods without the
 unit, and typed values on top: 32-bit integers, floats and strings in holding or input registers, in
-any word layout ([`aiortu.core.values`][aiortu.core.values]), and reads by reference (`"40108"`,
-[`aiortu.core.addressing`][aiortu.core.addressing]).
+any word layout ([`aiortu.core.model`][aiortu.core.model]), and reads by reference (`"40108"`,
+[`aiortu.core.model`][aiortu.core.model]).
 
 [`BroadcastHandle`][aiortu.master.BroadcastHandle] (`master.broadcast`) has the writes the spec lets
 be broadcast: each goes to unit 0, no reply is awaited, and the line waits the turnaround delay so
@@ -20,21 +20,22 @@ from collections.abc import Callable, Coroutine
 from typing import Any, Concatenate, ParamSpec, Protocol, TypeVar, TypeVarTuple, Unpack
 
 from aiortu._derived import derive
-from aiortu.core.addressing import Table, parse_reference
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import InvalidRequest
-from aiortu.core.pdu import Request
-from aiortu.core.values import (
+from aiortu.core.model import (
     Layout,
+    Table,
     ValueType,
     as_layout,
     as_value_type,
     check_encoding,
     decode_value,
     encode_value,
+    parse_reference,
     registers_to_string,
     string_to_registers,
 )
+from aiortu.core.pdu import Request
 from aiortu.master._operations import (
     Operations,
     mask_write_register_request,

@@ -22,26 +22,26 @@ from abc import abstractmethod
 from collections.abc import Awaitable, Iterable, Sequence
 from typing import TypeVar
 
-from aiortu.core import pdu_device_id, pdu_files, pdu_serial_line
+from aiortu.core import pdu
 from aiortu.core.codes import DeviceIdReadCode, DiagnosticSubFunction
 from aiortu.core.errors import ExceptionResponse, InvalidRequest, MalformedPDU
-from aiortu.core.pdu import ExceptionPDU, Request, Response
-from aiortu.core.pdu_bits import (
+from aiortu.core.pdu import (
+    ExceptionPDU,
+    MaskWriteRegisterRequest,
     ReadCoilsRequest,
     ReadCoilsResponse,
     ReadDiscreteInputsRequest,
-    WriteMultipleCoilsRequest,
-    WriteSingleCoilRequest,
-)
-from aiortu.core.pdu_registers import (
-    MaskWriteRegisterRequest,
     ReadFifoQueueRequest,
     ReadFifoQueueResponse,
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
     ReadInputRegistersRequest,
     ReadWriteMultipleRegistersRequest,
+    Request,
+    Response,
+    WriteMultipleCoilsRequest,
     WriteMultipleRegistersRequest,
+    WriteSingleCoilRequest,
     WriteSingleRegisterRequest,
 )
 from aiortu.master._arguments import check_coil, check_coils, check_registers
@@ -135,9 +135,9 @@ def mask_write_register_request(
 
 def write_file_record_request(
     records: Iterable[FileRecordLike],
-) -> pdu_files.WriteFileRecordRequest:
+) -> pdu.WriteFileRecordRequest:
     """The request of write file record (15), its arguments checked."""
-    return pdu_files.WriteFileRecordRequest(file_records(records))
+    return pdu.WriteFileRecordRequest(file_records(records))
 
 
 class Operations:
@@ -349,12 +349,12 @@ class Operations:
     ) -> list[list[int]]:
         """Read file records (14): one list of values per sub-request, in order.
 
-        Each sub-request is a [`FileRecordRequest`][aiortu.core.pdu_files.FileRecordRequest] or a
+        Each sub-request is a [`FileRecordRequest`][aiortu.core.pdu.FileRecordRequest] or a
         `(file_number, record_number, record_length)` tuple.
         """
-        request = pdu_files.ReadFileRecordRequest(record_requests(sub_requests))
+        request = pdu.ReadFileRecordRequest(record_requests(sub_requests))
         reply = await self.request(
-            unit, request, pdu_files.ReadFileRecordResponse, timeout=timeout, priority=priority
+            unit, request, pdu.ReadFileRecordResponse, timeout=timeout, priority=priority
         )
         return [list(values) for values in reply.records]
 
@@ -368,7 +368,7 @@ class Operations:
     ) -> None:
         """Write file records (15); the echo is verified.
 
-        Each record is a [`FileRecord`][aiortu.core.pdu_files.FileRecord] or a
+        Each record is a [`FileRecord`][aiortu.core.pdu.FileRecord] or a
         `(file_number, record_number, values)` tuple.
         """
         request = write_file_record_request(records)
@@ -382,8 +382,8 @@ class Operations:
         """Read the eight exception status bits of the device as one byte (07)."""
         reply = await self.request(
             unit,
-            pdu_serial_line.ReadExceptionStatusRequest(),
-            pdu_serial_line.ReadExceptionStatusResponse,
+            pdu.ReadExceptionStatusRequest(),
+            pdu.ReadExceptionStatusResponse,
             timeout=timeout,
             priority=priority,
         )
@@ -397,7 +397,7 @@ class Operations:
         *,
         timeout: float | None = None,
         priority: int = 0,
-    ) -> pdu_serial_line.DiagnosticsResponse | None:
+    ) -> pdu.DiagnosticsResponse | None:
         """Run diagnostics `sub_function` with `data` (08); return the reply.
 
         Force listen-only mode (04) gets no reply: it is sent, followed by the turnaround
@@ -405,50 +405,50 @@ class Operations:
         """
         if not isinstance(data, bytes | bytearray | memoryview):
             raise InvalidRequest("data", data, "bytes")
-        request = pdu_serial_line.DiagnosticsRequest(sub_function, data)
+        request = pdu.DiagnosticsRequest(sub_function, data)
         if request.sub_function == DiagnosticSubFunction.FORCE_LISTEN_ONLY_MODE:
             await self.send_without_reply(unit, request, priority=priority)
             return None
         return await self.request(
             unit,
             request,
-            pdu_serial_line.DiagnosticsResponse,
+            pdu.DiagnosticsResponse,
             timeout=timeout,
             priority=priority,
         )
 
     async def get_comm_event_counter(
         self, unit: int, *, timeout: float | None = None, priority: int = 0
-    ) -> pdu_serial_line.GetCommEventCounterResponse:
+    ) -> pdu.GetCommEventCounterResponse:
         """Read the status word and the event counter of the device (0B)."""
         return await self.request(
             unit,
-            pdu_serial_line.GetCommEventCounterRequest(),
-            pdu_serial_line.GetCommEventCounterResponse,
+            pdu.GetCommEventCounterRequest(),
+            pdu.GetCommEventCounterResponse,
             timeout=timeout,
             priority=priority,
         )
 
     async def get_comm_event_log(
         self, unit: int, *, timeout: float | None = None, priority: int = 0
-    ) -> pdu_serial_line.GetCommEventLogResponse:
+    ) -> pdu.GetCommEventLogResponse:
         """Read the status, the counters and the event log of the device (0C)."""
         return await self.request(
             unit,
-            pdu_serial_line.GetCommEventLogRequest(),
-            pdu_serial_line.GetCommEventLogResponse,
+            pdu.GetCommEventLogRequest(),
+            pdu.GetCommEventLogResponse,
             timeout=timeout,
             priority=priority,
         )
 
     async def report_server_id(
         self, unit: int, *, timeout: float | None = None, priority: int = 0
-    ) -> pdu_serial_line.ReportServerIdResponse:
+    ) -> pdu.ReportServerIdResponse:
         """Read the device's server id, run indicator and additional data (11)."""
         return await self.request(
             unit,
-            pdu_serial_line.ReportServerIdRequest(),
-            pdu_serial_line.ReportServerIdResponse,
+            pdu.ReportServerIdRequest(),
+            pdu.ReportServerIdResponse,
             timeout=timeout,
             priority=priority,
         )
@@ -470,11 +470,11 @@ class Operations:
         objects: dict[int, bytes] = {}
         next_id = object_id
         for _ in range(_MAX_DEVICE_ID_READS):
-            request = pdu_device_id.ReadDeviceIdentificationRequest(read_code, next_id)
+            request = pdu.ReadDeviceIdentificationRequest(read_code, next_id)
             reply = await self.request(
                 unit,
                 request,
-                pdu_device_id.ReadDeviceIdentificationResponse,
+                pdu.ReadDeviceIdentificationResponse,
                 timeout=timeout,
                 priority=priority,
             )

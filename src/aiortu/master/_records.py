@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from aiortu.core import pdu_files
+from aiortu.core import pdu
 from aiortu.core.errors import InvalidRequest
 from aiortu.master._arguments import check_int, check_items, check_registers
 
@@ -18,10 +18,10 @@ __all__ = (
     "record_requests",
 )
 
-RecordRequestLike = pdu_files.FileRecordRequest | tuple[int, int, int]
+RecordRequestLike = pdu.FileRecordRequest | tuple[int, int, int]
 """A read file record sub-request: the class, or `(file, record, length)`."""
 
-FileRecordLike = pdu_files.FileRecord | tuple[int, int, Sequence[int]]
+FileRecordLike = pdu.FileRecord | tuple[int, int, Sequence[int]]
 """A write file record sub-record: the class, or `(file, record, values)`."""
 
 
@@ -34,37 +34,37 @@ def _fields(name: str, item: object, kind: type, names: tuple[str, str, str]) ->
     return tuple(item)
 
 
-def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
+def as_record_request(sub: RecordRequestLike) -> pdu.FileRecordRequest:
     """A read file record sub-request from the class or a `(file, record, length)` tuple."""
     names = ("file_number", "record_number", "record_length")
-    fields = _fields("sub_request", sub, pdu_files.FileRecordRequest, names)
+    fields = _fields("sub_request", sub, pdu.FileRecordRequest, names)
     for name, value in zip(names, fields, strict=True):
         check_int(name, value, range(0x10000), InvalidRequest)
-    if isinstance(sub, pdu_files.FileRecordRequest):
+    if isinstance(sub, pdu.FileRecordRequest):
         return sub
-    return pdu_files.FileRecordRequest(*sub)
+    return pdu.FileRecordRequest(*sub)
 
 
-def as_file_record(record: FileRecordLike) -> pdu_files.FileRecord:
+def as_file_record(record: FileRecordLike) -> pdu.FileRecord:
     """A write file record sub-record from the class or a `(file, record, values)` tuple."""
     names = ("file_number", "record_number", "values")
-    file_number, record_number, values = _fields("record", record, pdu_files.FileRecord, names)
+    file_number, record_number, values = _fields("record", record, pdu.FileRecord, names)
     check_int("file_number", file_number, range(0x10000), InvalidRequest)
     check_int("record_number", record_number, range(0x10000), InvalidRequest)
-    return pdu_files.FileRecord(
+    return pdu.FileRecord(
         file_number,  # type: ignore[arg-type]  # checked above
         record_number,  # type: ignore[arg-type]
         check_registers("values", values),
     )
 
 
-def record_requests(sub_requests: object) -> tuple[pdu_files.FileRecordRequest, ...]:
+def record_requests(sub_requests: object) -> tuple[pdu.FileRecordRequest, ...]:
     """The sub-requests of a read file record (14), each checked."""
     items = check_items("sub_requests", sub_requests, "an iterable of sub-requests")
     return tuple(as_record_request(sub) for sub in items)  # type: ignore[arg-type]
 
 
-def file_records(records: object) -> tuple[pdu_files.FileRecord, ...]:
+def file_records(records: object) -> tuple[pdu.FileRecord, ...]:
     """The sub-records of a write file record (15), each checked."""
     items = check_items("records", records, "an iterable of records")
     return tuple(as_file_record(record) for record in items)  # type: ignore[arg-type]
