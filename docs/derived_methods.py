@@ -26,7 +26,7 @@ def _parameter(parameter: inspect.Parameter) -> griffe.Parameter:
     )
 
 
-def _function(name: str, made: Any, parent: griffe.Class) -> griffe.Function:
+def _function(name: str, made: Any, parent: griffe.Class | griffe.Module) -> griffe.Function:
     signature = inspect.signature(made)
     returns = signature.return_annotation
     function = griffe.Function(
@@ -42,8 +42,22 @@ def _function(name: str, made: Any, parent: griffe.Class) -> griffe.Function:
     return function
 
 
+def _replace(container: griffe.Class | griffe.Module, runtime: Any) -> None:
+    for name, member in list(container.members.items()):
+        if not isinstance(member, griffe.Attribute) or name.startswith("_"):
+            continue
+        made = vars(runtime).get(name)
+        if inspect.isfunction(made):
+            container.set_member(name, _function(name, made, container))
+
+
 class DerivedMethods(griffe.Extension):
-    """Replace each attribute of an aiortu class that holds a function by that function."""
+    """Replace each attribute of an aiortu class or module that holds a function by that
+    function."""
+
+    def on_module_members(self, *, mod: griffe.Module, **kwargs: Any) -> None:
+        if mod.path.startswith("aiortu"):
+            _replace(mod, importlib.import_module(mod.path))
 
     def on_class_members(self, *, cls: griffe.Class, **kwargs: Any) -> None:
         if not cls.path.startswith("aiortu."):
@@ -52,10 +66,4 @@ class DerivedMethods(griffe.Extension):
             runtime = getattr(importlib.import_module(cls.module.path), cls.name)
         except (ImportError, AttributeError):
             return
-        for name, member in list(cls.members.items()):
-            if not isinstance(member, griffe.Attribute) or name.startswith("_"):
-                continue
-            made = runtime.__dict__.get(name)
-            if inspect.isfunction(made):
-                function = _function(name, made, cls)
-                cls.set_member(name, function)
+        _replace(cls, runtime)

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import os
 import random
+import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -190,3 +192,13 @@ def test_serve_and_open_master_over_tcp_and_a_pty_bus() -> None:
         ):
             assert master.slave(1).read_holding_registers(7, 3) == [7, 8, 9]
     assert _portal_threads() == []
+
+
+def test_ctrl_c_in_the_calling_thread_stops_the_call() -> None:
+    bus = VirtualBus(2)  # no slave: a read waits for its whole timeout
+    with aiortu.blocking.start_master(bus[0], frame_gap=0, retries=0) as master:
+        threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT)).start()
+        start = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            master.read_holding_registers(1, 0, 1, timeout=5)
+        assert time.monotonic() - start < 4
