@@ -17,7 +17,14 @@ import pytest
 
 import aiortu.blocking
 from aiortu.blocking import BlockingBroadcastHandle, BlockingMaster, BlockingUnitHandle
-from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidRequest, ResponseTimeout
+from aiortu.errors import (
+    ConnectionLost,
+    ExceptionResponse,
+    InvalidRequest,
+    InvalidValue,
+    PortNotFound,
+    ResponseTimeout,
+)
 from aiortu.master import BroadcastHandle, Master, UnitHandle
 from aiortu.slave import Block, MemoryStore
 from aiortu.testing import VirtualBus
@@ -202,3 +209,11 @@ def test_ctrl_c_in_the_calling_thread_stops_the_call() -> None:
         with pytest.raises(KeyboardInterrupt):
             master.read_holding_registers(1, 0, 1, timeout=5)
         assert time.monotonic() - start < 4
+
+
+def test_an_opening_error_is_raised_and_leaves_no_thread() -> None:
+    with pytest.raises(PortNotFound):
+        aiortu.blocking.open_master("/dev/ttyUSB-none-such", reconnect=False)
+    with pytest.raises(InvalidValue, match=r"^timeout must be"):
+        aiortu.blocking.start_master(VirtualBus(2)[0], timeout=-1)
+    assert _portal_threads() == []
