@@ -93,9 +93,11 @@ def test_reads_writes_handles_and_broadcast(
     assert handle.read_float32(20) == 21.5
     assert handle.read_reference("40011", 2) == [1, 2]
     master.broadcast.write_coils(0, [True, False, True])
+    master.broadcast.write_register(address=30, value=9, priority=1)
     for unit in UNITS:
         assert master.read_coils(unit, 0, 3) == [True, False, True]
-    assert master.unit_stats(0).requests == 1  # the broadcast
+    assert master.read_holding_registers(1, 30, 1) == [9]
+    assert master.unit_stats(0).requests == 2  # the broadcasts
     assert master.is_online(1)
     assert master.connected
 

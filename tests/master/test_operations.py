@@ -92,6 +92,18 @@ def test_a_broadcast_takes_the_writes_arguments_and_a_priority(name: str) -> Non
     assert f"[`Master.{name}`][aiortu.master.Master.{name}]" in (method.__doc__ or "")
 
 
+async def test_a_broadcast_takes_its_arguments_by_keyword_too() -> None:
+    async with line(turnaround_delay=0.001) as (master, slave, _):
+        await master.broadcast.write_register(address=0x10, value=7, priority=1)
+        await master.broadcast.mask_write_register(1, and_mask=0xFF, or_mask=0)
+        assert [(seen.unit, seen.request.function_code) for seen in slave.seen] == [
+            (0, 6),
+            (0, 0x16),
+        ]
+        with pytest.raises(TypeError):
+            await master.broadcast.write_register(0x10, 7, timeout=1)  # type: ignore[call-arg]
+
+
 async def test_a_handle_calls_the_masters_method_with_its_unit() -> None:
     async with line() as (master, slave, _):
         handle = master.slave(17)

@@ -76,8 +76,8 @@ def _blocking_broadcast(
     """The blocking form of a broadcast `method`."""
     name = method.__name__  # type: ignore[attr-defined]  # a function, whose type is the protocol
 
-    def call(self: _Blocking, /, *args: *_Ts, priority: int = 0) -> None:
-        self._running.call(getattr(self._target, name), *args, priority=priority)
+    def call(self: _Blocking, /, *args: *_Ts, priority: int = 0, **named: Any) -> None:
+        self._running.call(getattr(self._target, name), *args, priority=priority, **named)
 
     derive(call, method, None)
     return call  # type: ignore[return-value]  # its call is the protocol's

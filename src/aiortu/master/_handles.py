@@ -90,8 +90,10 @@ def _broadcast(
     """The broadcast form of the master's write `operation`, whose request `build` makes."""
     name = operation.__name__
 
-    async def send(self: BroadcastHandle, /, *args: *_Ts, priority: int = 0) -> None:
-        request = build(*args)
+    # The write's arguments by keyword too, as its signature shows (the protocol's type
+    # cannot say so: a TypeVarTuple has no names).
+    async def send(self: BroadcastHandle, /, *args: *_Ts, priority: int = 0, **named: Any) -> None:
+        request = build(*args, **named)
         await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
 
     code = inspect.signature(build, eval_str=True).return_annotation.function_code
