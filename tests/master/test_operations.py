@@ -9,6 +9,7 @@ import inspect
 import anyio
 import pytest
 
+from aiortu.errors import InvalidRequest
 from aiortu.master import BroadcastHandle, Master, UnitHandle
 from aiortu.master._operations import Operations
 from aiortu.testing import VirtualBus
@@ -140,3 +141,21 @@ async def test_a_master_left_in_another_task_says_so_and_stays_open() -> None:
         leave.set()
         await left.wait()
     assert not other.connected
+
+
+@pytest.mark.parametrize("bad", [1.0, True, [1], None])
+async def test_a_read_made_before_does_not_let_a_bad_address_through(bad: object) -> None:
+    async with line() as (master, slave, _):
+        reads = (
+            master.read_coils,
+            master.read_discrete_inputs,
+            master.read_holding_registers,
+            master.read_input_registers,
+        )
+        for read in reads:
+            await read(1, 1, 1)  # the request for address 1 is made and kept
+            with pytest.raises(InvalidRequest, match=r"^address "):
+                await read(1, bad, 1)  # type: ignore[arg-type]
+            with pytest.raises(InvalidRequest, match=r"^count "):
+                await read(1, 1, bad)  # type: ignore[arg-type]
+        assert len(slave.seen) == len(reads)

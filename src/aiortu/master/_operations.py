@@ -18,6 +18,7 @@ that a read is one coroutine (the caller's) waiting on the engine.
 
 from __future__ import annotations
 
+import functools
 from abc import abstractmethod
 from collections.abc import Awaitable, Iterable, Sequence
 from typing import TypeVar
@@ -59,18 +60,17 @@ __all__ = (
 )
 
 _ResponseT = TypeVar("_ResponseT", bound=Response)
-_ReadT = TypeVar(
-    "_ReadT",
-    ReadCoilsRequest,
-    ReadDiscreteInputsRequest,
-    ReadHoldingRegistersRequest,
-    ReadInputRegistersRequest,
-)
-
 _READ_CACHE_SIZE = 256
-"""Read requests kept made (see `_read_request`)."""
+"""Read requests of each kind kept made: a poll loop reads the same blocks again and again,
+and a request (immutable) is encoded once. A hit in the cache (functools' C code) makes no
+Python call; a miss, or arguments of another type (`typed`: `1.0` and `True` are not `1`),
+runs the constructor, which checks them. Unhashable arguments miss the cache by a TypeError
+and meet the constructor's check too (see the reads)."""
 
-_reads: dict[tuple[type[Request], int, int], Request] = {}
+_coils_reads = functools.lru_cache(_READ_CACHE_SIZE, typed=True)(ReadCoilsRequest)
+_inputs_reads = functools.lru_cache(_READ_CACHE_SIZE, typed=True)(ReadDiscreteInputsRequest)
+_holding_reads = functools.lru_cache(_READ_CACHE_SIZE, typed=True)(ReadHoldingRegistersRequest)
+_input_register_reads = functools.lru_cache(_READ_CACHE_SIZE, typed=True)(ReadInputRegistersRequest)
 
 _MAX_DEVICE_ID_READS = 256
 """A device cannot stream more objects than there are ids; stop a looping one there."""
@@ -86,21 +86,6 @@ def answer(
     if not isinstance(response, expected):
         raise MalformedPDU(f"{type(response).__name__} does not answer {type(pdu).__name__}")
     return response
-
-
-def _read_request(kind: type[_ReadT], address: int, count: int) -> _ReadT:
-    """`kind(address, count)`, made once per address and count: a poll loop reads the same
-    blocks again and again, and a request object (immutable) is encoded once."""
-    if type(address) is not int or type(count) is not int:
-        return kind(address, count)  # the constructor says what is wrong (a float...)
-    key = (kind, address, count)
-    request = _reads.get(key)
-    if request is None:
-        request = kind(address, count)
-        if len(_reads) >= _READ_CACHE_SIZE:
-            _reads.clear()
-        _reads[key] = request
-    return request  # type: ignore[return-value]  # the key's kind made it
 
 
 # -- the requests of the writes a broadcast may carry, checked ---------------------------
@@ -187,7 +172,10 @@ class Operations:
         priority: int = 0,
     ) -> list[bool]:
         """Read `count` (1..2000) coils from `address` (01)."""
-        request = _read_request(ReadCoilsRequest, address, count)
+        try:
+            request = _coils_reads(address, count)
+        except TypeError:  # unhashable: the constructor says what is wrong
+            request = ReadCoilsRequest(address, count)
         response = await self._submit(unit, request, timeout, priority)
         return request.bits_of(answer(response, request, unit, ReadCoilsResponse))
 
@@ -201,7 +189,10 @@ class Operations:
         priority: int = 0,
     ) -> list[bool]:
         """Read `count` (1..2000) discrete inputs from `address` (02)."""
-        request = _read_request(ReadDiscreteInputsRequest, address, count)
+        try:
+            request = _inputs_reads(address, count)
+        except TypeError:  # unhashable: the constructor says what is wrong
+            request = ReadDiscreteInputsRequest(address, count)
         response = await self._submit(unit, request, timeout, priority)
         return request.bits_of(answer(response, request, unit, ReadCoilsResponse))
 
@@ -248,7 +239,10 @@ class Operations:
         priority: int = 0,
     ) -> list[int]:
         """Read `count` (1..125) holding registers from `address` (03)."""
-        request = _read_request(ReadHoldingRegistersRequest, address, count)
+        try:
+            request = _holding_reads(address, count)
+        except TypeError:  # unhashable: the constructor says what is wrong
+            request = ReadHoldingRegistersRequest(address, count)
         response = await self._submit(unit, request, timeout, priority)
         return list(answer(response, request, unit, ReadHoldingRegistersResponse).values)
 
@@ -262,7 +256,10 @@ class Operations:
         priority: int = 0,
     ) -> list[int]:
         """Read `count` (1..125) input registers from `address` (04)."""
-        request = _read_request(ReadInputRegistersRequest, address, count)
+        try:
+            request = _input_register_reads(address, count)
+        except TypeError:  # unhashable: the constructor says what is wrong
+            request = ReadInputRegistersRequest(address, count)
         response = await self._submit(unit, request, timeout, priority)
         return list(answer(response, request, unit, ReadHoldingRegistersResponse).values)
 
