@@ -98,6 +98,10 @@ def test_reads_writes_handles_and_broadcast(
         assert master.read_coils(unit, 0, 3) == [True, False, True]
     assert master.read_holding_registers(1, 30, 1) == [9]
     assert master.unit_stats(0).requests == 2  # the broadcasts
+    snapshot = master.statistics
+    assert snapshot[1].requests == master.unit_stats(1).requests > 0
+    master.read_coils(1, 0, 1)
+    assert snapshot[1].requests == master.unit_stats(1).requests - 1  # a snapshot
     assert master.is_online(1)
     assert master.connected
 

@@ -3,6 +3,7 @@ handle, each method made from the async one by a table of one line per method.""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Coroutine
 from contextlib import AbstractAsyncContextManager
 from types import TracebackType
@@ -10,7 +11,7 @@ from typing import Any, Concatenate, ParamSpec, Protocol, Self, TypeVar, TypeVar
 
 from aiortu._derived import derive
 from aiortu.blocking._portal import Running
-from aiortu.master import BroadcastHandle, BroadcastMethod, Master, UnitHandle
+from aiortu.master import BroadcastHandle, BroadcastMethod, Master, UnitHandle, UnitStats
 
 __all__ = (
     "BlockingBroadcastHandle",
@@ -173,6 +174,13 @@ class BlockingMaster(_Blocking):
         return self.master.connected
 
     @property
+    def statistics(self) -> dict[int, UnitStats]:
+        """A snapshot of the master's [`UnitStats`][aiortu.master.UnitStats] by unit address,
+        for the units used so far, taken in the loop (the loop goes on counting)."""
+        snapshot: dict[int, UnitStats] = self._running.call(_statistics, self.master)
+        return snapshot
+
+    @property
     def closed(self) -> bool:
         """Whether [`close`][aiortu.blocking.BlockingMaster.close] was called."""
         return self._running.closed
@@ -217,6 +225,10 @@ class BlockingMaster(_Blocking):
     unit_stats = _in_loop(Master.unit_stats)
     is_online = _in_loop(Master.is_online)
     set_min_turnaround = _in_loop(Master.set_min_turnaround)
+
+
+def _statistics(master: Master) -> dict[int, UnitStats]:
+    return {unit: dataclasses.replace(stats) for unit, stats in master.statistics.items()}
 
 
 def blocking_master(
