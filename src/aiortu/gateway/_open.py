@@ -25,7 +25,11 @@ from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS
 from aiortu.master import Master, open_master
 from aiortu.transport import (
     MODBUS_TCP_SCHEME,
+    MODBUS_UDP_SCHEME,
+    TCP_SCHEME,
+    DatagramListener,
     listen_tcp,
+    listen_udp,
     listen_unix,
     listening_address,
     parse_listen_url,
@@ -35,13 +39,16 @@ from aiortu.transport import (
 
 __all__ = ("Listen", "gateway")
 
+_SCHEMES = (MODBUS_TCP_SCHEME, MODBUS_UDP_SCHEME, TCP_SCHEME)
+
 
 @dataclass(frozen=True, slots=True)
 class Listen:
     """A listen URL and the priority of its connections: lower values are served first.
 
-    `tcp://host:port` serves Modbus TCP, `rtu+tcp://host:port` RTU frames over TCP (as a
-    serial device server sends them), `unix:PATH` Modbus TCP on a Unix socket; port 0 asks
+    `tcp://host:port` serves Modbus TCP, `udp://host:port` Modbus UDP (each source address a
+    connection of its own, answered at that address), `rtu+tcp://host:port` RTU frames over TCP
+    (as a serial device server sends them), `unix:PATH` Modbus TCP on a Unix socket; port 0 asks
     for a free port."""
 
     url: str
@@ -53,7 +60,7 @@ def _listen(item: str | Listen) -> Listen:
     if type(listen.priority) is not int:
         raise InvalidValue("priority", listen.priority, "an int (lower values go first)")
     if parse_unix_url(listen.url) is None:
-        parse_listen_url(listen.url)  # raises for a bad one, before anything is opened
+        parse_listen_url(listen.url, _SCHEMES)  # raises for a bad one, before anything is opened
     return listen
 
 
@@ -98,14 +105,18 @@ async def _listener(
         where = parse_metrics_url(url)
         listener = await listen_tcp(where.host, where.port, url=url)
     else:
-        address = parse_listen_url(url)
-        listener = await listen_tcp(address.host, address.port, url=url)
+        address = parse_listen_url(url, _SCHEMES)
+        if address.scheme == MODBUS_UDP_SCHEME:
+            sock = await listen_udp(address.host, address.port, url=url)
+            listener = DatagramListener(sock, url)
+        else:
+            listener = await listen_tcp(address.host, address.port, url=url)
     stack.push_async_callback(listener.aclose)
     return listener
 
 
 def _rtu_framing(url: str) -> bool:
-    return parse_unix_url(url) is None and parse_listen_url(url).scheme != MODBUS_TCP_SCHEME
+    return parse_unix_url(url) is None and parse_listen_url(url, _SCHEMES).scheme == TCP_SCHEME
 
 
 @contextlib.asynccontextmanager
@@ -136,8 +147,8 @@ async def gateway(
     arguments are [`Gateway`][aiortu.gateway.Gateway]'s.
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a listen URL that is not
-    `tcp://host:port`, `rtu+tcp://host:port` or `unix:PATH`, or lines whose unit ranges
-    overlap, and [`PortError`][aiortu.errors.PortError]s when a port cannot be opened.
+    `tcp://host:port`, `udp://host:port`, `rtu+tcp://host:port` or `unix:PATH`, or lines whose
+    unit ranges overlap, and [`PortError`][aiortu.errors.PortError]s when a port cannot be opened.
     """
     listens = [_listen(item) for item in listen]
     lines = _lines(serial_port_or_master, master_options)

@@ -26,6 +26,7 @@ from aiortu.transport._authorization import (
     load_rules,
     parse_rules,
 )
+from aiortu.transport._datagram_listener import PEER_BACKLOG, DatagramListener
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._listen import (
@@ -89,6 +90,7 @@ __all__ = (
     "ASCII_TCP_SCHEME",
     "MODBUS_TCP_SCHEME",
     "MODBUS_UDP_SCHEME",
+    "PEER_BACKLOG",
     "ROLE_OID",
     "RTU_SILENCE",
     "TCP_SCHEME",
@@ -101,6 +103,7 @@ __all__ = (
     "ConnectionCounters",
     "ConnectionLimit",
     "DatagramCounters",
+    "DatagramListener",
     "FileDescriptorStream",
     "FramedStream",
     "Framing",
