@@ -23,8 +23,8 @@ def test_help_has_examples_exit_codes_and_mbpoll(capsys: pytest.CaptureFixture[s
     ("listen", "message"),
     [
         ("tcp://127.0.0.1:0,prio=1", "only ',priority=N' (an integer) is allowed"),
-        ("udp://127.0.0.1:0", "a server listens on a tcp:// or rtu+tcp:// URL"),
-        ("/dev/ttyUSB1", "a server listens on a tcp:// or rtu+tcp:// URL"),
+        ("ftp://127.0.0.1:0", "a server listens on a tcp://, udp://"),
+        ("/dev/ttyUSB1", "a server listens on a tcp://, udp://"),
     ],
 )
 def test_a_bad_listen_url_is_one_line_and_exit_2(

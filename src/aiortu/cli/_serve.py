@@ -216,6 +216,7 @@ async def _serve_once(
         args.port,
         units,
         baudrate=args.baudrate,
+        bytesize=args.bytesize,
         parity=args.parity,
         stopbits=args.stopbits,
         frame_gap=args.frame_gap,
@@ -229,7 +230,7 @@ async def _serve_once(
         if local is not None:  # listening: say the port, which may have been 0
             where = f"{args.port} (port {local[1]})"
         else:
-            where = f"{args.port} at {args.baudrate} 8{args.parity}{args.stopbits}"
+            where = f"{args.port} at {args.baudrate} {args.bytesize}{args.parity}{args.stopbits}"
         _say(f"{which} {listing} on {where}; Ctrl-C to stop")
         await slave.wait_stopped()
     error = slave.connection_error

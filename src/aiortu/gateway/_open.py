@@ -89,7 +89,8 @@ async def _open_lines(
     for line in lines:
         master = line.port
         if not isinstance(master, Master):
-            master = await stack.enter_async_context(open_master(master, **options))
+            own = {**options, **line.options}
+            master = await stack.enter_async_context(open_master(master, **own))
         opened.append(GatewayLine(master, line.units, line.label))
     return opened
 

@@ -9,6 +9,7 @@ import anyio
 import anyio.abc
 
 from aiortu._log import get_logger
+from aiortu.core.ascii import DEFAULT_ASCII_TIMEOUT
 from aiortu.core.model import AsyncDataStore, DataStore, Table
 from aiortu.core.rtu import TimingMode
 from aiortu.core.serial import LineSettings
@@ -18,7 +19,13 @@ from aiortu.slave._handlers import Handler
 from aiortu.slave._routes import RangeHandler
 from aiortu.slave._slave import Slave, TraceCallback
 from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS
-from aiortu.transport import AcceptCounters, ConnectionLimit, listening_address, serve_listener
+from aiortu.transport import (
+    AcceptCounters,
+    AsciiStream,
+    ConnectionLimit,
+    listening_address,
+    serve_listener,
+)
 
 __all__ = ("RtuOverTcpServer",)
 
@@ -39,6 +46,10 @@ class RtuOverTcpServer:
     [`after_request`][aiortu.slave.RtuOverTcpServer.after_request] apply to the lines connected now
     and to every later one. At most `max_connections` lines at once; more are closed at once. There
     is no idle timeout: a line is quiet whenever no master polls.
+
+    With `framing` `"ascii"` each line speaks Modbus ASCII
+    ([`AsciiStream`][aiortu.transport.AsciiStream], `ascii_timeout` its inter-character timeout,
+    1 s by default) instead of RTU.
     """
 
     def __init__(
@@ -50,9 +61,18 @@ class RtuOverTcpServer:
         handlers: Mapping[int, Handler] | None = None,
         trace: TraceCallback | None = None,
         max_connections: int = DEFAULT_MAX_CONNECTIONS,
+        framing: str = "rtu",
+        ascii_timeout: float | None = None,
     ) -> None:
         if type(max_connections) is not int or max_connections < 1:
             raise InvalidValue("max_connections", max_connections, "an int of at least 1")
+        if framing not in ("rtu", "ascii"):
+            raise InvalidValue("framing", framing, "'rtu' or 'ascii'")
+        if ascii_timeout is not None and framing != "ascii":
+            raise InvalidValue("ascii_timeout", ascii_timeout, "given with framing='ascii' only")
+        self.framing = framing
+        """`rtu` or `ascii`: the framing each line speaks."""
+        self._ascii_timeout = DEFAULT_ASCII_TIMEOUT if ascii_timeout is None else ascii_timeout
         self.units: dict[int, DataStore | AsyncDataStore] = dict(units)
         """The data store of each unit served."""
         self.slaves: set[Slave] = set()
@@ -158,6 +178,8 @@ class RtuOverTcpServer:
 
     async def serve_connection(self, stream: anyio.abc.ByteStream) -> None:
         """Serve one line until it closes."""
+        if self.framing == "ascii":
+            stream = AsciiStream(stream, self._settings, timeout=self._ascii_timeout)
         slave = Slave(
             stream, self.units, self._settings, frame_gap=0, timing=self._timing, trace=self._trace
         )
