@@ -70,6 +70,7 @@ from aiortu.transport._udp import (
     open_modbus_udp,
     serve_datagrams,
 )
+from aiortu.transport._udp_push import PushDatagramStream
 from aiortu.transport._url import (
     ASCII_TCP_SCHEME,
     MODBUS_TCP_SCHEME,
@@ -114,6 +115,7 @@ __all__ = (
     "ModbusTcpCounters",
     "ModbusTcpStream",
     "PortAddress",
+    "PushDatagramStream",
     "PushStream",
     "RoleRules",
     "RS485Options",

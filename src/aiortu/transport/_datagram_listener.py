@@ -25,7 +25,8 @@ from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStre
 
 from aiortu._log import get_logger
 from aiortu.errors import FrameError
-from aiortu.transport._udp import DatagramCounters, _level, check_datagram
+from aiortu.transport._udp import DatagramCounters, check_datagram
+from aiortu.transport._udp_push import log_level
 from aiortu.transport._url import MODBUS_UDP_SCHEME, format_tcp_url
 
 __all__ = ("PEER_BACKLOG", "DatagramListener")
@@ -130,7 +131,7 @@ class DatagramListener(anyio.abc.Listener[anyio.abc.ByteStream]):
     def _refuse(self, peer: _Address, why: str) -> None:
         self.counters.refused += 1
         _log.log(
-            _level(self.counters.refused),
+            log_level(self.counters.refused),
             "%s: refused a datagram from %s: %s (counted; logged at debug level after the first)",
             self.url,
             format_tcp_url(peer[0], peer[1], MODBUS_UDP_SCHEME),
