@@ -48,6 +48,8 @@ examples:
       Modbus TCP on every interface, many clients at once
   aiortu serve rtu+tcp://0.0.0.0:5020 --config devices.toml
       RTU framing over TCP, listening (a wildcard host listens, any other connects)
+  aiortu serve ascii+tcp://0.0.0.0:5021 --config devices.toml
+      Modbus ASCII over TCP, listening, for serial device servers that connect in
 
 several processes can share one bus, each with its own units:
   aiortu virtual-bus --ports 3 --parity N --stopbits 2     # prints three paths
