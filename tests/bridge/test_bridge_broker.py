@@ -25,9 +25,10 @@ def subscriber(mosquitto: Mosquitto) -> Iterator[Subscriber]:
     sub.close()
 
 
-async def until(condition: object, timeout: float = 10) -> None:
-    with anyio.fail_after(timeout):
-        while not condition():  # type: ignore[operator]
+async def until(condition: object, within: float = 10) -> None:
+    """Poll `condition` (a bounded wait: the test fails after `within` seconds)."""
+    with anyio.fail_after(within):
+        while not condition():  # type: ignore[operator]  # noqa: ASYNC110
             await anyio.sleep(0.02)
 
 

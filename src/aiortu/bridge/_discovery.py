@@ -13,6 +13,7 @@ last will says `offline`) and the device's (from its unit's health). The device 
 from __future__ import annotations
 
 import json
+import re
 
 from aiortu.bridge._state import DeviceState
 from aiortu.core.model import PointType, ProfilePoint
@@ -39,7 +40,8 @@ def discovery_config(
     `command`, `availability` and the bridge's `status` topic."""
     component = entity_component(point)
     info = device.config.profile.device
-    object_id = f"{device.name}_{point.name}".replace("-", "_")
+    # Home Assistant's ids are letters, digits and underscores (SunSpec names have dots).
+    object_id = re.sub(r"[^A-Za-z0-9_]", "_", f"{device.name}_{point.name}")
     config: dict[str, object] = {
         "name": point.description or point.name.replace("_", " "),
         "unique_id": f"aiortu_{object_id}",

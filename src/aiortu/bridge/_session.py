@@ -137,7 +137,7 @@ class BrokerSession:
                     self._stream = await self._open()
                 delay = self.reconnect_delay[0]
                 await self._serve(self._stream)
-            except Exception as error:  # noqa: BLE001 - a group from the connection's tasks
+            except Exception as error:  # a group, from the connection's tasks
                 failure = _link_failure(error)
                 if failure is None:
                     raise
