@@ -139,15 +139,18 @@ class Bridge:
         while True:
             try:
                 await poller.run()
-            except ModbusError as error:
+            except* ModbusError as group:  # the poller's own task group wraps it
                 _log.warning("line %s: %s; its devices are offline until it is back", line.port,
-                             error)  # fmt: skip
-                now = anyio.current_time()
-                for state in self._states_of(line):
-                    if state.health is not UnitState.OFFLINE:
-                        state.health = UnitState.OFFLINE
-                        self._put(self.layout.health(state, now))
-                await anyio.sleep(1.0)
+                             group.exceptions[0])  # fmt: skip
+                self._line_lost(line)
+            await anyio.sleep(1.0)
+
+    def _line_lost(self, line: LineConfig) -> None:
+        now = anyio.current_time()
+        for state in self._states_of(line):
+            if state.health is not UnitState.OFFLINE:
+                state.health = UnitState.OFFLINE
+                self._put(self.layout.health(state, now))
 
     def _states_of(self, line: LineConfig) -> list[DeviceState]:
         return [self._by_name[device.name] for device in line.devices]

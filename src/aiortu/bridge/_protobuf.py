@@ -6,7 +6,7 @@ The fields and their numbers are those of the specification's `sparkplug_b.proto
 metric's `name` (1), `alias` (2), `timestamp` (3), `datatype` (4), `is_historical` (5),
 `is_null` (7) and its value in `int_value` (10, Int8..UInt32), `long_value` (11, Int64 and
 UInt64), `float_value` (12), `double_value` (13), `boolean_value` (14) or `string_value`
-(15). Signed values go two's complement in the unsigned fields, as the specification says.
+(15). Signed values go two's complement in the unsigned fields, in their own width.
 Unknown fields are skipped when reading.
 """
 
@@ -35,7 +35,9 @@ class DataType(enum.IntEnum):
 
 
 _INT_FIELD = {DataType.INT16, DataType.INT32, DataType.UINT16, DataType.UINT32}
-_LONG_FIELD = {DataType.INT64, DataType.UINT64}
+_SIGNED_BITS = {DataType.INT16: 16, DataType.INT32: 32, DataType.INT64: 64}
+"""A signed value goes in the unsigned field as its two's complement in its own width
+(Int16 -1 is 0xFFFF), as pysparkplug reads it."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,9 +94,8 @@ def _value(metric: Metric) -> bytes:
         return _key(12, 5) + struct.pack("<f", float(value))
     if datatype is DataType.DOUBLE:
         return _key(13, 1) + struct.pack("<d", float(value))
-    if datatype in _INT_FIELD:
-        return _key(10, 0) + _varint(int(value) & 0xFFFF_FFFF)
-    return _key(11, 0) + _varint(int(value) & 0xFFFF_FFFF_FFFF_FFFF)
+    mask = (1 << _SIGNED_BITS.get(datatype, 64)) - 1
+    return _key(10 if datatype in _INT_FIELD else 11, 0) + _varint(int(value) & mask)
 
 
 def _metric(metric: Metric) -> bytes:
@@ -188,9 +189,9 @@ def _decode_metric(data: bytes) -> Metric:
         raise ValueError(
             f"metric {name!r}: Sparkplug datatype {datatype} is not supported"
         ) from None
-    if isinstance(value, int) and not isinstance(value, bool):
-        value = _signed(value, {DataType.INT16: 32, DataType.INT32: 32, DataType.INT64: 64}[kind]) \
-            if kind in (DataType.INT16, DataType.INT32, DataType.INT64) else value  # fmt: skip
+    bits = _SIGNED_BITS.get(kind)
+    if bits is not None and isinstance(value, int) and not isinstance(value, bool):
+        value = _signed(value & ((1 << bits) - 1), bits)
     return Metric(name, kind, value, timestamp, alias)
 
 

@@ -114,6 +114,7 @@ class BrokerSession:
         self._stream: anyio.abc.ByteStream | None = None
         self._acked = anyio.Event()
         self._reader = PacketReader()
+        self._early: list[Packet] = []
         self._sending = anyio.Lock()
 
     async def _write(self, stream: anyio.abc.ByteStream, data: bytes) -> None:
@@ -203,6 +204,7 @@ class BrokerSession:
                 raise BrokerError(message)
             raise OSError(message)
         self._reader = reader
+        self._early = packets[1:]  # what came with the CONNACK, handled once serving
 
     async def _serve(self, stream: anyio.abc.ByteStream) -> None:
         topics = self.hooks.subscriptions()
@@ -241,6 +243,9 @@ class BrokerSession:
         reader = self._reader
         # The broker answers a PINGREQ within the keep-alive; silence beyond it is a dead link.
         limit = self.broker.keepalive * 1.5
+        early, self._early = self._early, []
+        for packet in early:
+            await self._handle(stream, packet)
         while True:
             with anyio.fail_after(limit):
                 data = await stream.receive()
