@@ -50,10 +50,12 @@ _MISSING = object()
 @dataclass(slots=True)
 class BridgeStats:
     """What the bridge did: `readings` taken from the pollers, `messages` made for the
-    broker, `writes` done from commands and `write_errors` refused or failed."""
+    broker (`values` of them carrying a point's value), `writes` done from commands and
+    `write_errors` refused or failed."""
 
     readings: int = 0
     messages: int = 0
+    values: int = 0
     writes: int = 0
     write_errors: int = 0
 
@@ -215,6 +217,7 @@ class Bridge:
             _log.info("device %s is %s", state.name, health.value)
             messages += self.layout.health(state, now)
         messages += self.layout.values(state, changed, now)
+        self.stats.values += len(changed)
         self._put(messages)
 
     def _put(self, messages: list[Message]) -> None:

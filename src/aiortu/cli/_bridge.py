@@ -75,6 +75,10 @@ async def _serve(config: object) -> int:
                       file=sys.stderr)  # fmt: skip
                 async for _ in signals:
                     break
+                stats = bridge.stats
+                print(f"aiortu bridge: stopped: {stats.values} values in {stats.messages} "
+                      f"messages, {bridge.session.delivered} delivered, {bridge.outbox.dropped} "
+                      f"dropped, {len(bridge.outbox)} waiting", file=sys.stderr)  # fmt: skip
         except BrokerError as error:
             failure = CommandFailed(str(error))
         except PortError as error:
