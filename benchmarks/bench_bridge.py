@@ -32,7 +32,6 @@ from tempfile import TemporaryDirectory
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import anyio
-
 from benchmarks.benchlib import add_section_argument, rss_kib, run_sections, table
 from tests.bridge.fleet import BridgeProcess, write_config, write_profile
 from tests.bridge.mosquitto import Mosquitto, Subscriber, free_port
@@ -64,8 +63,9 @@ def fleet(args: argparse.Namespace) -> list[str]:
     with TemporaryDirectory() as tmp:
         folder = Path(tmp)
         profile = write_profile(folder / "fleet.toml", points)
-        subscriber = Subscriber(broker.port, ["aiortu/#", "$SYS/broker/messages/#"], "bench",
-                                persistent=True)  # fmt: skip
+        subscriber = Subscriber(
+            broker.port, ["aiortu/#", "$SYS/broker/messages/#"], "bench", persistent=True
+        )
         bridges = [
             BridgeProcess.start(
                 f"b{n}",
@@ -77,14 +77,18 @@ def fleet(args: argparse.Namespace) -> list[str]:
                     profile=profile,
                     keepalive=10,
                 ),
-            )  # fmt: skip
+            )
             for n in range(bridges_n)
         ]
         try:
             total = bridges_n * units * points
             last = subscriber.last
-            subscriber.wait_for(lambda: sum(1 for t in last() if t.count("/") == 2
-                                            and t.rsplit("/", 1)[1][:1] == "p") >= total, 120)  # fmt: skip
+
+            def everything_seen() -> bool:
+                values = [t for t in last() if t.count("/") == 2 and t.rsplit("/", 1)[1][0] == "p"]
+                return len(values) >= total
+
+            subscriber.wait_for(everything_seen, 120)
             time.sleep(2)
             cpu0 = sum(cpu_exact(b.process.pid) for b in bridges)
             got0, received0 = len(subscriber.messages), _sys_counter(subscriber, "received")
@@ -100,8 +104,13 @@ def fleet(args: argparse.Namespace) -> list[str]:
             time.sleep(1)
             values = sum(c["values"] for c in counts)
             with subscriber.lock:
-                seen = sum(1 for m in subscriber.messages if m.topic.startswith("aiortu/b")
-                           and m.topic.rsplit("/", 1)[1][:1] == "p" and not m.retain)  # fmt: skip
+                seen = sum(
+                    1
+                    for m in subscriber.messages
+                    if m.topic.startswith("aiortu/b")
+                    and m.topic.rsplit("/", 1)[1][:1] == "p"
+                    and not m.retain
+                )
         finally:
             for bridge in bridges:
                 if bridge.process.poll() is None:
@@ -109,11 +118,17 @@ def fleet(args: argparse.Namespace) -> list[str]:
             subscriber.close()
             broker.close()
     lost = max(0, values - seen)
-    rows = [[
-        f"{bridges_n} x {units} units x {points} points", f"{got / elapsed:,.0f}",
-        f"{cpu / elapsed / total * 1000 * 1000:.1f}", f"{rss / total * 1000 / 1024:.1f}",
-        f"{(received + sent) / elapsed:,.0f}", f"{sum(c['dropped'] for c in counts)}", f"{lost}",
-    ]]  # fmt: skip
+    rows = [
+        [
+            f"{bridges_n} x {units} units x {points} points",
+            f"{got / elapsed:,.0f}",
+            f"{cpu / elapsed / total * 1000 * 1000:.1f}",
+            f"{rss / total * 1000 / 1024:.1f}",
+            f"{(received + sent) / elapsed:,.0f}",
+            f"{sum(c['dropped'] for c in counts)}",
+            f"{lost}",
+        ]
+    ]
     return [
         f"## Fleet ({args.seconds:.0f} s measured, every point published every 1 s poll)",
         "",
@@ -128,37 +143,51 @@ def fleet(args: argparse.Namespace) -> list[str]:
                 "lost",
             ],
             rows,
-        ),  # fmt: skip
+        ),
         f"(the subscriber counted {seen:,} value messages; the bridges made {values:,})",
     ]
 
 
 def _meter_profile(path: Path) -> Path:
     """40 input-register measurements (1 s) and 10 counters and settings (60 s)."""
-    parts = ['[device]\nmanufacturer = "aiortu"\nmodel = "bench-meter"\n',
-             "[poll]\nslow = 60.0\n"]  # fmt: skip
+    parts = ['[device]\nmanufacturer = "aiortu"\nmodel = "bench-meter"\n', "[poll]\nslow = 60.0\n"]
     for n in range(FAST):
-        parts.append(f'[[point]]\nname = "f{n:02}"\ntable = "input_registers"\naddress = {n}\n'
-                     f'type = "u16"\nvalue = {n}\n')  # fmt: skip
+        parts.append(
+            f'[[point]]\nname = "f{n:02}"\ntable = "input_registers"\naddress = {n}\n'
+            f'type = "u16"\nvalue = {n}\n'
+        )
     for n in range(SLOW // 2):
-        parts.append(f'[[point]]\nname = "e{n}"\ntable = "input_registers"\n'
-                     f'address = {300 + 2 * n}\ntype = "u32"\npoll = "slow"\nvalue = 1000\n')  # fmt: skip
+        address = 300 + 2 * n
+        parts.append(
+            f'[[point]]\nname = "e{n}"\ntable = "input_registers"\n'
+            f'address = {address}\ntype = "u32"\npoll = "slow"\nvalue = 1000\n'
+        )
     for n in range(SLOW // 2):
-        parts.append(f'[[point]]\nname = "s{n}"\naddress = {1000 + n}\ntype = "u16"\n'
-                     f'poll = "slow"\naccess = "rw"\nvalue = 5\n')  # fmt: skip
+        parts.append(
+            f'[[point]]\nname = "s{n}"\naddress = {1000 + n}\ntype = "u16"\n'
+            f'poll = "slow"\naccess = "rw"\nvalue = 5\n'
+        )
     path.write_text("\n".join(parts))
     return path
 
 
 def _modbus4mqtt_config(path: Path, port: int) -> Path:
-    regs = [f"  - pub_topic: meter/f{n:02}\n    address: {n}\n    table: input\n"
-            for n in range(FAST)]  # fmt: skip
-    regs += [f"  - pub_topic: meter/e{n}\n    address: {300 + 2 * n}\n    table: input\n"
-             "    type: uint32\n" for n in range(SLOW // 2)]  # fmt: skip
-    regs += [f"  - pub_topic: meter/s{n}\n    address: {1000 + n}\n    table: holding\n"
-             for n in range(SLOW // 2)]  # fmt: skip
-    path.write_text(f"ip: 127.0.0.1\nport: {port}\nupdate_rate: 1\ndevice_address: 1\n"
-                    f"address_offset: 0\nregisters:\n{''.join(regs)}")  # fmt: skip
+    regs = [
+        f"  - pub_topic: meter/f{n:02}\n    address: {n}\n    table: input\n" for n in range(FAST)
+    ]
+    regs += [
+        f"  - pub_topic: meter/e{n}\n    address: {300 + 2 * n}\n    table: input\n"
+        "    type: uint32\n"
+        for n in range(SLOW // 2)
+    ]
+    regs += [
+        f"  - pub_topic: meter/s{n}\n    address: {1000 + n}\n    table: holding\n"
+        for n in range(SLOW // 2)
+    ]
+    path.write_text(
+        f"ip: 127.0.0.1\nport: {port}\nupdate_rate: 1\ndevice_address: 1\n"
+        f"address_offset: 0\nregisters:\n{''.join(regs)}"
+    )
     return path
 
 
@@ -201,8 +230,14 @@ class _Meter:
         self.thread.join(5)
 
 
-def _run_one(name: str, command: list[str], meter: _Meter, subscriber: Subscriber,
-             prefix: str, seconds: float) -> dict[str, float]:  # fmt: skip
+def _run_one(
+    name: str,
+    command: list[str],
+    meter: _Meter,
+    subscriber: Subscriber,
+    prefix: str,
+    seconds: float,
+) -> dict[str, float]:
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         subscriber.wait_for(lambda: len(subscriber.on(f"{prefix}/meter/f00")) >= 2, 30)
@@ -225,11 +260,14 @@ def _run_one(name: str, command: list[str], meter: _Meter, subscriber: Subscribe
     ]
     published = len(mine)
     return {
-        "transactions per point": requests / published, "CPU us per point": cpu / published * 1e6,
+        "transactions per point": requests / published,
+        "CPU us per point": cpu / published * 1e6,
         "p50 ms": statistics.median(latencies) * 1000,
-        "p99 ms": statistics.quantiles(latencies, n=100)[98] * 1000 if len(latencies) > 2
-        else max(latencies) * 1000, "points/s": published / seconds,
-    }  # fmt: skip
+        "p99 ms": statistics.quantiles(latencies, n=100)[98] * 1000
+        if len(latencies) > 2
+        else max(latencies) * 1000,
+        "points/s": published / seconds,
+    }
 
 
 def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
@@ -244,41 +282,69 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
             f"qos = {args.qos}\n"
             f'[[line]]\nport = "tcp://127.0.0.1:{meter.port}"\n'
             f'[[line.device]]\nname = "meter"\nunit = 1\nprofile = "{folder / "meter.toml"}"\n'
-        )  # fmt: skip
+        )
         m4m = _modbus4mqtt_config(folder / "meter.yaml", meter.port)
         commands = {
-            "aiortu bridge": [sys.executable, "-m", "aiortu", "bridge", "--config",
-                              str(folder / "bridge.toml")],
-            "modbus4mqtt": [args.modbus4mqtt, "--hostname", "127.0.0.1", "--port",
-                            str(broker.port), "--config", str(m4m), "--mqtt_topic_prefix", "m4m"],
-        }  # fmt: skip
+            "aiortu bridge": [
+                sys.executable,
+                "-m",
+                "aiortu",
+                "bridge",
+                "--config",
+                str(folder / "bridge.toml"),
+            ],
+            "modbus4mqtt": [
+                args.modbus4mqtt,
+                "--hostname",
+                "127.0.0.1",
+                "--port",
+                str(broker.port),
+                "--config",
+                str(m4m),
+                "--mqtt_topic_prefix",
+                "m4m",
+            ],
+        }
         prefixes = {"aiortu bridge": "aiortu", "modbus4mqtt": "m4m"}
         subscriber = Subscriber(broker.port, ["aiortu/#", "m4m/#"], "bench")
         try:
             for _ in range(args.rounds):
                 for name, command in commands.items():
-                    results[name].append(_run_one(name, command, meter, subscriber,
-                                                  prefixes[name], args.seconds))  # fmt: skip
+                    results[name].append(
+                        _run_one(name, command, meter, subscriber, prefixes[name], args.seconds)
+                    )
         finally:
             subscriber.close()
             meter.close()
             broker.close()
     keys = ["transactions per point", "CPU us per point", "p50 ms", "p99 ms", "points/s"]
-    medians = {n: {k: statistics.median(r[k] for r in runs) for k in keys}
-               for n, runs in results.items()}  # fmt: skip
-    rows = [[name, *(f"{medians[name][k]:.3f}" if k == "transactions per point"
-                     else f"{medians[name][k]:.0f}" for k in keys)]
-            for name in results]  # fmt: skip
+    medians = {
+        n: {k: statistics.median(r[k] for r in runs) for k in keys} for n, runs in results.items()
+    }
+    rows = [
+        [
+            name,
+            *(
+                f"{medians[name][k]:.3f}"
+                if k == "transactions per point"
+                else f"{medians[name][k]:.0f}"
+                for k in keys
+            ),
+        ]
+        for name in results
+    ]
     ratio = {k: medians["aiortu bridge"][k] / medians["modbus4mqtt"][k] for k in keys[:2]}
     return [
         f"## Against modbus4mqtt ({args.rounds} interleaved rounds of {args.seconds:.0f} s each; "
         f"medians; 1 s poll, values changing every second; aiortu at QoS {args.qos}, "
-        "modbus4mqtt at QoS 0)", "",
-        table(["bridge", *keys], rows), "",
+        "modbus4mqtt at QoS 0)",
+        "",
+        table(["bridge", *keys], rows),
+        "",
         f"aiortu / modbus4mqtt: line transactions per published point "
         f"{ratio['transactions per point']:.2f}x, CPU per published point "
         f"{ratio['CPU us per point']:.2f}x",
-    ]  # fmt: skip
+    ]
 
 
 SECTIONS = {"fleet": fleet, "modbus4mqtt": versus_modbus4mqtt}
@@ -289,13 +355,19 @@ def main() -> None:
     add_section_argument(parser, SECTIONS)
     parser.add_argument("--seconds", type=float, default=20.0, help="measured time per run")
     parser.add_argument("--rounds", type=int, default=3, help="interleaved rounds (modbus4mqtt)")
-    parser.add_argument("--qos", type=int, default=1, choices=(0, 1),
-                        help="the aiortu bridge's QoS (modbus4mqtt publishes at 0)")  # fmt: skip
+    parser.add_argument(
+        "--qos",
+        type=int,
+        default=1,
+        choices=(0, 1),
+        help="the aiortu bridge's QoS (modbus4mqtt publishes at 0)",
+    )
     parser.add_argument("--bridges", type=int, default=8)
     parser.add_argument("--units", type=int, default=10)
     parser.add_argument("--points", type=int, default=50)
-    parser.add_argument("--modbus4mqtt", default="modbus4mqtt",
-                        help="the modbus4mqtt command (from its own venv)")  # fmt: skip
+    parser.add_argument(
+        "--modbus4mqtt", default="modbus4mqtt", help="the modbus4mqtt command (from its own venv)"
+    )
     run_sections(parser.parse_args(), SECTIONS)
 
 
