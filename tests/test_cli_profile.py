@@ -204,3 +204,53 @@ def test_home_assistant_and_evcc_files_are_imported(tmp_path: Path) -> None:
         "profile type (known: int8, int16, int32, int64, uint8, uint16, uint32, uint64, "
         "float32, float64, string)"
     )
+
+
+def test_scan_says_which_profile_each_unit_found_matches(tmp_path: Path) -> None:
+    bus = start_aiortu(
+        "virtual-bus",
+        "--ports",
+        "2",
+        "--parity",
+        "N",
+        "--stopbits",
+        "2",
+        "--link-dir",
+        str(tmp_path),
+    )
+    served = None
+    pump = str(ROOT / "examples/profiles/heat-pump.toml")
+    try:
+        assert bus.stdout is not None
+        ports = [bus.stdout.readline().strip() for _ in range(2)]
+        served = start_aiortu(
+            "serve", ports[1], "--profile", pump, "--unit", "4", "--parity", "N", "--stopbits", "2"
+        )
+        assert served.stderr is not None
+        assert "unit 4 on" in served.stderr.readline()
+        result = run_aiortu(
+            "scan",
+            ports[0],
+            "--baudrates",
+            "19200",
+            "--parities",
+            "N",
+            "--units",
+            "1-5",
+            "--timeout",
+            "0.1",
+            "--profile",
+            pump,
+            "--profile",
+            "eastron-sdm630",
+        )
+        assert result.returncode == 0, result.stderr
+        assert result.stdout.splitlines()[-2:] == [
+            "found 1 unit (4) at 19200 8N2",
+            f"unit 4: ACME HP-7 ({pump}, by device identification, probes)",
+        ]
+    finally:
+        if served is not None:
+            stop(served)
+        bus.terminate()
+        bus.wait(timeout=10)

@@ -17,9 +17,9 @@ import json
 import random
 import signal
 import sys
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TextIO
 
 import anyio
 
@@ -43,10 +43,12 @@ from aiortu.core.model import (
 from aiortu.errors import ConfigError, InvalidValue
 
 if TYPE_CHECKING:
+    from aiortu.core.serial import LineSettings
     from aiortu.slave import MemoryStore, ProfileStore
 
 __all__ = (
     "SHIPPED",
+    "report_matches",
     "open_profile",
     "register",
     "run_poll",
@@ -107,22 +109,7 @@ def register(subparsers: Subparsers) -> None:
     actions.add_parser("list", help="the shipped profiles").set_defaults(run=_list)
     reference = actions.add_parser("reference", help="print the format reference (Markdown)")
     reference.set_defaults(run=_reference)
-    read = actions.add_parser("read", help="read points of a device by name")
-    add_line_options(read)
-    read.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
-    read.add_argument("--profile", required=True, help="a profile file or a shipped name")
-    read.add_argument(
-        "--point", action="append", dest="points", metavar="NAME", help="a point (all if none)"
-    )
-    read.add_argument("--json", action="store_true", help="print one JSON object")
-    read.set_defaults(run=_read)
-    write = actions.add_parser("write", help="write a point of a device by name")
-    add_line_options(write)
-    write.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
-    write.add_argument("--profile", required=True, help="a profile file or a shipped name")
-    write.add_argument("point", metavar="POINT", help="the point to write")
-    write.add_argument("value", metavar="VALUE", help="a number, true/false, or a name")
-    write.set_defaults(run=_write)
+    _add_device_actions(actions)
     match = actions.add_parser("match", help="which known profiles units match")
     add_line_options(match)
     match.add_argument("--unit", required=True, help="unit address(es): 1..247, comma-separated")
@@ -157,6 +144,26 @@ def register(subparsers: Subparsers) -> None:
     layout.add_argument("--value", action="append", default=[], metavar="NAME=VALUE")
     layout.add_argument("--models-dir", help="SunSpec's model definitions (default: pysunspec2's)")
     layout.set_defaults(run=_sunspec)
+
+
+def _add_device_actions(actions: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The actions that talk to a device: `read` and `write` by name."""
+    read = actions.add_parser("read", help="read points of a device by name")
+    add_line_options(read)
+    read.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    read.add_argument("--profile", required=True, help="a profile file or a shipped name")
+    read.add_argument(
+        "--point", action="append", dest="points", metavar="NAME", help="a point (all if none)"
+    )
+    read.add_argument("--json", action="store_true", help="print one JSON object")
+    read.set_defaults(run=_read)
+    write = actions.add_parser("write", help="write a point of a device by name")
+    add_line_options(write)
+    write.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    write.add_argument("--profile", required=True, help="a profile file or a shipped name")
+    write.add_argument("point", metavar="POINT", help="the point to write")
+    write.add_argument("value", metavar="VALUE", help="a number, true/false, or a name")
+    write.set_defaults(run=_write)
 
 
 def _failed(error: ConfigError | InvalidValue) -> int:
@@ -503,3 +510,46 @@ def _match(args: argparse.Namespace) -> int:
         return 0
 
     return run_master(args, body)
+
+
+async def report_matches(
+    port: str,
+    found: Sequence[tuple[int, LineSettings]],
+    names: Sequence[str],
+    *,
+    response_timeout: float,
+    out: TextIO,
+) -> None:
+    """For `aiortu scan --profile`: which of the profiles `names` (files or shipped names;
+    every shipped profile when empty) each unit `found` (with the setting it answered at)
+    matches, one line each, reading the unit at that setting."""
+    from aiortu.core.model import SunSpecModels
+    from aiortu.master import match_profiles, open_master
+
+    profiles = [open_profile(name) for name in names or shipped_profiles()]
+    try:
+        models: SunSpecModels | None = SunSpecModels.locate()
+    except ConfigError:
+        models = None
+    by_setting: dict[LineSettings, list[int]] = {}
+    for address, settings in found:
+        by_setting.setdefault(settings, []).append(address)
+    for settings, units in by_setting.items():
+        async with open_master(
+            port,
+            baudrate=settings.baudrate,
+            parity=str(settings.parity),
+            stopbits=settings.stopbits,
+            timeout=response_timeout,
+            retries=0,
+            reconnect=False,
+        ) as master:
+            for address in sorted(set(units)):
+                matches = await match_profiles(master, address, profiles, sunspec=models)
+                names_found = [
+                    f"{m.profile.device.manufacturer} {m.profile.device.model} "
+                    f"({m.profile.source}, by {', '.join(m.by)})"
+                    for m in matches
+                ]
+                out.write(f"unit {address}: {'; '.join(names_found) or 'no known profile'}\n")
+    out.flush()

@@ -220,3 +220,10 @@ def test_unknown_enum_name_and_bit_out_of_range() -> None:
     assert "point s.value: value 'on' is not one of off" in error_of(profile(enum + 'value = "on"'))
     flags = '[[point]]\nname = "f"\naddress = 0\ntype = "bitfield"\nbits = { 16 = "x" }\n'
     assert "point f.bits.16: must be a number 0..15" in error_of(profile(flags))
+
+
+def test_a_text_its_encoding_cannot_hold_is_refused_not_mangled() -> None:
+    text = profile('[[point]]\nname = "s"\naddress = 0\ntype = "string"\nsize = 2\nvalue = "€1"')
+    assert "point s.value: text '€1' has characters ascii cannot encode" in error_of(text)
+    latin = text.replace('value = "€1"', 'encoding = "latin-1"\nvalue = "é1"')
+    assert parse_profile(latin).points[0].initial == "é1"

@@ -7,6 +7,7 @@ that a test holds to the same results.
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
 from collections.abc import Sequence
@@ -17,6 +18,7 @@ from aiortu.core.model._values import Layout
 
 __all__ = (
     "check_value",
+    "coding",
     "check_write",
     "decode_point",
     "encode_point",
@@ -24,7 +26,6 @@ __all__ = (
     "raw_of",
     "scaled",
     "struct_code",
-    "swapped_buffer",
     "text_of",
     "value_order",
 )
@@ -42,36 +43,38 @@ _CODES = {
 }
 
 
-def struct_code(point: ProfilePoint) -> str:
-    """The `struct` code of the point's raw value: `H`, `i`, `f`, ..., or `Ns` for a string."""
-    if point.type is PointType.STRING:
-        return f"{2 * point.size}s"
-    if point.type in (PointType.BITFIELD, PointType.ENUM):
-        return "H" if point.size == 1 else "I"
-    return _CODES[point.type]
-
-
-def swapped_buffer(layout: Layout) -> bool:
-    """Whether a value in `layout` is read from the registers packed little-endian.
+@functools.cache
+def coding(kind: PointType, layout: Layout, size: int) -> tuple[bool, str, str]:
+    """How a value of `kind` in `layout` over `size` registers is unpacked from its registers:
+    whether they are packed little-endian, the `struct` byte order, and the `struct` code.
 
     Packed big-endian, ABCD reads big-endian and DCBA little-endian; packed little-endian
-    (each register's bytes swapped), CDAB reads little-endian and BADC big-endian.
+    (each register's bytes swapped), CDAB reads little-endian and BADC big-endian. A
+    string's bytes follow its layout's byte swap alone.
     """
-    return layout.word_swap != layout.byte_swap
+    if kind is PointType.STRING:
+        return layout.byte_swap, ">", f"{2 * size}s"
+    if kind in (PointType.BITFIELD, PointType.ENUM):
+        code = "H" if size == 1 else "I"
+    else:
+        code = _CODES[kind]
+    return layout.word_swap != layout.byte_swap, "<" if layout.word_swap else ">", code
+
+
+def struct_code(point: ProfilePoint) -> str:
+    """The `struct` code of the point's raw value: `H`, `i`, `f`, ..., or `Ns` for a string."""
+    return coding(point.type, point.layout, point.size)[2]
 
 
 def packed_little_endian(point: ProfilePoint) -> bool:
-    """Whether the point is read from its registers packed little-endian: as
-    [`swapped_buffer`][aiortu.core.model.swapped_buffer] says, but a string's bytes follow
-    its layout's byte swap alone."""
-    if point.type is PointType.STRING:
-        return point.layout.byte_swap
-    return swapped_buffer(point.layout)
+    """Whether the point is read from its registers packed little-endian (see
+    `coding`)."""
+    return coding(point.type, point.layout, point.size)[0]
 
 
 def value_order(point: ProfilePoint) -> str:
     """The `struct` byte order of the point's value in its packed registers."""
-    return "<" if point.layout.word_swap and point.type is not PointType.STRING else ">"
+    return coding(point.type, point.layout, point.size)[1]
 
 
 def _unpack(point: ProfilePoint, registers: Sequence[int]) -> int | float | bytes:
@@ -236,7 +239,15 @@ def encode_point(point: ProfilePoint, value: Value, sf: int | None = None) -> tu
         return (int(bool(value)),)
     if kind is PointType.STRING:
         assert isinstance(value, str)
-        data = value.encode(point.encoding, errors="replace")
+        try:
+            data = value.encode(point.encoding)
+        except UnicodeEncodeError as error:
+            raise _fail(
+                point,
+                value,
+                point.encoding,
+                f"text {value!r} has characters {point.encoding} cannot encode ({error.reason})",
+            ) from None
         if len(data) > 2 * point.size:
             raise _fail(
                 point,

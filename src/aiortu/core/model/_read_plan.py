@@ -20,14 +20,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from aiortu.core.model._addressing import Table
-from aiortu.core.model._point_codec import (
-    packed_little_endian,
-    scaled,
-    struct_code,
-    text_of,
-    value_order,
-)
-from aiortu.core.model._profile import Hole, PointType, Profile, ProfilePoint, Value
+from aiortu.core.model._point_codec import coding, scaled, text_of
+from aiortu.core.model._profile import PointType, Profile, ProfilePoint, Value
 
 __all__ = ("BlockRead", "Raw", "ReadPlan", "describe", "plan_blocks")
 
@@ -46,18 +40,24 @@ class _Unpacker:
     """Whether some raw values need converting (strings from bytes, bools from integers)."""
 
 
+_CONVERTED = (PointType.STRING, PointType.BOOL)
+
+
 def _unpackers(address: int, points: Sequence[ProfilePoint]) -> tuple[_Unpacker, ...]:
-    groups: dict[tuple[bool, str], list[ProfilePoint]] = {}
+    # Planning runs once per plan, but for every point: a plain loop, no generator per point.
+    groups: dict[tuple[bool, str], list[tuple[ProfilePoint, str]]] = {}
     for point in points:
-        groups.setdefault((packed_little_endian(point), value_order(point)), []).append(point)
+        swapped, order, code = coding(point.type, point.layout, point.size)
+        groups.setdefault((swapped, order), []).append((point, code))
     unpackers = []
-    for (swapped, order), members in groups.items():
-        codes, at = [], 0
-        for point in members:  # in address order, never overlapping
+    for (swapped, order), coded in groups.items():
+        codes, at, members, converts = [], 0, [], False
+        for point, code in coded:  # in address order, never overlapping
             start = 2 * (point.address - address)
-            codes.append(f"{start - at}x{struct_code(point)}" if start > at else struct_code(point))
+            codes.append(f"{start - at}x{code}" if start > at else code)
             at = start + 2 * point.size
-        converts = any(p.type in (PointType.STRING, PointType.BOOL) for p in members)
+            members.append(point)
+            converts = converts or point.type in _CONVERTED
         codec = struct.Struct(order + "".join(codes))
         unpackers.append(_Unpacker(codec, swapped, tuple(members), converts))
     return tuple(unpackers)
@@ -108,34 +108,37 @@ def _converted(point: ProfilePoint, raw: int | float | bytes) -> Raw:
     return bool(raw) if point.type is PointType.BOOL else raw
 
 
-def _hole_between(holes: Sequence[Hole], table: Table, start: int, stop: int) -> bool:
-    return any(h.table is table and h.start < stop and start < h.stop for h in holes)
+def _hole_in(holes: Sequence[tuple[int, int]], start: int, stop: int) -> bool:
+    return any(hole_start < stop and start < hole_stop for hole_start, hole_stop in holes)
 
 
 def plan_blocks(points: Iterable[ProfilePoint], profile: Profile) -> list[BlockRead]:
     """The reads that cover `points` within `profile`'s limits and around its holes, by table
     and address. Every point is in exactly one read."""
-    ordered = sorted(points, key=lambda p: (p.table.value, p.address))
     reads: list[BlockRead] = []
-    group: list[ProfilePoint] = []
-    end = 0
-    for point in ordered:
-        if group:
-            first = group[0]
-            limit, gap = profile.limits.for_table(point.table)
-            new_end = max(end, point.stop)
+    by_table: dict[Table, list[ProfilePoint]] = {}
+    for point in points:
+        by_table.setdefault(point.table, []).append(point)
+    for table in sorted(by_table, key=lambda t: t.value):
+        limit, gap = profile.limits.for_table(table)
+        holes = [(h.start, h.stop) for h in profile.holes if h.table is table]
+        group: list[ProfilePoint] = []
+        first = end = 0
+        for point in sorted(by_table[table], key=lambda p: p.address):
+            address = point.address
+            stop = point.stop if point.stop > end else end  # the group's span with it
             if (
-                first.table is point.table
-                and point.address - end <= gap
-                and new_end - first.address <= limit
-                and not _hole_between(profile.holes, point.table, end, point.address)
+                group
+                and address - end <= gap
+                and stop - first <= limit
+                and not (holes and _hole_in(holes, end, address))
             ):
                 group.append(point)
-                end = new_end
+                end = stop
                 continue
-            reads.append(_block(group, end))
-        group, end = [point], point.stop
-    if group:
+            if group:
+                reads.append(_block(group, end))
+            group, first, end = [point], address, point.stop
         reads.append(_block(group, end))
     return reads
 

@@ -19,7 +19,7 @@ import importlib.util
 import json
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -287,8 +287,6 @@ def sunspec_layout(
 
 
 def _with_initial(point: ProfilePoint, values: Mapping[str, Value], repeats: int) -> ProfilePoint:
-    from dataclasses import replace
-
     if point.name in values:
         return replace(point, initial=values[point.name])
     if point.meta.get("sunspec_type") == "sunssf":
