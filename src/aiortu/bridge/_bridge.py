@@ -63,9 +63,10 @@ class BridgeStats:
 class Bridge:
     """The bridge of `config` (see the module docstring); an async context manager.
 
-    Entering connects to the broker once (a refused login or certificate raises
-    [`BrokerError`][aiortu.bridge.BrokerError]; an unreachable broker is logged, and the
-    bridge polls and buffers until it is there), opens the lines and starts polling.
+    Entering connects to the broker once (a refused login, or a certificate that cannot be
+    loaded or does not check, raises [`BrokerError`][aiortu.bridge.BrokerError]; an
+    unreachable broker is logged, and the bridge polls and buffers until it is there), opens
+    the lines and starts polling.
     """
 
     def __init__(self, config: BridgeConfig) -> None:

@@ -55,7 +55,6 @@ def discovery_config(
             "name": device.name,
             "manufacturer": info.manufacturer,
             "model": info.model,
-            "via_device": f"aiortu_bridge_{node}",
         },
     }
     if point.unit:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import ssl
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -124,8 +125,13 @@ class BrokerSession:
 
     async def connect(self) -> None:
         """Connect once: raise [`BrokerError`][aiortu.bridge.BrokerError] if the broker
-        refuses the login, OSError (or TimeoutError) if it cannot be reached."""
-        self._stream = await self._open()
+        refuses the login or its certificate does not check, OSError (or TimeoutError) if it
+        cannot be reached; either is kept in `last_error`."""
+        try:
+            self._stream = await self._open()
+        except (OSError, BrokerError) as error:
+            self.last_error = str(error) or type(error).__name__
+            raise
 
     async def run(self) -> None:
         """Deliver until cancelled, connecting again (with back-off) whenever the connection
@@ -169,9 +175,15 @@ class BrokerSession:
             if context is None:
                 stream = await anyio.connect_tcp(broker.host, broker.port)
             else:
-                stream = await anyio.connect_tcp(
-                    broker.host, broker.port, ssl_context=context, tls_standard_compatible=False
-                )
+                try:
+                    stream = await anyio.connect_tcp(
+                        broker.host, broker.port, ssl_context=context,
+                        tls_standard_compatible=False,
+                    )  # fmt: skip
+                except ssl.SSLError as error:
+                    # A certificate that does not check is the configuration's fault.
+                    reason = getattr(error, "verify_message", None) or error.reason or error
+                    raise BrokerError(f"broker {broker.url}: TLS failed: {reason}") from None
             try:
                 await stream.send(connect_packet(
                     broker.client_id, keepalive=broker.keepalive, username=broker.username,
