@@ -153,6 +153,10 @@ _SHIPPED = "eastron-sdm630, sunspec-inverter"
             'line[0].device[0].publish: must be "change" or "every", not \'sometimes\'',
         ),
         (
+            f'profile = "{HEAT_PUMP}"\npoints = []',
+            "line[0].device[0].points: must be a list of point names (none: omit it)",
+        ),
+        (
             f'profile = "{HEAT_PUMP}"\ncolour = 1',
             f"line[0].device[0].colour: unknown key (known: {_KNOWN})",
         ),
@@ -162,6 +166,25 @@ def test_config_mistakes_are_one_line(device: str, message: str) -> None:
     text = _LINE.format(url="mqtt://127.0.0.1:1883") + f"unit = 1\n{device}\n"
     with pytest.raises(ConfigError) as caught:
         parse_config(text, "bridge.toml")
+    assert str(caught.value) == f"bridge.toml: {message}"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('[topics]\nretain = "yes"\n', "topics.retain: must be true or false, not 'yes'"),
+        (
+            '[topics]\nlayout = "xml"\n',
+            "topics.layout: must be one of home-assistant, plain, sparkplug",
+        ),
+        ("[topics]\nqos = 2\n", "topics.qos: must be 0 or 1, not 2"),
+        ("[buffer]\nmax_messages = 0\n", "buffer.max_messages: must be an integer >= 1, not 0"),
+    ],
+)
+def test_topic_and_buffer_mistakes_are_one_line(text: str, message: str) -> None:
+    line = _LINE.format(url="mqtt://127.0.0.1:1883") + f'unit = 1\nprofile = "{HEAT_PUMP}"\n'
+    with pytest.raises(ConfigError) as caught:
+        parse_config(text + line, "bridge.toml")
     assert str(caught.value) == f"bridge.toml: {message}"
 
 

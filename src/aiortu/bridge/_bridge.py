@@ -79,8 +79,8 @@ class Bridge:
             else PlainLayout(topics, discovery=topics.layout == "home-assistant")
         )  # fmt: skip
         self.devices = [
-            DeviceState(d, tuple(p for p in d.profile.points if d.points in (None, ()) or
-                                 p.name in (d.points or ())))
+            DeviceState(d, tuple(p for p in d.profile.points
+                                 if d.points is None or p.name in d.points))
             for d in config.devices()
         ]  # fmt: skip
         """Each device's state, in the configuration's order."""

@@ -25,7 +25,8 @@ class BrokerError(Exception):
 @dataclass(frozen=True, slots=True)
 class Broker:
     """An MQTT broker: `host` and `port`, `tls` for `mqtts://` (with the CA file `ca_file`,
-    or the system's, and a client certificate `cert_file` and `key_file` if given),
+    or the system's, and a client certificate `cert_file` and `key_file` if given; `insecure`
+    skips the check of the broker's certificate, for tests only),
     `username` and `password`, the `client_id` the bridge connects as and the `keepalive` in
     seconds (the broker publishes the bridge's last will after 1.5 times that of silence)."""
 

@@ -182,6 +182,8 @@ class _Reader:
         layout = TopicLayout(**table)
         if layout.layout not in LAYOUTS:
             raise self.fail("topics.layout", f"must be one of {', '.join(LAYOUTS)}")
+        if not isinstance(layout.retain, bool):
+            raise self.fail("topics.retain", f"must be true or false, not {layout.retain!r}")
         if layout.qos not in (0, 1) or isinstance(layout.qos, bool):
             raise self.fail("topics.qos", f"must be 0 or 1, not {layout.qos!r}")
         for key in ("prefix", "discovery_prefix", "node", "group"):
@@ -248,8 +250,8 @@ class _Reader:
         points = table.get("points")
         every = table.get("every_poll", [])
         for option, names in (("points", points or []), ("every_poll", every)):
-            if not isinstance(names, list):
-                raise self.fail(f"{key}.{option}", "must be a list of point names")
+            if not isinstance(names, list) or (option == "points" and points == []):
+                raise self.fail(f"{key}.{option}", "must be a list of point names (none: omit it)")
             for n, point in enumerate(names):
                 if not any(p.name == point for p in profile.points):
                     raise self.fail(
