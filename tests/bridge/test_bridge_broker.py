@@ -177,3 +177,7 @@ async def test_sparkplug_births_data_commands_and_rebirth(
         restart = seqs.index(0, 1)
         assert seqs[:restart] == list(range(restart))
         assert seqs[restart:] == list(range(len(seqs) - restart))
+    # The connection gone, the broker publishes the node's last will: NDEATH, the same bdSeq.
+    await until(lambda: _of(_sparkplug(subscriber), node.format("NDEATH")), 10)
+    (ndeath,) = _of(_sparkplug(subscriber), node.format("NDEATH"))
+    assert (ndeath.bd_seq_metric.name, ndeath.bd_seq_metric.value) == ("bdSeq", 0)
