@@ -17,7 +17,6 @@ refused or failed goes to the error topic, and the bridge goes on.
 from __future__ import annotations
 
 import contextlib
-import logging
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +26,7 @@ from typing import Self
 import anyio
 import anyio.abc
 
+from aiortu._log import get_logger
 from aiortu.bridge._config import VIRTUAL_PORT, BridgeConfig, LineConfig, load_config
 from aiortu.bridge._outbox import Message, Outbox
 from aiortu.bridge._packets import Publish
@@ -43,7 +43,7 @@ from aiortu.testing import VirtualBus
 
 __all__ = ("Bridge", "BridgeStats", "run")
 
-_log = logging.getLogger("aiortu.bridge")
+_log = get_logger(__name__)
 _MISSING = object()
 
 

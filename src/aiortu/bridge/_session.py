@@ -12,7 +12,6 @@ QoS 1 is at least once). After each connection the session first sends what
 from __future__ import annotations
 
 import contextlib
-import logging
 import ssl
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,6 +19,7 @@ from dataclasses import dataclass
 import anyio
 import anyio.abc
 
+from aiortu._log import get_logger
 from aiortu.bridge._broker import Broker, BrokerError
 from aiortu.bridge._outbox import Message, Outbox
 from aiortu.bridge._packets import (
@@ -59,7 +59,7 @@ def _link_failure(error: Exception) -> Exception | None:
     return None
 
 
-_log = logging.getLogger("aiortu.bridge")
+_log = get_logger(__name__)
 
 _FATAL = (1, 2, 4, 5)
 """CONNACK refusals that trying again will not cure: protocol, client id, login."""
