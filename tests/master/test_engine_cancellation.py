@@ -34,11 +34,13 @@ async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_q
     # the write: the machine still waits for the read's reply.
     ended: list[BaseException] = []
     async with anyio.create_task_group() as callers:
-        async with line(default=silent, timeout=5.0, retries=0) as (master, _, _):
+        # The machine's route; the fast path taken over is the pty test below.
+        async with line(default=silent, timeout=5.0, retries=0, fast_path=False) as (
+            master,
+            _,
+            _,
+        ):
             engine = master.engine
-            # The machine's route (the in-memory bus would take the usual exchange); the
-            # usual exchange taken over is the pty test below.
-            engine.usual_exchanges = False
             read_scope = anyio.CancelScope()
 
             async def read() -> None:
@@ -56,7 +58,7 @@ async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_q
             callers.start_soon(write)
             await _until(lambda: engine.queued > 0)
             read_scope.cancel()
-            await _until(lambda: engine._for_line_task is not None)
+            await _until(lambda: engine.line_task.job is not None)
         with anyio.fail_after(2):
             while not ended:  # noqa: ASYNC110
                 await anyio.sleep(0.001)
@@ -149,7 +151,7 @@ async def test_closing_while_the_line_task_runs_a_read_taken_over_fails_the_queu
 
                 callers.start_soon(read)
                 await read_master(pty, 8)
-                assert engine._usual is not None  # the usual exchange waits
+                assert engine.fast.on_wire  # the fast path's exchange waits
 
                 async def write() -> None:
                     try:
@@ -160,7 +162,7 @@ async def test_closing_while_the_line_task_runs_a_read_taken_over_fails_the_queu
                 callers.start_soon(write)
                 await _until(lambda: engine.queued > 0)
                 pty.write(encode_frame(2, bytes.fromhex("030400090009")))
-                await _until(lambda: engine._for_line_task is not None)
+                await _until(lambda: engine.line_task.job is not None)
             with anyio.fail_after(2):
                 while not ended:  # noqa: ASYNC110
                     await anyio.sleep(0.001)

@@ -13,8 +13,8 @@ import pytest
 from aiortu.core.crc import crc16
 from aiortu.core.pdu import Request
 from aiortu.errors import ResponseTimeout
+from aiortu.master._attempt import guard_ends
 from aiortu.master._client import Master
-from aiortu.master._engine import guard_ends
 from tests.master.fakes import FakeSlave, answer, line, silent
 
 TIMEOUT = 0.05

@@ -15,7 +15,7 @@ from aiortu.core.codes import ExceptionCode
 from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request
 from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
-from aiortu.master._engine import UnitOffline
+from aiortu.errors import UnitOffline
 
 from .fakes import FakeSlave, answer, line, register_value, silent, standard_reply
 

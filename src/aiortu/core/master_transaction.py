@@ -142,6 +142,9 @@ class SkipReason(enum.StrEnum):
     """It comes from another unit."""
     OTHER_FUNCTION = "other function"
     """Its function code is neither the request's nor its exception form."""
+    LATE = "late"
+    """It does not answer the request, but it answers the unit's last request that timed
+    out: that request's reply, come too late."""
 
 
 class OutcomeKind(enum.Enum):
@@ -176,7 +179,9 @@ class Transaction:
     """One request to one unit, and what happened to it so far.
 
     `expects_reply` is false for broadcasts and for requests a device never answers (diagnostics 04,
-    force listen-only mode); those wait `turnaround` seconds instead. Set
+    force listen-only mode); those wait `turnaround` seconds instead. `order` places the
+    transaction in its line's queue: lower runs first, equal orders in order of arrival (a
+    caller's priority, or a line server's fairness key). Set
     [`abandoned`][aiortu.core.master_transaction.Transaction] when the caller is gone: the attempt
     in flight finishes (so that its reply cannot reach a later request) but is not retried.
     """
@@ -187,6 +192,7 @@ class Transaction:
     policy: RetryPolicy = field(default_factory=RetryPolicy)
     expects_reply: bool = True
     turnaround: float = 0.0
+    order: int = 0
     abandoned: bool = False
     attempts: int = 0
     """Attempts sent so far."""

@@ -11,7 +11,8 @@ from __future__ import annotations
 from aiortu.errors import UnitOffline, UnitSkipped
 from aiortu.master._calls import FileRecordLike, RecordRequestLike
 from aiortu.master._client import Master, open_master
-from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
+from aiortu.master._config import MasterConfig, ReconnectPolicy, TimingPolicy
+from aiortu.master._connection import LineConnection, StreamOpener
 from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
@@ -24,12 +25,14 @@ __all__ = (
     "HealthPolicy",
     "LineConnection",
     "Master",
+    "MasterConfig",
     "Point",
     "Poller",
     "ReconnectPolicy",
     "RecordRequestLike",
     "Sample",
     "StreamOpener",
+    "TimingPolicy",
     "UnitHandle",
     "UnitHealth",
     "UnitOffline",

@@ -30,7 +30,7 @@ docs/protocol.md.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Awaitable, Callable, Collection, Mapping, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Self, TypeVar
 
@@ -38,7 +38,7 @@ import anyio
 import anyio.abc
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.master_transaction import Failure, RetryPolicy, Transaction
+from aiortu.core.master_transaction import RetryPolicy, Transaction
 from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response, decode_request
 from aiortu.core.pdu_bits import (
     ReadCoilsRequest,
@@ -58,9 +58,9 @@ from aiortu.core.pdu_registers import (
     WriteMultipleRegistersRequest,
     WriteSingleRegisterRequest,
 )
-from aiortu.core.receiver import Role, TimingMode
+from aiortu.core.receiver import Role
 from aiortu.core.timing import LineSettings
-from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
+from aiortu.errors import ExceptionResponse, InvalidRequest, InvalidValue, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
     UNIT_RANGE,
@@ -68,15 +68,15 @@ from aiortu.master._arguments import (
     check_coil,
     check_coils,
     check_int,
-    check_master_settings,
     check_priority,
     check_registers,
     check_timeout,
     check_turnaround,
     check_unit,
 )
-from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
-from aiortu.master._engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
+from aiortu.master._config import MasterConfig
+from aiortu.master._connection import LineConnection, StreamOpener, can_reconnect
+from aiortu.master._engine import LineEngine, UnitOffline, UnitStats
 from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._serial_line import SerialLineFunctions
 
@@ -93,6 +93,9 @@ _ReadT = TypeVar(
 
 _STATS_UNITS = range(248)
 """The units a master keeps statistics of: unit 0 counts the broadcasts."""
+
+_SEND_ONCE = RetryPolicy(0)
+"""The policy of a request without reply: nothing tells a failed attempt."""
 
 _READ_CACHE_SIZE = 256
 """Read requests a master keeps made (see `Master._read_request`)."""
@@ -189,62 +192,41 @@ class Master(SerialLineFunctions):
         stream: anyio.abc.ByteStream,
         settings: LineSettings | None = None,
         *,
-        timeout: float = 1.0,
-        retries: int = 2,
-        retry_on: Collection[Failure | int] | None = None,
-        repeatable: Collection[int] | None = None,
-        frame_gap: float | None = None,
-        turnaround_delay: float = 0.1,
-        late_reply_guard: float = 0.1,
-        offline_after: int = 3,
-        fail_fast_offline: bool = False,
-        probe_interval: float = 5.0,
-        timing: TimingMode | str = TimingMode.TOLERANT,
+        config: MasterConfig | None = None,
         clock: Callable[[], float] = anyio.current_time,
         opener: StreamOpener | None = None,
-        reconnect: bool = True,
-        reconnect_delay: tuple[float, float] = (0.1, 5.0),
-        reconnect_fail_fast: bool = False,
-        min_turnaround: float = 0.0,
-        wire_timed: bool | None = None,
+        **options: Any,
     ) -> None:
-        check_master_settings(
-            timeout=timeout, retries=retries, retry_on=retry_on, repeatable=repeatable,
-            frame_gap=frame_gap, turnaround_delay=turnaround_delay,
-            late_reply_guard=late_reply_guard, offline_after=offline_after,
-            fail_fast_offline=fail_fast_offline, probe_interval=probe_interval,
-            reconnect=reconnect, reconnect_delay=reconnect_delay,
-            reconnect_fail_fast=reconnect_fail_fast, timing=timing, settings=settings,
-            clock=clock, opener=opener, min_turnaround=min_turnaround, wire_timed=wire_timed,
-        )  # fmt: skip
+        if settings is not None and not isinstance(settings, LineSettings):
+            raise InvalidValue("settings", settings, "a LineSettings or None")
+        if not callable(clock):
+            raise InvalidValue("clock", clock, "a function returning the time in seconds")
+        if opener is not None and not callable(opener):
+            raise InvalidValue("opener", opener, "None or an async function returning a stream")
+        if config is not None and not isinstance(config, MasterConfig):
+            raise InvalidValue("config", config, "a MasterConfig or None")
+        config = (config if config is not None else MasterConfig()).with_options(**options)
+        self.config = config
+        """The master's options (see [`MasterConfig`][aiortu.master.MasterConfig])."""
         self.settings = settings if settings is not None else LineSettings()
-        self.timeout = float(timeout)
-        self.turnaround_delay = turnaround_delay
-        self.policy = RetryPolicy.of(retries, retry_on, repeatable)
+        self.timeout = config.timeout
+        self.turnaround_delay = config.timings.turnaround_delay
+        self.policy = config.retry
+        timings = config.timings
 
         def make_link(stream: anyio.abc.ByteStream) -> Link:
             link = Link(
-                stream, self.settings, role=Role.MASTER, timing=timing, frame_gap=frame_gap,
-                clock=clock,
+                stream, self.settings, role=Role.MASTER, timing=timings.mode,
+                frame_gap=timings.frame_gap, clock=clock,
             )  # fmt: skip
-            if wire_timed is not None:
-                link.wire_timed = wire_timed
+            if timings.wire_timed is not None:
+                link.wire_timed = timings.wire_timed
             return link
 
         link = make_link(stream)
-        self.engine = LineEngine(
-            link,
-            health=HealthPolicy(offline_after, fail_fast_offline, probe_interval),
-            late_reply_guard=late_reply_guard,
-        )
-        self.engine.min_turnaround = check_turnaround(min_turnaround)
-        self.connection = LineConnection(
-            self.engine,
-            link,
-            make_link,
-            opener,
-            ReconnectPolicy(reconnect, reconnect_delay, reconnect_fail_fast),
-        )
+        reconnect = can_reconnect(opener, config.reconnection)
+        self.engine = LineEngine(link, config, can_reconnect=reconnect)
+        self.connection = LineConnection(self.engine, link, make_link, opener, config.reconnection)
         """Keeps the line up: reconnect counters, the current link."""
         self.broadcast = BroadcastHandle(self)
         """The writes that may go to every unit at once (unit 0); no reply is awaited."""
@@ -299,10 +281,9 @@ class Master(SerialLineFunctions):
         silence. Too large a value drops the device's genuine replies.
         """
         check_unit(unit)
-        if seconds is None:
-            self.engine.unit_turnaround.pop(unit, None)
-        else:
-            self.engine.unit_turnaround[unit] = check_turnaround(seconds)
+        self.engine.set_unit_turnaround(
+            unit, None if seconds is None else check_turnaround(seconds)
+        )
 
     def unit_stats(self, unit: int) -> UnitStats:
         """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
@@ -331,8 +312,10 @@ class Master(SerialLineFunctions):
         check_unit(unit)
         pdu = _known_form(pdu)
         policy = self.policy.for_function(pdu.function_code)
-        transaction = Transaction(unit, pdu, self._timeout(timeout), policy)
-        response = await self.engine.submit(transaction, check_priority(priority))
+        transaction = Transaction(
+            unit, pdu, self._timeout(timeout), policy, order=check_priority(priority)
+        )
+        response = await self.engine.submit(transaction)
         assert response is not None
         return response
 
@@ -349,16 +332,16 @@ class Master(SerialLineFunctions):
                 )
         else:
             check_unit(unit)
-        check_priority(priority)
         transaction = Transaction(
             unit,
             pdu,
             self.timeout,
-            RetryPolicy(0),
+            _SEND_ONCE,
             expects_reply=False,
             turnaround=self.turnaround_delay,
+            order=check_priority(priority),
         )
-        await self.engine.submit(transaction, priority)
+        await self.engine.submit(transaction)
 
     async def request(
         self,
@@ -410,7 +393,9 @@ class Master(SerialLineFunctions):
             policy = self.policy
             if request.function_code not in policy.repeatable:
                 policy = policy.for_function(request.function_code)
-        return self.engine.submit_request(unit, request, response_timeout, policy, priority)
+        return self.engine.submit(
+            Transaction(unit, request, response_timeout, policy, order=priority)
+        )
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
         """`kind(address, count)`, made once per address and count: a poll loop reads
@@ -615,29 +600,16 @@ async def open_master(
     parity: str = "E",
     stopbits: float = 1,
     bytesize: int = 8,
-    timeout: float = 1.0,
-    retries: int = 2,
-    retry_on: Collection[Failure | int] | None = None,
-    repeatable: Collection[int] | None = None,
-    frame_gap: float | None = None,
-    turnaround_delay: float = 0.1,
-    late_reply_guard: float = 0.1,
-    offline_after: int = 3,
-    fail_fast_offline: bool = False,
-    probe_interval: float = 5.0,
-    timing: TimingMode | str = TimingMode.TOLERANT,
-    reconnect: bool = True,
-    reconnect_delay: tuple[float, float] = (0.1, 5.0),
-    reconnect_fail_fast: bool = False,
-    min_turnaround: float = 0.0,
-    wire_timed: bool | None = None,
-    **transport_options: Any,
+    config: MasterConfig | None = None,
+    **options: Any,
 ) -> AsyncIterator[Master]:
     """Open `port_or_url` (a serial device path, `rtu+tcp://host:port`, or `tcp://host:port` for
     Modbus TCP) and yield a [`Master`][aiortu.master.Master] on it; the port is closed on exit.
 
-    The line settings come from `baudrate`, `parity`, `stopbits` and `bytesize`; the other arguments
-    are [`Master`][aiortu.master.Master]'s, and `transport_options` go to
+    The line settings come from `baudrate`, `parity`, `stopbits` and `bytesize`. `config` and the
+    everyday keywords among `options` (those of
+    [`MasterConfig.KEYWORDS`][aiortu.master.MasterConfig]: `timeout`, `retries`, ...) are the
+    master's; the other `options` go to
     [`aiortu.transport.open_stream`][aiortu.transport.open_stream] (`exclusive`, `rs485`,
     `local_echo`, `connect_timeout`). Opening errors are [`PortError`][aiortu.errors.PortError]s.
 
@@ -648,24 +620,21 @@ async def open_master(
     ([`ModbusTcpCounters`][aiortu.transport.ModbusTcpCounters], at `master.link.stream.counters`)
     go on across reconnects.
 
-    With `reconnect` (the default) the master reopens the same port with the same
-    settings after it disappears (a USB adapter unplugged); see [`Master`][aiortu.master.Master] for
-    `reconnect_delay` and `reconnect_fail_fast`.
+    With reconnecting on (the default) the master reopens the same port with the same
+    settings after it disappears (a USB adapter unplugged); see
+    [`ReconnectPolicy`][aiortu.master.ReconnectPolicy].
     """
-    options: dict[str, Any] = {
-        "timeout": timeout, "retries": retries, "retry_on": retry_on, "repeatable": repeatable,
-        "frame_gap": frame_gap, "turnaround_delay": turnaround_delay,
-        "late_reply_guard": late_reply_guard, "offline_after": offline_after,
-        "fail_fast_offline": fail_fast_offline, "probe_interval": probe_interval,
-        "timing": timing, "reconnect": reconnect, "reconnect_delay": reconnect_delay,
-        "reconnect_fail_fast": reconnect_fail_fast, "min_turnaround": min_turnaround,
-        "wire_timed": wire_timed,
-    }  # fmt: skip
-    check_master_settings(**options)  # before the port is opened: a bad one leaves it shut
+    keywords = MasterConfig.KEYWORDS
+    master_options = {name: value for name, value in options.items() if name in keywords}
+    transport_options = {name: value for name, value in options.items() if name not in keywords}
+    if config is not None and not isinstance(config, MasterConfig):
+        raise InvalidValue("config", config, "a MasterConfig or None")
+    # Checked before the port is opened: a bad option leaves it shut.
+    config = (config if config is not None else MasterConfig()).with_options(**master_options)
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     opener = _opener(port_or_url, settings, transport_options)
     stream = await opener()
-    master = Master(stream, settings, opener=opener, **options)
+    master = Master(stream, settings, opener=opener, config=config)
     try:
         async with master:
             yield master

@@ -76,7 +76,9 @@ class UnitStats:
     retries: int = 0
     """Attempts repeated."""
     skipped_frames: int = 0
-    """Frames skipped while waiting for this unit (stale, other units, not matching)."""
+    """Frames skipped while waiting for this unit (stale, other units, not matching, late)."""
+    late_replies: int = 0
+    """Of those, the replies to this unit's timed-out requests that came too late."""
     last_latency: float | None = None
     """Seconds from the start of the request to the end of the reply, last success."""
     mean_latency: float | None = None
