@@ -11,6 +11,7 @@ import aiortu
 from aiortu.core.crc import crc16
 from aiortu.core.receiver import DiscardReason, FrameDiscarded, FrameReceived, Role
 from aiortu.errors import ConnectionLost, ResponseTimeout
+from aiortu.line import ReplyTap
 from aiortu.line._link import Link
 from aiortu.master._client import Master
 from aiortu.transport._serial import open_serial
@@ -125,7 +126,7 @@ async def test_an_expected_frame_goes_to_its_callback_and_anything_else_as_event
                 taken.append((frame, end))
                 arrived.set()
 
-            link.expect(reply[:3], len(reply), on_frame)
+            link.expect(ReplyTap(reply[:3], len(reply), on_frame, None))
             # Another unit's frame of the same length is not the one expected.
             other = _with_crc(bytes([18]) + REPLY[1:])
             pty.write(other)
@@ -146,7 +147,7 @@ async def test_an_expected_frame_goes_to_its_callback_and_anything_else_as_event
                 event = await link.receive()
             assert isinstance(event, FrameReceived)
             # A bad CRC is never handed over: the receiver discards it.
-            link.expect(reply[:3], len(reply), on_frame)
+            link.expect(ReplyTap(reply[:3], len(reply), on_frame, None))
             pty.write(reply[:-1] + bytes([reply[-1] ^ 1]))
             with anyio.fail_after(2):
                 event = await link.receive()

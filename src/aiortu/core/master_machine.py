@@ -376,7 +376,9 @@ class MasterMachine:
         """
         if self.state is not _S.IDLE or self._on_transition is not None or unit in self._late:
             return None
-        known = self._remember(unit, request)
+        known = self._frames.get((unit, id(request)))
+        if known is None or known.request is not request:
+            known = self._remember(unit, request)
         return known if known.reply_shape is not None else None
 
     @staticmethod

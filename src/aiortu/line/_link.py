@@ -416,27 +416,22 @@ class Link:
         if self._listener is not None:
             self._listener(None)
 
-    def expect(
-        self,
-        prefix: bytes,
-        length: int,
-        on_frame: Callable[[bytes, float], None],
-        checked: bytes | None = None,
-    ) -> None:
-        """Hand the next chunk that is exactly one good frame of `length` bytes starting with
-        `prefix` straight to `on_frame(frame, end)`, once, instead of to the listener as a
-        [`FrameReceived`][aiortu.core.receiver.FrameReceived];
-        [`forget_expected`][aiortu.line.Link.forget_expected] undoes it. `prefix` and `length` must
-        fit one frame layout (the receiver checks the CRC only). `checked` is a frame of that layout
-        whose CRC is known to be good (the last reply to the same request): a chunk equal to it is
-        not checked again.
+    def expect(self, tap: ReplyTap) -> None:
+        """Hand the next chunk that is exactly one good frame of `tap.length` bytes starting
+        with `tap.prefix` straight to `tap.on_frame(frame, end)`, once, instead of to the
+        listener as a [`FrameReceived`][aiortu.core.receiver.FrameReceived];
+        [`forget_expected`][aiortu.line.Link.forget_expected] undoes it. `prefix` and `length`
+        must fit one frame layout (the receiver checks the CRC only). `tap.checked` is a frame of
+        that layout whose CRC is known to be good (the last reply to the same request): a chunk
+        equal to it is not checked again. A tap may be given again (a master keeps one per
+        reply shape).
 
         Only where the stream pushes its bytes (see `_push`); anything else takes
         the usual way. A master waiting for the reply it knows the shape of (a register
         read's) saves the event and the queue this way.
         """
         if self._push_reader is not None:
-            self._push_reader.reply_tap = ReplyTap(prefix, length, on_frame, checked)
+            self._push_reader.reply_tap = tap
 
     def expect_requests(
         self,
