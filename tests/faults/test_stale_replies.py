@@ -65,8 +65,8 @@ class _Line:
     def call_at(self, when: float, callback: object) -> asyncio.TimerHandle:
         return self.loop.call_at(when + 1e9, lambda: None)  # never fires here
 
-    def expect(self, prefix: bytes, length: int, on_frame: object, checked: object) -> None:
-        self.expected = on_frame
+    def expect(self, tap: object) -> None:
+        self.expected = tap
 
     def forget_expected(self) -> None:
         self.expected = None

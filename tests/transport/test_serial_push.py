@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import anyio
 import pytest
 
@@ -234,17 +232,14 @@ async def test_master_reads_on_a_port_whatever_way_the_reply_comes(
             expect = link.expect
             usual_replies: list[bytes] = []
 
-            def counting_expect(
-                prefix: bytes,
-                length: int,
-                on_frame: Callable[[bytes, float], None],
-                checked: bytes | None = None,
-            ) -> None:
+            def counting_expect(tap: ReplyTap) -> None:
+                on_frame = tap.on_frame
+
                 def counted(frame: bytes, end: float) -> None:
                     usual_replies.append(frame)
                     on_frame(frame, end)
 
-                expect(prefix, length, counted, checked)
+                expect(ReplyTap(tap.prefix, tap.length, counted, tap.checked))
 
             link.expect = counting_expect  # type: ignore[method-assign]
 
