@@ -15,6 +15,7 @@ from aiortu.master._config import MasterConfig, ReconnectPolicy, TimingPolicy
 from aiortu.master._connection import LineConnection, StreamOpener
 from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
+from aiortu.master._seam import Seam
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
 
 __all__ = (
@@ -31,6 +32,7 @@ __all__ = (
     "ReconnectPolicy",
     "RecordRequestLike",
     "Sample",
+    "Seam",
     "StreamOpener",
     "TimingPolicy",
     "UnitHandle",

@@ -78,6 +78,7 @@ from aiortu.master._config import MasterConfig
 from aiortu.master._connection import LineConnection, StreamOpener, can_reconnect
 from aiortu.master._engine import LineEngine, UnitOffline, UnitStats
 from aiortu.master._handles import BroadcastHandle, UnitHandle
+from aiortu.master._seam import Seam
 from aiortu.master._serial_line import SerialLineFunctions
 
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
@@ -189,7 +190,7 @@ class Master(SerialLineFunctions):
 
     def __init__(
         self,
-        stream: anyio.abc.ByteStream,
+        stream: anyio.abc.ByteStream | Seam,
         settings: LineSettings | None = None,
         *,
         config: MasterConfig | None = None,
@@ -223,10 +224,17 @@ class Master(SerialLineFunctions):
                 link.wire_timed = timings.wire_timed
             return link
 
-        link = make_link(stream)
-        reconnect = can_reconnect(opener, config.reconnection)
-        self.engine = LineEngine(link, config, can_reconnect=reconnect)
-        self.connection = LineConnection(self.engine, link, make_link, opener, config.reconnection)
+        self._engine: LineEngine | None = None
+        self._connection: LineConnection | None = None
+        self._seam: Seam
+        """What every request goes through: the line's engine, or the Seam given."""
+        if isinstance(stream, Seam):
+            self._seam = stream
+        else:
+            link = make_link(stream)
+            reconnect = can_reconnect(opener, config.reconnection)
+            engine = self._seam = self._engine = LineEngine(link, config, can_reconnect=reconnect)
+            self._connection = LineConnection(engine, link, make_link, opener, config.reconnection)
         """Keeps the line up: reconnect counters, the current link."""
         self.broadcast = BroadcastHandle(self)
         """The writes that may go to every unit at once (unit 0); no reply is awaited."""
@@ -239,7 +247,8 @@ class Master(SerialLineFunctions):
         async with contextlib.AsyncExitStack() as stack:
             task_group = await stack.enter_async_context(anyio.create_task_group())
             stack.callback(task_group.cancel_scope.cancel)
-            task_group.start_soon(self.connection.run, name="aiortu master line task")
+            if self._connection is not None:
+                task_group.start_soon(self._connection.run, name="aiortu master line task")
             self._exit_stack = stack.pop_all()
         return self
 
@@ -255,21 +264,42 @@ class Master(SerialLineFunctions):
         return await stack.__aexit__(exc_type, exc, traceback)
 
     @property
+    def engine(self) -> LineEngine:
+        """The engine of the master's line (not on a [`Seam`][aiortu.master.Seam] given in
+        place of a stream)."""
+        if self._engine is None:
+            raise InvalidValue("engine", self._seam, "a master on a byte stream", "no line")
+        return self._engine
+
+    @property
+    def connection(self) -> LineConnection:
+        """Keeps the line up: reconnect counters, the current link (not on a
+        [`Seam`][aiortu.master.Seam] given in place of a stream)."""
+        if self._connection is None:
+            raise InvalidValue("connection", self._seam, "a master on a byte stream", "no line")
+        return self._connection
+
+    @property
     def link(self) -> Link:
         """The line the master talks on now (a new one after each reconnect)."""
         return self.connection.link
 
     @property
     def connected(self) -> bool:
-        """Whether the line is up: False while reconnecting and once failed or closed."""
-        return self.connection.connected
+        """Whether the line is up: False while reconnecting and once failed or closed
+        (always True on a [`Seam`][aiortu.master.Seam] given in place of a stream)."""
+        return self._connection is None or self._connection.connected
+
+    def clock(self) -> float:
+        """The master's time, in seconds (its line's clock)."""
+        return self._seam.clock()
 
     # -- statistics ------------------------------------------------------------------
 
     @property
     def statistics(self) -> Mapping[int, UnitStats]:
         """[`UnitStats`][aiortu.master.UnitStats] by unit address, for units used so far."""
-        return self.engine.stats
+        return self._seam.stats
 
     def set_min_turnaround(self, unit: int, seconds: float | None) -> None:
         """Set the least time `unit` takes from the end of a request on the wire to the
@@ -281,13 +311,14 @@ class Master(SerialLineFunctions):
         silence. Too large a value drops the device's genuine replies.
         """
         check_unit(unit)
-        self.engine.set_unit_turnaround(
-            unit, None if seconds is None else check_turnaround(seconds)
-        )
+        if self._engine is not None:
+            self._engine.set_unit_turnaround(
+                unit, None if seconds is None else check_turnaround(seconds)
+            )
 
     def unit_stats(self, unit: int) -> UnitStats:
         """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
-        return self.engine.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
+        return self._seam.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
         """False once `unit` failed `offline_after` times in a row, until a success."""
@@ -315,7 +346,7 @@ class Master(SerialLineFunctions):
         transaction = Transaction(
             unit, pdu, self._timeout(timeout), policy, order=check_priority(priority)
         )
-        response = await self.engine.submit(transaction)
+        response = await self._seam.submit(transaction)
         assert response is not None
         return response
 
@@ -341,7 +372,7 @@ class Master(SerialLineFunctions):
             turnaround=self.turnaround_delay,
             order=check_priority(priority),
         )
-        await self.engine.submit(transaction)
+        await self._seam.submit(transaction)
 
     async def request(
         self,
@@ -393,7 +424,7 @@ class Master(SerialLineFunctions):
             policy = self.policy
             if request.function_code not in policy.repeatable:
                 policy = policy.for_function(request.function_code)
-        return self.engine.submit(
+        return self._seam.submit(
             Transaction(unit, request, response_timeout, policy, order=priority)
         )
 

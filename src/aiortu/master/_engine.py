@@ -71,6 +71,10 @@ class LineEngine(LineState):
         self.line_task = LineTask(self)
         self._failed: ConnectionLost | None = None
 
+    def clock(self) -> float:
+        """The line's time, in seconds."""
+        return self.link.clock()
+
     @property
     def late_reply_guard(self) -> float:
         """The silence kept after a failed attempt, in seconds."""

@@ -1,7 +1,7 @@
 """What the parts of a master's engine share: the line, the machine, the queue, the attempts,
 the statistics, and the hand-overs between them.
 
-[`LineEngine`][aiortu.master.LineEngine] is a `LineState`; its fast path
+`LineEngine` is a `LineState`; its fast path
 (`_fast_path.py`) and its line task (`_line_task.py`) are given it, and call the hand-overs
 it implements (`release`, `take_over`, `adopt`, `exchange`).
 """

@@ -1,6 +1,6 @@
 """Who holds a master's line and who waits for it: one job per transaction, one queue.
 
-[`LineEngine.submit`][aiortu.master.LineEngine] makes a `Job` for a transaction that cannot
+`LineEngine.submit` makes a `Job` for a transaction that cannot
 run at once and puts it in the `LineQueue`, ordered by the transaction's `order` (lower
 first), then by arrival. Each job has one way to be woken: its `future`, completed once,
 with `TURN` (the line is the caller's: it runs its transaction itself), with the result
