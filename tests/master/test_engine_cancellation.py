@@ -17,6 +17,7 @@ from aiortu.master._client import Master
 from aiortu.transport._serial import open_serial
 from tests.master.fakes import FakeSlave, answer, line, silent
 from tests.transport.ptys import LINE, open_pty, read_master
+from tests.virtual_clock import on_virtual_clock
 
 
 async def _until(condition: Callable[[], bool]) -> None:
@@ -25,6 +26,7 @@ async def _until(condition: Callable[[], bool]) -> None:
             await anyio.sleep(0.001)
 
 
+@on_virtual_clock
 async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_queued_write() -> (
     None
 ):
@@ -72,6 +74,7 @@ async def _slow(slave: FakeSlave, unit: int, request: Request) -> None:
     await answer(slave, unit, request)
 
 
+@on_virtual_clock
 async def test_a_caller_cancelled_while_queued_is_dropped_and_the_line_goes_on() -> None:
     async with line(default=_slow, timeout=1.0) as (master, slave, _):
         engine = master.engine
