@@ -9,6 +9,8 @@ got the three-register reply and failed with `MalformedPDU: ... byte_count = 6`.
 
 from __future__ import annotations
 
+import functools
+
 import anyio
 import pytest
 
@@ -20,7 +22,8 @@ from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRe
 from aiortu.core.timing import LineSettings
 from aiortu.errors import MalformedPDU, ResponseTimeout
 from aiortu.testing import VirtualBus
-from tests.master.fakes import FakeSlave, answer, standard_reply
+from tests.master.fakes import FakeSlave, Step, answer, silent, standard_reply
+from tests.virtual_clock import on_virtual_clock
 
 THREE = ReadHoldingRegistersResponse((1, 2, 3)).encode()  # byte count 6
 ONE = ReadHoldingRegistersResponse((9,)).encode()
@@ -118,4 +121,49 @@ async def test_the_libmodbus_sequence_on_a_virtual_line(fast_path: bool) -> None
             stats = master.unit_stats(1)
             assert stats.late_replies == 1
             assert (stats.successes, stats.failures, stats.timeouts) == (1, 1, 1)
+        tasks.cancel_scope.cancel()
+
+
+async def _late_by(seconds: float, slave: FakeSlave, unit: int, request: Request) -> None:
+    await anyio.sleep(seconds)
+    await answer(slave, unit, request)
+
+
+@on_virtual_clock
+async def test_a_unit_that_answers_only_late_goes_offline_though_its_replies_are_taken() -> None:
+    # Each reply comes 0.15 s after its request, the timeout is 0.1 s and no guard is kept:
+    # every read times out once, and its retry takes the first attempt's reply. The caller
+    # gets its values; the unit's health counts each as a failure.
+    bus = VirtualBus(2)
+    slave = FakeSlave(bus.endpoints[1], frozenset({1}), {}, functools.partial(_late_by, 0.15))
+    master = aiortu.Master(
+        bus.endpoints[0], LineSettings(1_000_000), timeout=0.1, late_reply_guard=0, frame_gap=0
+    )
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(slave.run)
+        async with master:
+            for _ in range(3):
+                assert await master.read_holding_registers(1, 0, 1) == [1000]
+            stats = master.unit_stats(1)
+            assert (stats.successes, stats.late_successes, stats.timeouts) == (3, 3, 3)
+            assert not master.is_online(1)
+        tasks.cancel_scope.cancel()
+
+
+@on_virtual_clock
+async def test_a_reply_in_time_after_a_lost_request_keeps_the_unit_online() -> None:
+    # One timed-out attempt then a reply in time: one failure in a row, not three.
+    def script() -> dict[int, Step]:
+        return {0: silent}
+
+    bus = VirtualBus(2)
+    slave = FakeSlave(bus.endpoints[1], frozenset({1}), script(), answer)
+    master = aiortu.Master(bus.endpoints[0], LineSettings(1_000_000), timeout=0.1, frame_gap=0)
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(slave.run)
+        async with master:
+            assert await master.read_holding_registers(1, 0, 1) == [1000]
+            assert await master.read_holding_registers(1, 0, 1) == [1000]
+            stats = master.unit_stats(1)
+            assert (stats.late_successes, stats.consecutive_failures, stats.online) == (1, 0, True)
         tasks.cancel_scope.cancel()

@@ -12,7 +12,7 @@ import anyio
 
 from aiortu.core.errors import FrameError
 from aiortu.core.master_machine import MasterMachine
-from aiortu.core.master_transaction import Outcome, OutcomeKind
+from aiortu.core.master_transaction import Failure, Outcome, OutcomeKind
 from aiortu.core.pdu import ExceptionPDU
 from aiortu.errors import ConnectionLost, ResponseTimeout
 from aiortu.line import Link, LinkEvent
@@ -81,10 +81,13 @@ class LineState:
             return
         response = outcome.response
         if response is not None:
-            stats.count_success(
-                self.link.clock() - transaction.attempt_start,
-                exception=isinstance(response, ExceptionPDU),
-            )
+            now = self.link.clock()
+            latency = now - transaction.attempt_start
+            exception = isinstance(response, ExceptionPDU)
+            if Failure.TIMEOUT in transaction.failures:
+                stats.count_late_success(latency, self.health, now, exception=exception)
+            else:
+                stats.count_success(latency, exception=exception)
         job.finish(response, None)
 
     def attach(self, link: Link) -> None:
