@@ -130,28 +130,19 @@ def _known_form(pdu: object) -> Request:
 class Master(SerialLineFunctions):
     """A Modbus RTU master on `stream`; an async context manager.
 
-    `settings` give the line timing. `timeout` is the response timeout of each attempt,
-    counted from when the request has left the wire; `retries` extra attempts follow a
-    failure listed in `retry_on` (default: timeouts and frame errors, never exception
-    responses; add exception codes to retry those), for requests whose function code is
-    in `repeatable` (default
-    [`SAFE_TO_REPEAT`][aiortu.core.master_transaction.SAFE_TO_REPEAT]: reads and the idempotent
-    writes; a request of another code is sent once). `frame_gap` is the silence kept
-    before each request (`None`: t3.5, or 0 on a stream of whole frames such as Modbus TCP's
-    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream]; 0 for virtual lines and TCP gateways).
-    `turnaround_delay` is the wait after a broadcast. Health: `offline_after`
-    consecutive failures mark a unit offline; with `fail_fast_offline` calls to it raise
-    [`UnitOffline`][aiortu.errors.UnitOffline] except one probe every `probe_interval`
-    seconds. `timing` is the receiver's t1.5 mode. `min_turnaround` and `wire_timed`
-    decide which replies are stale (see below).
+    `stream` is any `anyio.abc.ByteStream`, or a [`Seam`][aiortu.master.Seam] that answers
+    requests itself (a test's [`MockLine`][aiortu.testing.MockLine]). `settings` give the line
+    timing. The options are a [`MasterConfig`][aiortu.master.MasterConfig] (`config`) and the
+    everyday keywords on top of it (`timeout=`, `retries=`, `offline_after=`, ...: the names of
+    `MasterConfig.KEYWORDS`, each setting one field of one of its policies; see there).
+    `clock` is the master's time.
 
-    Reconnecting (see [`aiortu.master`][aiortu.master]): when the stream fails, the request in
-    flight and the queued ones raise [`ConnectionLost`][aiortu.errors.ConnectionLost]. A master
-    given only a stream cannot reopen it and stays failed. Given an `opener` (an async function
-    returning a new stream for the same port; [`open_master`][aiortu.master.open_master] passes one)
-    and `reconnect` true, it reopens the port, waiting `reconnect_delay` `(first, longest)` seconds
-    between attempts, doubling; requests made meanwhile wait up to their timeout for the port and
-    then raise ConnectionLost, or raise it at once with `reconnect_fail_fast`.
+    Reconnecting (see [`ReconnectPolicy`][aiortu.master.ReconnectPolicy]): when the stream
+    fails, the request in flight and the queued ones raise
+    [`ConnectionLost`][aiortu.errors.ConnectionLost]. A master given only a stream cannot reopen
+    it and stays failed. Given an `opener` (an async function returning a new stream for the
+    same port; [`open_master`][aiortu.master.open_master] passes one), it reopens the port as its
+    reconnect policy says.
 
     Every method takes the unit first, and `timeout=` (this call's response timeout)
     and `priority=` (lower goes first; equal priorities keep their order). Requests
