@@ -15,11 +15,9 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.master_machine import MasterMachine
-from aiortu.core.master_transaction import OutcomeKind, RetryPolicy, SkipReason, Transaction
-from aiortu.core.pdu import Request
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
-from aiortu.core.timing import LineSettings
+from aiortu.core.machines import MasterMachine, OutcomeKind, RetryPolicy, SkipReason, Transaction
+from aiortu.core.pdu import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse, Request
+from aiortu.core.serial import LineSettings
 from aiortu.errors import MalformedPDU, ResponseTimeout
 from aiortu.testing import VirtualBus
 from tests.master.fakes import FakeSlave, Step, answer, silent, standard_reply

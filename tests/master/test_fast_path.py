@@ -18,10 +18,16 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.crc import crc16
-from aiortu.core.master_machine import KnownRequest, MasterMachine, MasterState
-from aiortu.core.master_transaction import OutcomeKind, RetryPolicy, Transaction
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, WriteSingleRegisterRequest
+from aiortu.core.machines import (
+    KnownRequest,
+    MasterMachine,
+    MasterState,
+    OutcomeKind,
+    RetryPolicy,
+    Transaction,
+)
+from aiortu.core.pdu import ReadHoldingRegistersRequest, WriteSingleRegisterRequest
+from aiortu.core.rtu import crc16
 from aiortu.errors import ConnectionLost
 from aiortu.master import MasterConfig
 from aiortu.master._attempt import NO_GUARD

@@ -7,10 +7,12 @@ import anyio.lowlevel
 import pytest
 
 import aiortu
-from aiortu.core.pdu import ExceptionPDU, Request, Response
-from aiortu.core.pdu_registers import (
+from aiortu.core.pdu import (
+    ExceptionPDU,
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
+    Request,
+    Response,
     WriteSingleRegisterRequest,
     WriteSingleRegisterResponse,
 )

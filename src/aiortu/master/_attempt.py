@@ -2,7 +2,7 @@
 answers it with its timer, and the late-reply guard kept after a failed attempt.
 
 `Attempts` feeds what the link delivered (`Attempts.deliver`, from the engine's link
-listener) and the clock to the [`MasterMachine`][aiortu.core.master_machine.MasterMachine]
+listener) and the clock to the [`MasterMachine`][aiortu.core.machines.MasterMachine]
 until it has an outcome. One event loop timer serves every wait (`Attempts.arm`): armed for
 the earliest deadline, it is armed again for the current one if it fires before it, so a
 read that ends in time costs no timer of its own. Without an event loop (trio) a wait is a
@@ -21,14 +21,14 @@ from typing import Any
 
 import anyio
 
-from aiortu.core.master_machine import MasterMachine
-from aiortu.core.master_transaction import (
+from aiortu.core.machines import (
+    MasterMachine,
     Outcome,
     OutcomeKind,
     SkipReason,
     frame_error_from_discard,
 )
-from aiortu.core.receiver import FrameReceived
+from aiortu.core.rtu import FrameReceived
 from aiortu.errors import ConnectionLost
 from aiortu.line import Link, LinkEvent
 from aiortu.master._stats import UnitStats

@@ -13,7 +13,7 @@ of coroutines.
 [`Master`][aiortu.master.Master] takes any `anyio.abc.ByteStream`;
 [`open_master`][aiortu.master.open_master] opens one from a port name or URL first. The line engine
 lives in [`aiortu.master`][aiortu.master], the state machine in
-[`aiortu.core.master_machine`][aiortu.core.master_machine], the per-unit and broadcast handles in
+[`aiortu.core.machines`][aiortu.core.machines], the per-unit and broadcast handles in
 [`aiortu.master`][aiortu.master].
 
 Who runs a transaction. The line is owned by one transaction at a time, and that
@@ -38,28 +38,30 @@ import anyio
 import anyio.abc
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.master_transaction import RetryPolicy, Transaction
-from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response, decode_request
-from aiortu.core.pdu_bits import (
+from aiortu.core.machines import RetryPolicy, Transaction
+from aiortu.core.pdu import (
+    ExceptionPDU,
+    MaskWriteRegisterRequest,
+    RawPDU,
     ReadCoilsRequest,
     ReadCoilsResponse,
     ReadDiscreteInputsRequest,
-    WriteMultipleCoilsRequest,
-    WriteSingleCoilRequest,
-)
-from aiortu.core.pdu_registers import (
-    MaskWriteRegisterRequest,
     ReadFifoQueueRequest,
     ReadFifoQueueResponse,
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
     ReadInputRegistersRequest,
     ReadWriteMultipleRegistersRequest,
+    Request,
+    Response,
+    WriteMultipleCoilsRequest,
     WriteMultipleRegistersRequest,
+    WriteSingleCoilRequest,
     WriteSingleRegisterRequest,
+    decode_request,
 )
-from aiortu.core.receiver import Role
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import Role
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ExceptionResponse, InvalidRequest, InvalidValue, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (

@@ -1,7 +1,7 @@
 """A master's options, once: a frozen configuration of its policies.
 
 [`MasterConfig`][aiortu.master.MasterConfig] groups what a [`Master`][aiortu.master.Master] does
-about retries ([`RetryPolicy`][aiortu.core.master_transaction.RetryPolicy]), unit health
+about retries ([`RetryPolicy`][aiortu.core.machines.RetryPolicy]), unit health
 ([`HealthPolicy`][aiortu.master.HealthPolicy]), reconnecting
 ([`ReconnectPolicy`][aiortu.master.ReconnectPolicy]) and the line's waits
 ([`TimingPolicy`][aiortu.master.TimingPolicy]). `Master(...)` and `open_master(...)` take one
@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Final
 
 from aiortu.core.errors import InvalidValue
-from aiortu.core.master_transaction import RetryPolicy
-from aiortu.core.receiver import TimingMode
+from aiortu.core.machines import RetryPolicy
+from aiortu.core.rtu import TimingMode
 from aiortu.master._arguments import (
     check_at_least,
     check_bool,

@@ -1,8 +1,8 @@
 """The master's line: one transaction at a time on one line, for any number of callers.
 
-`LineEngine` runs the sans-IO [`MasterMachine`][aiortu.core.master_machine.MasterMachine] on a
+`LineEngine` runs the sans-IO [`MasterMachine`][aiortu.core.machines.MasterMachine] on a
 [`Link`][aiortu.line.Link]. Every caller (the master's methods, the handles, the poller, the
-line server) hands it a [`Transaction`][aiortu.core.master_transaction.Transaction] through one
+line server) hands it a [`Transaction`][aiortu.core.machines.Transaction] through one
 method, `LineEngine.submit`, and awaits what it returns. Its parts, one module each:
 
 - the queue (`_queue.py`): who holds the line, who waits for it, in the transactions' order;
@@ -40,8 +40,7 @@ from collections.abc import Awaitable
 import anyio
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.master_machine import MasterState
-from aiortu.core.master_transaction import Outcome, OutcomeKind, Transaction
+from aiortu.core.machines import MasterState, Outcome, OutcomeKind, Transaction
 from aiortu.errors import ConnectionLost, UnitOffline
 from aiortu.line import Link, LinkEvent
 from aiortu.master._attempt import NO_GUARD

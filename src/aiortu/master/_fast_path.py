@@ -25,7 +25,7 @@ machine. `FastPath` does, one exchange at a time:
    future.
 
 So a reply ends a transaction by one of two routes: here, or the table of
-[`MasterMachine`][aiortu.core.master_machine.MasterMachine]. The differential tests run the same
+[`MasterMachine`][aiortu.core.machines.MasterMachine]. The differential tests run the same
 scenarios with the fast path on and off and compare results, statistics and the bytes on the
 wire.
 """
@@ -35,9 +35,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from aiortu.core.master_machine import KnownRequest, MasterMachine
-from aiortu.core.master_transaction import Transaction
-from aiortu.core.receiver import FrameReceived
+from aiortu.core.machines import KnownRequest, MasterMachine, Transaction
+from aiortu.core.rtu import FrameReceived
 from aiortu.line import ReplyTap
 from aiortu.master._attempt import NO_GUARD
 from aiortu.master._line_state import LineState

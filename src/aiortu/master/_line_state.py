@@ -11,8 +11,7 @@ from __future__ import annotations
 import anyio
 
 from aiortu.core.errors import FrameError
-from aiortu.core.master_machine import MasterMachine
-from aiortu.core.master_transaction import Failure, Outcome, OutcomeKind
+from aiortu.core.machines import Failure, MasterMachine, Outcome, OutcomeKind
 from aiortu.core.pdu import ExceptionPDU
 from aiortu.errors import ConnectionLost, ResponseTimeout
 from aiortu.line import Link, LinkEvent
@@ -59,7 +58,7 @@ class LineState:
         """The least delay from a request to `unit` leaving the wire to the arrival of its
         reply's first byte, where the link's wire times are real: the unit's minimum
         turnaround plus the byte's own wire time. None where they are not (see
-        [`Transaction.reply_delay`][aiortu.core.master_transaction.Transaction.reply_delay])."""
+        [`Transaction.reply_delay`][aiortu.core.machines.Transaction.reply_delay])."""
         link = self.link
         if not link.wire_timed:
             return None

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import anyio
 
-from aiortu.core.master_machine import MasterState
-from aiortu.core.master_transaction import OutcomeKind
+from aiortu.core.machines import MasterState, OutcomeKind
 from aiortu.errors import ConnectionLost
 from aiortu.line import Link
 from aiortu.master._line_state import LineState

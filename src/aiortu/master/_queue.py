@@ -19,7 +19,7 @@ from typing import Any, Final, Protocol
 import anyio
 import anyio.abc
 
-from aiortu.core.master_transaction import Transaction
+from aiortu.core.machines import Transaction
 from aiortu.core.pdu import ExceptionPDU, Response
 from aiortu.errors import ConnectionLost
 

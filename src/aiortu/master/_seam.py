@@ -1,7 +1,7 @@
 """What a master hands its transactions to: the one request seam.
 
 A [`Master`][aiortu.master.Master] submits every request it makes, whatever method makes it,
-as a [`Transaction`][aiortu.core.master_transaction.Transaction] to one object's `submit`: its
+as a [`Transaction`][aiortu.core.machines.Transaction] to one object's `submit`: its
 line's engine, or a [`Seam`][aiortu.master.Seam] given in place of a byte stream, such as
 [`aiortu.testing.MockLine`][aiortu.testing.MockLine], which answers requests without bytes or
 timing.
@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Mapping
 from typing import Protocol, runtime_checkable
 
-from aiortu.core.master_transaction import Transaction
+from aiortu.core.machines import Transaction
 from aiortu.core.pdu import ExceptionPDU, Response
 from aiortu.master._stats import UnitStats
 

@@ -23,7 +23,7 @@ import anyio
 import anyio.lowlevel
 
 from aiortu.core.errors import CRCError, FrameError, ResponseTimeout
-from aiortu.core.master_transaction import Transaction
+from aiortu.core.machines import Transaction
 from aiortu.core.pdu import ExceptionPDU, Request, Response
 from aiortu.errors import InvalidValue
 from aiortu.master import HealthPolicy, UnitStats
