@@ -192,6 +192,13 @@ class Link:
         self.receiver = Receiver(
             self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence
         )
+        self._init_events(queue_size)
+        self._init_runtime()
+        self._init_sender(stream)
+        self._init_counters()
+
+    def _init_events(self, queue_size: int) -> None:
+        """The queue of events for `receive`, and the listener that may take them instead."""
         self.queue_size = queue_size
         """The most events kept waiting to be received (by a listener too)."""
         self._send_events: MemoryObjectSendStream[LinkEvent]
@@ -199,8 +206,11 @@ class Link:
         self._send_events, self._receive_events = anyio.create_memory_object_stream[LinkEvent](
             queue_size
         )
-        self._task_group: anyio.abc.TaskGroup | None = None
         self._listener: LinkListener | None = None
+
+    def _init_runtime(self) -> None:
+        """What the link learns of the running backend when it opens, and its run state."""
+        self._task_group: anyio.abc.TaskGroup | None = None
         self.backend: type[anyio.abc.AsyncBackend] | None = None
         """The async backend the link runs on (set when it opens): its events, cancel
         scopes and clock cost no backend lookup."""
@@ -217,8 +227,6 @@ class Link:
         self._error: BaseException | None = None
         self._closed = anyio.Event()
         self._stopped = False
-        self._init_sender(stream)
-        self._init_counters()
 
     def _init_sender(self, stream: anyio.abc.ByteStream) -> None:
         """The sender's state, and the push reader where the stream pushes its bytes."""
