@@ -31,12 +31,15 @@ def device(unit: int, request: Request) -> Response | ExceptionPDU | None:
 
 async def test_a_gateway_forwards_to_a_mock_line() -> None:
     line = MockLine(device)
-    async with aiortu.Master(line, fail_fast_offline=True) as master:
-        async with gateway(master, ["tcp://127.0.0.1:0"]) as server, client(server) as peer:
-            with anyio.fail_after(5):
-                assert await peer.request("0300050002", unit=17) == "03 04 00 05 00 06"
-                assert await peer.request("0600010007", unit=17) == "86 01"  # refused
-                assert await peer.request("0300000001", unit=9) == "83 0B"  # no reply: 0B
+    async with (
+        aiortu.Master(line, fail_fast_offline=True) as master,
+        gateway(master, ["tcp://127.0.0.1:0"]) as server,
+        client(server) as peer,
+    ):
+        with anyio.fail_after(5):
+            assert await peer.request("0300050002", unit=17) == "03 04 00 05 00 06"
+            assert await peer.request("0600010007", unit=17) == "86 01"  # refused
+            assert await peer.request("0300000001", unit=9) == "83 0B"  # no reply: 0B
     assert [(t.unit, t.request.function_code) for t in line.transactions] == [
         (17, 3),
         (17, 6),
