@@ -16,7 +16,7 @@ from aiortu.core.pdu import (
 from aiortu.errors import ResponseTimeout
 from aiortu.gateway import gateway
 from aiortu.testing import MockLine
-from tests.gateway.helpers import client
+from tests.gateway.helpers import client, line
 
 
 def device(unit: int, request: Request) -> Response | ExceptionPDU | None:
@@ -45,3 +45,15 @@ async def test_a_gateway_forwards_to_a_mock_line() -> None:
         (17, 6),
         (9, 3),
     ]
+
+
+async def test_a_gateways_reads_take_the_fast_path_as_any_read() -> None:
+    # Through the one seam, a forwarded register read on an idle line runs without the
+    # machine, as the master's own reads do (failing fast on offline units, as the line
+    # server's master does): the machine begins no transaction.
+    async with line() as gateway_line, client(gateway_line.gateway) as peer:
+        with anyio.fail_after(5):
+            for _ in range(3):
+                assert (await peer.request("0300000002")).startswith("03 04")
+        assert gateway_line.master.engine.machine.transaction is None
+        assert gateway_line.master.unit_stats(17).successes == 3

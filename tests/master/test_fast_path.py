@@ -365,7 +365,10 @@ VETOES: dict[str, dict[str, object]] = {
     "the line task does not serve": {"open": False},
     "line held or waited for": {"busy": True},
     "late-reply guard pending": {"guard_until": 12.0},
-    "fail fast on offline units": {"health": aiortu.HealthPolicy(fail_fast_offline=True)},
+    "fail fast, the unit offline": {
+        "health": aiortu.HealthPolicy(fail_fast_offline=True),
+        "stats": {1: aiortu.UnitStats(online=False)},
+    },
     "machine not idle": {"machine": _busy_machine()},
     "machine observed": {"machine": MasterMachine(on_transition=lambda *step: None)},
     "a late reply awaited from the unit": {"machine": _late_reply_awaited()},
@@ -383,6 +386,12 @@ def test_the_fast_path_runs_where_every_condition_holds() -> None:
 @pytest.mark.parametrize("change", VETOES.values(), ids=VETOES.keys())
 def test_each_condition_of_the_fast_path_alone_keeps_it_off(change: dict[str, object]) -> None:
     assert _predicate_case(**change) is None
+
+
+def test_fail_fast_lets_the_fast_path_run_for_a_unit_not_offline() -> None:
+    fail_fast = aiortu.HealthPolicy(fail_fast_offline=True)
+    assert _predicate_case(health=fail_fast) is not None
+    assert _predicate_case(health=fail_fast, stats={1: aiortu.UnitStats()}) is not None
 
 
 def test_the_line_handed_to_a_queued_caller_lets_the_fast_path_run() -> None:

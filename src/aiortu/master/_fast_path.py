@@ -100,8 +100,9 @@ class FastPath:
             # After a failed attempt the late-reply guard comes first: the machine's route
             # keeps it.
             and engine.attempts.guard_until == NO_GUARD
-            # Requests to offline units may be refused: the machine's route decides.
-            and not engine.health.fail_fast_offline
+            # With fail-fast, a request to an offline unit may be refused: the machine's
+            # route decides. One to a unit not known to be offline goes.
+            and not (engine.health.fail_fast_offline and _offline(engine, transaction.unit))
         ):
             return None
         # The machine is IDLE (nothing in flight to take over), has no transition observer
@@ -209,3 +210,8 @@ class FastPath:
         future = self._future
         if not future.done():
             future.set_exception(error)
+
+
+def _offline(engine: LineState, unit: int) -> bool:
+    stats = engine.stats.get(unit)
+    return stats is not None and not stats.online
