@@ -12,6 +12,12 @@ EXAMPLES = Path(__file__).parent.parent / "examples"
 
 # Each script, and lines (or line beginnings) its output must contain.
 EXPECTED = {
+    "profile_device.py": [
+        "flow_temperature  35.5 °C",
+        "mode              heat",
+        "setpoint now 48.5",
+        "refused: heat-pump.toml: point setpoint: value 70 is outside the limits 20..55",
+    ],
     "poll_several_devices.py": ["cycle 2 unit 3 voltage3   231.250", "unit 4: offline"],
     "typed_values.py": [
         "float32 CDAB at 2: 0000 41AC -> 21.5",

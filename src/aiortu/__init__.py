@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from aiortu.core.codes import ExceptionCode, FunctionCode
+    from aiortu.core.model import Profile, load_profile
     from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response
     from aiortu.core.serial import LineSettings
     from aiortu.errors import (
@@ -34,16 +35,20 @@ if TYPE_CHECKING:
     from aiortu.gateway import gateway
     from aiortu.master import (
         BroadcastHandle,
+        Device,
         HealthPolicy,
         Master,
         MasterConfig,
         Point,
         Poller,
+        ProfilePoller,
+        Reading,
         ReconnectPolicy,
         Sample,
         UnitHandle,
         UnitStats,
         open_master,
+        walk_sunspec,
     )
     from aiortu.slave import (
         AsyncDataStore,
@@ -51,6 +56,7 @@ if TYPE_CHECKING:
         Change,
         DataStore,
         MemoryStore,
+        ProfileStore,
         Reply,
         RequestContext,
         Slave,
@@ -67,6 +73,7 @@ _LAZY: dict[str, str] = {
     "ConfigError": "aiortu.errors",
     "ConnectionLost": "aiortu.errors",
     "DataStore": "aiortu.slave",
+    "Device": "aiortu.master",
     "ExceptionCode": "aiortu.core.codes",
     "ExceptionPDU": "aiortu.core.pdu",
     "ExceptionResponse": "aiortu.errors",
@@ -80,6 +87,10 @@ _LAZY: dict[str, str] = {
     "Master": "aiortu.master",
     "MasterConfig": "aiortu.master",
     "MemoryStore": "aiortu.slave",
+    "Profile": "aiortu.core.model",
+    "ProfilePoller": "aiortu.master",
+    "ProfileStore": "aiortu.slave",
+    "Reading": "aiortu.master",
     "ModbusError": "aiortu.errors",
     "Point": "aiortu.master",
     "Poller": "aiortu.master",
@@ -99,6 +110,8 @@ _LAZY: dict[str, str] = {
     "UnitStats": "aiortu.master",
     "gateway": "aiortu.gateway",
     "load_config": "aiortu.slave",
+    "load_profile": "aiortu.core.model",
+    "walk_sunspec": "aiortu.master",
     "open_master": "aiortu.master",
     "serve": "aiortu.slave",
 }
@@ -116,6 +129,7 @@ __all__ = (
     "ConfigError",
     "ConnectionLost",
     "DataStore",
+    "Device",
     "ExceptionCode",
     "ExceptionPDU",
     "ExceptionResponse",
@@ -133,7 +147,11 @@ __all__ = (
     "Point",
     "Poller",
     "PortError",
+    "Profile",
+    "ProfilePoller",
+    "ProfileStore",
     "RawPDU",
+    "Reading",
     "ReconnectPolicy",
     "Reply",
     "Request",
@@ -149,8 +167,10 @@ __all__ = (
     "__version__",
     "gateway",
     "load_config",
+    "load_profile",
     "open_master",
     "serve",
+    "walk_sunspec",
 )
 
 

@@ -85,7 +85,7 @@ async def test_an_async_handler_is_awaited_and_priorities_reach_it() -> None:
     async with aiortu.Master(line) as master:
         seen = [await master.read_holding_registers(unit, 0, 1, priority=3) for unit in (4, 5)]
     assert seen == [[4], [5]]
-    assert [t.order for t in line.transactions] == [3, 3]
+    assert [t.priority for t in line.transactions] == [3, 3]
 
 
 async def test_a_poller_polls_a_mock_line() -> None:

@@ -13,27 +13,37 @@ from aiortu.master._calls import FileRecordLike, RecordRequestLike
 from aiortu.master._client import Master, open_master
 from aiortu.master._config import MasterConfig, ReconnectPolicy, TimingPolicy
 from aiortu.master._connection import LineConnection, StreamOpener
+from aiortu.master._device import Device, Reading
 from aiortu.master._handles import BroadcastHandle, UnitHandle
+from aiortu.master._identify import ProfileMatch, match_profiles
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
+from aiortu.master._profile_poller import ProfilePoller
 from aiortu.master._seam import Seam
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
+from aiortu.master._sunspec import FoundModel, SunSpecDevice, walk_sunspec
 
 __all__ = (
     "BroadcastHandle",
     "CycleReport",
     "CycleStats",
+    "Device",
     "FileRecordLike",
+    "FoundModel",
     "HealthPolicy",
     "LineConnection",
     "Master",
     "MasterConfig",
     "Point",
     "Poller",
+    "ProfileMatch",
+    "ProfilePoller",
+    "Reading",
     "ReconnectPolicy",
     "RecordRequestLike",
     "Sample",
     "Seam",
     "StreamOpener",
+    "SunSpecDevice",
     "TimingPolicy",
     "UnitHandle",
     "UnitHealth",
@@ -41,5 +51,7 @@ __all__ = (
     "UnitSkipped",
     "UnitState",
     "UnitStats",
+    "match_profiles",
     "open_master",
+    "walk_sunspec",
 )

@@ -219,14 +219,17 @@ class Master(SerialLineFunctions):
 
         self._engine: LineEngine | None = None
         self._connection: LineConnection | None = None
-        self._seam: Seam
-        """What every request goes through: the line's engine, or the Seam given."""
+        self.seam: Seam
+        """The one seam every request goes through (see [`Seam`][aiortu.master.Seam]): the
+        line's engine, or the Seam given in place of a stream. A caller that builds its own
+        [`Transaction`][aiortu.core.machines.Transaction]s (the line server) submits them
+        here."""
         if isinstance(stream, Seam):
-            self._seam = stream
+            self.seam = stream
         else:
             link = make_link(stream)
             reconnect = can_reconnect(opener, config.reconnection)
-            engine = self._seam = self._engine = LineEngine(link, config, can_reconnect=reconnect)
+            engine = self.seam = self._engine = LineEngine(link, config, can_reconnect=reconnect)
             self._connection = LineConnection(engine, link, make_link, opener, config.reconnection)
         """Keeps the line up: reconnect counters, the current link."""
         self.broadcast = BroadcastHandle(self)
@@ -261,7 +264,7 @@ class Master(SerialLineFunctions):
         """The engine of the master's line (not on a [`Seam`][aiortu.master.Seam] given in
         place of a stream)."""
         if self._engine is None:
-            raise InvalidValue("engine", self._seam, "a master on a byte stream", "no line")
+            raise InvalidValue("engine", self.seam, "a master on a byte stream", "no line")
         return self._engine
 
     @property
@@ -269,7 +272,7 @@ class Master(SerialLineFunctions):
         """Keeps the line up: reconnect counters, the current link (not on a
         [`Seam`][aiortu.master.Seam] given in place of a stream)."""
         if self._connection is None:
-            raise InvalidValue("connection", self._seam, "a master on a byte stream", "no line")
+            raise InvalidValue("connection", self.seam, "a master on a byte stream", "no line")
         return self._connection
 
     @property
@@ -285,14 +288,14 @@ class Master(SerialLineFunctions):
 
     def clock(self) -> float:
         """The master's time, in seconds (its line's clock)."""
-        return self._seam.clock()
+        return self.seam.clock()
 
     # -- statistics ------------------------------------------------------------------
 
     @property
     def statistics(self) -> Mapping[int, UnitStats]:
         """[`UnitStats`][aiortu.master.UnitStats] by unit address, for units used so far."""
-        return self._seam.stats
+        return self.seam.stats
 
     def set_min_turnaround(self, unit: int, seconds: float | None) -> None:
         """Set the least time `unit` takes from the end of a request on the wire to the
@@ -311,7 +314,7 @@ class Master(SerialLineFunctions):
 
     def unit_stats(self, unit: int) -> UnitStats:
         """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
-        return self._seam.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
+        return self.seam.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
         """False once `unit` failed `offline_after` times in a row, until a success."""
@@ -337,9 +340,9 @@ class Master(SerialLineFunctions):
         pdu = _known_form(pdu)
         policy = self.policy.for_function(pdu.function_code)
         transaction = Transaction(
-            unit, pdu, self._timeout(timeout), policy, order=check_priority(priority)
+            unit, pdu, self._timeout(timeout), policy, priority=check_priority(priority)
         )
-        response = await self._seam.submit(transaction)
+        response = await self.seam.submit(transaction)
         assert response is not None
         return response
 
@@ -363,9 +366,9 @@ class Master(SerialLineFunctions):
             _SEND_ONCE,
             expects_reply=False,
             turnaround=self.turnaround_delay,
-            order=check_priority(priority),
+            priority=check_priority(priority),
         )
-        await self._seam.submit(transaction)
+        await self.seam.submit(transaction)
 
     async def request(
         self,
@@ -417,8 +420,8 @@ class Master(SerialLineFunctions):
             policy = self.policy
             if request.function_code not in policy.repeatable:
                 policy = policy.for_function(request.function_code)
-        return self._seam.submit(
-            Transaction(unit, request, response_timeout, policy, order=priority)
+        return self.seam.submit(
+            Transaction(unit, request, response_timeout, policy, priority=priority)
         )
 
     def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:

@@ -1,8 +1,8 @@
 """Who holds a master's line and who waits for it: one job per transaction, one queue.
 
-`LineEngine.submit` makes a `Job` for a transaction that cannot
-run at once and puts it in the `LineQueue`, ordered by the transaction's `order` (lower
-first), then by arrival. Each job has one way to be woken: its `future`, completed once,
+`LineEngine.submit` makes a `Job` for a transaction that cannot run at once and puts it in
+the `LineQueue`, ordered by the transaction's `priority`, then its `order` (lower first),
+then by arrival. Each job has one way to be woken: its `future`, completed once,
 with `TURN` (the line is the caller's: it runs its transaction itself), with the result
 (the engine ran the transaction for it), or with the error that ends it. On an event loop
 the future is a future of that loop; elsewhere (trio) an `EventFuture`.
@@ -159,14 +159,14 @@ class Job:
 
 
 class LineQueue:
-    """Whether the line is held (`busy`), and the jobs that wait for it: lower order first,
-    then in order of arrival."""
+    """Whether the line is held (`busy`), and the jobs that wait for it: lower priority
+    first, then lower order, then in order of arrival."""
 
     __slots__ = ("_sequence", "busy", "waiting")
 
     def __init__(self) -> None:
-        self.waiting: list[tuple[int, int, Job]] = []
-        """A heap of sort keys `(order, sequence, job)` (ints compare in C: a queue of
+        self.waiting: list[tuple[int, int, int, Job]] = []
+        """A heap of sort keys `(priority, order, sequence, job)` (ints compare in C: a queue of
         10,000 callers costs no more per job than one of ten). Read it; change it through
         the methods."""
         self._sequence = itertools.count()
@@ -177,7 +177,7 @@ class LineQueue:
     def push(self, transaction: Transaction, future: JobFuture) -> Job:
         """Queue `transaction`, whose caller awaits `future`; return its job."""
         job = Job(transaction, future, next(self._sequence))
-        heapq.heappush(self.waiting, (transaction.order, job.sequence, job))
+        heapq.heappush(self.waiting, (transaction.priority, transaction.order, job.sequence, job))
         return job
 
     def next_job(self) -> Job | None:
@@ -185,7 +185,7 @@ class LineQueue:
         (the line marked free) if there is none."""
         heap = self.waiting
         while heap:
-            job = heapq.heappop(heap)[2]
+            job = heapq.heappop(heap)[3]
             if job.transaction.abandoned or job.future.done():
                 continue  # its caller was cancelled while queued
             self.busy = True
@@ -198,4 +198,4 @@ class LineQueue:
         """Fail every queued job with ConnectionLost(`why`)."""
         heap = self.waiting
         while heap:
-            heapq.heappop(heap)[2].finish(None, ConnectionLost(why))
+            heapq.heappop(heap)[3].finish(None, ConnectionLost(why))

@@ -178,9 +178,10 @@ class Transaction:
     """One request to one unit, and what happened to it so far.
 
     `expects_reply` is false for broadcasts and for requests a device never answers (diagnostics 04,
-    force listen-only mode); those wait `turnaround` seconds instead. `order` places the
-    transaction in its line's queue: lower runs first, equal orders in order of arrival (a
-    caller's priority, or a line server's fairness key). Set
+    force listen-only mode); those wait `turnaround` seconds instead. `priority`, then
+    `order`, place the transaction in its line's queue: lower runs first, equal keys in order
+    of arrival (a caller's priority; a line server's listener priority and its fairness turn
+    between connections). Set
     [`abandoned`][aiortu.core.machines.Transaction] when the caller is gone: the attempt
     in flight finishes (so that its reply cannot reach a later request) but is not retried.
     """
@@ -191,6 +192,7 @@ class Transaction:
     policy: RetryPolicy = field(default_factory=RetryPolicy)
     expects_reply: bool = True
     turnaround: float = 0.0
+    priority: int = 0
     order: int = 0
     abandoned: bool = False
     attempts: int = 0
