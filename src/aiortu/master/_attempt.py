@@ -238,22 +238,24 @@ class Attempts:
                 if outcome.kind is not OutcomeKind.WAIT:
                     return outcome
                 continue
-            await self._wait(deadline, now)
+            loop = link.loop
+            if loop is not None:
+                # A future of the link's loop, completed by `deliver` or the timer (here,
+                # not in a coroutine of its own: one frame less on every wake-up).
+                waiter = self.waiter = loop.create_future()
+                self.arm(deadline)
+                try:
+                    await waiter
+                finally:
+                    self.waiter = None
+                    self.deadline = math.inf
+                continue
+            await self._wait_without_loop(deadline, now)
 
-    async def _wait(self, deadline: float, now: float) -> None:
-        """Wait until something is delivered or `deadline` passes."""
+    async def _wait_without_loop(self, deadline: float, now: float) -> None:
+        """Wait until something is delivered or `deadline` passes, on a backend without
+        an asyncio loop (trio): an anyio event and a cancel scope."""
         link = self.link
-        loop = link.loop
-        if loop is not None:
-            # A future of the link's loop, completed by `deliver` or the timer.
-            waiter = self.waiter = loop.create_future()
-            self.arm(deadline)
-            try:
-                await waiter
-            finally:
-                self.waiter = None
-                self.deadline = math.inf
-            return
         backend = link.backend
         assert backend is not None
         if not link.backend_clock:

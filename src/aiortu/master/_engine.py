@@ -40,7 +40,7 @@ from collections.abc import Awaitable
 import anyio
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.machines import MasterState, Outcome, OutcomeKind, Transaction
+from aiortu.core.machines import MasterState, OutcomeKind, Transaction
 from aiortu.errors import ConnectionLost, UnitOffline
 from aiortu.line import Link, LinkEvent
 from aiortu.master._attempt import NO_GUARD
@@ -208,9 +208,9 @@ class LineEngine(LineState):
                 if on_the_wire:
                     on_the_wire = False  # a retry sends the request again
                 elif attempts.guard_until != NO_GUARD or not attempts.send_at_once():
-                    await self._send(job)
+                    await attempts.send()
                 failures = len(transaction.failures)
-                outcome = await self._outcome(job, stats)
+                outcome = await attempts.outcome(stats)
                 if outcome.kind is not OutcomeKind.RETRY:
                     break
                 stats.count_failed_attempt(transaction)
@@ -223,7 +223,13 @@ class LineEngine(LineState):
             job.finish(None, error)
             raise
         except BaseException:
-            if self.line_task.job is not job:
+            if self.line_task.job is job:
+                raise  # the line task's own, cancelled: it gives the attempt up
+            if machine.state is not MasterState.IDLE:
+                # The caller is gone with an attempt on the wire (its frame may be on its
+                # way): the line task finishes the attempt, without retries.
+                self.adopt(job)
+            else:
                 # Gone before the request went out: nothing is on the wire. An earlier
                 # attempt may still be answered late: keep the guard.
                 transaction.abandoned = True
@@ -234,29 +240,6 @@ class LineEngine(LineState):
         if outcome.error is not None:
             raise outcome.error
         return outcome.response
-
-    async def _send(self, job: Job) -> None:
-        """Send the machine's frame; a caller cancelled once it began to go out leaves the
-        attempt to the line task."""
-        try:
-            await self.attempts.send()
-        except ConnectionLost:
-            raise
-        except BaseException:
-            if self.machine.state is not MasterState.IDLE:
-                self.adopt(job)  # the frame may be on its way
-            raise
-
-    async def _outcome(self, job: Job, stats: UnitStats) -> Outcome:
-        """The outcome of the attempt on the wire; a caller gone meanwhile leaves it to
-        the line task."""
-        try:
-            return await self.attempts.outcome(stats)
-        except ConnectionLost:
-            raise
-        except BaseException:
-            self.adopt(job)
-            raise
 
     # -- the link -----------------------------------------------------------------------------
 
