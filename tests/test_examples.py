@@ -28,6 +28,12 @@ EXPECTED = {
         "observer: holding_registers 2: [0, 0] -> [7, 8]",
     ],
     "proxy_store.py": ["the far device now holds: [100, 200, 300, 401]"],
+    "blocking_read.py": [
+        "registers 0x6B..0x6D = [215, 7, 8]",
+        "float32 at 0x10 = 21.5",
+        "from two threads: {16: [16812, 0], 107: [215, 7]}",
+        "unit 17: 6 requests, online True",
+    ],
     "broadcast.py": ["unit 1: setpoint 215, registers 0..2 = [1, 2, 3]", "unit 3: setpoint 215"],
     "rtu_over_tcp.py": ["after the write: [1234]"],
     "modbus_tcp_master.py": [
@@ -40,6 +46,20 @@ EXPECTED = {
         "tool: setpoint written, reply 06 00 00 00 d7",
         "logger: registers 0..2 = [215, 7, 8]",
         "the device: setpoint 215",
+    ],
+    "modbus_ascii.py": [
+        "registers 0..2 = [215, 7, 8]",
+        "ASCII frames the slave received: 2",
+    ],
+    "modbus_udp.py": [
+        "registers 0..2 = [215, 7, 8]",
+        "requests 2, replies 2, from strangers 0, refused 0",
+    ],
+    "modbus_tls.py": [
+        "operator: setpoint written",
+        "viewer: write refused with exception 01",
+        "viewer: setpoint = 230",
+        "requests denied by the rules: 1",
     ],
     "modbus_tcp_server.py": [
         "Modbus TCP transaction 2: reply 03 06 00 d7 00 07 00 08",

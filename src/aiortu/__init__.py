@@ -1,7 +1,8 @@
 """aiortu: an asyncio Modbus RTU master/slave framework.
 
 See the README and `docs/` for the guides; the names they use are re-exported here. The packages
-[`aiortu.master`][aiortu.master], [`aiortu.slave`][aiortu.slave],
+[`aiortu.master`][aiortu.master], [`aiortu.blocking`][aiortu.blocking] (the same API
+without async), [`aiortu.slave`][aiortu.slave],
 [`aiortu.gateway`][aiortu.gateway], [`aiortu.testing`][aiortu.testing],
 [`aiortu.transport`][aiortu.transport], [`aiortu.line`][aiortu.line] and
 [`aiortu.core`][aiortu.core] hold the rest.
