@@ -55,7 +55,18 @@ class Package:
 
 
 PACKAGES = {
-    "core": Package(("src/aiortu/core/**/*.py",), ("tests/core/**/test_*.py",)),
+    "core": Package(
+        ("src/aiortu/core/**/*.py",),
+        (
+            "tests/core/**/test_*.py",
+            # The core's state machines, plans and codes, tested beside their users.
+            "tests/master/**/test_master_machine.py",
+            "tests/master/**/test_poll_plan.py",
+            "tests/slave/**/test_slave_machine.py",
+            "tests/slave/**/test_serial_line_codes.py",
+            "tests/test_errors.py",
+        ),
+    ),
     "gateway": Package(("src/aiortu/gateway/**/*.py",), ("tests/gateway/**/test_*.py",)),
     "master engine": Package(
         (
