@@ -14,7 +14,7 @@ from collections.abc import Callable
 import anyio
 import pytest
 
-from aiortu.core.frame import encode_frame
+from aiortu.core.rtu import encode_frame
 from aiortu.gateway import GatewayLine, gateway
 from aiortu.slave import MemoryStore, RequestContext
 from tests.gateway.helpers import UNIT, Line, client, device, line

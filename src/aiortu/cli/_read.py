@@ -26,7 +26,7 @@ from aiortu.cli._master import (
     run_master,
     unit,
 )
-from aiortu.core.addressing import Table
+from aiortu.core.model import Table
 
 __all__ = ("print_values", "register", "run", "target")
 

@@ -16,7 +16,7 @@ from typing import Any
 
 from anyio.abc import ByteStream
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._mbap_stream import (
