@@ -8,6 +8,7 @@ the content and order of what the clients receive, never on time.
 
 from __future__ import annotations
 
+import re
 import tracemalloc
 from collections.abc import Callable
 
@@ -15,6 +16,7 @@ import anyio
 import pytest
 
 from aiortu.core.rtu import encode_frame
+from aiortu.errors import InvalidValue
 from aiortu.gateway import GatewayLine, gateway
 from aiortu.slave import MemoryStore, RequestContext
 from tests.gateway.helpers import UNIT, Line, client, device, line
@@ -220,3 +222,65 @@ async def test_an_endless_rtu_frame_of_unknown_length_is_not_buffered_whole() ->
             await stream.send(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
             with anyio.fail_after(5):
                 assert await stream.receive() == encode_frame(UNIT, bytes.fromhex("03 02 1234"))
+
+
+async def test_a_write_drops_only_the_cached_blocks_it_touches() -> None:
+    async with line(cache_ms=60_000) as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 07"
+        on_the_line = bench.messages
+        # Register 0 lies just before the block: the block stays cached.
+        assert await tcp.request("06 0000 0042") == "06 00 00 00 42"
+        assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 07"
+        assert bench.messages == on_the_line + 1  # the write alone
+        # Register 2 lies in it: read again.
+        assert await tcp.request("06 0002 0009") == "06 00 02 00 09"
+        assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 09"
+        assert bench.messages == on_the_line + 3
+
+
+async def test_a_truncated_write_drops_every_cached_block_of_its_unit() -> None:
+    # 06 with one address byte: the cache cannot tell what it writes, so nothing it kept for
+    # the unit may be trusted after it (the device decides what it makes of the request).
+    async with line(cache_ms=60_000) as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0005 0001") == "03 02 00 00"
+        assert await tcp.request("03 0005 0001") == "03 02 00 00"
+        on_the_line = bench.messages
+        await tcp.request("06 00")
+        assert await tcp.request("03 0005 0001") == "03 02 00 00"
+        assert bench.messages == on_the_line + 2  # the write, and the read again
+
+
+async def test_replies_are_counted_by_kind_per_unit() -> None:
+    dead = OTHER  # no device answers it
+    async with line() as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        assert await tcp.request("03 FFF0 0001") == "83 02"  # the device's own exception
+        assert await tcp.request("03 0000 0001", dead) == "83 0B"
+        assert await tcp.request("03 0000 0001", 250) == "83 0B"  # refused at once
+        units = bench.gateway.statistics.units
+        assert (units[("line", UNIT)].replies, units[("line", UNIT)].exceptions) == (1, 1)
+        assert (units[("line", dead)].no_response, units[("line", dead)].exceptions) == (1, 0)
+        assert bench.gateway.counters.refused_units == 1
+
+
+@pytest.mark.parametrize(
+    ("url", "reason"),
+    [
+        ("ftp://127.0.0.1:9102/metrics", "expected an http:// URL"),
+        ("http://127.0.0.1:9102", None),  # the default path
+        ("http://127.0.0.1:70000/metrics", "the port '70000' is not in 0..65535"),
+        ("http://:9102/metrics", "expected an http:// URL"),
+    ],
+)
+async def test_a_metrics_url_is_checked_before_anything_is_opened(
+    url: str, reason: str | None
+) -> None:
+    async with line() as bench:
+        if reason is None:
+            async with gateway(bench.master, [], metrics=url.replace("9102", "0")) as served:
+                assert served.metrics_address is not None
+                assert (await _get_metrics(served.metrics_address)).startswith("# HELP")
+            return
+        with pytest.raises(InvalidValue, match=re.escape(reason)):
+            async with gateway(bench.master, [], metrics=url):
+                pass
