@@ -82,6 +82,8 @@ PACKAGES = {
             "tests/master/**/test_reconnect.py",
             "tests/master/**/test_tcp_master.py",
             "tests/master/**/test_fast_path_differential.py",
+            "tests/faults/**/test_stale_replies.py",
+            "tests/faults/**/test_master_misbehaving.py",
         ),
     ),
     "slave servers": Package(
