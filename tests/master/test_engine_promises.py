@@ -1,0 +1,73 @@
+"""Promises of the master's engine that hold whatever its internals: one transaction on the
+line at a time, whoever is cancelled while waiting for it.
+
+Through public behaviour only: a master and a slave on a virtual line, the slave holding a
+request until the test lets it go, and the frames on the line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import anyio
+import pytest
+
+from aiortu.core.serial import LineSettings
+from aiortu.master import Master
+from aiortu.slave import RequestContext, Slave
+from aiortu.testing import VirtualBus
+from tests.slave.tcp_helpers import UNIT, device
+
+pytestmark = pytest.mark.timeout(30)
+
+
+class Hold:
+    """A slave hook that holds every request until `release`."""
+
+    def __init__(self) -> None:
+        self.released = anyio.Event()
+        self.held = 0
+
+    async def __call__(self, request: object, context: RequestContext) -> None:
+        self.held += 1
+        await self.released.wait()
+
+
+async def _until(condition: Callable[[], bool]) -> None:
+    with anyio.fail_after(10):
+        while not condition():  # noqa: ASYNC110
+            await anyio.sleep(0.001)
+
+
+async def test_a_caller_cancelled_while_queued_does_not_hand_the_line_on() -> None:
+    hold = Hold()
+    bus = VirtualBus(2)
+    slave = Slave(bus.endpoints[1], {UNIT: device()}, frame_gap=0.0, frame_silence=0.005)
+    slave.before_request(hold)
+    master = Master(bus.endpoints[0], LineSettings(1_000_000), frame_gap=0, timeout=10.0,
+                    retries=0, turnaround_delay=0.005)  # fmt: skip
+    results: dict[str, list[int]] = {}
+
+    async def read(name: str, address: int) -> None:
+        results[name] = await master.read_holding_registers(UNIT, address, 1)
+
+    async with slave, master, anyio.create_task_group() as tasks:
+        tasks.start_soon(read, "first", 0)
+        await _until(lambda: hold.held == 1)  # the first read on the line, held
+        queued = anyio.CancelScope()
+
+        async def given_up() -> None:
+            with queued:
+                await read("given up", 1)
+
+        tasks.start_soon(given_up)
+        await anyio.wait_all_tasks_blocked()
+        queued.cancel()  # its caller leaves while it waits for the line
+        await anyio.wait_all_tasks_blocked()
+        tasks.start_soon(read, "third", 2)
+        await anyio.wait_all_tasks_blocked()
+        on_the_line = [entry.data for entry in bus.trace if entry.sender == 0]
+        assert [frame[3] for frame in on_the_line] == [0]  # the first read alone
+        hold.released.set()
+    assert results == {"first": [0x1234], "third": [7]}
+    assert [entry.data[3] for entry in bus.trace if entry.sender == 0] == [0, 2]
