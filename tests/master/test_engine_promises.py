@@ -1,8 +1,10 @@
 """Promises of the master's engine that hold whatever its internals: one transaction on the
-line at a time, whoever is cancelled while waiting for it.
+line at a time, whoever is cancelled while waiting for it, and the late-reply guard after
+a transaction whose retry succeeded.
 
-Through public behaviour only: a master and a slave on a virtual line, the slave holding a
-request until the test lets it go, and the frames on the line.
+Through behaviour on the line only: a master and a slave (or a scripted fake device) on a
+virtual line, the slave holding a request until the test lets it go, and the frames on the
+line; times are asserted as lower bounds the engine guarantees.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from aiortu.core.serial import LineSettings
 from aiortu.master import Master
 from aiortu.slave import RequestContext, Slave
 from aiortu.testing import VirtualBus
+from tests.master.fakes import line, silent
 from tests.slave.tcp_helpers import UNIT, device
 
 pytestmark = pytest.mark.timeout(30)
@@ -71,3 +74,15 @@ async def test_a_caller_cancelled_while_queued_does_not_hand_the_line_on() -> No
         hold.released.set()
     assert results == {"first": [0x1234], "third": [7]}
     assert [entry.data[3] for entry in bus.trace if entry.sender == 0] == [0, 2]
+
+
+async def test_after_a_retry_succeeds_the_next_request_waits_the_guard() -> None:
+    # The first attempt's reply may still be on its way: the guard is kept once more.
+    guard = 0.4
+    options = {"timeout": 0.05, "retries": 1, "late_reply_guard": guard}
+    async with line(script={0: silent}, **options) as (master, slave, _):
+        assert await master.read_holding_registers(1, 0, 2) == [1000, 1001]  # on the retry
+        assert await master.read_holding_registers(1, 0, 2) == [1000, 1001]
+        times = [seen.time for seen in slave.seen]
+        assert len(times) == 3
+        assert times[2] - times[1] >= guard
