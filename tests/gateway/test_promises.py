@@ -165,9 +165,9 @@ def _label_value(sample: str, metric: str) -> str:
     return "".join(value)
 
 
-async def _get_metrics(address: tuple[str, int]) -> str:
+async def _get_metrics(address: tuple[str, int], target: str = "/metrics") -> str:
     async with await anyio.connect_tcp(*address) as stream:
-        await stream.send(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n")
+        await stream.send(f"GET {target} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
         data = b""
         with anyio.fail_after(5):
             try:
@@ -190,6 +190,8 @@ async def test_a_line_name_with_a_quote_a_backslash_and_a_newline_is_escaped_in_
                 assert await tcp.request("03 0000 0001") == "03 02 12 34"
             assert named.metrics_address is not None
             body = await _get_metrics(named.metrics_address)
+            # A query string is allowed, and changes nothing.
+            assert await _get_metrics(named.metrics_address, "/metrics?name[]=x") == body
     metric = "aiortu_gateway_line_transactions_total"
     expected = f'{metric}{{line="bench \\"A\\"\\\\left\\nside"}} 1'
     assert expected in body.splitlines()
@@ -228,14 +230,15 @@ async def test_a_write_drops_only_the_cached_blocks_it_touches() -> None:
     async with line(cache_ms=60_000) as bench, client(bench.gateway) as tcp:
         assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 07"
         on_the_line = bench.messages
-        # Register 0 lies just before the block: the block stays cached.
+        # Registers 0 and 3 lie just before and just after the block: it stays cached.
         assert await tcp.request("06 0000 0042") == "06 00 00 00 42"
+        assert await tcp.request("06 0003 0042") == "06 00 03 00 42"
         assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 07"
-        assert bench.messages == on_the_line + 1  # the write alone
+        assert bench.messages == on_the_line + 2  # the writes alone
         # Register 2 lies in it: read again.
         assert await tcp.request("06 0002 0009") == "06 00 02 00 09"
         assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 09"
-        assert bench.messages == on_the_line + 3
+        assert bench.messages == on_the_line + 4
 
 
 async def test_a_truncated_write_drops_every_cached_block_of_its_unit() -> None:
@@ -284,3 +287,19 @@ async def test_a_metrics_url_is_checked_before_anything_is_opened(
         with pytest.raises(InvalidValue, match=re.escape(reason)):
             async with gateway(bench.master, [], metrics=url):
                 pass
+
+
+async def test_a_connection_has_four_requests_waiting_at_most_by_default() -> None:
+    async with line(master_options=HELD) as bench:
+        hold = Hold()
+        bench.slave.before_request(hold)
+        async with client(bench.gateway) as tcp:
+            for transaction_id in range(6):
+                await tcp.send("03 0000 0001", UNIT, transaction_id)
+            await _until(lambda: bench.gateway.counters.requests >= 4)
+            await anyio.wait_all_tasks_blocked()
+            await anyio.sleep(0.05)  # time for a fifth to be read, were it allowed
+            assert bench.gateway.counters.requests == 4
+            hold.release()
+            replies = [await tcp.receive() for _ in range(6)]
+            assert [reply.transaction_id for reply in replies if reply] == list(range(6))
