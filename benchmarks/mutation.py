@@ -287,25 +287,29 @@ def package_tests(package: Package, mutated: str | None = None) -> list[str]:
     return [str(path.relative_to(ROOT)) for path in files]
 
 
-def _run_tests(copy: Path, tests: list[str], timeout: float) -> tuple[str, float]:
-    """Run `tests` in `copy`: "passed", "failed", "error" or "timeout", and the seconds."""
+def _run_tests(
+    copy: Path, tests: list[str], timeout: float, log: Path | None = None
+) -> tuple[str, float]:
+    """Run `tests` in `copy`: "passed", "failed", "error" or "timeout", and the seconds
+    (pytest's output to `log`, or nowhere)."""
     shutil.rmtree(copy / ".hypothesis", ignore_errors=True)
     env = dict(os.environ, PYTHONPATH=str(copy / "src"), PYTHONDONTWRITEBYTECODE="1")
     began = time.monotonic()
-    process = subprocess.Popen(
-        [sys.executable, "-m", "pytest", *_PYTEST, *tests],
-        cwd=copy,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    try:
-        code = process.wait(timeout)
-    except subprocess.TimeoutExpired:
-        os.killpg(process.pid, signal.SIGKILL)
-        process.wait()
-        return "timeout", time.monotonic() - began
+    with open(log or os.devnull, "wb") as output:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "pytest", *_PYTEST, *tests],
+            cwd=copy,
+            env=env,
+            stdout=output,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        try:
+            code = process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+            return "timeout", time.monotonic() - began
     seconds = time.monotonic() - began
     return {0: "passed", 1: "failed"}.get(code, "error"), seconds
 
@@ -355,9 +359,15 @@ def run_package(copy: Path, name: str, args: argparse.Namespace) -> list[Outcome
         for mutant in mutants:
             print(f"{name}: {mutant.path}:{mutant.line}  {mutant.description}")
         return []
-    result, seconds = _run_tests(copy, package_tests(package), 3600)
-    if result != "passed":
-        sys.exit(f"{name}: the unmutated tests did not pass ({result}); fix them first")
+    log = copy / f"unmutated-{name.replace(' ', '-')}.log"
+    for _ in range(2):  # once more: a test that failed under the machine's load
+        result, seconds = _run_tests(copy, package_tests(package), 3600, log)
+        if result == "passed":
+            break
+    else:
+        tail = log.read_text(errors="replace").strip().splitlines()[-15:]
+        print(f"{name}: skipped, the unmutated tests did not pass ({result}):", *tail, sep="\n  ")
+        return []
     timeout = max(60.0, args.timeout_factor * seconds)
     print(f"{name}: tests pass in {seconds:.0f} s; {len(mutants)} mutants", flush=True)
     outcomes = []
@@ -379,9 +389,9 @@ def report(results: dict[str, list[Outcome]]) -> None:
     for name, outcomes in results.items():
         counts = Counter(outcome.status for outcome in outcomes)
         killed = len(outcomes) - counts["survived"]
-        ratio = 100 * killed / len(outcomes) if outcomes else 0.0
+        ratio = f"{100 * killed / len(outcomes):.0f} %" if outcomes else "not run"
         print(f"| {name} | {len(outcomes)} | {killed} | {counts['timeout']} | "
-              f"{counts['survived']} | {ratio:.0f} % |")  # fmt: skip
+              f"{counts['survived']} | {ratio} |")  # fmt: skip
     survivors = [o.mutant for outcomes in results.values() for o in outcomes
                  if o.status == "survived"]  # fmt: skip
     print(f"\nSurvivors ({len(survivors)}):")

@@ -8,6 +8,7 @@ the content and order of what the clients receive, never on time.
 
 from __future__ import annotations
 
+import logging
 import re
 import tracemalloc
 from collections.abc import Callable
@@ -17,7 +18,7 @@ import pytest
 
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import InvalidValue
-from aiortu.gateway import GatewayLine, gateway
+from aiortu.gateway import Gateway, GatewayLine, gateway
 from aiortu.slave import MemoryStore, RequestContext
 from tests.gateway.helpers import UNIT, Line, client, device, line
 
@@ -303,3 +304,58 @@ async def test_a_connection_has_four_requests_waiting_at_most_by_default() -> No
             hold.release()
             replies = [await tcp.receive() for _ in range(6)]
             assert [reply.transaction_id for reply in replies if reply] == list(range(6))
+
+
+async def test_a_connection_over_the_limit_is_logged_once_until_one_closes(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.WARNING, logger="aiortu")
+    async with line(max_connections=1) as bench, client(bench.gateway) as first:
+        assert await first.request("03 0000 0001") == "03 02 12 34"
+        for _ in range(2):
+            async with client(bench.gateway) as refused:
+                assert await refused.closed_by_server()
+        assert bench.gateway.counters.connections_refused == 2
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1
+    assert warnings[0].startswith("gateway: 1 connections open, the most allowed; closing")
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("max_in_flight", 0, "max_in_flight must be an int of at least 1, not 0"),
+        ("max_connections", 0, "max_connections must be an int of at least 1, not 0"),
+        ("idle_timeout", 0, "idle_timeout must be a positive number of seconds, not 0"),
+    ],
+)
+async def test_a_limit_below_its_least_value_is_refused_in_one_sentence(
+    option: str, value: int, message: str
+) -> None:
+    async with line() as bench:
+        with pytest.raises(InvalidValue) as raised:
+            Gateway(bench.master, **{option: value})
+    assert str(raised.value) == message
+
+
+class Clock:
+    """A clock the test moves: the cache's age is asserted without waiting."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+async def test_a_cached_read_is_answered_until_exactly_cache_ms_old() -> None:
+    clock = Clock()
+    async with line(cache_ms=500, clock=clock) as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        on_the_line = bench.messages
+        clock.now += 0.5
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        assert bench.messages == on_the_line  # 500 ms old: still answered
+        clock.now += 0.001
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        assert bench.messages == on_the_line + 1
