@@ -94,6 +94,14 @@ async def test_reads_of_different_counts_in_flight_at_once_get_their_own_reply()
         assert bench.messages == 2
 
 
+async def test_without_coalescing_identical_reads_in_flight_each_go_on_the_line() -> None:
+    async with line(master_options=HELD, coalesce=False) as bench:
+        reply = await _two_reads_in_flight(bench, (UNIT, "03 0000 0001"), (UNIT, "03 0000 0001"))
+        assert reply == "03 02 12 34"
+        assert bench.messages == 2
+        assert bench.gateway.counters.coalesced == 0
+
+
 async def test_a_broadcast_between_two_cached_reads_drops_the_cache() -> None:
     async with line(cache_ms=60_000) as bench, client(bench.gateway) as tcp:
         assert await tcp.request("03 0000 0001") == "03 02 12 34"
