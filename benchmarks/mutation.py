@@ -84,6 +84,7 @@ PACKAGES = {
             "tests/master/**/test_fast_path_differential.py",
             "tests/faults/**/test_stale_replies.py",
             "tests/faults/**/test_master_misbehaving.py",
+            "tests/test_trio.py",  # the engine's routes without an event loop
         ),
     ),
     "slave servers": Package(
