@@ -320,10 +320,13 @@ def run_mutant(copy: Path, mutant: Mutant, tests: list[str], timeout: float) -> 
     target = copy / mutant.path
     original = target.read_bytes()
     target.write_bytes(_applied(original, mutant))
+    log = copy / "mutant.log"
     try:
-        result, seconds = _run_tests(copy, tests, timeout)
+        result, seconds = _run_tests(copy, tests, timeout, log)
     finally:
         target.write_bytes(original)
+    if result == "error":  # the mutant cannot be imported, or pytest could not run: say which
+        print(*log.read_text(errors="replace").strip().splitlines()[-3:], sep="\n    ")
     status = {"passed": "survived", "failed": "killed"}.get(result, result)
     return Outcome(mutant, status, seconds)
 
@@ -340,6 +343,9 @@ def _arguments() -> argparse.Namespace:
         help="a mutant's timeout, in times the unmutated run of its tests (at least 60 s)",
     )
     parser.add_argument("--list", action="store_true", help="list the sample; run nothing")
+    parser.add_argument(
+        "--only", metavar="TEXT", help="run the sampled mutants whose `file:line` holds TEXT"
+    )
     return parser.parse_args()
 
 
@@ -356,6 +362,8 @@ def run_package(copy: Path, name: str, args: argparse.Namespace) -> list[Outcome
     """Run the sample of package `name`; its unmutated tests must pass first."""
     package = PACKAGES[name]
     mutants = sample(package, args.sample, args.seed, name)
+    if args.only:
+        mutants = [m for m in mutants if args.only in f"{m.path}:{m.line}"]
     if args.list:
         for mutant in mutants:
             print(f"{name}: {mutant.path}:{mutant.line}  {mutant.description}")
