@@ -37,6 +37,7 @@ async def test_a_failing_broadcast_is_not_answered_and_the_request_behind_it_is(
             # The connection goes on.
             assert await tcp.request("03 0000 0001", unit=2, transaction_id=3) == "03 02 12 34"
         assert server.counters.connections_accepted == 1
+        assert server.counters.requests == 3  # the broadcast counts too
 
 
 @pytest.mark.parametrize(("unit", "expected"), [(255, "03 02 00 2a"), (256, "83 04")])
