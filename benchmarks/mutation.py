@@ -89,7 +89,9 @@ PACKAGES = {
     ),
     "slave servers": Package(
         (
-            "src/aiortu/slave/**/_server.py",
+            "src/aiortu/slave/**/_slave.py",
+            "src/aiortu/slave/**/_rtu_over_tcp.py",
+            "src/aiortu/slave/**/_serve.py",
             "src/aiortu/slave/**/_tcp_server.py",
             "src/aiortu/slave/**/_dispatch.py",
             "src/aiortu/slave/**/_answer_at_once.py",

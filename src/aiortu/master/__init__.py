@@ -9,32 +9,45 @@ of coroutines; handles bound to one unit; a poller that reads points in cycles.
 from __future__ import annotations
 
 from aiortu.errors import UnitOffline, UnitSkipped
-from aiortu.master._calls import FileRecordLike, RecordRequestLike
 from aiortu.master._client import Master, open_master
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
-from aiortu.master._handles import BroadcastHandle, UnitHandle
+from aiortu.master._device import Device, Reading
+from aiortu.master._handles import BroadcastHandle, BroadcastMethod, UnitHandle
+from aiortu.master._identify import ProfileMatch, match_profiles
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
+from aiortu.master._profile_poller import ProfilePoller
+from aiortu.master._records import FileRecordLike, RecordRequestLike
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
+from aiortu.master._sunspec import FoundModel, SunSpecDevice, walk_sunspec
 
 __all__ = (
     "BroadcastHandle",
+    "BroadcastMethod",
     "CycleReport",
     "CycleStats",
+    "Device",
     "FileRecordLike",
+    "FoundModel",
     "HealthPolicy",
     "LineConnection",
     "Master",
     "Point",
     "Poller",
+    "ProfileMatch",
+    "ProfilePoller",
+    "Reading",
     "ReconnectPolicy",
     "RecordRequestLike",
     "Sample",
     "StreamOpener",
+    "SunSpecDevice",
     "UnitHandle",
     "UnitHealth",
     "UnitOffline",
     "UnitSkipped",
     "UnitState",
     "UnitStats",
+    "match_profiles",
     "open_master",
+    "walk_sunspec",
 )
