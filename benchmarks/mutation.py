@@ -67,7 +67,11 @@ PACKAGES = {
             "tests/test_errors.py",
         ),
     ),
-    "gateway": Package(("src/aiortu/gateway/**/*.py",), ("tests/gateway/**/test_*.py",)),
+    "gateway": Package(
+        # With the framing of a listening connection (MBAP or RTU), the gateway's and the servers'.
+        ("src/aiortu/gateway/**/*.py", "src/aiortu/transport/**/_server_framing.py"),
+        ("tests/gateway/**/test_*.py",),
+    ),
     "master engine": Package(
         (
             "src/aiortu/master/**/_engine*.py",
