@@ -236,8 +236,8 @@ def _offset(source: bytes, line: int, column: int) -> int:
     return sum(len(text) for text in lines[: line - 1]) + column
 
 
-def mutants_of(path: Path) -> list[Mutant]:
-    """Every mutant of the file at `path` that still compiles."""
+def mutants_of(path: Path, root: Path = ROOT) -> list[Mutant]:
+    """Every mutant of the file at `path` (in the tree at `root`) that still compiles."""
     source = path.read_bytes()
     tree = ast.parse(source)
     skipped = _skipped_nodes(tree)
@@ -252,7 +252,7 @@ def mutants_of(path: Path) -> list[Mutant]:
         end = _offset(source, node.end_lineno or node.lineno, node.end_col_offset or 0)
         for text, description, statement in _changes(node, source):
             new = text if statement else f"({text})"
-            mutant = Mutant(str(path.relative_to(ROOT)), node.lineno, start, end, new, description)
+            mutant = Mutant(str(path.relative_to(root)), node.lineno, start, end, new, description)
             if _compiles(source, mutant):
                 found.append(mutant)
     return found
@@ -274,9 +274,10 @@ def _glob(patterns: tuple[str, ...], root: Path = ROOT) -> list[Path]:
     return sorted({path for pattern in patterns for path in root.glob(pattern)})
 
 
-def sample(package: Package, size: int, seed: int, name: str) -> list[Mutant]:
-    """A seeded sample of `size` mutants of `package`, in file and line order."""
-    every = [mutant for path in _glob(package.sources) for mutant in mutants_of(path)]
+def sample(package: Package, size: int, seed: int, name: str, root: Path = ROOT) -> list[Mutant]:
+    """A seeded sample of `size` mutants of `package` (in the tree at `root`), in file and
+    line order."""
+    every = [mutant for path in _glob(package.sources, root) for mutant in mutants_of(path, root)]
     chosen = random.Random(f"{seed}:{name}").sample(every, min(size, len(every)))
     return sorted(chosen, key=lambda mutant: (mutant.path, mutant.start, mutant.text))
 
@@ -284,14 +285,14 @@ def sample(package: Package, size: int, seed: int, name: str) -> list[Mutant]:
 # -- running them ----------------------------------------------------------------------
 
 
-def package_tests(package: Package, mutated: str | None = None) -> list[str]:
+def package_tests(package: Package, root: Path = ROOT, mutated: str | None = None) -> list[str]:
     """The package's test files, those named after the mutated module first (they are the
     likeliest to fail, and the run stops at the first failure)."""
-    excluded = set(_glob(package.exclude_tests))
-    files = [path for path in _glob(package.tests) if path not in excluded]
+    excluded = set(_glob(package.exclude_tests, root))
+    files = [path for path in _glob(package.tests, root) if path not in excluded]
     stem = Path(mutated).stem.lstrip("_") if mutated else ""
     files.sort(key=lambda path: not (stem and stem in path.stem))
-    return [str(path.relative_to(ROOT)) for path in files]
+    return [str(path.relative_to(root)) for path in files]
 
 
 def _run_tests(
@@ -367,7 +368,7 @@ def _commit() -> str:
 def run_package(copy: Path, name: str, args: argparse.Namespace) -> list[Outcome]:
     """Run the sample of package `name`; its unmutated tests must pass first."""
     package = PACKAGES[name]
-    mutants = sample(package, args.sample, args.seed, name)
+    mutants = sample(package, args.sample, args.seed, name, copy)
     if args.only:
         mutants = [m for m in mutants if args.only in f"{m.path}:{m.line}"]
     if args.list:
@@ -376,7 +377,7 @@ def run_package(copy: Path, name: str, args: argparse.Namespace) -> list[Outcome
         return []
     log = copy / f"unmutated-{name.replace(' ', '-')}.log"
     for _ in range(2):  # once more: a test that failed under the machine's load
-        result, seconds = _run_tests(copy, package_tests(package), 3600, log)
+        result, seconds = _run_tests(copy, package_tests(package, copy), 3600, log)
         if result == "passed":
             break
     else:
@@ -387,7 +388,7 @@ def run_package(copy: Path, name: str, args: argparse.Namespace) -> list[Outcome
     print(f"{name}: tests pass in {seconds:.0f} s; {len(mutants)} mutants", flush=True)
     outcomes = []
     for mutant in mutants:
-        outcome = run_mutant(copy, mutant, package_tests(package, mutant.path), timeout)
+        outcome = run_mutant(copy, mutant, package_tests(package, copy, mutant.path), timeout)
         outcomes.append(outcome)
         print(
             f"  {outcome.status:8} {outcome.seconds:5.1f} s  {mutant.path}:{mutant.line}  "
@@ -417,6 +418,8 @@ def report(results: dict[str, list[Outcome]]) -> None:
 def main() -> None:
     args = _arguments()
     names = args.package or list(PACKAGES)
+    # Stopped, it still removes its copy of the repository.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit("stopped"))
     print(f"mutation testing at {_commit()}: {' '.join(sys.argv)}", flush=True)
     with tempfile.TemporaryDirectory(prefix="aiortu-mutants-") as folder:
         copy = Path(folder) / "repo"
