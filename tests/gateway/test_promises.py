@@ -367,3 +367,12 @@ async def test_a_cached_read_is_answered_until_exactly_cache_ms_old() -> None:
         clock.now += 0.001
         assert await tcp.request("03 0000 0001") == "03 02 12 34"
         assert bench.messages == on_the_line + 1
+
+
+async def test_a_gateway_made_directly_coalesces_and_has_no_port_before_it_listens() -> None:
+    async with line() as bench:
+        made = Gateway(bench.master)
+        assert made.coalesce is True
+        assert (made.max_in_flight, made.max_connections) == (4, 32)
+        with pytest.raises(RuntimeError, match="the gateway is not listening yet"):
+            _ = made.port
