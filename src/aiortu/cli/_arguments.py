@@ -24,6 +24,7 @@ __all__ = (
     "seconds",
     "seconds_or_zero",
     "unit",
+    "unit_id",
 )
 
 PTY_LINE = "--parity N --stopbits 2"
@@ -60,6 +61,17 @@ def unit(text: str) -> int:
     if not 1 <= value <= 247:
         hint = " (0 is the broadcast address, which gets no reply)" if value == 0 else ""
         raise argparse.ArgumentTypeError(f"must be a unit address 1..247, not {text}{hint}")
+    return value
+
+
+def unit_id(text: str) -> int:
+    """A unit id 0..255: what a Modbus TCP request may carry (a serial line takes 1..247;
+    `aiortu.cli._master.check_unit_for_port` checks that once the port is known)."""
+    value = _integer(text)
+    if not 0 <= value <= 255:
+        raise argparse.ArgumentTypeError(
+            f"must be a unit address 1..247 (0..255 over tcp://), not {text}"
+        )
     return value
 
 

@@ -28,6 +28,7 @@ from aiortu.cli._arguments import (
     resolve_line_settings,
     seconds,
     unit,
+    unit_id,
 )
 from aiortu.cli._messages import invalid_value, port_failure
 from aiortu.core.addressing import Reference, Table, parse_reference
@@ -56,6 +57,8 @@ __all__ = (
     "run_master",
     "seconds",
     "unit",
+    "unit_id",
+    "check_unit_for_port",
 )
 
 EXIT_CODES_HELP = """\
@@ -123,6 +126,17 @@ def reference(text: str) -> Reference:
     return parse_reference(text)
 
 
+def check_unit_for_port(port: str, unit_address: int) -> None:
+    """Refuse a unit id the port's framing cannot take: a serial line (or RTU over TCP)
+    takes 1..247, Modbus TCP (`tcp://`) any id 0..255, as given in its header."""
+    if port.strip().lower().startswith("tcp://"):
+        return
+    try:
+        unit(str(unit_address))
+    except argparse.ArgumentTypeError as error:
+        raise UsageError(f"--unit {error}") from None
+
+
 @asynccontextmanager
 async def open_from_args(
     args: argparse.Namespace, *, reconnect: bool = False, **options: object
@@ -134,6 +148,8 @@ async def open_from_args(
     # Imported here, not above: ``--help`` and bad arguments need none of the master.
     from aiortu.master import open_master
 
+    if getattr(args, "unit", None) is not None and isinstance(args.unit, int):
+        check_unit_for_port(args.port, args.unit)
     resolve_line_settings(args)
     async with open_master(
         args.port,

@@ -20,7 +20,7 @@ from aiortu.cli._master import (
     address,
     open_from_args,
     run_master,
-    unit,
+    unit_id,
 )
 from aiortu.cli._read import print_values, target
 from aiortu.core.addressing import Table
@@ -63,7 +63,9 @@ def register(subparsers: Subparsers) -> None:
     )
     add_line_options(parser)
     what = parser.add_argument_group("what to write")
-    what.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    what.add_argument(
+        "--unit", type=unit_id, required=True, help="unit address 1..247 (0..255 over tcp://)"
+    )
     what.add_argument("--table", choices=("coils", "holding"), help="the table (with --address)")
     what.add_argument("--address", type=address, help="the first protocol address (0-based)")
     what.add_argument("--ref", help="a 5- or 6-digit reference instead, e.g. 40017 or 00001")

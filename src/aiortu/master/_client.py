@@ -64,6 +64,7 @@ from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
     UNIT_RANGE,
+    WHOLE_FRAME_UNIT_RANGE,
     check_at_least,
     check_coil,
     check_coils,
@@ -232,6 +233,10 @@ class Master(SerialLineFunctions):
             return link
 
         link = make_link(stream)
+        self.unit_range = WHOLE_FRAME_UNIT_RANGE if link.whole_frames else UNIT_RANGE
+        """The unit ids a request may go to: 1..247 on a serial line; over Modbus TCP, whose
+        framing carries any byte, 0..255 as given (0 then awaits a reply like any other id;
+        [`broadcast`][aiortu.master.Master] is the broadcast)."""
         self.engine = LineEngine(
             link,
             health=HealthPolicy(offline_after, fail_fast_offline, probe_interval),
@@ -298,7 +303,7 @@ class Master(SerialLineFunctions):
         device's documented turnaround; a spec-abiding device keeps at least t3.5 of
         silence. Too large a value drops the device's genuine replies.
         """
-        check_unit(unit)
+        check_unit(unit, self.unit_range)
         if seconds is None:
             self.engine.unit_turnaround.pop(unit, None)
         else:
@@ -306,7 +311,8 @@ class Master(SerialLineFunctions):
 
     def unit_stats(self, unit: int) -> UnitStats:
         """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
-        return self.engine.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
+        counted = self.unit_range if self.unit_range.stop > _STATS_UNITS.stop else _STATS_UNITS
+        return self.engine.unit_stats(check_int("unit", unit, counted, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
         """False once `unit` failed `offline_after` times in a row, until a success."""
@@ -314,7 +320,7 @@ class Master(SerialLineFunctions):
 
     def slave(self, unit: int) -> UnitHandle:
         """A handle on one unit: the same methods without the unit, plus typed values."""
-        return UnitHandle(self, check_unit(unit))
+        return UnitHandle(self, check_unit(unit, self.unit_range))
 
     # -- the core of every call ------------------------------------------------------
 
@@ -328,7 +334,7 @@ class Master(SerialLineFunctions):
         its reply checked as such (a malformed one raises InvalidRequest). A request is
         sent again after a failure only if its code is in the master's *repeatable*.
         """
-        check_unit(unit)
+        check_unit(unit, self.unit_range)
         pdu = _known_form(pdu)
         policy = self.policy.for_function(pdu.function_code)
         transaction = Transaction(unit, pdu, self._timeout(timeout), policy)
@@ -348,7 +354,7 @@ class Master(SerialLineFunctions):
                     "unit", unit, UNIT_RANGE, f"{type(pdu).__name__} may not be broadcast"
                 )
         else:
-            check_unit(unit)
+            check_unit(unit, self.unit_range)
         check_priority(priority)
         transaction = Transaction(
             unit,
@@ -401,8 +407,8 @@ class Master(SerialLineFunctions):
         that goes out at once is then one coroutine (the caller's) waiting on the
         engine's future."""
         # The commonest call (a unicast unit, the master's timeout) makes no further call.
-        if type(unit) is not int or unit not in UNIT_RANGE:
-            check_unit(unit)  # raises, saying why
+        if type(unit) is not int or unit not in self.unit_range:
+            check_unit(unit, self.unit_range)  # raises, saying why
         if type(priority) is not int:
             priority = check_priority(priority)
         response_timeout = self.timeout if timeout is None else check_timeout(timeout)
