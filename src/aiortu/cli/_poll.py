@@ -26,10 +26,10 @@ from aiortu.cli import SUMMARIES, Subparsers
 from aiortu.cli._arguments import add_no_reconnect, add_timing, plural
 from aiortu.cli._arguments import unit as unit_address
 from aiortu.cli._master import (
-    EXIT_CODES_HELP,
     LINE_FLAGS_HELP,
     UsageError,
     add_line_options,
+    address,
     open_from_args,
     positive_int,
     reference,
@@ -53,6 +53,14 @@ from aiortu.master import CycleReport, Poller, Sample, UnitHealth, UnitState
 
 __all__ = ("TablePrinter", "parse_point", "points_from_args", "register", "run")
 
+POLL_EXIT_CODES_HELP = """\
+exit codes:
+  0  ran its --cycles or --duration, or stopped by Ctrl-C or SIGTERM; a point or a
+     unit that fails (no reply, an exception) is shown in the table, not an exit code
+  1  the port could not be opened, or was lost with --no-reconnect
+  2  bad arguments (one line on stderr)
+"""
+
 _EXAMPLES = f"""\
 examples:
   aiortu poll /dev/ttyUSB0 --unit 1 --ref 40001 --count 4
@@ -74,7 +82,7 @@ the same with mbpoll (which polls one unit and one range):
   aiortu poll ... --cycles 1                         mbpoll -1
 
 {LINE_FLAGS_HELP}
-{EXIT_CODES_HELP}"""
+{POLL_EXIT_CODES_HELP}"""
 
 
 def register(subparsers: Subparsers) -> None:
@@ -84,7 +92,9 @@ def register(subparsers: Subparsers) -> None:
         help=SUMMARIES["poll"],
         description=(
             "Poll points at an interval and show their values with each unit's health. "
-            "Neighbouring points of a unit are read together. The table refreshes in place "
+            "Neighbouring points of a unit are read together (--max-gap); a device that "
+            "refuses such a read for a hole in its map gets the points' own reads instead, "
+            "from then on. The table refreshes in place "
             "on a terminal; piped, each cycle is printed as plain lines."
         ),
         epilog=_EXAMPLES,
@@ -111,6 +121,16 @@ def register(subparsers: Subparsers) -> None:
         help="word and byte order of wider values (ABCD: big-endian)",
     )
     what.add_argument("--scale", type=float, default=None, help="multiply values by this")
+    what.add_argument(
+        "--max-gap",
+        type=address,
+        default=10,
+        metavar="N",
+        help=(
+            "read neighbouring points of a unit together when at most N unused registers "
+            "(16 N bits) lie between them; 0 reads only adjacent points together (10)"
+        ),
+    )
     what.add_argument(
         "--point",
         action="append",
@@ -315,6 +335,7 @@ def run(args: argparse.Namespace) -> int:
                 master,
                 points,
                 interval=args.interval,
+                max_gap=args.max_gap,
                 offline_probe_interval=args.probe_interval,
             )
             if args.json:
