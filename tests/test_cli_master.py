@@ -126,7 +126,7 @@ def test_poll_json_with_named_typed_points(port: str) -> None:
         (["read", "--unit", "1", "--table", "holding"], 2,
          "aiortu read: error: read needs --table and --address, or --ref"),
         (["read", "--unit", "1", "--table", "holding", "--address", "0", "--count", "126"], 2,
-         "aiortu read: error: --count must be 1..125, not 126"),
+         "aiortu read: error: at most 125 registers can be read at once, not 126"),
         (["write", "--unit", "1", "--table", "coils", "--address", "0", "--values", "maybe"], 2,
          "aiortu write: error: --values must be 1, 0, true, false, on or off, not maybe"),
         (["write", "--unit", "1", "--ref", "30001", "--values", "1"], 2,

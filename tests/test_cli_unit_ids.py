@@ -40,8 +40,8 @@ def test_read_and_write_over_modbus_tcp_take_any_unit_id(tcp_url: str, unit: str
 @pytest.mark.parametrize(
     ("unit", "message"),
     [
-        ("255", "--unit must be a unit address 1..247, not 255"),
-        ("0", "--unit must be a unit address 1..247, not 0 (0 is the broadcast address, "
+        ("255", "argument --unit: must be a unit address 1..247, not 255"),
+        ("0", "argument --unit: must be a unit address 1..247, not 0 (0 is the broadcast address, "
               "which gets no reply)"),
     ],
 )  # fmt: skip

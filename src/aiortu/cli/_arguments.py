@@ -16,6 +16,7 @@ __all__ = (
     "add_timing",
     "address",
     "is_pty",
+    "number",
     "parity",
     "plural",
     "positive_int",
@@ -96,6 +97,17 @@ def seconds_or_zero(text: str) -> float:
     value = _number_of_seconds(text)
     if not 0 <= value < float("inf"):
         raise argparse.ArgumentTypeError(f"must be a number of seconds, 0 or more, not {text}")
+    return value
+
+
+def number(text: str) -> float:
+    """A finite number, such as a scale factor: `0.1`, `-2`, `1e3`."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number")
     return value
 
 

@@ -58,6 +58,7 @@ __all__ = (
     "seconds",
     "unit",
     "unit_id",
+    "check_span",
     "check_unit_for_port",
 )
 
@@ -126,6 +127,39 @@ def reference(text: str) -> Reference:
     return parse_reference(text)
 
 
+_AT_ONCE: dict[tuple[Table, str], int] = {
+    (Table.COILS, "read"): 2000,
+    (Table.DISCRETE_INPUTS, "read"): 2000,
+    (Table.INPUT_REGISTERS, "read"): 125,
+    (Table.HOLDING_REGISTERS, "read"): 125,
+    (Table.COILS, "written"): 1968,
+    (Table.HOLDING_REGISTERS, "written"): 123,
+}
+"""The most elements one request may read or write, as the spec allows."""
+
+_ELEMENTS = {
+    Table.COILS: "coils",
+    Table.DISCRETE_INPUTS: "discrete inputs",
+    Table.INPUT_REGISTERS: "input registers",
+    Table.HOLDING_REGISTERS: "registers",
+}
+
+
+def check_span(table: Table, start: int, count: int, verb: str) -> None:
+    """Refuse, in words, a read or write (`verb` "read" or "written") of `count` elements
+    from `start` that one request cannot carry, before the port is opened."""
+    noun = _ELEMENTS[table]
+    most = _AT_ONCE[table, verb]
+    if count > most:
+        raise UsageError(f"at most {most} {noun} can be {verb} at once, not {count}")
+    last = start + count - 1
+    if last > 0xFFFF:
+        raise UsageError(
+            f"the {noun} {verb} must end at address 65535 or before, not {last} "
+            f"({start} + {count} {noun})"
+        )
+
+
 def check_unit_for_port(port: str, unit_address: int) -> None:
     """Refuse a unit id the port's framing cannot take: a serial line (or RTU over TCP)
     takes 1..247, Modbus TCP (`tcp://`) any id 0..255, as given in its header."""
@@ -134,7 +168,7 @@ def check_unit_for_port(port: str, unit_address: int) -> None:
     try:
         unit(str(unit_address))
     except argparse.ArgumentTypeError as error:
-        raise UsageError(f"--unit {error}") from None
+        raise UsageError(f"argument --unit: {error}") from None
 
 
 @asynccontextmanager

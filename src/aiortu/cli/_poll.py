@@ -23,7 +23,7 @@ from typing import TextIO
 import anyio
 
 from aiortu.cli import SUMMARIES, Subparsers
-from aiortu.cli._arguments import add_no_reconnect, add_timing, plural
+from aiortu.cli._arguments import add_no_reconnect, add_timing, number, plural
 from aiortu.cli._arguments import unit as unit_address
 from aiortu.cli._master import (
     LINE_FLAGS_HELP,
@@ -120,7 +120,7 @@ def register(subparsers: Subparsers) -> None:
         default=Layout.ABCD.value,
         help="word and byte order of wider values (ABCD: big-endian)",
     )
-    what.add_argument("--scale", type=float, default=None, help="multiply values by this")
+    what.add_argument("--scale", type=number, default=None, help="multiply values by this")
     what.add_argument(
         "--max-gap",
         type=address,

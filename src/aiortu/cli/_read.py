@@ -20,6 +20,7 @@ from aiortu.cli._master import (
     UsageError,
     add_line_options,
     address,
+    check_span,
     open_from_args,
     positive_int,
     reference,
@@ -99,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
 
     async def body() -> int:
         table, start = target(args, "read")
+        check_span(table, start, args.count, "read")
         async with open_from_args(args) as master:
             unit, count = args.unit, args.count
             values: list[bool] | list[int]

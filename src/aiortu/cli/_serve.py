@@ -100,7 +100,10 @@ def register(subparsers: Subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT or SIGTERM; return the exit code."""
     if not os.path.isfile(args.config):
-        print(f"aiortu serve: error: {args.config}: cannot read it: no such file", file=sys.stderr)
+        problem = (
+            "is a directory, not a TOML file" if os.path.isdir(args.config) else "does not exist"
+        )
+        print(f"aiortu serve: error: --config {args.config} {problem}", file=sys.stderr)
         return 2
     try:
         config = load_config(args.config)

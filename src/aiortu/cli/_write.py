@@ -18,6 +18,7 @@ from aiortu.cli._master import (
     UsageError,
     add_line_options,
     address,
+    check_span,
     open_from_args,
     run_master,
     unit_id,
@@ -115,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
             kind = table.value.replace("_", " ")
             raise UsageError(f"cannot write {kind}: only coils and holding registers are writable")
         values = parse_values(args.values, table)
+        check_span(table, start, len(values), "written")
         async with open_from_args(args) as master:
             unit = args.unit
             single = len(values) == 1 and not args.multiple
