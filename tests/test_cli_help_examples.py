@@ -79,7 +79,7 @@ def test_the_virtual_bus_help_reads_a_unit_the_example_file_has(tmp_path: Path) 
         with running(as_run(serve, names), "Ctrl-C to stop"):
             result = run(as_run(read, names))
             assert (result.returncode, result.stderr) == (0, "")
-            assert result.stdout == "107 44609\n108 22098\n109 17216\n"
+            assert result.stdout == "40108 44609\n40109 22098\n40110 17216\n"
             if shutil.which("mbpoll"):
                 polled = run(as_run(mbpoll, names))
                 assert polled.returncode == 0, polled.stdout + polled.stderr

@@ -32,7 +32,7 @@ def tcp_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
 @pytest.mark.parametrize("unit", ["255", "0", "0xFF"])
 def test_read_and_write_over_modbus_tcp_take_any_unit_id(tcp_url: str, unit: str) -> None:
     read = run_aiortu("read", tcp_url, "--unit", unit, "--ref", "40001", "--count", "3")
-    assert (read.returncode, read.stdout, read.stderr) == (0, "0 1\n1 2\n2 3\n", "")
+    assert (read.returncode, read.stdout, read.stderr) == (0, "40001 1\n40002 2\n40003 3\n", "")
     written = run_aiortu("write", tcp_url, "--unit", unit, "--ref", "40003", "--values", "3")
     assert (written.returncode, written.stderr) == (0, "")
 

@@ -29,6 +29,7 @@ Runner: TypeAlias = "Callable[[argparse.Namespace], int]"
 SUMMARIES: dict[str, str] = {
     "demo": "watch three simulated devices being polled on a virtual bus (no hardware)",
     "gateway": "share one serial line with many Modbus TCP clients (the line server)",
+    "identify": "read what a device says it is: identification objects and server id",
     "monitor": "watch a bus: print every frame with its meaning, never send",
     "poll": "poll points on one or more units and show them as a live table",
     "read": "read coils, discrete inputs or registers from a device once",

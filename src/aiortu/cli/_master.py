@@ -27,6 +27,7 @@ from aiortu.cli._arguments import (
     positive_int,
     resolve_line_settings,
     seconds,
+    seconds_or_zero,
     unit,
     unit_id,
 )
@@ -50,6 +51,8 @@ __all__ = (
     "LINE_FLAGS_HELP",
     "TABLES",
     "add_line_options",
+    "add_rs485_options",
+    "rs485_options",
     "address",
     "open_from_args",
     "positive_int",
@@ -112,6 +115,69 @@ def add_line_options(parser: argparse.ArgumentParser) -> None:
     line.add_argument(
         "--retries", type=address, default=0, help="extra attempts after a timeout (0)"
     )
+    add_rs485_options(parser)
+
+
+def add_rs485_options(parser: argparse.ArgumentParser) -> None:
+    """Add the kernel RS-485 mode's options (`RS485Options`); any of them turns it on."""
+    rs485 = parser.add_argument_group(
+        "RS-485 (the driver switches the transceiver with RTS; needs a UART that supports it)"
+    )
+    rs485.add_argument(
+        "--rs485",
+        action="store_true",
+        help="RTS high while sending, low while receiving (mbpoll -R)",
+    )
+    rs485.add_argument(
+        "--rs485-rts-low",
+        action="store_true",
+        help="RTS low while sending, high while receiving, for inverted adapters (mbpoll -F)",
+    )
+    rs485.add_argument(
+        "--rs485-delay-before-tx",
+        type=seconds_or_zero,
+        default=None,
+        metavar="S",
+        help="seconds between raising RTS and the first bit (the driver's own)",
+    )
+    rs485.add_argument(
+        "--rs485-delay-before-rx",
+        type=seconds_or_zero,
+        default=None,
+        metavar="S",
+        help="seconds between the last bit and releasing RTS (the driver's own)",
+    )
+    rs485.add_argument(
+        "--rs485-receive-during-tx",
+        action="store_true",
+        help="keep the receiver on while sending; the echo of each request is dropped",
+    )
+
+
+def rs485_options(args: argparse.Namespace) -> dict[str, object]:
+    """The transport options of `args`' RS-485 flags: none unless one is given."""
+    wanted = (
+        args.rs485
+        or args.rs485_rts_low
+        or args.rs485_receive_during_tx
+        or args.rs485_delay_before_tx is not None
+        or args.rs485_delay_before_rx is not None
+    )
+    if not wanted:
+        return {}
+    if "://" in args.port:
+        raise UsageError("the --rs485 options are for a serial port, not a URL")
+    from aiortu.transport import RS485Options
+
+    options = RS485Options(
+        rts_level_for_tx=not args.rs485_rts_low,
+        rts_level_for_rx=args.rs485_rts_low,
+        delay_before_tx=args.rs485_delay_before_tx,
+        delay_before_rx=args.rs485_delay_before_rx,
+        receive_during_tx=args.rs485_receive_during_tx,
+    )
+    # A receiver kept on hears our own requests: drop them.
+    return {"rs485": options, "local_echo": args.rs485_receive_during_tx}
 
 
 def reference(text: str) -> Reference:
@@ -185,6 +251,7 @@ async def open_from_args(
     if getattr(args, "unit", None) is not None and isinstance(args.unit, int):
         check_unit_for_port(args.port, args.unit)
     resolve_line_settings(args)
+    options = {**rs485_options(args), **options}
     async with open_master(
         args.port,
         baudrate=args.baudrate,

@@ -80,6 +80,7 @@ the same with mbpoll (which polls one unit and one range):
   aiortu poll ... --type int32 --layout CDAB         mbpoll -t 4:int
   aiortu poll ... --interval 0.5                     mbpoll -l 500
   aiortu poll ... --cycles 1                         mbpoll -1
+  aiortu poll ... --hex                              mbpoll -t 4:hex
 
 {LINE_FLAGS_HELP}
 {POLL_EXIT_CODES_HELP}"""
@@ -149,6 +150,9 @@ def register(subparsers: Subparsers) -> None:
         help="seconds between probes of an offline unit (5.0)",
     )
     parser.add_argument("--json", action="store_true", help="one JSON object per sample")
+    parser.add_argument(
+        "--hex", action="store_true", help="whole numbers in hex in the table (mbpoll :hex)"
+    )
     add_no_reconnect(parser)
     parser.set_defaults(run=run)
 
@@ -236,7 +240,9 @@ def _failure(error: Exception) -> str:
     return "failed"
 
 
-def _format_value(sample: Sample) -> str:
+def _format_value(sample: Sample, *, hex_digits: bool = False) -> str:
+    """A sample's value as the table shows it; whole numbers in hex with `hex_digits`,
+    as wide as the point (0x002A for one register, 0x0000002A for two)."""
     if sample.error is not None:
         return f"-- {_failure(sample.error)}"
     value = sample.value
@@ -244,16 +250,23 @@ def _format_value(sample: Sample) -> str:
         return "1" if value else "0"
     if isinstance(value, float):
         return f"{value:.6g}"
+    if hex_digits and value is not None:
+        digits = 4 * sample.point.width
+        # A negative number as its two's complement, as it sits in the registers.
+        return f"0x{value & ((1 << (4 * digits)) - 1):0{digits}X}"
     return str(value)
 
 
 class TablePrinter:
     """Prints cycles to `out`: redrawn in place with `ansi`, else as plain blocks."""
 
-    def __init__(self, out: TextIO, poller: Poller, *, ansi: bool) -> None:
+    def __init__(
+        self, out: TextIO, poller: Poller, *, ansi: bool, hex_digits: bool = False
+    ) -> None:
         self.out = out
         self.poller = poller
         self.ansi = ansi
+        self.hex_digits = hex_digits
         self._latest: dict[str, Sample] = {}
         self._shown = 0
 
@@ -269,7 +282,9 @@ class TablePrinter:
         ]
         for point in self.poller.points:
             latest = self._latest.get(point.name)
-            shown = _format_value(latest) if latest is not None else "--"
+            shown = "--"
+            if latest is not None:
+                shown = _format_value(latest, hex_digits=self.hex_digits)
             lines.append(f"{point.name:<16}{point.unit:>5}  {shown}")
         if self.poller.master.connected:
             now = self.poller.master.link.clock()
@@ -341,7 +356,9 @@ def run(args: argparse.Namespace) -> int:
             if args.json:
                 poller.on_sample(lambda s: print(_json_sample(s), flush=True))
             else:
-                printer = TablePrinter(sys.stdout, poller, ansi=sys.stdout.isatty())
+                printer = TablePrinter(
+                    sys.stdout, poller, ansi=sys.stdout.isatty(), hex_digits=args.hex
+                )
                 poller.on_cycle(printer.show)
             if not args.reconnect:
                 poller.on_cycle(_fail_on_lost_line)

@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
                     await master.write_register(unit, start, registers[0])
                 else:
                     await master.write_registers(unit, start, registers)
-        print_values(args.json, unit, table, start, values)
+        print_values(args, unit, table, start, values)
         return 0
 
     return run_master(args, body)
