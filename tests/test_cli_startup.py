@@ -136,3 +136,17 @@ def test_ctrl_c_during_a_read_exits_130_quietly() -> None:
         read.send_signal(signal.SIGINT)
         out, err = read.communicate(timeout=10)
     assert (read.returncode, out, err) == (130, "", "")
+
+
+def test_the_master_and_the_transports_load_pyserial_and_the_poller_on_first_use() -> None:
+    script = "\n".join([
+        "import sys",
+        "import aiortu.master, aiortu.transport",
+        "print(sorted(n for n in sys.modules if n == 'serial' or n.endswith('_poller')))",
+        "aiortu.master.Poller, aiortu.transport.RS485Options",
+        "print(sorted(n for n in sys.modules if n == 'serial' or n.endswith('_poller')))",
+    ])  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=30, check=True
+    )
+    assert result.stdout.splitlines() == ["[]", "['aiortu.master._poller', 'serial']"]
