@@ -16,6 +16,7 @@ import signal
 import sys
 import time
 from collections.abc import Mapping
+from typing import Any
 
 import anyio
 
@@ -46,6 +47,10 @@ examples:
       behind a serial device server, no silence kept before replies
   aiortu serve tcp://0.0.0.0:1502 --config devices.toml
       Modbus TCP on every interface, many clients at once
+  aiortu serve tcp://0.0.0.0:1502 --config devices.toml --serial-line-codes \
+                                  --unit-alias 255=17 --unit-alias 0=17
+      the same, answering the server id (11) and the other serial-line codes, and
+      unit ids 255 and 0 as unit 17
   aiortu serve rtu+tcp://0.0.0.0:5020 --config devices.toml
       RTU framing over TCP, listening (a wildcard host listens, any other connects)
 
@@ -90,6 +95,26 @@ def register(subparsers: Subparsers) -> None:
     add_line_settings(line)
     add_frame_gap(line, before="reply")
     add_timing(line)
+    tcp = parser.add_argument_group("Modbus TCP (tcp:// only)")
+    tcp.add_argument(
+        "--serial-line-codes",
+        action="store_true",
+        help=(
+            "answer the serial-line-only codes 07, 08, 0B, 0C and 11 (server id) as a serial "
+            "device would; without it they get exception 01, as the spec marks them"
+        ),
+    )
+    tcp.add_argument(
+        "--unit-alias",
+        type=unit_alias,
+        action="append",
+        default=[],
+        metavar="ID=UNIT",
+        help=(
+            "answer unit id ID (0..255) as the served UNIT; repeat for several (default, "
+            "with one unit: 0 and 255 are that unit)"
+        ),
+    )
     parser.add_argument(
         "--trace", action="store_true", help="log every frame on stderr, in hex, with its meaning"
     )
@@ -109,6 +134,23 @@ def run(args: argparse.Namespace) -> int:
         config = load_config(args.config)
     except ConfigError as error:
         print(f"aiortu serve: error: {error}", file=sys.stderr)
+        return 2
+    tcp_options = _tcp_options(args)
+    if tcp_options and not args.port.strip().lower().startswith("tcp://"):
+        given = "--serial-line-codes" if args.serial_line_codes else "--unit-alias"
+        print(
+            f"aiortu serve: error: {given} is for a Modbus TCP server (tcp://): a serial line "
+            "serves every code and has no unit ids but its units",
+            file=sys.stderr,
+        )
+        return 2
+    unknown = sorted({unit for _, unit in args.unit_alias} - set(config.units))
+    if unknown:
+        print(
+            f"aiortu serve: error: --unit-alias names unit {unknown[0]}, which {args.config} "
+            f"does not describe (it has {', '.join(map(str, sorted(config.units)))})",
+            file=sys.stderr,
+        )
         return 2
     resolve_line_settings(args)
     with library_warnings_on_stderr("serve"):
@@ -203,6 +245,7 @@ async def _serve_once(
         frame_gap=args.frame_gap,
         timing=args.timing,
         trace=tracer,
+        **_tcp_options(args),
     ) as slave:
         listing = ", ".join(str(unit) for unit in sorted(units))
         which = "unit" if len(units) == 1 else "units"
@@ -218,6 +261,30 @@ async def _serve_once(
         return error
     # A listener that stopped: say why in the same terms as a line that failed.
     return ConnectionLost("the line closed" if error is None else str(error))
+
+
+def unit_alias(text: str) -> tuple[int, int]:
+    """`ID=UNIT`: a unit id 0..255 answered as the served unit UNIT (1..247)."""
+    alias, equals, unit = text.partition("=")
+    try:
+        pair = int(alias, 0), int(unit, 0)
+    except ValueError:
+        pair = (-1, -1)
+    if not equals or pair[0] not in range(256) or pair[1] not in range(1, 248):
+        raise argparse.ArgumentTypeError(
+            f"must be ID=UNIT, a unit id 0..255 and a served unit 1..247 (255=17), not {text}"
+        )
+    return pair
+
+
+def _tcp_options(args: argparse.Namespace) -> dict[str, Any]:
+    """What `--serial-line-codes` and `--unit-alias` ask of the Modbus TCP server."""
+    options: dict[str, Any] = {}
+    if args.serial_line_codes:
+        options["serial_line_codes"] = True
+    if args.unit_alias:
+        options["unit_aliases"] = dict(args.unit_alias)
+    return options
 
 
 def _say(message: str) -> None:
