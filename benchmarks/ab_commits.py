@@ -108,8 +108,8 @@ async def pymodbus_reads(port: str, requests: int) -> float:
 
 
 async def child_bare(port: str, requests: int) -> float:
-    from aiortu.core.frame import encode_frame
-    from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
+    from aiortu.core.pdu import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
+    from aiortu.core.rtu import encode_frame
 
     request = encode_frame(1, ReadHoldingRegistersRequest(0, 10).encode())
     reply = encode_frame(1, ReadHoldingRegistersResponse(tuple(EXPECTED)).encode())

@@ -38,10 +38,9 @@ from dataclasses import dataclass, field
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import benchlib
 
-from aiortu.core import crc as crc_module
-from aiortu.core.crc import crc16
-from aiortu.core.pdu import decode_response
-from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
+from aiortu.core.pdu import ReadHoldingRegistersResponse, decode_response
+from aiortu.core.rtu import _crc as crc_module
+from aiortu.core.rtu import crc16
 
 Call = Callable[[], object]
 

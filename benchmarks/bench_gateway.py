@@ -236,7 +236,7 @@ def socat_line(units: int = 1, slave: str = "pymodbus") -> Iterator[tuple[benchl
 @contextlib.contextmanager
 def paced_line() -> Iterator[tuple[benchlib.Children, str, object]]:
     """A PtyBus paced at 19200 8N2 with pymodbus's RTU server on port 1."""
-    from aiortu.core.timing import LineSettings
+    from aiortu.core.serial import LineSettings
     from aiortu.testing import PtyBus
 
     bus = PtyBus(2, settings=LineSettings(BAUDRATE, 8, "N", 2), trace_size=200_000)

@@ -45,10 +45,9 @@ from dataclasses import dataclass, field
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import benchlib
 
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
-from aiortu.core.receiver import FrameReceived, Receiver, Role
-from aiortu.core.timing import LineSettings
+from aiortu.core.pdu import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
+from aiortu.core.rtu import FrameReceived, Receiver, Role, encode_frame
+from aiortu.core.serial import LineSettings
 
 TARGET_FRAMES_PER_SECOND = 50_000
 """The issue's target for frames fed whole."""

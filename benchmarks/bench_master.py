@@ -48,8 +48,8 @@ sys.path.insert(0, __file__.rsplit("/", 1)[0])
 import benchlib
 
 import aiortu
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
+from aiortu.core.pdu import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
+from aiortu.core.rtu import encode_frame
 from aiortu.slave._store import Block
 from aiortu.testing import VirtualBus
 

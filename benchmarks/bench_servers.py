@@ -117,8 +117,8 @@ def serve_bare(port: str) -> None:
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import benchlib
 
-    from aiortu.core.frame import encode_frame
-    from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
+    from aiortu.core.pdu import ReadHoldingRegistersResponse
+    from aiortu.core.rtu import encode_frame
 
     reply = encode_frame(1, ReadHoldingRegistersResponse(tuple(range(10))).encode())
     fd = benchlib.open_raw(port)

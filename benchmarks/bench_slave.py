@@ -37,11 +37,11 @@ sys.path.insert(0, __file__.rsplit("/", 1)[0])
 import benchlib
 
 import aiortu
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu_registers import (
+from aiortu.core.pdu import (
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
 )
+from aiortu.core.rtu import encode_frame
 
 EXPECTED = list(range(10))
 REQUEST = encode_frame(1, ReadHoldingRegistersRequest(0, 10).encode())

@@ -28,7 +28,7 @@ from collections import Counter
 import anyio
 
 import aiortu
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import FaultPlan, VirtualBus
 
 REGISTERS = 2000

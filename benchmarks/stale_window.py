@@ -36,8 +36,8 @@ import anyio
 import anyio.abc
 
 import aiortu
-from aiortu.core.frame import encode_frame
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.testing import TraceEntry, VirtualBus, VirtualEndpoint
 
 UNIT = 1

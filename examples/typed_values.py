@@ -13,7 +13,7 @@ from __future__ import annotations
 import anyio
 
 import aiortu
-from aiortu.core.values import Layout, encode_value
+from aiortu.core.model import Layout, encode_value
 from aiortu.testing import VirtualBus
 
 UNIT = 17

@@ -12,8 +12,7 @@ from aiortu.cli import main
 from aiortu.cli._demo import PlainRenderer, TableRenderer, header_lines
 from aiortu.cli._demo_devices import EnergyMeter, Reading, TemperatureController
 from aiortu.cli._demo_system import Demo
-from aiortu.core.addressing import Table
-from aiortu.core.values import Layout, decode_value
+from aiortu.core.model import Layout, Table, decode_value
 
 from .cli_helpers import run_aiortu, start_aiortu
 

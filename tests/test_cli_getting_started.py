@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
 
 pytestmark = pytest.mark.timeout(60)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
 
 from . import pymodbus_server

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from aiortu.cli._master import rs485_options
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
 from aiortu.transport import RS485Options
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from aiortu.cli import main
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
 
 pytestmark = pytest.mark.timeout(60)

@@ -11,7 +11,7 @@ import pytest
 import serial
 
 from aiortu.cli import main
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 
 from .cli_helpers import run_aiortu, start_aiortu, stop
 

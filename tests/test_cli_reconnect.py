@@ -15,7 +15,7 @@ import anyio.abc
 import pytest
 
 import aiortu
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing._pty_bus import make_raw
 from aiortu.transport._fd import FileDescriptorStream
 

@@ -24,7 +24,7 @@ from aiortu.cli._scan import (
     report,
     settings_to_try,
 )
-from aiortu.core.timing import LineSettings, Parity
+from aiortu.core.serial import LineSettings, Parity
 from aiortu.slave._handlers import BUILTIN_HANDLERS
 from aiortu.testing import VirtualBus
 

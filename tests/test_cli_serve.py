@@ -13,8 +13,8 @@ import pytest
 
 from aiortu.cli import _serve, build_parser
 from aiortu.cli._poll import _format_value, _json_sample
-from aiortu.core.frame import encode_frame
-from aiortu.core.poll_plan import Point
+from aiortu.core.model import Point
+from aiortu.core.rtu import encode_frame
 from aiortu.errors import (
     ConnectionLost,
     CRCError,

@@ -10,7 +10,7 @@ from collections.abc import AsyncIterator
 import pytest
 
 from aiortu.cli import build_parser
-from aiortu.core.receiver import TimingMode
+from aiortu.core.rtu import TimingMode
 from aiortu.errors import PortError
 
 TIMING = ("serve", "monitor", "poll")

@@ -16,7 +16,7 @@ import pytest
 
 import aiortu.cli
 from aiortu.cli import SUMMARIES, build_parser, main
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
 
 from .cli_helpers import aiortu_command

@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from aiortu.core import master_machine, receiver, slave_machine
-from aiortu.core.diagrams import state_diagram
+from aiortu.core.machines import _master_machine as master_machine
+from aiortu.core.machines import _slave_machine as slave_machine
+from aiortu.core.machines import state_diagram
+from aiortu.core.rtu import _receiver as receiver
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 

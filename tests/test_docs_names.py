@@ -76,7 +76,7 @@ def test_the_check_finds_names_and_refuses_private_ones() -> None:
     assert "aiortu.open_master" in found
     assert "aiortu.UnitOffline" in found  # the guide tells users to catch it
     assert why_not_public("aiortu.UnitOffline") is None
-    assert why_not_public("aiortu.core.timing.LineSettings") is None
+    assert why_not_public("aiortu.core.serial.LineSettings") is None
     assert why_not_public("aiortu.Point.of") is None
     assert why_not_public("aiortu.slave._store.Block") == "aiortu.slave._store is private"
     assert why_not_public("aiortu.master.LineEngine") == "aiortu.master does not export LineEngine"

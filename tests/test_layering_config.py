@@ -31,17 +31,6 @@ def _contracts() -> list[dict[str, object]]:
     return contracts
 
 
-def _deprecated_modules() -> set[str]:
-    """The forwarding modules left where modules used to be; nothing inside imports them."""
-    (forbidden,) = [
-        contract["forbidden_modules"]
-        for contract in _contracts()
-        if contract["name"].startswith("Nothing inside aiortu imports the deprecated")
-    ]
-    assert isinstance(forbidden, list)
-    return {name for name in forbidden if name.count(".") == 1}
-
-
 def test_every_module_is_in_a_layer() -> None:
     (layers,) = [
         contract["layers"]
@@ -50,7 +39,7 @@ def test_every_module_is_in_a_layer() -> None:
     ]
     assert isinstance(layers, list)
     layered = {name.strip() for layer in layers for name in layer.replace(":", "|").split("|")}
-    assert _top_level_modules() - layered - _deprecated_modules() == set()
+    assert _top_level_modules() - layered == set()
 
 
 def test_the_core_may_import_no_other_module_of_the_package() -> None:
@@ -60,4 +49,4 @@ def test_the_core_may_import_no_other_module_of_the_package() -> None:
         if contract.get("source_modules") == ["aiortu.core"]
     ]
     assert isinstance(forbidden, list)
-    assert _top_level_modules() - {"aiortu.core"} - _deprecated_modules() <= set(forbidden)
+    assert _top_level_modules() - {"aiortu.core"} <= set(forbidden)

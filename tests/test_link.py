@@ -5,9 +5,8 @@ from __future__ import annotations
 import anyio
 import pytest
 
-from aiortu.core.frame import encode_frame
-from aiortu.core.receiver import DiscardReason, FrameDiscarded, FrameReceived, Role
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import DiscardReason, FrameDiscarded, FrameReceived, Role, encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost
 from aiortu.line._link import Link
 from aiortu.testing import virtual_pair

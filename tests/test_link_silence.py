@@ -11,9 +11,8 @@ import anyio.abc
 import pytest
 
 import aiortu.line._sender
-from aiortu.core.frame import encode_frame
-from aiortu.core.receiver import FrameReceived
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import FrameReceived, encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.line._link import Link
 from aiortu.line._wake_timer import WakeTimer, _timerfd_libc
 from aiortu.testing import virtual_pair

@@ -27,8 +27,8 @@ import pytest
 from anyio.abc import SocketAttribute, SocketStream
 
 import aiortu
-from aiortu.core.addressing import Table
-from aiortu.core.timing import LineSettings
+from aiortu.core.model import Table
+from aiortu.core.serial import LineSettings
 from aiortu.testing import VirtualBus, virtual_pair
 from aiortu.testing._pty_bus import make_raw
 from aiortu.transport import FileDescriptorStream, open_serial

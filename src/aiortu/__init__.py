@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from aiortu.core.codes import ExceptionCode, FunctionCode
     from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response
-    from aiortu.core.timing import LineSettings
+    from aiortu.core.serial import LineSettings
     from aiortu.errors import (
         ConfigError,
         ConnectionLost,
@@ -74,7 +74,7 @@ _LAZY: dict[str, str] = {
     "HealthPolicy": "aiortu.master",
     "InvalidRequest": "aiortu.errors",
     "InvalidValue": "aiortu.errors",
-    "LineSettings": "aiortu.core.timing",
+    "LineSettings": "aiortu.core.serial",
     "MalformedPDU": "aiortu.errors",
     "Master": "aiortu.master",
     "MemoryStore": "aiortu.slave",

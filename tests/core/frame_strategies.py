@@ -12,15 +12,14 @@ from hypothesis import strategies as st
 from hypothesis.strategies import SearchStrategy
 
 from aiortu.core.codes import USER_DEFINED_FUNCTION_CODES, FunctionCode
-from aiortu.core.crc import crc16
-from aiortu.core.frame import (
+from aiortu.core.pdu import PDU, DiagnosticsRequest, DiagnosticsResponse
+from aiortu.core.rtu import (
     MIN_FRAME_LENGTH,
+    crc16,
     encode_frame,
     expected_request_length,
     expected_response_length,
 )
-from aiortu.core.pdu import PDU
-from aiortu.core.pdu_serial_line import DiagnosticsRequest, DiagnosticsResponse
 
 from . import strategies_bits_registers as bits_registers
 from . import strategies_serial_files_devid as serial_files_devid
@@ -70,7 +69,7 @@ def has_accidental_prefix(frame: bytes) -> bool:
     A receiver that may expect both layouts (a monitor, or a slave hearing other units)
     completes a frame at the first predicted length whose CRC checks, so it splits such a
     frame in two: a documented limit of length-aware completion (see
-    :mod:`aiortu.core.receiver`), which tests of whole conversations leave out.
+    :mod:`aiortu.core.rtu._receiver`), which tests of whole conversations leave out.
     """
     return any(
         MIN_FRAME_LENGTH <= guess < len(frame) and crc16(frame[:guess]) == 0

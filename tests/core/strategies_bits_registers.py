@@ -13,27 +13,19 @@ from typing import TypeVar
 from hypothesis import strategies as st
 from hypothesis.strategies import SearchStrategy
 
-from aiortu.core import pdu_bits, pdu_registers
-from aiortu.core.pdu import Request, Response, unpack_bits, unpack_registers
-from aiortu.core.pdu_bits import (
+from aiortu.core.pdu import (
+    MAX_FIFO_COUNT,
     MAX_READ_BITS,
+    MAX_READ_REGISTERS,
+    MAX_READ_WRITE_WRITE_REGISTERS,
     MAX_WRITE_BITS,
+    MAX_WRITE_REGISTERS,
+    MaskWriteRegisterRequest,
+    MaskWriteRegisterResponse,
     ReadCoilsRequest,
     ReadCoilsResponse,
     ReadDiscreteInputsRequest,
     ReadDiscreteInputsResponse,
-    WriteMultipleCoilsRequest,
-    WriteMultipleCoilsResponse,
-    WriteSingleCoilRequest,
-    WriteSingleCoilResponse,
-)
-from aiortu.core.pdu_registers import (
-    MAX_FIFO_COUNT,
-    MAX_READ_REGISTERS,
-    MAX_READ_WRITE_WRITE_REGISTERS,
-    MAX_WRITE_REGISTERS,
-    MaskWriteRegisterRequest,
-    MaskWriteRegisterResponse,
     ReadFifoQueueRequest,
     ReadFifoQueueResponse,
     ReadHoldingRegistersRequest,
@@ -42,11 +34,21 @@ from aiortu.core.pdu_registers import (
     ReadInputRegistersResponse,
     ReadWriteMultipleRegistersRequest,
     ReadWriteMultipleRegistersResponse,
+    Request,
+    Response,
+    WriteMultipleCoilsRequest,
+    WriteMultipleCoilsResponse,
     WriteMultipleRegistersRequest,
     WriteMultipleRegistersResponse,
+    WriteSingleCoilRequest,
+    WriteSingleCoilResponse,
     WriteSingleRegisterRequest,
     WriteSingleRegisterResponse,
+    unpack_bits,
+    unpack_registers,
 )
+from aiortu.core.pdu import _bits as pdu_bits
+from aiortu.core.pdu import _registers as pdu_registers
 
 __all__ = (
     "BITS_REQUEST_STRATEGIES",

@@ -14,30 +14,26 @@ from hypothesis import strategies as st
 from hypothesis.strategies import DrawFn, SearchStrategy
 
 from aiortu.core.codes import DeviceIdReadCode, DiagnosticSubFunction
-from aiortu.core.pdu_device_id import (
+from aiortu.core.pdu import (
     CONFORMITY_LEVELS,
-    ReadDeviceIdentificationRequest,
-    ReadDeviceIdentificationResponse,
-)
-from aiortu.core.pdu_files import (
-    FileRecord,
-    FileRecordRequest,
-    ReadFileRecordRequest,
-    ReadFileRecordResponse,
-    WriteFileRecordRequest,
-    WriteFileRecordResponse,
-)
-from aiortu.core.pdu_serial_line import (
     DiagnosticsRequest,
     DiagnosticsResponse,
+    FileRecord,
+    FileRecordRequest,
     GetCommEventCounterRequest,
     GetCommEventCounterResponse,
     GetCommEventLogRequest,
     GetCommEventLogResponse,
+    ReadDeviceIdentificationRequest,
+    ReadDeviceIdentificationResponse,
     ReadExceptionStatusRequest,
     ReadExceptionStatusResponse,
+    ReadFileRecordRequest,
+    ReadFileRecordResponse,
     ReportServerIdRequest,
     ReportServerIdResponse,
+    WriteFileRecordRequest,
+    WriteFileRecordResponse,
 )
 
 __all__ = (

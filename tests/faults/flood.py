@@ -16,7 +16,7 @@ import anyio
 import anyio.lowlevel
 
 import aiortu
-from aiortu.core.frame import encode_frame
+from aiortu.core.rtu import encode_frame
 from tests.transport.ptys import LINE, open_pty
 
 __all__ = ("FloodResult", "garbage_flood", "rss_bytes")

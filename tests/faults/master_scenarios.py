@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 import anyio
 
 import aiortu
-from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.master._client import Master
 from aiortu.testing._virtual_bus import VirtualBus
 from tests.master.fakes import FakeSlave, coil_value, register_value, standard_reply, until_idle

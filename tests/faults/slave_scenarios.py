@@ -14,10 +14,9 @@ from dataclasses import dataclass
 import anyio
 
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
-from aiortu.core.crc import crc16
 from aiortu.core.errors import ModbusError
-from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Response, decode_request, decode_response
+from aiortu.core.rtu import crc16, encode_frame
 from aiortu.slave._server import Slave
 from aiortu.slave._store import Block, MemoryStore, ServerId
 from aiortu.testing._virtual_bus import virtual_pair

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from aiortu.core.codes import FunctionCode
-from aiortu.core.frame import encode_frame
+from aiortu.core.rtu import encode_frame
 
 from .slave_scenarios import (
     CODES,

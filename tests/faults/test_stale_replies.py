@@ -12,12 +12,10 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.frame import encode_frame
-from aiortu.core.master_machine import MasterMachine
-from aiortu.core.master_transaction import OutcomeKind, RetryPolicy, SkipReason, Transaction
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
-from aiortu.core.receiver import FrameReceived, Receiver, Role
-from aiortu.core.timing import LineSettings
+from aiortu.core.machines import MasterMachine, OutcomeKind, RetryPolicy, SkipReason, Transaction
+from aiortu.core.pdu import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
+from aiortu.core.rtu import FrameReceived, Receiver, Role, encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.line import Link
 from aiortu.master import UnitStats
 from aiortu.master._job import JobQueue

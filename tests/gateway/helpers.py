@@ -9,7 +9,7 @@ from typing import Any
 
 import anyio
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.gateway import Gateway, Listen, gateway
 from aiortu.master import Master
 from aiortu.slave import MemoryStore, Slave

@@ -20,7 +20,7 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
 from tests import pymodbus_server
 from tests.pymodbus_server import COILS, DISCRETE_INPUTS, HOLDING_REGISTERS, INPUT_REGISTERS

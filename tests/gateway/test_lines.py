@@ -11,7 +11,7 @@ import anyio
 import pytest
 
 from aiortu.cli import main
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.gateway import Gateway, GatewayLine, gateway
 from aiortu.master import Master

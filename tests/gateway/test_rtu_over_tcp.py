@@ -6,8 +6,8 @@ import anyio
 import anyio.abc
 import pytest
 
-from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import RawPDU
+from aiortu.core.rtu import encode_frame
 from aiortu.slave import RequestContext
 from tests.gateway.helpers import UNIT, line
 

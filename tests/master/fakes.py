@@ -15,58 +15,51 @@ from dataclasses import dataclass, field
 import anyio
 import anyio.abc
 
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import RawPDU, Request, decode_request
-from aiortu.core.pdu_bits import (
-    ReadCoilsRequest,
-    ReadCoilsResponse,
-    ReadDiscreteInputsRequest,
-    ReadDiscreteInputsResponse,
-    WriteMultipleCoilsRequest,
-    WriteMultipleCoilsResponse,
-    WriteSingleCoilRequest,
-    WriteSingleCoilResponse,
-)
-from aiortu.core.pdu_device_id import (
-    ReadDeviceIdentificationRequest,
-    ReadDeviceIdentificationResponse,
-)
-from aiortu.core.pdu_files import (
-    ReadFileRecordRequest,
-    ReadFileRecordResponse,
-    WriteFileRecordRequest,
-    WriteFileRecordResponse,
-)
-from aiortu.core.pdu_registers import (
-    MaskWriteRegisterRequest,
-    MaskWriteRegisterResponse,
-    ReadFifoQueueRequest,
-    ReadFifoQueueResponse,
-    ReadHoldingRegistersRequest,
-    ReadHoldingRegistersResponse,
-    ReadInputRegistersRequest,
-    ReadInputRegistersResponse,
-    ReadWriteMultipleRegistersRequest,
-    ReadWriteMultipleRegistersResponse,
-    WriteMultipleRegistersRequest,
-    WriteMultipleRegistersResponse,
-    WriteSingleRegisterRequest,
-    WriteSingleRegisterResponse,
-)
-from aiortu.core.pdu_serial_line import (
+from aiortu.core.pdu import (
     DiagnosticsRequest,
     DiagnosticsResponse,
     GetCommEventCounterRequest,
     GetCommEventCounterResponse,
     GetCommEventLogRequest,
     GetCommEventLogResponse,
+    MaskWriteRegisterRequest,
+    MaskWriteRegisterResponse,
+    RawPDU,
+    ReadCoilsRequest,
+    ReadCoilsResponse,
+    ReadDeviceIdentificationRequest,
+    ReadDeviceIdentificationResponse,
+    ReadDiscreteInputsRequest,
+    ReadDiscreteInputsResponse,
     ReadExceptionStatusRequest,
     ReadExceptionStatusResponse,
+    ReadFifoQueueRequest,
+    ReadFifoQueueResponse,
+    ReadFileRecordRequest,
+    ReadFileRecordResponse,
+    ReadHoldingRegistersRequest,
+    ReadHoldingRegistersResponse,
+    ReadInputRegistersRequest,
+    ReadInputRegistersResponse,
+    ReadWriteMultipleRegistersRequest,
+    ReadWriteMultipleRegistersResponse,
     ReportServerIdRequest,
     ReportServerIdResponse,
+    Request,
+    WriteFileRecordRequest,
+    WriteFileRecordResponse,
+    WriteMultipleCoilsRequest,
+    WriteMultipleCoilsResponse,
+    WriteMultipleRegistersRequest,
+    WriteMultipleRegistersResponse,
+    WriteSingleCoilRequest,
+    WriteSingleCoilResponse,
+    WriteSingleRegisterRequest,
+    WriteSingleRegisterResponse,
+    decode_request,
 )
-from aiortu.core.receiver import FrameReceived, ReceiverState, Role
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import FrameReceived, ReceiverState, Role, encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost
 from aiortu.line._link import Link
 from aiortu.master._client import Master

@@ -8,10 +8,9 @@ from collections.abc import Callable
 import anyio
 import pytest
 
-from aiortu.core.frame import encode_frame
-from aiortu.core.master_machine import MasterState
-from aiortu.core.pdu import Request
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest
+from aiortu.core.machines import MasterState
+from aiortu.core.pdu import ReadHoldingRegistersRequest, Request
+from aiortu.core.rtu import encode_frame
 from aiortu.errors import ConnectionLost
 from aiortu.master._client import Master
 from aiortu.transport._serial import open_serial

@@ -10,8 +10,8 @@ import math
 import anyio
 import pytest
 
-from aiortu.core.crc import crc16
 from aiortu.core.pdu import Request
+from aiortu.core.rtu import crc16
 from aiortu.errors import ResponseTimeout
 from aiortu.master._client import Master
 from aiortu.master._engine import guard_ends

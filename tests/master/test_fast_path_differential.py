@@ -21,9 +21,9 @@ import anyio
 import anyio.abc
 import pytest
 
-from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import decode_request
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ModbusError
 from aiortu.master._client import Master
 from aiortu.testing import VirtualBus

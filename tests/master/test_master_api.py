@@ -9,9 +9,8 @@ import pytest
 
 import aiortu
 from aiortu.core.codes import DeviceIdReadCode
-from aiortu.core.pdu import ExceptionPDU, RawPDU
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest
-from aiortu.core.values import Layout, encode_value
+from aiortu.core.model import Layout, encode_value
+from aiortu.core.pdu import ExceptionPDU, RawPDU, ReadHoldingRegistersRequest
 from aiortu.errors import InvalidRequest
 
 from .fakes import FakeSlave, coil_value, line, register_value, standard_reply

@@ -14,9 +14,8 @@ import anyio
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aiortu.core.pdu import RawPDU
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
-from aiortu.core.timing import LineSettings
+from aiortu.core.pdu import RawPDU, ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue, ModbusError, ResponseTimeout
 from aiortu.master._client import Master
 from aiortu.master._handles import BroadcastHandle, UnitHandle

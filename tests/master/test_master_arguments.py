@@ -11,10 +11,9 @@ import pytest
 
 import aiortu
 from aiortu.core.codes import FunctionCode
-from aiortu.core.frame import encode_frame
-from aiortu.core.master_transaction import SAFE_TO_REPEAT, Failure
-from aiortu.core.pdu import RawPDU, Request, Response
-from aiortu.core.pdu_registers import WriteSingleRegisterResponse
+from aiortu.core.machines import SAFE_TO_REPEAT, Failure
+from aiortu.core.pdu import RawPDU, Request, Response, WriteSingleRegisterResponse
+from aiortu.core.rtu import encode_frame
 from aiortu.errors import InvalidRequest, InvalidValue, ModbusError
 from aiortu.master._client import Master
 from aiortu.testing import VirtualBus

@@ -12,9 +12,8 @@ import pytest
 
 import aiortu
 from aiortu.core.codes import ExceptionCode
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import Request
-from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
+from aiortu.core.pdu import ReadHoldingRegistersResponse, Request
+from aiortu.core.rtu import encode_frame
 from aiortu.master._engine import UnitOffline
 
 from .fakes import FakeSlave, answer, line, register_value, silent, standard_reply

@@ -15,9 +15,8 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.pdu import Request
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest
-from aiortu.core.timing import LineSettings
+from aiortu.core.pdu import ReadHoldingRegistersRequest, Request
+from aiortu.core.serial import LineSettings
 from aiortu.testing import FaultPlan, VirtualBus
 
 from .fakes import FakeSlave, answer, register_value, until_idle

@@ -7,7 +7,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from aiortu.core.errors import CRCError, FrameError, MalformedPDU, ResponseTimeout
-from aiortu.core.master_machine import (
+from aiortu.core.machines import (
+    Failure,
+    OutcomeKind,
+    RetryPolicy,
+    SkipReason,
+    Transaction,
+)
+from aiortu.core.machines._master_machine import (
     TRANSITIONS,
     MasterEvent,
     MasterMachine,
@@ -15,14 +22,7 @@ from aiortu.core.master_machine import (
     MasterState,
     next_state,
 )
-from aiortu.core.master_transaction import (
-    Failure,
-    OutcomeKind,
-    RetryPolicy,
-    SkipReason,
-    Transaction,
-)
-from aiortu.core.pdu_registers import (
+from aiortu.core.pdu import (
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
     ReadInputRegistersRequest,

@@ -8,9 +8,16 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.addressing import Table
-from aiortu.core.poll_plan import MAX_READ_BITS, MAX_READ_REGISTERS, Point, plan_reads
-from aiortu.core.values import Layout, ValueType, encode_value
+from aiortu.core.model import (
+    MAX_READ_BITS,
+    MAX_READ_REGISTERS,
+    Layout,
+    Point,
+    Table,
+    ValueType,
+    encode_value,
+    plan_reads,
+)
 from aiortu.errors import InvalidValue
 
 

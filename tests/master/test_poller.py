@@ -12,12 +12,15 @@ import pytest
 import aiortu
 from aiortu import Point, Poller
 from aiortu.cli._poll import TablePrinter
-from aiortu.core.addressing import Table
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import Request
-from aiortu.core.pdu_bits import ReadCoilsRequest, ReadDiscreteInputsRequest
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadInputRegistersRequest
-from aiortu.core.values import ValueType, decode_value
+from aiortu.core.model import Table, ValueType, decode_value
+from aiortu.core.pdu import (
+    ReadCoilsRequest,
+    ReadDiscreteInputsRequest,
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    Request,
+)
+from aiortu.core.rtu import encode_frame
 from aiortu.master._poller import CycleReport, Sample, UnitHealth, UnitSkipped
 from aiortu.master._stats import UnitState
 from aiortu.testing import VirtualBus

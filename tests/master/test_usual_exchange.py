@@ -18,10 +18,9 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.crc import crc16
-from aiortu.core.master_machine import KnownRequest, MasterMachine, MasterState
-from aiortu.core.master_transaction import Transaction
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, WriteSingleRegisterRequest
+from aiortu.core.machines import KnownRequest, MasterMachine, MasterState, Transaction
+from aiortu.core.pdu import ReadHoldingRegistersRequest, WriteSingleRegisterRequest
+from aiortu.core.rtu import crc16
 from aiortu.errors import ConnectionLost
 from aiortu.master._client import Master
 from aiortu.master._usual_exchange import usual_exchange_for

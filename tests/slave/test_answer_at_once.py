@@ -20,11 +20,9 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.frame import CANNOT_KNOW, encode_frame, expected_response_length
-from aiortu.core.pdu import RawPDU
-from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
-from aiortu.core.receiver import FrameReceived
-from aiortu.core.slave_machine import SlaveState
+from aiortu.core.machines import SlaveState
+from aiortu.core.pdu import RawPDU, ReadHoldingRegistersResponse
+from aiortu.core.rtu import CANNOT_KNOW, FrameReceived, encode_frame, expected_response_length
 from aiortu.slave._answer_at_once import FAST_PATHS, Taken
 from aiortu.slave._server import Slave
 from aiortu.slave._store import Table

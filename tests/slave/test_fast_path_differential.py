@@ -25,10 +25,9 @@ from typing import Any
 import anyio
 import pytest
 
-from aiortu.core.frame import CANNOT_KNOW, encode_frame, expected_response_length
-from aiortu.core.receiver import ReceiverState
-from aiortu.core.slave_machine import SlaveState
-from aiortu.core.timing import LineSettings
+from aiortu.core.machines import SlaveState
+from aiortu.core.rtu import CANNOT_KNOW, ReceiverState, encode_frame, expected_response_length
+from aiortu.core.serial import LineSettings
 from aiortu.slave._server import Slave
 from aiortu.slave._store import Block, MemoryStore, Table
 from aiortu.testing._virtual_bus import virtual_pair

@@ -5,7 +5,7 @@ from __future__ import annotations
 import random
 
 from aiortu.core.codes import FunctionCode
-from aiortu.core.frame import encode_frame
+from aiortu.core.rtu import encode_frame
 from aiortu.slave._answer_at_once import FAST_PATHS
 from aiortu.slave._store import Block, MemoryStore, Table
 

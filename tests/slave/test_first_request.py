@@ -9,7 +9,7 @@ import anyio
 
 import aiortu
 from aiortu.core.pdu import RawPDU
-from aiortu.core.receiver import ReceiverState, Role
+from aiortu.core.rtu import ReceiverState, Role
 from aiortu.testing import VirtualBus
 
 

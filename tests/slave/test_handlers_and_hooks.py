@@ -11,7 +11,7 @@ import pytest
 
 import aiortu
 from aiortu.core.codes import ExceptionCode
-from aiortu.core.pdu_registers import ReadHoldingRegistersResponse
+from aiortu.core.pdu import ReadHoldingRegistersResponse
 from aiortu.errors import ExceptionResponse, ResponseTimeout
 from aiortu.slave._handlers import Reply, RequestContext
 from aiortu.slave._routes import RangeAccess

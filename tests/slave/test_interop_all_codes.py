@@ -11,7 +11,7 @@ from collections.abc import AsyncIterator
 import anyio
 import pytest
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.slave._server import Slave
 from aiortu.slave._store import MemoryStore, ServerId, Table
 from aiortu.transport._fd import FileDescriptorStream

@@ -14,8 +14,8 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import pack_registers, unpack_registers
+from aiortu.core.rtu import encode_frame
 from aiortu.slave._store import MemoryStore, Table
 
 from .helpers import slave_line

@@ -6,8 +6,8 @@ from __future__ import annotations
 import anyio
 import pytest
 
-from aiortu.core.comm_events import receive_event, send_event
-from aiortu.core.frame import encode_frame
+from aiortu.core.machines import receive_event, send_event
+from aiortu.core.rtu import encode_frame
 from aiortu.slave._store import MemoryStore, ServerId, Table
 
 from .helpers import UNIT, example_store, slave_line

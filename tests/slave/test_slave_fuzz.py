@@ -8,8 +8,7 @@ import anyio
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aiortu.core.crc import crc16
-from aiortu.core.frame import decode_frame, encode_frame
+from aiortu.core.rtu import crc16, decode_frame, encode_frame
 
 from .helpers import UNIT, example_store, slave_line
 

@@ -14,8 +14,7 @@ import anyio
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aiortu.core.crc import crc16
-from aiortu.core.frame import decode_frame, encode_frame
+from aiortu.core.rtu import crc16, decode_frame, encode_frame
 from aiortu.slave._store import MemoryStore, ServerId
 
 from .helpers import UNIT, slave_line

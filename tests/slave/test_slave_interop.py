@@ -10,8 +10,8 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.frame import encode_frame
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.slave._server import Slave
 from aiortu.slave._store import MemoryStore, Table
 from aiortu.transport._fd import FileDescriptorStream

@@ -7,9 +7,8 @@ import logging
 import anyio
 import pytest
 
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import RawPDU
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest
+from aiortu.core.pdu import RawPDU, ReadHoldingRegistersRequest
+from aiortu.core.rtu import encode_frame
 from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue
 from aiortu.slave._handlers import RequestContext
 from aiortu.slave._server import Slave

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.slave_machine import (
+from aiortu.core.machines._slave_machine import (
     TRANSITIONS,
     SerialLineCounters,
     SlaveEvent,

@@ -252,7 +252,7 @@ async def test_hooks_routes_and_replies_over_tcp() -> None:
 
 
 async def test_rtu_over_tcp_listens_and_serves_each_connection_as_a_line() -> None:
-    from aiortu.core.frame import decode_frame, encode_frame
+    from aiortu.core.rtu import decode_frame, encode_frame
 
     store = device()
     async with serve("rtu+tcp://127.0.0.1:0", {UNIT: store}) as server:
@@ -280,7 +280,7 @@ def test_under_trio(scenario: Callable[[], Awaitable[None]]) -> None:
 
 
 async def test_rtu_over_tcp_hooks_reach_lines_connected_before_and_after() -> None:
-    from aiortu.core.frame import encode_frame
+    from aiortu.core.rtu import encode_frame
 
     seen: list[str] = []
     async with serve("rtu+tcp://127.0.0.1:0", {UNIT: device()}) as server:

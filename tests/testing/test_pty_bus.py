@@ -9,7 +9,7 @@ import anyio
 import pytest
 import serial
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
 from aiortu.transport._fd import FileDescriptorStream
 

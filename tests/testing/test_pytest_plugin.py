@@ -15,7 +15,7 @@ SUITE = textwrap.dedent(
     import os
     import pytest
     import anyio
-    from aiortu.core.timing import LineSettings
+    from aiortu.core.serial import LineSettings
     from aiortu.testing import FaultPlan
 
     {marker}

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.line._wake_timer import WakeTimer
 from aiortu.testing import FaultPlan, VirtualBus, virtual_pair

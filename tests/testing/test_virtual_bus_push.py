@@ -14,7 +14,7 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import FaultPlan, VirtualBus, virtual_pair
 
 pytestmark = pytest.mark.timeout(30)

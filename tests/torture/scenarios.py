@@ -27,7 +27,7 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import FaultPlan
 
 __all__ = (

@@ -23,13 +23,13 @@ import anyio.abc
 
 import aiortu
 import aiortu.transport
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu_registers import (
+from aiortu.core.machines import SlaveState
+from aiortu.core.pdu import (
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
     WriteSingleRegisterRequest,
 )
-from aiortu.core.slave_machine import SlaveState
+from aiortu.core.rtu import encode_frame
 from aiortu.testing import PtyBus, TraceEntry, VirtualBus
 
 from .checks import Ledger, Leftovers, Report, logged_errors

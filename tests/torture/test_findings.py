@@ -20,7 +20,7 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus, VirtualBus
 
 from .checks import Leftovers

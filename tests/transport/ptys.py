@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import anyio
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 
 __all__ = ("LINE", "Pty", "open_pty", "pty_keeps_even_parity", "read_master")
 

@@ -12,9 +12,8 @@ import anyio.abc
 import anyio.lowlevel
 import pytest
 
-from aiortu.core.crc import crc16
 from aiortu.core.mbap import AduDecoder, encode_adu
-from aiortu.core.receiver import FrameReceived
+from aiortu.core.rtu import FrameReceived, crc16
 from aiortu.line import Link
 from aiortu.transport import FramedStream, ModbusTcpCounters, ModbusTcpStream
 

@@ -10,7 +10,7 @@ from anyio.abc import SocketAttribute, SocketStream
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.transport import (
     ListenAddress,

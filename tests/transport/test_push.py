@@ -10,8 +10,8 @@ import anyio.abc
 import pytest
 from anyio.streams.stapled import StapledByteStream
 
-from aiortu.core.receiver import FrameReceived, Role
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import FrameReceived, Role
+from aiortu.core.serial import LineSettings
 from aiortu.line import Link
 from aiortu.transport import FileDescriptorStream, PushStream, SerialStream, open_serial
 from tests.transport.ptys import LINE, open_pty

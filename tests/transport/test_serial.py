@@ -9,7 +9,7 @@ import termios
 import anyio
 import pytest
 
-from aiortu.core.timing import LineSettings, Parity
+from aiortu.core.serial import LineSettings, Parity
 from aiortu.errors import (
     InvalidValue,
     PortBusy,

@@ -8,8 +8,7 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.crc import crc16
-from aiortu.core.receiver import DiscardReason, FrameDiscarded, FrameReceived, Role
+from aiortu.core.rtu import DiscardReason, FrameDiscarded, FrameReceived, Role, crc16
 from aiortu.errors import ConnectionLost, ResponseTimeout
 from aiortu.line._link import Link
 from aiortu.master._client import Master

@@ -23,7 +23,7 @@ import anyio
 from aiortu.cli import SUMMARIES, Subparsers
 from aiortu.cli._arguments import plural, positive_int, seconds
 from aiortu.cli._demo_system import Demo, DeviceView, ReadingView, Snapshot
-from aiortu.core.addressing import Table
+from aiortu.core.model import Table
 
 __all__ = ("PlainRenderer", "TableRenderer", "header_lines", "register", "run")
 

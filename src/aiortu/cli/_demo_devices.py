@@ -18,8 +18,7 @@ import random
 from dataclasses import dataclass
 from typing import Protocol
 
-from aiortu.core.addressing import Reference, Table, format_reference
-from aiortu.core.values import Layout, ValueType, encode_value
+from aiortu.core.model import Layout, Reference, Table, ValueType, encode_value, format_reference
 from aiortu.master import Point
 from aiortu.slave import Block, Change, MemoryStore
 
@@ -40,7 +39,7 @@ Value = bool | int | float
 
 @dataclass(frozen=True, slots=True)
 class Reading:
-    """One value the demo polls and shows: its [`Point`][aiortu.core.poll_plan.Point], a `label`,
+    """One value the demo polls and shows: its [`Point`][aiortu.core.model.Point], a `label`,
     a unit of measure and how many `digits` after the point to show."""
 
     point: Point

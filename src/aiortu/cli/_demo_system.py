@@ -54,7 +54,7 @@ from aiortu.cli._demo_devices import (
     Value,
     to_tenths,
 )
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue, ModbusError
 from aiortu.master import CycleReport, CycleStats, Master, Point, Poller, UnitHealth, UnitStats
 from aiortu.slave import Slave

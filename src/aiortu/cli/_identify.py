@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
 def _print(
     args: argparse.Namespace, objects: dict[int, bytes] | ExceptionResponse, server: object
 ) -> None:
-    from aiortu.core.pdu_serial_line import ReportServerIdResponse
+    from aiortu.core.pdu import ReportServerIdResponse
 
     assert isinstance(server, ReportServerIdResponse | ExceptionResponse)
     named = (

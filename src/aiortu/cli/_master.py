@@ -32,7 +32,7 @@ from aiortu.cli._arguments import (
     unit_id,
 )
 from aiortu.cli._messages import invalid_value, port_failure
-from aiortu.core.addressing import Reference, Table, parse_reference
+from aiortu.core.model import Reference, Table, parse_reference
 from aiortu.errors import (
     ConnectionLost,
     ExceptionResponse,

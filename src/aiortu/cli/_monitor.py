@@ -3,7 +3,7 @@
 Opens the port (a device path or `rtu+tcp://host:port`), listens with a receiver in
 the `MONITOR` role and never sends. Each frame becomes one line on stdout: the time,
 the direction, the CRC status and a description from
-[`BusDecoder`][aiortu.core.bus_decoder.BusDecoder], or, with `--json`, one JSON object. Runs
+[`BusDecoder`][aiortu.core.rtu.BusDecoder], or, with `--json`, one JSON object. Runs
 until SIGINT or SIGTERM and exits 0; a port that cannot be opened, or that fails while
 listening, gives one line on stderr and exit code 1.
 """
@@ -25,9 +25,8 @@ import anyio
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import add_line_settings, add_timing, resolve_line_settings
 from aiortu.cli._messages import port_failure
-from aiortu.core.bus_decoder import BusDecoder, DecodedFrame
-from aiortu.core.receiver import Role
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import BusDecoder, DecodedFrame, Role
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue, PortError
 from aiortu.line import Link
 from aiortu.transport import ModbusTcpAddress, open_stream, parse_port_url

@@ -36,9 +36,7 @@ from aiortu.cli._master import (
     run_master,
     seconds,
 )
-from aiortu.core.addressing import Reference, format_reference
-from aiortu.core.poll_plan import Point
-from aiortu.core.values import Layout, ValueType
+from aiortu.core.model import Layout, Point, Reference, ValueType, format_reference
 from aiortu.errors import (
     ConnectionLost,
     CRCError,

@@ -27,7 +27,7 @@ from aiortu.cli._master import (
     run_master,
     unit_id,
 )
-from aiortu.core.addressing import Reference, Table, format_reference
+from aiortu.core.model import Reference, Table, format_reference
 
 __all__ = ("print_values", "register", "run", "target")
 

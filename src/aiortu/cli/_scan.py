@@ -36,11 +36,14 @@ from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import is_pty, plural
 from aiortu.cli._messages import port_failure
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import ExceptionPDU, decode_response
-from aiortu.core.pdu_registers import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
-from aiortu.core.receiver import FrameReceived, Role
-from aiortu.core.timing import LineSettings, Parity
+from aiortu.core.pdu import (
+    ExceptionPDU,
+    ReadHoldingRegistersRequest,
+    ReadHoldingRegistersResponse,
+    decode_response,
+)
+from aiortu.core.rtu import FrameReceived, Role, encode_frame
+from aiortu.core.serial import LineSettings, Parity
 from aiortu.errors import (
     ConnectionLost,
     ModbusError,

@@ -29,9 +29,8 @@ from aiortu.cli._arguments import (
     resolve_line_settings,
 )
 from aiortu.cli._messages import library_warnings_on_stderr, port_failure
-from aiortu.core.bus_decoder import describe_frame
-from aiortu.core.frame import encode_frame
 from aiortu.core.pdu import Request, decode_request
+from aiortu.core.rtu import describe_frame, encode_frame
 from aiortu.errors import ConnectionLost, ModbusError, PortError
 from aiortu.slave import ConfigError, MemoryStore, load_config, serve
 

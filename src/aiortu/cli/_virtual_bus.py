@@ -14,7 +14,7 @@ import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import PTY_LINE, parity, positive_int, probability, seconds_or_zero
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import PortError
 from aiortu.testing import FaultPlan, PtyBus
 

@@ -24,7 +24,7 @@ from aiortu.cli._master import (
     unit_id,
 )
 from aiortu.cli._read import print_values, target
-from aiortu.core.addressing import Table
+from aiortu.core.model import Table
 from aiortu.errors import InvalidValue
 
 __all__ = ("parse_values", "register", "run")

@@ -15,7 +15,8 @@ from __future__ import annotations
 from typing import Final, Protocol
 
 from aiortu.core.errors import FrameError
-from aiortu.core.frame import (
+from aiortu.core.mbap import Adu, AduDecoder, encode_adu
+from aiortu.core.rtu import (
     CANNOT_KNOW,
     MAX_FRAME_LENGTH,
     MIN_FRAME_LENGTH,
@@ -24,7 +25,6 @@ from aiortu.core.frame import (
     encode_frame,
     expected_request_length,
 )
-from aiortu.core.mbap import Adu, AduDecoder, encode_adu
 
 __all__ = ("RTU_SILENCE", "Framing", "MbapFraming", "RtuFraming")
 

@@ -2,7 +2,7 @@
 
 A [`Link`][aiortu.line.Link] owns a byte stream (a serial port, a TCP connection to a serial device
 server, a virtual line). It timestamps every chunk with the link's clock, runs the
-sans-IO [`Receiver`][aiortu.core.receiver.Receiver], wakes it at its deadlines, and queues
+sans-IO [`Receiver`][aiortu.core.rtu.Receiver], wakes it at its deadlines, and queues
 what it yields: frames, and the bytes it discarded with the reason.
 
 Two ways in. A stream that pushes its bytes (a [`PushStream`][aiortu.transport.PushStream],
@@ -62,7 +62,7 @@ import anyio.abc
 import anyio.lowlevel
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
-from aiortu.core.receiver import (
+from aiortu.core.rtu import (
     DiscardReason,
     FrameDiscarded,
     FrameReceived,
@@ -70,7 +70,7 @@ from aiortu.core.receiver import (
     Role,
     TimingMode,
 )
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost
 from aiortu.line._native import NativeWaits, native_waits
 from aiortu.line._push_reader import PushReader, ReplyTap, RequestTap
@@ -425,7 +425,7 @@ class Link:
     ) -> None:
         """Hand the next chunk that is exactly one good frame of `length` bytes starting with
         `prefix` straight to `on_frame(frame, end)`, once, instead of to the listener as a
-        [`FrameReceived`][aiortu.core.receiver.FrameReceived];
+        [`FrameReceived`][aiortu.core.rtu.FrameReceived];
         [`forget_expected`][aiortu.line.Link.forget_expected] undoes it. `prefix` and `length` must
         fit one frame layout (the receiver checks the CRC only). `checked` is a frame of that layout
         whose CRC is known to be good (the last reply to the same request): a chunk equal to it is
@@ -447,7 +447,7 @@ class Link:
         """Hand every chunk that is exactly one good request of `length` bytes with one
         of `function_codes` straight to `on_request(frame, end)`, from the read
         callback, instead of to the listener as a
-        [`FrameReceived`][aiortu.core.receiver.FrameReceived]; `None` stops it. Every request
+        [`FrameReceived`][aiortu.core.rtu.FrameReceived]; `None` stops it. Every request
         with those function codes must be `length` bytes long (01 to 06 are 8), whatever
         its unit: the receiver checks the CRC only.
 

@@ -20,7 +20,7 @@ from typing import Any, Protocol
 import anyio
 import anyio.abc
 
-from aiortu.core.receiver import FrameDiscarded, FrameReceived, Receiver
+from aiortu.core.rtu import FrameDiscarded, FrameReceived, Receiver
 from aiortu.line._sender import LineActivity
 
 __all__ = ("PushReader", "ReplyTap", "RequestTap")

@@ -15,10 +15,10 @@ from typing import Final
 
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import InvalidRequest, InvalidValue
-from aiortu.core.master_transaction import Failure
+from aiortu.core.machines import Failure
 from aiortu.core.pdu import REGISTER_RANGE
-from aiortu.core.receiver import TimingMode
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import TimingMode
+from aiortu.core.serial import LineSettings
 
 __all__ = (
     "UNIT_RANGE",
@@ -170,7 +170,7 @@ def check_items(name: str, values: object, allowed: str) -> tuple[object, ...]:
 
 def check_retry_on(retry_on: object) -> frozenset[Failure | int] | None:
     """The failures and exception codes a master retries: None (the default), or a
-    collection of [`Failure`][aiortu.core.master_transaction.Failure] members and
+    collection of [`Failure`][aiortu.core.machines.Failure] members and
     exception codes 1..255."""
     if retry_on is None:
         return None

@@ -15,14 +15,16 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import Protocol, TypeVar
 
-from aiortu.core import pdu_files
+from aiortu.core import pdu as pdu_files
 from aiortu.core.codes import DeviceIdReadCode
-from aiortu.core.pdu import ExceptionPDU, Request, Response
-from aiortu.core.pdu_serial_line import (
+from aiortu.core.pdu import (
     DiagnosticsResponse,
+    ExceptionPDU,
     GetCommEventCounterResponse,
     GetCommEventLogResponse,
     ReportServerIdResponse,
+    Request,
+    Response,
 )
 
 __all__ = ("FileRecordLike", "MasterCalls", "RecordRequestLike", "Requester")

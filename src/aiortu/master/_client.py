@@ -13,7 +13,7 @@ of coroutines.
 [`Master`][aiortu.master.Master] takes any `anyio.abc.ByteStream`;
 [`open_master`][aiortu.master.open_master] opens one from a port name or URL first. The line engine
 lives in [`aiortu.master`][aiortu.master], the state machine in
-[`aiortu.core.master_machine`][aiortu.core.master_machine], the per-unit and broadcast handles in
+[`aiortu.core.machines`][aiortu.core.machines], the per-unit and broadcast handles in
 [`aiortu.master`][aiortu.master].
 
 Who runs a transaction. The line is owned by one transaction at a time, and that
@@ -38,28 +38,30 @@ import anyio
 import anyio.abc
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.master_transaction import Failure, RetryPolicy, Transaction
-from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response, decode_request
-from aiortu.core.pdu_bits import (
+from aiortu.core.machines import Failure, RetryPolicy, Transaction
+from aiortu.core.pdu import (
+    ExceptionPDU,
+    MaskWriteRegisterRequest,
+    RawPDU,
     ReadCoilsRequest,
     ReadCoilsResponse,
     ReadDiscreteInputsRequest,
-    WriteMultipleCoilsRequest,
-    WriteSingleCoilRequest,
-)
-from aiortu.core.pdu_registers import (
-    MaskWriteRegisterRequest,
     ReadFifoQueueRequest,
     ReadFifoQueueResponse,
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
     ReadInputRegistersRequest,
     ReadWriteMultipleRegistersRequest,
+    Request,
+    Response,
+    WriteMultipleCoilsRequest,
     WriteMultipleRegistersRequest,
+    WriteSingleCoilRequest,
     WriteSingleRegisterRequest,
+    decode_request,
 )
-from aiortu.core.receiver import Role, TimingMode
-from aiortu.core.timing import LineSettings
+from aiortu.core.rtu import Role, TimingMode
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
@@ -132,7 +134,7 @@ class Master(SerialLineFunctions):
     failure listed in `retry_on` (default: timeouts and frame errors, never exception
     responses; add exception codes to retry those), for requests whose function code is
     in `repeatable` (default
-    [`SAFE_TO_REPEAT`][aiortu.core.master_transaction.SAFE_TO_REPEAT]: reads and the idempotent
+    [`SAFE_TO_REPEAT`][aiortu.core.machines.SAFE_TO_REPEAT]: reads and the idempotent
     writes; a request of another code is sent once). `frame_gap` is the silence kept
     before each request (`None`: t3.5, or 0 on a stream of whole frames such as Modbus TCP's
     [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream]; 0 for virtual lines and TCP gateways).

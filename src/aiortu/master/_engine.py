@@ -1,8 +1,8 @@
 """The master's line: one transaction at a time on one line, for any number of callers.
 
 `LineEngine` owns a [`Link`][aiortu.line.Link] and runs the sans-IO
-[`MasterMachine`][aiortu.core.master_machine.MasterMachine] on it. Callers hand it
-[`Transaction`][aiortu.core.master_transaction.Transaction] objects through `LineEngine.submit`.
+[`MasterMachine`][aiortu.core.machines.MasterMachine] on it. Callers hand it
+[`Transaction`][aiortu.core.machines.Transaction] objects through `LineEngine.submit`.
 
 The line belongs to one transaction at a time, and the transaction runs in the task of
 the caller that submitted it: the caller sends the request and waits for the reply
@@ -56,8 +56,9 @@ import anyio
 
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import FrameError
-from aiortu.core.master_machine import MasterMachine, MasterState
-from aiortu.core.master_transaction import (
+from aiortu.core.machines import (
+    MasterMachine,
+    MasterState,
     Outcome,
     OutcomeKind,
     RetryPolicy,
@@ -65,7 +66,7 @@ from aiortu.core.master_transaction import (
     frame_error_from_discard,
 )
 from aiortu.core.pdu import ExceptionPDU, Request, Response
-from aiortu.core.receiver import FrameReceived
+from aiortu.core.rtu import FrameReceived
 from aiortu.errors import ConnectionLost, ResponseTimeout, UnitOffline
 from aiortu.line import Link, LinkEvent
 from aiortu.master._job import TURN, Job, JobQueue, Waiter
@@ -206,7 +207,7 @@ class LineEngine:
         """The least delay from a request to `unit` leaving the wire to the arrival of
         its reply's first byte, where the link's wire times are real: the unit's minimum
         turnaround plus the byte's own wire time. None where they are not (see
-        [`Transaction.reply_delay`][aiortu.core.master_transaction.Transaction.reply_delay])."""
+        [`Transaction.reply_delay`][aiortu.core.machines.Transaction.reply_delay])."""
         link = self.link
         if not link.wire_timed:
             return None

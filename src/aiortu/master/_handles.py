@@ -5,8 +5,8 @@
 
 [`UnitHandle`][aiortu.master.UnitHandle] (`master.slave(17)`) has the master's methods without the
 unit, and typed values on top: 32-bit integers, floats and strings in holding or input registers, in
-any word layout ([`aiortu.core.values`][aiortu.core.values]), and reads by reference (`"40108"`,
-[`aiortu.core.addressing`][aiortu.core.addressing]).
+any word layout ([`aiortu.core.model`][aiortu.core.model]), and reads by reference (`"40108"`,
+[`aiortu.core.model`][aiortu.core.model]).
 
 [`BroadcastHandle`][aiortu.master.BroadcastHandle] (`master.broadcast`) has the writes the spec lets
 be broadcast: each goes to unit 0, no reply is awaited, and the line waits the turnaround delay so
@@ -17,33 +17,35 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 
-from aiortu.core import pdu_files
-from aiortu.core.addressing import Table, parse_reference
+from aiortu.core import pdu as pdu_files
 from aiortu.core.codes import BROADCAST_UNIT, DeviceIdReadCode
 from aiortu.core.errors import InvalidRequest
-from aiortu.core.pdu import ExceptionPDU, Request, Response
-from aiortu.core.pdu_bits import WriteMultipleCoilsRequest, WriteSingleCoilRequest
-from aiortu.core.pdu_registers import (
-    MaskWriteRegisterRequest,
-    WriteMultipleRegistersRequest,
-    WriteSingleRegisterRequest,
-)
-from aiortu.core.pdu_serial_line import (
-    DiagnosticsResponse,
-    GetCommEventCounterResponse,
-    GetCommEventLogResponse,
-    ReportServerIdResponse,
-)
-from aiortu.core.values import (
+from aiortu.core.model import (
     Layout,
+    Table,
     ValueType,
     as_layout,
     as_value_type,
     check_encoding,
     decode_value,
     encode_value,
+    parse_reference,
     registers_to_string,
     string_to_registers,
+)
+from aiortu.core.pdu import (
+    DiagnosticsResponse,
+    ExceptionPDU,
+    GetCommEventCounterResponse,
+    GetCommEventLogResponse,
+    MaskWriteRegisterRequest,
+    ReportServerIdResponse,
+    Request,
+    Response,
+    WriteMultipleCoilsRequest,
+    WriteMultipleRegistersRequest,
+    WriteSingleCoilRequest,
+    WriteSingleRegisterRequest,
 )
 from aiortu.master._arguments import (
     check_coil,

@@ -20,7 +20,7 @@ import itertools
 
 import anyio
 
-from aiortu.core.master_transaction import Transaction
+from aiortu.core.machines import Transaction
 from aiortu.core.pdu import ExceptionPDU, Response
 from aiortu.errors import ConnectionLost
 

@@ -10,11 +10,11 @@
             print(sample.name, sample.value)
 
 The points are planned once
-([`aiortu.core.poll_plan.plan_reads`][aiortu.core.poll_plan.plan_reads]): neighbours on the same
+([`aiortu.core.model.plan_reads`][aiortu.core.model.plan_reads]): neighbours on the same
 unit and table share one read when the gap between them is at most `max_gap` elements, within the
 spec's limits. A device whose map has a hole inside a merged read refuses the whole block with
 exception 02 (illegal data address): the poller then splits that read into the reads of its
-points alone ([`PlannedRead.split`][aiortu.core.poll_plan.PlannedRead.split]), at once and for
+points alone ([`PlannedRead.split`][aiortu.core.model.PlannedRead.split]), at once and for
 good, so the hole costs one request once and only a point that is really missing shows the
 exception. Points with their own `interval` are polled on their own schedule; each interval has
 its own cycle.
@@ -54,27 +54,25 @@ import anyio
 import anyio.abc
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
-from aiortu.core.addressing import Table
 from aiortu.core.codes import ExceptionCode
-from aiortu.core.pdu import Response
-from aiortu.core.pdu_bits import (
-    ReadCoilsRequest,
-    ReadCoilsResponse,
-    ReadDiscreteInputsRequest,
-    ReadDiscreteInputsResponse,
-)
-from aiortu.core.pdu_registers import (
-    ReadHoldingRegistersRequest,
-    ReadHoldingRegistersResponse,
-    ReadInputRegistersRequest,
-    ReadInputRegistersResponse,
-)
-from aiortu.core.poll_plan import (
+from aiortu.core.model import (
     MAX_READ_BITS,
     MAX_READ_REGISTERS,
     PlannedRead,
     Point,
+    Table,
     plan_reads,
+)
+from aiortu.core.pdu import (
+    ReadCoilsRequest,
+    ReadCoilsResponse,
+    ReadDiscreteInputsRequest,
+    ReadDiscreteInputsResponse,
+    ReadHoldingRegistersRequest,
+    ReadHoldingRegistersResponse,
+    ReadInputRegistersRequest,
+    ReadInputRegistersResponse,
+    Response,
 )
 from aiortu.errors import (
     ConnectionLost,

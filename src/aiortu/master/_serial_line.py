@@ -16,7 +16,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import TypeVar
 
-from aiortu.core import pdu_device_id, pdu_files, pdu_serial_line
+from aiortu.core import pdu as pdu_device_id
+from aiortu.core import pdu as pdu_files
+from aiortu.core import pdu as pdu_serial_line
 from aiortu.core.codes import DeviceIdReadCode, DiagnosticSubFunction
 from aiortu.core.pdu import Response
 from aiortu.errors import InvalidRequest, MalformedPDU
@@ -50,7 +52,7 @@ class SerialLineFunctions:
     ) -> list[list[int]]:
         """Read file records (14): one list of values per sub-request, in order.
 
-        Each sub-request is a [`FileRecordRequest`][aiortu.core.pdu_files.FileRecordRequest] or a
+        Each sub-request is a [`FileRecordRequest`][aiortu.core.pdu.FileRecordRequest] or a
         `(file_number, record_number, record_length)` tuple.
         """
         request = pdu_files.ReadFileRecordRequest(record_requests(sub_requests))
@@ -73,7 +75,7 @@ class SerialLineFunctions:
     ) -> None:
         """Write file records (15); the echo is verified.
 
-        Each record is a [`FileRecord`][aiortu.core.pdu_files.FileRecord] or a
+        Each record is a [`FileRecord`][aiortu.core.pdu.FileRecord] or a
         `(file_number, record_number, values)` tuple.
         """
         request = pdu_files.WriteFileRecordRequest(file_records(records))

@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass
 
 from aiortu.core.errors import CRCError
-from aiortu.core.master_transaction import Failure, Transaction
+from aiortu.core.machines import Failure, Transaction
 
 __all__ = ("HealthPolicy", "UnitState", "UnitStats")
 

@@ -25,7 +25,7 @@ the machine:
    (retries, the late-reply guard, statistics) for the caller.
 
 So a reply ends a transaction by one of two routes: the usual reply here, or the table
-of [`MasterMachine`][aiortu.core.master_machine.MasterMachine]. The differential tests run the
+of [`MasterMachine`][aiortu.core.machines.MasterMachine]. The differential tests run the
 same scenarios with the shortcut on and off and compare results, statistics and bytes on
 the wire.
 """
@@ -36,10 +36,9 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from aiortu.core.master_machine import KnownRequest, MasterMachine
-from aiortu.core.master_transaction import RetryPolicy, Transaction
+from aiortu.core.machines import KnownRequest, MasterMachine, RetryPolicy, Transaction
 from aiortu.core.pdu import Request
-from aiortu.core.receiver import FrameReceived
+from aiortu.core.rtu import FrameReceived
 from aiortu.line import Link
 from aiortu.master._job import Job, JobQueue, Waiter
 from aiortu.master._stats import UnitStats
@@ -81,7 +80,7 @@ class UsualExchange:
     reply_delay: float | None
     """The unit's least delay to the reply's first byte, or None without real wire
     times (see
-    [`Transaction.reply_delay`][aiortu.core.master_transaction.Transaction.reply_delay])."""
+    [`Transaction.reply_delay`][aiortu.core.machines.Transaction.reply_delay])."""
     stale_before: float
     """A usual reply that ends sooner began before `end` plus `reply_delay`: stale
     (minus infinity without a reply delay). One comparison on the fast path."""

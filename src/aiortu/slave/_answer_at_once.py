@@ -1,9 +1,9 @@
 """The slave's answer-at-once: the commonest requests answered where they arrive.
 
 A request normally goes the general route: the link hands a
-[`FrameReceived`][aiortu.core.receiver.FrameReceived] to the slave's listener, the listener queues
+[`FrameReceived`][aiortu.core.rtu.FrameReceived] to the slave's listener, the listener queues
 it, and the serve loop drives the table machine
-([`SlaveMachine`][aiortu.core.slave_machine.SlaveMachine]) through the handler, the hooks and
+([`SlaveMachine`][aiortu.core.machines.SlaveMachine]) through the handler, the hooks and
 the reply. That costs a task wake-up per request.
 
 This module is the one shortcut around it. Where `AnswerAtOnce.may_answer` (the
@@ -20,7 +20,7 @@ A *fast path* (`FAST_PATHS`) maps the request's bytes to the reply's bytes for t
 request and a store that answers, before changing anything; the request then takes the general
 route, so the answers are the same either way. A normal reply that goes out at once (frame gap 0, or
 already kept) is counted in one step
-([`answered_at_once`][aiortu.core.slave_machine.SlaveMachine.answered_at_once], the same counters
+([`answered_at_once`][aiortu.core.machines.SlaveMachine.answered_at_once], the same counters
 and log entries as the table's four steps); otherwise the machine is driven step by step and a reply
 that must wait for the frame gap is left to the serve loop as a `Taken`.
 
@@ -37,13 +37,10 @@ from dataclasses import dataclass
 from typing import Final
 
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
-from aiortu.core.data_model import AsyncDataStore, DataStore, Table
-from aiortu.core.frame import encode_frame
-from aiortu.core.pdu import pack_bits
-from aiortu.core.pdu_bits import MAX_READ_BITS
-from aiortu.core.pdu_registers import MAX_READ_REGISTERS, MAX_WRITE_REGISTERS
-from aiortu.core.receiver import FrameReceived
-from aiortu.core.slave_machine import SlaveMachine, SlaveState
+from aiortu.core.machines import SlaveMachine, SlaveState
+from aiortu.core.model import AsyncDataStore, DataStore, Table
+from aiortu.core.pdu import MAX_READ_BITS, MAX_READ_REGISTERS, MAX_WRITE_REGISTERS, pack_bits
+from aiortu.core.rtu import FrameReceived, encode_frame
 from aiortu.errors import ExceptionResponse
 from aiortu.line import Link, LinkEvent
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler

@@ -58,7 +58,7 @@ from pathlib import Path
 from typing import Any
 
 from aiortu.core.codes import DeviceIdObject, ExceptionCode
-from aiortu.core.data_model import ServerId, Table
+from aiortu.core.model import ServerId, Table
 from aiortu.errors import ConfigError, InvalidValue
 from aiortu.slave._store import Block, MemoryStore
 

@@ -18,9 +18,9 @@ from typing import Any
 
 from aiortu._log import get_logger
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode
-from aiortu.core.data_model import AsyncDataStore, DataStore, Table
+from aiortu.core.machines import SlaveMachine
+from aiortu.core.model import AsyncDataStore, DataStore, Table
 from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_request
-from aiortu.core.slave_machine import SlaveMachine
 from aiortu.errors import ExceptionResponse, InvalidValue, MalformedPDU
 from aiortu.slave._answer_at_once import exception_pdu
 from aiortu.slave._handlers import (

@@ -25,57 +25,57 @@ from dataclasses import dataclass
 from typing import Any, Final, TypeVar
 
 from aiortu.core.codes import DiagnosticSubFunction, ExceptionCode, FunctionCode
-from aiortu.core.data_model import AsyncDataStore, DataStore, ServerId, Table
-from aiortu.core.device_identity import answer_device_identification
-from aiortu.core.pdu import ExceptionPDU, Response
-from aiortu.core.pdu_bits import (
-    ReadCoilsRequest,
-    ReadCoilsResponse,
-    ReadDiscreteInputsRequest,
-    ReadDiscreteInputsResponse,
-    WriteMultipleCoilsRequest,
-    WriteMultipleCoilsResponse,
-    WriteSingleCoilRequest,
-    WriteSingleCoilResponse,
+from aiortu.core.machines import SlaveMachine
+from aiortu.core.model import (
+    AsyncDataStore,
+    DataStore,
+    ServerId,
+    Table,
+    answer_device_identification,
 )
-from aiortu.core.pdu_device_id import ReadDeviceIdentificationRequest
-from aiortu.core.pdu_files import (
-    ReadFileRecordRequest,
-    ReadFileRecordResponse,
-    WriteFileRecordRequest,
-    WriteFileRecordResponse,
-)
-from aiortu.core.pdu_registers import (
+from aiortu.core.pdu import (
+    COMM_EVENT_STATUS_READY,
     MAX_FIFO_COUNT,
+    DiagnosticsRequest,
+    DiagnosticsResponse,
+    ExceptionPDU,
+    GetCommEventCounterRequest,
+    GetCommEventCounterResponse,
+    GetCommEventLogRequest,
+    GetCommEventLogResponse,
     MaskWriteRegisterRequest,
     MaskWriteRegisterResponse,
+    ReadCoilsRequest,
+    ReadCoilsResponse,
+    ReadDeviceIdentificationRequest,
+    ReadDiscreteInputsRequest,
+    ReadDiscreteInputsResponse,
+    ReadExceptionStatusRequest,
+    ReadExceptionStatusResponse,
     ReadFifoQueueRequest,
     ReadFifoQueueResponse,
+    ReadFileRecordRequest,
+    ReadFileRecordResponse,
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
     ReadInputRegistersRequest,
     ReadInputRegistersResponse,
     ReadWriteMultipleRegistersRequest,
     ReadWriteMultipleRegistersResponse,
+    ReportServerIdRequest,
+    ReportServerIdResponse,
+    Response,
+    WriteFileRecordRequest,
+    WriteFileRecordResponse,
+    WriteMultipleCoilsRequest,
+    WriteMultipleCoilsResponse,
     WriteMultipleRegistersRequest,
     WriteMultipleRegistersResponse,
+    WriteSingleCoilRequest,
+    WriteSingleCoilResponse,
     WriteSingleRegisterRequest,
     WriteSingleRegisterResponse,
 )
-from aiortu.core.pdu_serial_line import (
-    COMM_EVENT_STATUS_READY,
-    DiagnosticsRequest,
-    DiagnosticsResponse,
-    GetCommEventCounterRequest,
-    GetCommEventCounterResponse,
-    GetCommEventLogRequest,
-    GetCommEventLogResponse,
-    ReadExceptionStatusRequest,
-    ReadExceptionStatusResponse,
-    ReportServerIdRequest,
-    ReportServerIdResponse,
-)
-from aiortu.core.slave_machine import SlaveMachine
 from aiortu.errors import ExceptionResponse
 
 __all__ = (

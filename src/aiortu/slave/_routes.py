@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from aiortu.core.codes import ExceptionCode
-from aiortu.core.data_model import AsyncDataStore, DataStore, Table
+from aiortu.core.model import AsyncDataStore, DataStore, Table
 from aiortu.errors import ExceptionResponse
 
 __all__ = ("RangeAccess", "RangeHandler", "RoutedStore")

@@ -14,7 +14,7 @@ a URL first, or listens on one: `tcp://` for Modbus TCP
 connection). One line may carry a whole bus of simulated units. The general route of a request
 (checks, handler, hooks) is `Dispatcher`, shared with the Modbus TCP server.
 
-Each frame goes through the core's [`SlaveMachine`][aiortu.core.slave_machine.SlaveMachine], which
+Each frame goes through the core's [`SlaveMachine`][aiortu.core.machines.SlaveMachine], which
 decides what the spec says: frames for other units are dropped and counted, frames with a bad CRC
 never reach it (the link discards and counts them), broadcasts are executed by every unit and never
 answered, and exceptions come in the spec's order (01, 03, 02, 04). A request is dispatched by
@@ -55,11 +55,10 @@ import anyio.lowlevel
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.data_model import AsyncDataStore, DataStore, Table
-from aiortu.core.frame import encode_frame
-from aiortu.core.receiver import DiscardReason, FrameReceived, Role, TimingMode
-from aiortu.core.slave_machine import SerialLineCounters, SlaveMachine, SlaveState
-from aiortu.core.timing import LineSettings
+from aiortu.core.machines import SerialLineCounters, SlaveMachine, SlaveState
+from aiortu.core.model import AsyncDataStore, DataStore, Table
+from aiortu.core.rtu import DiscardReason, FrameReceived, Role, TimingMode, encode_frame
+from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue
 from aiortu.line import Link, LinkEvent, Waiter
 from aiortu.slave._answer_at_once import AnswerAtOnce, Taken
@@ -106,7 +105,7 @@ class Slave(Dispatcher):
     `units` maps each unit address (1..247) to its data store. `settings` are the line settings;
     `frame_gap` is the silence kept before each reply (`None` for t3.5 of the settings, 0 for lines
     without a wire such as TCP). `timing` and `frame_silence` configure the receiver (see
-    [`aiortu.core.receiver`][aiortu.core.receiver]). `handlers` adds or replaces handlers by
+    [`aiortu.core.rtu`][aiortu.core.rtu]). `handlers` adds or replaces handlers by
     function code, as [`set_handler`][aiortu.slave.Slave.set_handler] does. `clock` is the link's
     clock. `trace` sees every frame (see [`TraceCallback`][aiortu.slave.TraceCallback]).
 

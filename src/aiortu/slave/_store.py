@@ -1,18 +1,18 @@
 """Data stores: what a slave reads and writes when a master asks, and the in-memory default.
 
 A slave unit serves the four tables of the Modbus data model (coils, discrete inputs, input
-registers, holding registers) from a [`DataStore`][aiortu.core.data_model.DataStore]: a small
-synchronous protocol, [`read`][aiortu.core.data_model.DataStore.read] and
-[`write`][aiortu.core.data_model.DataStore.write] on a [`Table`][aiortu.core.addressing.Table],
+registers, holding registers) from a [`DataStore`][aiortu.core.model.DataStore]: a small
+synchronous protocol, [`read`][aiortu.core.model.DataStore.read] and
+[`write`][aiortu.core.model.DataStore.write] on a [`Table`][aiortu.core.model.Table],
 raising [`ExceptionResponse`][aiortu.errors.ExceptionResponse] with the code the master should get
 (02 for an address outside the map), plus the optional capabilities
-([`SupportsFifoQueues`][aiortu.core.data_model.SupportsFifoQueues],
-[`SupportsExceptionStatus`][aiortu.core.data_model.SupportsExceptionStatus],
-[`SupportsFileRecords`][aiortu.core.data_model.SupportsFileRecords],
-[`SupportsDeviceIdentification`][aiortu.core.data_model.SupportsDeviceIdentification],
-[`SupportsServerId`][aiortu.core.data_model.SupportsServerId]). They are defined in
-[`aiortu.core.data_model`][aiortu.core.data_model] and re-exported here. Any store method may be a
-coroutine ([`AsyncDataStore`][aiortu.core.data_model.AsyncDataStore], e.g. a store that proxies
+([`SupportsFifoQueues`][aiortu.core.model.SupportsFifoQueues],
+[`SupportsExceptionStatus`][aiortu.core.model.SupportsExceptionStatus],
+[`SupportsFileRecords`][aiortu.core.model.SupportsFileRecords],
+[`SupportsDeviceIdentification`][aiortu.core.model.SupportsDeviceIdentification],
+[`SupportsServerId`][aiortu.core.model.SupportsServerId]). They are defined in
+[`aiortu.core.model`][aiortu.core.model] and re-exported here. Any store method may be a
+coroutine ([`AsyncDataStore`][aiortu.core.model.AsyncDataStore], e.g. a store that proxies
 another device, see `examples/proxy_store.py`); a sync store keeps costing nothing extra.
 
 [`MemoryStore`][aiortu.slave.MemoryStore] is the default store:
@@ -52,7 +52,7 @@ import anyio
 
 from aiortu._log import get_logger
 from aiortu.core.codes import ExceptionCode
-from aiortu.core.data_model import (
+from aiortu.core.model import (
     AsyncDataStore,
     DataStore,
     ServerId,

@@ -48,9 +48,9 @@ import anyio.abc
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
-from aiortu.core.data_model import AsyncDataStore, DataStore
+from aiortu.core.machines import SlaveMachine
 from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
-from aiortu.core.slave_machine import SlaveMachine
+from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.errors import InvalidValue
 from aiortu.slave._answer_at_once import exception_pdu
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher

@@ -62,7 +62,7 @@ import anyio
 import anyio.abc
 import anyio.from_thread
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import PortBusy
 from aiortu.testing._faults import FaultPlan
 from aiortu.testing._virtual_bus import TraceEntry, VirtualBus

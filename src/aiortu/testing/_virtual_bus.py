@@ -74,7 +74,7 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.line import WakeTimer, create_wake_timer, native_waits
 from aiortu.testing._faults import FaultedChunk, FaultInjector, FaultPlan

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from anyio.abc import ByteStream
 
-from aiortu.core.timing import LineSettings
+from aiortu.core.serial import LineSettings
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._mbap_stream import (

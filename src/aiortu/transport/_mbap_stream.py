@@ -35,8 +35,8 @@ import anyio.abc
 import anyio.lowlevel
 
 from aiortu._log import get_logger
-from aiortu.core.crc import crc16
 from aiortu.core.mbap import AduDecoder, MalformedHeader, encode_adu
+from aiortu.core.rtu import crc16
 from aiortu.errors import InvalidValue
 from aiortu.transport._tcp import open_tcp_connection
 

@@ -1,7 +1,7 @@
 """A serial port as an anyio byte stream, over pyserial-asyncio-fast.
 
 [`open_serial`][aiortu.transport.open_serial] opens a device path (`/dev/ttyUSB0`,
-`/dev/serial/by-id/...`, a pty) with the given [`LineSettings`][aiortu.core.timing.LineSettings] and
+`/dev/serial/by-id/...`, a pty) with the given [`LineSettings`][aiortu.core.serial.LineSettings] and
 returns a [`SerialStream`][aiortu.transport.SerialStream], an `anyio.abc.ByteStream` that the link,
 the master and the slave can use like any other stream.
 
@@ -51,7 +51,7 @@ import serial.rs485
 from anyio.abc import ByteStream
 from serial_asyncio_fast import SerialTransport
 
-from aiortu.core.timing import LineSettings, Parity
+from aiortu.core.serial import LineSettings, Parity
 from aiortu.errors import (
     InvalidValue,
     PortBusy,
