@@ -182,7 +182,7 @@ def test_serve_with_a_missing_file_exits_2(tmp_path: Path) -> None:
     )
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1
-    assert "cannot read it" in result.stderr
+    assert result.stderr == f"aiortu serve: error: --config {tmp_path / 'no'} does not exist\n"
 
 
 def test_read_only_ranges_may_span_adjacent_blocks_and_aliases() -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TYPE_CHECKING
 
 from aiortu.cli import SUMMARIES, Subparsers
 from aiortu.cli._master import (
@@ -24,6 +25,10 @@ from aiortu.cli._master import (
 )
 from aiortu.core.codes import DeviceIdObject, DeviceIdReadCode, ExceptionCode
 from aiortu.errors import ExceptionResponse
+
+if TYPE_CHECKING:
+    from aiortu.core.pdu import ReportServerIdResponse
+    from aiortu.master import UnitHandle
 
 __all__ = ("register", "run")
 
@@ -106,19 +111,9 @@ def run(args: argparse.Namespace) -> int:
     async def body() -> int:
         async with open_from_args(args) as master:
             unit = master.slave(args.unit)
-            objects: dict[int, bytes] | ExceptionResponse
+            objects = await _identification(unit, _LEVELS[args.level])
             try:
-                objects = await unit.read_device_identification(_LEVELS[args.level])
-            except ExceptionResponse as error:
-                objects = error
-                if error.code in _NOT_THERE and args.level != "basic":
-                    try:
-                        objects = await unit.read_device_identification(DeviceIdReadCode.BASIC)
-                    except ExceptionResponse as basic_error:
-                        objects = basic_error
-            server: object
-            try:
-                server = await unit.report_server_id()
+                server: ReportServerIdResponse | ExceptionResponse = await unit.report_server_id()
             except ExceptionResponse as error:
                 server = error
         if isinstance(objects, ExceptionResponse) and isinstance(server, ExceptionResponse):
@@ -129,12 +124,27 @@ def run(args: argparse.Namespace) -> int:
     return run_master(args, body)
 
 
-def _print(
-    args: argparse.Namespace, objects: dict[int, bytes] | ExceptionResponse, server: object
-) -> None:
-    from aiortu.core.pdu import ReportServerIdResponse
+async def _identification(
+    unit: UnitHandle, level: DeviceIdReadCode
+) -> dict[int, bytes] | ExceptionResponse:
+    """The objects `unit` has at `level`; a device that has fewer (it answers 02 or 03)
+    gets the basic read; the exception it answers to that, if it refuses."""
+    try:
+        return await unit.read_device_identification(level)
+    except ExceptionResponse as error:
+        if error.code not in _NOT_THERE or level == DeviceIdReadCode.BASIC:
+            return error
+    try:
+        return await unit.read_device_identification(DeviceIdReadCode.BASIC)
+    except ExceptionResponse as error:
+        return error
 
-    assert isinstance(server, ReportServerIdResponse | ExceptionResponse)
+
+def _print(
+    args: argparse.Namespace,
+    objects: dict[int, bytes] | ExceptionResponse,
+    server: ReportServerIdResponse | ExceptionResponse,
+) -> None:
     named = (
         None
         if isinstance(objects, ExceptionResponse)
