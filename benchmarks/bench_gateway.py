@@ -1,7 +1,8 @@
 """The line server (`aiortu gateway`) against mbusd, a C Modbus TCP to RTU gateway.
 
     python benchmarks/bench_gateway.py [--mbusd PATH] [--rounds 3] [--seconds 4]
-        [--section unpaced|paced|coalescing|dead-unit]
+        [--section unpaced|paced|coalescing|dead-unit] [--rates 19200:8N2,115200:8N1]
+        [--clients 1,8,32] [--baseline SRC]
 
 Both gateways run as processes of their own (so that their CPU time can be read from
 /proc) and forward to the same pymodbus RTU server (`bench_servers.py pymodbus`, unit 1,
@@ -13,10 +14,14 @@ contenders alternate (A B A B ...) for `--rounds` rounds and the tables give med
 
 Sections:
 
-- `unpaced`: a socat pty pair (no pacing), 1, 8 and 32 clients: requests/s, the gateway's
-  CPU per request, p99 latency, and fairness (the largest deviation of a client's request
-  count from the mean of all clients); the aiortu gateway also with `--frame-gap 0.001`,
-  the same 1 ms of silence before a request as mbusd's `-R 1`.
+- `unpaced`: a socat pty pair (no pacing), 1, 8 and 32 clients (`--clients`), at each of
+  `--rates` (the line settings both gateways and the server are given: 19200 8N2, and 115200
+  8N1, where mbusd's own per-request cost is not hidden by its waits): requests/s, the
+  gateway's CPU per request, p99 latency, and fairness (the largest deviation of a client's
+  request count from the mean of all clients); the aiortu gateway also with `--frame-gap
+  0.001`, the same 1 ms of silence before a request as mbusd's `-R 1`. With `--baseline SRC`
+  (the `src` folder of another checkout), that tree's gateway runs too, as `base` rows, in
+  the same interleaved rounds: before and after a change in one table.
 - `paced`: an [`aiortu.testing.PtyBus`] paced at 19200 8N2, 8 clients: the share of the
   wire limit, and the silences before each request on the bus trace against t3.5.
 - `coalescing`: the paced bus, 32 clients reading the same block: requests/s served
@@ -58,6 +63,29 @@ WIRE_LIMIT = 1 / ((REQUEST_BYTES + REPLY_BYTES) * CHAR_BITS / BAUDRATE + 2 * T35
 MBUSD = "/tmp/mbusd-build/mbusd"
 GAP_1MS = "aiortu, 1 ms gap"
 """The gateway keeping 1 ms of silence before each request (mbusd's `-R 1`), not t3.5."""
+BASE = "base"
+"""The gateway of the `--baseline` tree (rows named `base`, `base, 1 ms gap`)."""
+
+
+@dataclass(frozen=True)
+class Rate:
+    """Line settings for the unpaced runs: a baud rate and 8N1 or 8N2."""
+
+    baudrate: int
+    stopbits: int
+
+    @classmethod
+    def parse(cls, text: str) -> Rate:
+        baudrate, _, form = text.partition(":")
+        if form not in ("8N1", "8N2"):
+            raise argparse.ArgumentTypeError(f"{text!r}: expected BAUD:8N1 or BAUD:8N2")
+        return cls(int(baudrate), int(form[2]))
+
+    def __str__(self) -> str:
+        return f"{self.baudrate} 8N{self.stopbits}"
+
+
+SLOW = Rate(BAUDRATE, 2)
 
 
 def free_port() -> int:
@@ -78,23 +106,27 @@ def wait_listening(port: int, process: subprocess.Popen[bytes]) -> None:
 
 
 def start_gateway(
-    children: benchlib.Children, name: str, serial: str, mbusd: str
-) -> tuple[subprocess.Popen[bytes], int]:
-    """Start gateway *name* (`aiortu`, `GAP_1MS` or `mbusd`) on *serial*; return it and its
-    TCP port."""
+    children: benchlib.Children, name: str, serial: str, args: argparse.Namespace,
+    rate: Rate = SLOW,
+) -> tuple[subprocess.Popen[bytes], int]:  # fmt: skip
+    """Start gateway *name* (`aiortu`, `GAP_1MS`, `mbusd`, or `BASE`...) on *serial*; return
+    it and its TCP port."""
     port = free_port()
+    env = None
     if name == "mbusd":
-        argv = [mbusd, "-d", "-L", "/dev/null", "-v", "0", "-p", serial, "-s", str(BAUDRATE)]
-        argv += ["-m", "8N2", "-A", "127.0.0.1", "-P", str(port), "-R", "1", "-N", "0"]
-        argv += ["-W", "500", "-T", "0", "-C", "64"]
+        argv = [args.mbusd, "-d", "-L", "/dev/null", "-v", "0", "-p", serial]
+        argv += ["-s", str(rate.baudrate), "-m", f"8N{rate.stopbits}", "-A", "127.0.0.1"]
+        argv += ["-P", str(port), "-R", "1", "-N", "0", "-W", "500", "-T", "0", "-C", "64"]
     else:
         argv = [sys.executable, "-m", "aiortu", "gateway", serial]
-        argv += ["--listen", f"tcp://127.0.0.1:{port}", "--baudrate", str(BAUDRATE)]
-        argv += ["--parity", "N", "--stopbits", "2", "--retries", "0", "--timeout", "0.5"]
-        argv += ["--max-connections", "64"]
-        if name == GAP_1MS:
+        argv += ["--listen", f"tcp://127.0.0.1:{port}", "--baudrate", str(rate.baudrate)]
+        argv += ["--parity", "N", "--stopbits", str(rate.stopbits), "--retries", "0"]
+        argv += ["--timeout", "0.5", "--max-connections", "64"]
+        if name.endswith("1 ms gap"):
             argv += ["--frame-gap", "0.001"]
-    process = children.start(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        if name.startswith(BASE):
+            env = {**os.environ, "PYTHONPATH": args.baseline}
+    process = children.start(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     wait_listening(port, process)
     return process, port
 
@@ -204,9 +236,10 @@ def measure(
     units: Sequence[int] = (1,),
     warmup: float = 0.5,
     same_block: bool = False,
+    rate: Rate = SLOW,
 ) -> tuple[Load, float]:
     """One run: start gateway *name*, load it, stop it. Returns the load and CPU s/request."""
-    process, port = start_gateway(children, name, serial, args.mbusd)
+    process, port = start_gateway(children, name, serial, args, rate)
     try:
         run_clients(port, 1, 0.3, units, warmup=0.0)  # the line and the slave warmed up
         cpu = benchlib.cpu_seconds(process.pid)
@@ -224,12 +257,17 @@ def contenders(args: argparse.Namespace) -> list[str]:
 
 
 @contextlib.contextmanager
-def socat_line(units: int = 1, slave: str = "pymodbus") -> Iterator[tuple[benchlib.Children, str]]:
-    """A socat pty pair with pymodbus's RTU server (or aiortu's) on one end; yield the other
-    end."""
+def socat_line(
+    units: int = 1, slave: str = "pymodbus", rate: Rate = SLOW
+) -> Iterator[tuple[benchlib.Children, str]]:
+    """A socat pty pair with pymodbus's RTU server (or aiortu's) on one end, at `rate`; yield
+    the other end."""
     with benchlib.Children() as children:
         near, far = children.socat_pair()
-        children.server(slave, far, "--units", str(units))
+        children.server(
+            slave, far, "--units", str(units), "--baudrate", str(rate.baudrate),
+            "--stopbits", str(rate.stopbits),
+        )  # fmt: skip
         yield children, near
 
 
@@ -250,34 +288,45 @@ def paced_line() -> Iterator[tuple[benchlib.Children, str, object]]:
 
 def section_unpaced(args: argparse.Namespace) -> list[str]:
     names = [*contenders(args), GAP_1MS]
+    if args.baseline:
+        names += [BASE, f"{BASE}, 1 ms gap"]
     rows = []
-    with socat_line() as (children, serial):
-        for clients in (1, 8, 32):
-            runs: dict[str, list[tuple[Load, float]]] = {name: [] for name in names}
-            for _ in range(args.rounds):
-                for name in names:
-                    runs[name].append(measure(children, name, serial, args, clients))
-            base = {}
-            for name in names:
-                rate = benchlib.median([load.rate for load, _ in runs[name]])
-                cpu = benchlib.median([cpu for _, cpu in runs[name]]) * 1e6
-                p99 = benchlib.median([load.p99_ms for load, _ in runs[name]])
-                unfair = max(load.unfairness for load, _ in runs[name]) * 100
-                base.setdefault("rate", rate)
-                base.setdefault("cpu", cpu)
-                base.setdefault("p99", p99)
-                rows.append(
-                    [
-                        f"{clients}", name, f"{rate:.0f}", f"{rate / base['rate']:.2f}x",
-                        f"{cpu:.0f}", f"{cpu / base['cpu']:.2f}x", f"{p99:.1f}",
-                        f"{p99 / base['p99']:.2f}x", f"{unfair:.1f}",
-                    ]
-                )  # fmt: skip
+    for rate in args.rates:
+        with socat_line(rate=rate) as (children, serial):
+            for clients in args.clients:
+                runs: dict[str, list[tuple[Load, float]]] = {name: [] for name in names}
+                for _ in range(args.rounds):
+                    for name in names:
+                        runs[name].append(measure(children, name, serial, args, clients, rate=rate))
+                rows += _unpaced_rows(rate, clients, names, runs)
     headers = [
-        "clients", "gateway", "requests/s", "vs mbusd", "CPU us/request", "vs mbusd",
+        "line", "clients", "gateway", "requests/s", "vs mbusd", "CPU us/request", "vs mbusd",
         "p99 ms", "vs mbusd", "worst client off mean %",
     ]  # fmt: skip
     return ["### Unpaced (socat pty pair)", "", benchlib.table(headers, rows)]
+
+
+def _unpaced_rows(
+    rate: Rate, clients: int, names: list[str], runs: dict[str, list[tuple[Load, float]]]
+) -> list[list[str]]:
+    base: dict[str, float] = {}
+    rows = []
+    for name in names:
+        rate_ = benchlib.median([load.rate for load, _ in runs[name]])
+        cpu = benchlib.median([cpu for _, cpu in runs[name]]) * 1e6
+        p99 = benchlib.median([load.p99_ms for load, _ in runs[name]])
+        unfair = max(load.unfairness for load, _ in runs[name]) * 100
+        base.setdefault("rate", rate_)
+        base.setdefault("cpu", cpu)
+        base.setdefault("p99", p99)
+        rows.append(
+            [
+                str(rate), f"{clients}", name, f"{rate_:.0f}", f"{rate_ / base['rate']:.2f}x",
+                f"{cpu:.0f}", f"{cpu / base['cpu']:.2f}x", f"{p99:.1f}",
+                f"{p99 / base['p99']:.2f}x", f"{unfair:.1f}",
+            ]
+        )  # fmt: skip
+    return rows
 
 
 def gaps_before(trace: Sequence[object], since: float, sender: int) -> list[float]:
@@ -308,7 +357,7 @@ def _paced_run(
     """One run on the paced bus: the load, the gateway's frames on the wire, their gaps."""
     import anyio.lowlevel  # noqa: F401  (the bus clock is anyio's: the loop's monotonic)
 
-    process, port = start_gateway(children, name, serial, args.mbusd)
+    process, port = start_gateway(children, name, serial, args)
     try:
         run_clients(port, 1, 0.3, warmup=0.0)
         since = time.monotonic() + 0.5
@@ -417,6 +466,18 @@ def main() -> None:
     parser.add_argument("--mbusd", default=MBUSD, help=f"the mbusd binary ({MBUSD})")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=4.0)
+    parser.add_argument(
+        "--rates", type=lambda text: [Rate.parse(item) for item in text.split(",")],
+        default=[SLOW], help="line settings of the unpaced runs (19200:8N2)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--clients", type=lambda text: [int(item) for item in text.split(",")],
+        default=[1, 8, 32], help="client counts of the unpaced runs (1,8,32)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--baseline", default=None, metavar="SRC",
+        help="the src folder of another checkout whose gateway runs too (rows 'base')",
+    )  # fmt: skip
     benchlib.add_section_argument(parser, SECTIONS)
     args = parser.parse_args()
     benchlib.run_sections(args, SECTIONS)

@@ -46,7 +46,9 @@ async def _until_signal() -> None:
     await stop.wait()
 
 
-async def serve_pymodbus(port: str, units: int, changing: bool = False) -> None:
+async def serve_pymodbus(
+    port: str, units: int, changing: bool = False, settings: tuple[int, int] = (BAUDRATE, STOPBITS)
+) -> None:
     from pymodbus import FramerType
     from pymodbus.datastore import (
         ModbusDeviceContext,
@@ -76,9 +78,9 @@ async def serve_pymodbus(port: str, units: int, changing: bool = False) -> None:
         context,
         framer=FramerType.RTU,
         port=port,
-        baudrate=BAUDRATE,
+        baudrate=settings[0],
         parity=PARITY,
-        stopbits=STOPBITS,
+        stopbits=settings[1],
         bytesize=8,
         trace_connect=lambda up: _ready() if up else None,
     )
@@ -162,11 +164,13 @@ def main() -> None:
     parser.add_argument("--units", type=int, default=1)
     parser.add_argument("--lines", type=int, default=16)
     parser.add_argument("--baudrate", type=int, default=BAUDRATE)
+    parser.add_argument("--stopbits", type=int, default=STOPBITS)
     parser.add_argument("--latency", type=float, default=0.0)
     parser.add_argument("--changing", action="store_true")
     args = parser.parse_args()
     if args.mode == "pymodbus":
-        asyncio.run(serve_pymodbus(args.port, args.units, args.changing))
+        settings = (args.baudrate, args.stopbits)
+        asyncio.run(serve_pymodbus(args.port, args.units, args.changing, settings))
     elif args.mode == "aiortu":
         asyncio.run(serve_aiortu(args.port, args.units, args.frame_gap))
     elif args.mode == "bare":

@@ -49,9 +49,10 @@ async def main() -> None:
     bus = VirtualBus(2, settings=SETTINGS)
     async with (
         aiortu.Slave(bus.endpoints[1], devices, SETTINGS),
-        # offline_after=1: one failed read marks a unit offline (the default is 3).
+        # offline_after=1: one failed read marks a unit offline (the default is 3); the
+        # timeout leaves a loaded machine time to answer for the units that are there.
         aiortu.Master(
-            bus.endpoints[0], SETTINGS, timeout=0.2, retries=0, offline_after=1
+            bus.endpoints[0], SETTINGS, timeout=1.0, retries=0, offline_after=1
         ) as master,
     ):
         poller = aiortu.Poller(master, points, interval=0.1, offline_probe_interval=2.0)

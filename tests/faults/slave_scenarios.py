@@ -17,7 +17,7 @@ from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
 from aiortu.core.errors import ModbusError
 from aiortu.core.pdu import Response, decode_request, decode_response
 from aiortu.core.rtu import crc16, encode_frame
-from aiortu.slave._server import Slave
+from aiortu.slave import Slave
 from aiortu.slave._store import Block, MemoryStore, ServerId
 from aiortu.testing._virtual_bus import virtual_pair
 from tests.slave.helpers import RawMaster

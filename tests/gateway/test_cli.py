@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import socket
+
 import pytest
 
 from aiortu.cli import main
@@ -42,3 +44,27 @@ def test_a_port_that_cannot_be_opened_is_one_line_and_exit_1(
     err = capsys.readouterr().err
     assert "/dev/no-such-port" in err
     assert err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    ("listen", "metrics", "message"),
+    [
+        ("tcp://127.0.0.1:{busy}", [], "the port is in use"),
+        ("tcp://192.0.2.1:1502", [], "not one of this machine's"),
+        ("unix:/no/such/folder/gw.sock", [], "the socket's directory does not exist"),
+        ("tcp://127.0.0.1:0", ["--metrics", "http://127.0.0.1:{busy}/metrics"], "in use"),
+    ],
+)
+def test_an_address_it_cannot_listen_on_is_one_line_and_exit_1(
+    listen: str, metrics: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        args = [listen.format(busy=port), *(item.format(busy=port) for item in metrics)]
+        assert main(["gateway", "/dev/null", "--listen", *args]) == 1
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1
+    assert "Traceback" not in err

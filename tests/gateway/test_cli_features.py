@@ -3,8 +3,10 @@
 
 from __future__ import annotations
 
+import os
 import re
 import signal
+import stat
 import subprocess
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -83,3 +85,25 @@ async def test_line_unix_cache_stats_and_metrics_from_the_command(tmp_path: Path
             assert b"cache_hits=1" in gateway.text
             body = await _metrics(port)
             assert 'aiortu_gateway_client_requests_total{client="unix"} 3' in body
+
+
+async def test_the_command_logs_the_librarys_warnings_and_sets_the_socket_mode(
+    tmp_path: Path,
+) -> None:
+    socket_path = str(tmp_path / "gw.sock")
+    with PtyBus(2).running_in_thread() as bus:
+        gateway_args = [
+            "gateway", bus.paths[0], "--listen", f"unix:{socket_path}?mode=0600",
+            "--max-connections", "1",
+        ]  # fmt: skip
+        async with _command(*gateway_args) as gateway:
+            await gateway.wait_for(rb"Ctrl-C")
+            assert stat.S_IMODE(os.stat(socket_path).st_mode) == 0o600
+            async with await anyio.connect_unix(socket_path):
+                for _ in range(5):  # a burst of refusals: one line
+                    async with await anyio.connect_unix(socket_path) as refused:
+                        with pytest.raises((anyio.EndOfStream, anyio.BrokenResourceError)):
+                            with anyio.fail_after(5):
+                                await refused.receive()
+            await gateway.wait_for(rb"aiortu gateway: gateway: 1 connections open, the most")
+        assert gateway.text.count(b"the most allowed") == 1

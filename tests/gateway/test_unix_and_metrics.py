@@ -7,6 +7,7 @@ import os
 import re
 import socket
 import stat
+from contextlib import AsyncExitStack
 from pathlib import Path
 
 import anyio
@@ -123,3 +124,21 @@ async def test_a_bad_metrics_url_is_refused(url: str) -> None:
         with pytest.raises(InvalidValue, match="metrics"):
             async with gateway(bench.master, [], metrics=url):
                 pass
+
+
+async def test_the_metrics_listener_has_a_connection_cap_of_its_own() -> None:
+    from aiortu.gateway._metrics import MAX_METRICS_CONNECTIONS
+
+    async with line(metrics="http://127.0.0.1:0/metrics") as bench:
+        address = bench.gateway.metrics_address
+        assert address is not None
+        async with AsyncExitStack() as stack:
+            for _ in range(MAX_METRICS_CONNECTIONS):  # silent scrapers, each held 5 s
+                await stack.enter_async_context(await anyio.connect_tcp(*address))
+            await anyio.sleep(0.1)
+            async with await anyio.connect_tcp(*address) as refused:
+                with pytest.raises((anyio.EndOfStream, anyio.BrokenResourceError)):
+                    with anyio.fail_after(2):  # closed at once, not after the 5 s
+                        await refused.receive()
+        head, _ = await _get(address, "/metrics")
+        assert head.startswith("HTTP/1.1 200 OK")

@@ -19,7 +19,7 @@ from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue, ModbusError, ResponseTimeout
 from aiortu.master._client import Master
 from aiortu.master._handles import BroadcastHandle, UnitHandle
-from aiortu.slave._server import Slave
+from aiortu.slave import Slave
 from aiortu.slave._store import Block, MemoryStore
 from aiortu.testing import VirtualBus
 

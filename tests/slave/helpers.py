@@ -10,7 +10,7 @@ import anyio
 
 from aiortu.core.model import DataStore
 from aiortu.core.rtu import CANNOT_KNOW, decode_frame, encode_frame, expected_response_length
-from aiortu.slave._server import Slave
+from aiortu.slave import Slave
 from aiortu.slave._store import Block, MemoryStore
 from aiortu.testing._virtual_bus import VirtualEndpoint, virtual_pair
 

@@ -82,7 +82,7 @@ async def connect(server: ModbusTcpServer) -> AsyncIterator[TcpClient]:
 @asynccontextmanager
 async def tcp_server(units: Any = None, **options: Any) -> AsyncIterator[ModbusTcpServer]:
     """``aiortu.serve`` on an ephemeral port of 127.0.0.1 (unit 17 with :func:`device`)."""
-    from aiortu.slave._server import serve
+    from aiortu.slave import serve
 
     async with serve("tcp://127.0.0.1:0", units or {UNIT: device()}, **options) as server:
         assert isinstance(server, ModbusTcpServer)

@@ -12,7 +12,7 @@ import anyio
 import pytest
 
 from aiortu.core.serial import LineSettings
-from aiortu.slave._server import Slave
+from aiortu.slave import Slave
 from aiortu.slave._store import MemoryStore, ServerId, Table
 from aiortu.transport._fd import FileDescriptorStream
 

@@ -12,7 +12,7 @@ import pytest
 import aiortu
 from aiortu.core.rtu import encode_frame
 from aiortu.core.serial import LineSettings
-from aiortu.slave._server import Slave
+from aiortu.slave import Slave
 from aiortu.slave._store import MemoryStore, Table
 from aiortu.transport._fd import FileDescriptorStream
 

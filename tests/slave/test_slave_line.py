@@ -10,8 +10,8 @@ import pytest
 from aiortu.core.pdu import RawPDU, ReadHoldingRegistersRequest
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue
+from aiortu.slave import Slave
 from aiortu.slave._handlers import RequestContext
-from aiortu.slave._server import Slave
 from aiortu.slave._store import Change, MemoryStore, Table
 from aiortu.testing._virtual_bus import virtual_pair
 
@@ -116,7 +116,7 @@ async def test_failing_handler_gives_04_and_the_slave_goes_on(
         raise RuntimeError("boom")
 
     async with slave_line(handlers={0x41: explode}) as (master, slave):
-        with caplog.at_level(logging.ERROR, logger="aiortu.slave._server"):
+        with caplog.at_level(logging.ERROR, logger="aiortu.slave._slave"):
             assert await master.request(UNIT, "41 01") == "C1 04"
         assert await master.request(UNIT, "03 00 6B 00 01") == "03 02 AE 41"
     assert "boom" in caplog.text

@@ -13,8 +13,8 @@ import pytest
 
 from aiortu.core.pdu import RawPDU
 from aiortu.errors import InvalidValue
+from aiortu.slave import RtuOverTcpServer, serve
 from aiortu.slave._handlers import Reply, RequestContext
-from aiortu.slave._server import RtuOverTcpServer, serve
 from aiortu.slave._store import MemoryStore, Table
 from aiortu.slave._tcp_server import ModbusTcpServer
 from tests.slave.helpers import slave_line
@@ -364,3 +364,19 @@ async def test_random_requests_answered_as_on_a_serial_line() -> None:
     for table in (Table.COILS, Table.HOLDING_REGISTERS):
         same = tcp_store.get(table, 0, 16) == serial_store.get(table, 0, 16)
         assert same, f"seed {seed} (AIORTU_TCP_SEED={seed})"
+
+
+async def test_rtu_over_tcp_logs_a_burst_of_refused_lines_once(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    with caplog.at_level(logging.WARNING, logger="aiortu"):
+        async with serve("rtu+tcp://127.0.0.1:0", {UNIT: device()}, max_connections=1) as server:
+            assert isinstance(server, RtuOverTcpServer)
+            async with await anyio.connect_tcp("127.0.0.1", server.port):
+                for _ in range(20):
+                    async with await anyio.connect_tcp("127.0.0.1", server.port) as refused:
+                        with pytest.raises((anyio.EndOfStream, anyio.BrokenResourceError)):
+                            with anyio.fail_after(5):
+                                await refused.receive()
+            assert server.counters.connections_refused == 20
+    assert sum("the most allowed" in record.getMessage() for record in caplog.records) == 1

@@ -24,7 +24,7 @@ from aiortu.cli._arguments import (
     seconds,
     unit,
 )
-from aiortu.cli._messages import port_failure
+from aiortu.cli._messages import library_warnings_on_stderr, port_failure
 from aiortu.errors import InvalidValue, PortError
 from aiortu.gateway import Gateway, GatewayLine, Listen, gateway
 
@@ -41,8 +41,8 @@ examples:
   aiortu gateway /dev/ttyUSB0 --listen tcp://127.0.0.1:1502,priority=-1 \\
                               --listen tcp://0.0.0.0:1503
       local clients (the SCADA) go before those of the other listener
-  aiortu gateway /dev/ttyUSB0 --listen unix:/run/aiortu-ttyUSB0.sock
-      Modbus TCP framing on a Unix socket, for programs on this machine
+  aiortu gateway /dev/ttyUSB0 --listen 'unix:/run/aiortu-ttyUSB0.sock?mode=0660&group=modbus'
+      Modbus TCP framing on a Unix socket, for programs of group modbus on this machine
   aiortu gateway --line /dev/ttyUSB0:1-20 --line /dev/ttyUSB1:21-40 \\
                  --listen tcp://0.0.0.0:502
       two lines, each with its own master; units 41..247 get exception 0A
@@ -100,9 +100,9 @@ def register(subparsers: Subparsers) -> None:
         required=True,
         metavar="URL[,priority=N]",
         help=(
-            "tcp://host:port (Modbus TCP), rtu+tcp://host:port (RTU frames) or unix:PATH "
-            "(Modbus TCP on a Unix socket) to listen on; repeat for several; lower "
-            "priorities go first (0)"
+            "tcp://host:port (Modbus TCP), rtu+tcp://host:port (RTU frames) or "
+            "unix:PATH[?mode=0660&group=NAME] (Modbus TCP on a Unix socket, with its file "
+            "mode and group) to listen on; repeat for several; lower priorities go first (0)"
         ),
     )
     line = parser.add_argument_group("line settings")
@@ -158,6 +158,10 @@ def _add_statistics(watch: argparse._ArgumentGroup) -> None:
     watch.add_argument(
         "--metrics", default=None, metavar="URL",
         help="serve them as Prometheus text, as http://127.0.0.1:9102/metrics",
+    )  # fmt: skip
+    watch.add_argument(
+        "--stats-clients", type=positive_int, default=256, metavar="N",
+        help="client hosts counted one by one, the most recent; the others added up (256)",
     )  # fmt: skip
 
 
@@ -218,7 +222,8 @@ def run(args: argparse.Namespace) -> int:
     args.port = ports if isinstance(ports, str) else str(ports[0].port)
     resolve_line_settings(args)
     args.port = given
-    return anyio.run(_serve, args, ports, listens)
+    with library_warnings_on_stderr("gateway"):
+        return anyio.run(_serve, args, ports, listens)
 
 
 def _parse_line(text: str) -> GatewayLine:
@@ -259,6 +264,7 @@ async def _serve(
                 coalesce=args.coalesce,
                 cache_ms=args.cache_ms,
                 metrics=args.metrics,
+                client_statistics=args.stats_clients,
                 baudrate=args.baudrate,
                 parity=args.parity,
                 stopbits=args.stopbits,

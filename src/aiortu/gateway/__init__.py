@@ -26,6 +26,8 @@ from aiortu.gateway._server import (
     GatewayCounters,
 )
 from aiortu.gateway._stats import (
+    DEFAULT_CLIENT_STATISTICS,
+    OTHER_CLIENTS,
     ClientStatistics,
     GatewayStatistics,
     LineStatistics,
@@ -33,6 +35,8 @@ from aiortu.gateway._stats import (
 )
 
 __all__ = (
+    "DEFAULT_CLIENT_STATISTICS",
+    "OTHER_CLIENTS",
     "ClientStatistics",
     "DEFAULT_IDLE_TIMEOUT",
     "DEFAULT_MAX_CONNECTIONS",

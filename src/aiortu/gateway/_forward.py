@@ -9,15 +9,31 @@ any reply with its function code (or the exception form) answers it.
 
 from __future__ import annotations
 
+from collections.abc import Awaitable
 from dataclasses import dataclass
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
-from aiortu.core.pdu import RawPDU, Request, Response, decode_request
+from aiortu.core.machines import RetryPolicy, Transaction
+from aiortu.core.pdu import (
+    ExceptionPDU,
+    RawPDU,
+    Request,
+    Response,
+    decode_request,
+    encode_exception,
+)
 from aiortu.errors import ConnectionLost, MalformedPDU, ModbusError
 from aiortu.master import Master
 
-__all__ = ("COALESCED_CODES", "exception_reply", "forward", "forward_broadcast", "request_of")
+__all__ = (
+    "COALESCED_CODES",
+    "exception_reply",
+    "forward",
+    "forward_broadcast",
+    "on_the_line",
+    "request_of",
+)
 
 _log = get_logger(__name__)
 
@@ -46,7 +62,7 @@ class _AsReceived(RawPDU):
 
 def exception_reply(pdu: bytes, code: ExceptionCode) -> bytes:
     """The exception reply PDU to request `pdu` with `code`."""
-    return bytes(((pdu[0] | 0x80) & 0xFF, code))
+    return encode_exception(pdu[0], code)
 
 
 def request_of(pdu: bytes) -> Request:
@@ -57,30 +73,59 @@ def request_of(pdu: bytes) -> Request:
         return _AsReceived(pdu[0], pdu[1:])
 
 
-async def forward(master: Master, unit: int, pdu: bytes, priority: int) -> bytes:
+async def forward(master: Master, unit: int, pdu: bytes, priority: int, order: int) -> bytes:
     """The reply PDU to `pdu` from `unit` (1..247): the device's, or exception 0B when it did not
     answer (after the master's retries, or at once while it is offline and the master fails fast),
-    0A while the line is down."""
+    0A while the line is down. Queued by `priority`, then `order` (see `on_the_line`)."""
     if pdu[0] == 0 or pdu[0] & 0x80:
         # Function code 0, or an exception's: not a request, nothing on the line answers it.
         return exception_reply(pdu, ExceptionCode.ILLEGAL_FUNCTION)
+    request = request_of(pdu)
+    policy = master.policy.for_function(request.function_code)
+    transaction = Transaction(unit, request, master.timeout, policy)
     try:
-        reply = await master.execute(unit, request_of(pdu), priority=priority)
+        reply = await on_the_line(master, transaction, priority, order)
     except ConnectionLost as error:
         _log.debug("gateway: unit %d: the line is down (%s)", unit, error)
         return exception_reply(pdu, _NO_PATH)
     except ModbusError as error:
         _log.debug("gateway: unit %d did not answer: %s", unit, error)
         return exception_reply(pdu, _NO_RESPONSE)
+    assert reply is not None
     return reply.encode()
 
 
-async def forward_broadcast(master: Master, pdu: bytes, priority: int) -> bool:
+async def forward_broadcast(master: Master, pdu: bytes, priority: int, order: int) -> bool:
     """Send `pdu` to every unit and wait the turnaround delay; False when it was not sent (a
     request the spec does not let be broadcast, or the line is down)."""
+    request = request_of(pdu)
+    if not request.broadcastable:
+        _log.debug("gateway: function code %d may not be broadcast; not sent", pdu[0])
+        return False
+    transaction = Transaction(
+        BROADCAST_UNIT,
+        request,
+        master.timeout,
+        RetryPolicy(0),
+        expects_reply=False,
+        turnaround=master.turnaround_delay,
+    )
     try:
-        await master.send_without_reply(BROADCAST_UNIT, request_of(pdu), priority=priority)
+        await on_the_line(master, transaction, priority, order)
     except ModbusError as error:
         _log.debug("gateway: broadcast of function code %d not sent: %s", pdu[0], error)
         return False
     return True
+
+
+def on_the_line(
+    master: Master, transaction: Transaction, priority: int, order: int
+) -> Awaitable[Response | ExceptionPDU | None]:
+    """Run `transaction` on the line of `master`: the gateway's one call into the engine.
+
+    Queued transactions go by the listener's `priority`, then by `order`, the connection's
+    turn (see [`Gateway`][aiortu.gateway.Gateway]: fairness between connections is this key).
+    A caller cancelled while queued is dropped from the queue; one whose request is on the wire
+    leaves it to complete, without retries. (A plain function: one coroutine frame less on
+    every resumption of the transaction.)"""
+    return master.engine.submit(transaction, priority, order)

@@ -1,7 +1,9 @@
 """`--metrics`: the gateway's statistics as Prometheus text, over a tiny HTTP responder.
 
 It answers `GET PATH` (the path of the metrics URL) with the text exposition format and
-anything else with 404, one request per connection, then closes it. The format is written
+anything else with 404, one request per connection, then closes it; at most
+`MAX_METRICS_CONNECTIONS` at once (a scraper needs one), through the same accept loop as every
+listener ([`serve_listener`][aiortu.transport.serve_listener]). The format is written
 directly (see [`GatewayStatistics`][aiortu.gateway.GatewayStatistics]): no dependency.
 """
 
@@ -15,10 +17,14 @@ import anyio.abc
 
 from aiortu._log import get_logger
 from aiortu.errors import InvalidValue
+from aiortu.transport import ConnectionLimit, serve_listener
 
-__all__ = ("MetricsAddress", "parse_metrics_url", "serve_metrics")
+__all__ = ("MAX_METRICS_CONNECTIONS", "MetricsAddress", "parse_metrics_url", "serve_metrics")
 
 _log = get_logger(__name__)
+
+MAX_METRICS_CONNECTIONS = 8
+"""Metrics connections served at once; more are closed at once."""
 
 _FORM = "http://HOST:PORT/PATH"
 _MAX_REQUEST = 8192
@@ -49,11 +55,11 @@ def parse_metrics_url(url: str) -> MetricsAddress:
 
 
 async def serve_metrics(
-    listener: anyio.abc.Listener[anyio.abc.SocketStream], path: str, text: Callable[[], str]
+    listener: anyio.abc.Listener[anyio.abc.ByteStream], path: str, text: Callable[[], str]
 ) -> None:
     """Answer `GET path` with `text()` on every connection of `listener`, until cancelled."""
 
-    async def answer(stream: anyio.abc.SocketStream) -> None:
+    async def answer(stream: anyio.abc.ByteStream) -> None:
         async with stream:
             request = b""
             with anyio.move_on_after(_REQUEST_TIMEOUT):
@@ -80,5 +86,6 @@ async def serve_metrics(
             except (anyio.BrokenResourceError, anyio.ClosedResourceError):
                 _log.debug("gateway metrics: the client left before the reply")
 
-    async with listener:
-        await listener.serve(answer)
+    await serve_listener(
+        listener, answer, ConnectionLimit("gateway metrics", MAX_METRICS_CONNECTIONS)
+    )

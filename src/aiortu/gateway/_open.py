@@ -21,9 +21,17 @@ from aiortu.gateway._server import (
     DEFAULT_MAX_IN_FLIGHT,
     Gateway,
 )
-from aiortu.gateway._unix import listen_unix, remove_socket, unix_path
+from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS
 from aiortu.master import Master, open_master
-from aiortu.transport import MODBUS_TCP_SCHEME, listen_tcp, parse_listen_url
+from aiortu.transport import (
+    MODBUS_TCP_SCHEME,
+    listen_tcp,
+    listen_unix,
+    listening_address,
+    parse_listen_url,
+    parse_unix_url,
+    remove_socket,
+)
 
 __all__ = ("Listen", "gateway")
 
@@ -44,7 +52,7 @@ def _listen(item: str | Listen) -> Listen:
     listen = item if isinstance(item, Listen) else Listen(item)
     if type(listen.priority) is not int:
         raise InvalidValue("priority", listen.priority, "an int (lower values go first)")
-    if unix_path(listen.url) is None:
+    if parse_unix_url(listen.url) is None:
         parse_listen_url(listen.url)  # raises for a bad one, before anything is opened
     return listen
 
@@ -82,17 +90,22 @@ async def _open_lines(
 async def _listener(
     stack: contextlib.AsyncExitStack, url: str
 ) -> anyio.abc.Listener[anyio.abc.ByteStream]:
-    path = unix_path(url)
-    if path is not None:
-        listener = await listen_unix(path, url)
-        stack.callback(remove_socket, path)
-        return listener
-    address = parse_listen_url(url)
-    return await listen_tcp(address.host, address.port, url=url)
+    unix = parse_unix_url(url)
+    if unix is not None:
+        listener = await listen_unix(unix, url)
+        stack.callback(remove_socket, unix.path)
+    elif url.startswith("http://"):
+        where = parse_metrics_url(url)
+        listener = await listen_tcp(where.host, where.port, url=url)
+    else:
+        address = parse_listen_url(url)
+        listener = await listen_tcp(address.host, address.port, url=url)
+    stack.push_async_callback(listener.aclose)
+    return listener
 
 
 def _rtu_framing(url: str) -> bool:
-    return unix_path(url) is None and parse_listen_url(url).scheme != MODBUS_TCP_SCHEME
+    return parse_unix_url(url) is None and parse_listen_url(url).scheme != MODBUS_TCP_SCHEME
 
 
 @contextlib.asynccontextmanager
@@ -108,6 +121,7 @@ async def gateway(
     cache_ms: float = 0,
     clock: Callable[[], float] = time.monotonic,
     metrics: str | None = None,
+    client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     **master_options: Any,
 ) -> AsyncIterator[Gateway]:
     """Share serial lines with network clients: yield a running
@@ -129,6 +143,10 @@ async def gateway(
     lines = _lines(serial_port_or_master, master_options)
     where = parse_metrics_url(metrics) if metrics is not None else None
     async with contextlib.AsyncExitStack() as stack:
+        # Listeners first: an address that cannot be had fails before any line is opened (and
+        # before any task group, which would wrap the error).
+        listeners = [(await _listener(stack, item.url), item) for item in listens]
+        http = None if where is None or metrics is None else await _listener(stack, metrics)
         server = Gateway(
             await _open_lines(stack, lines, master_options),
             max_in_flight=max_in_flight,
@@ -138,20 +156,16 @@ async def gateway(
             coalesce=coalesce,
             cache_ms=cache_ms,
             clock=clock,
+            client_statistics=client_statistics,
         )
-        listeners = [(await _listener(stack, item.url), item) for item in listens]
-        http = None if where is None else await listen_tcp(where.host, where.port, url=metrics)
         tasks = await stack.enter_async_context(anyio.create_task_group())
         stack.callback(tasks.cancel_scope.cancel)
-        await tasks.start(server.run)
         for listener, item in listeners:
             serve = functools.partial(
                 server.serve, listener, priority=item.priority, rtu_framing=_rtu_framing(item.url)
             )
             await tasks.start(serve)
         if http is not None and where is not None:
-            address = http.extra(anyio.abc.SocketAttribute.local_address)
-            assert isinstance(address, tuple)
-            server.metrics_address = (str(address[0]), int(address[1]))
+            server.metrics_address = listening_address(http)
             tasks.start_soon(serve_metrics, http, where.path, server.statistics.prometheus)
         yield server

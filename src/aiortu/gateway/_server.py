@@ -1,15 +1,17 @@
 """The line server: network clients share one serial line through its master's engine.
 
 [`Gateway`][aiortu.gateway.Gateway] reads requests from any number of connections and hands
-them to the line one at a time, fairly. What it decides:
+each to the engine of its line at once, with a key that keeps the line fair. What it decides:
 
 - **Forwarding.** Every request goes out at frame level, whatever its function code (see
   [`aiortu.gateway`][aiortu.gateway]); the reply carries the client's transaction id and unit id.
 - **Fairness.** Connections are served in turn (round-robin), those of a listener with a lower
-  `priority` value first; the gateway hands the engine at most two requests at a time, so a
+  `priority` value first: each request takes its connection's next turn on the line, never
+  earlier than the line's current turn, and the engine's queue goes by (priority, turn), so a
   quiet client's request waits for one request of each busy client, not for their queues.
 - **Pipelining.** A connection may have `max_in_flight` requests waiting for their replies;
-  the gateway reads nothing more from it until one is answered (TCP then holds the client back).
+  the gateway reads nothing more from it until one is answered (TCP then holds the client back,
+  from its first byte: see [`serve_listener`][aiortu.transport.serve_listener]).
 - **Lines.** Each line has its own master, queue and window; a request goes to the line whose
   unit range holds its unit id, and a unit no line serves gets exception 0A at once.
 - **Unit ids.** Unit 0 is a broadcast: executed on every line, followed by the master's
@@ -28,15 +30,21 @@ them to the line one at a time, fairly. What it decides:
 - **Framing.** A connection speaks Modbus TCP, or RTU frames over TCP (see
   [`serve_connection`][aiortu.gateway.Gateway.serve_connection]).
 - **Limits.** At most `max_connections` at once (more are closed at once); a connection with
-  nothing waiting that sends nothing for `idle_timeout` seconds is closed; a malformed MBAP
-  header closes that connection only, logged once.
+  nothing waiting that sends nothing for `idle_timeout` seconds is closed, and so is one whose
+  reply could not be written for `idle_timeout` (it reads nothing), while one whose request
+  waits for a slow line is not idle; a malformed MBAP header closes that connection only,
+  logged once.
+- **Clients that leave.** A client that resets its connection, or to which a reply cannot be
+  written, has its queued requests dropped before they reach the line; one on the wire
+  completes there. A client that half-closes (a request, then end of stream) gets the replies
+  to the requests already read, then the connection closes.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Final
 
 import anyio
@@ -47,13 +55,20 @@ from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
 from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.errors import InvalidValue
 from aiortu.gateway._cache import ReadCache
-from aiortu.gateway._fair_queue import FairQueue, Lane
+from aiortu.gateway._connection import GONE, Connection, Turns
 from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
-from aiortu.gateway._framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
-from aiortu.gateway._stats import GatewayStatistics, LineStatistics
+from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS, GatewayStatistics, LineStatistics
 from aiortu.master import Master
-from aiortu.transport import peer_address
+from aiortu.transport import (
+    RTU_SILENCE,
+    ConnectionLimit,
+    Framing,
+    MbapFraming,
+    RtuFraming,
+    peer_address,
+    serve_listener,
+)
 
 __all__ = (
     "DEFAULT_IDLE_TIMEOUT",
@@ -74,15 +89,12 @@ DEFAULT_MAX_CONNECTIONS: Final = 32
 DEFAULT_IDLE_TIMEOUT: Final = 120.0
 """Seconds a connection with nothing waiting may stay silent, unless told otherwise."""
 
-_ENGINE_WINDOW = 2
-"""Requests handed to the engine at once: one on the line, one ready to follow it."""
-
 _READ_SIZE = 4096
+_REQUEST_TASK = "gateway request"  # named here: anyio would work a name out per task
 _UNIT_RANGE = range(1, 248)
 _ALL_UNITS = 0xFF
 _NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
 _NO_PATH = ExceptionCode.GATEWAY_PATH_UNAVAILABLE
-_GONE = (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError)
 
 
 @dataclass(slots=True)
@@ -113,83 +125,46 @@ class GatewayCounters:
     """Reads answered from the read cache: no transaction of their own."""
 
 
-class _Line:
-    """One line: its master, the units routed to it, its queue, window, shared reads, cache."""
+class _Line(Turns):
+    """One line: its master, the units routed to it, its current turn, shared reads, cache."""
 
     def __init__(
         self, line: GatewayLine, name: str, cache: ReadCache | None, stats: LineStatistics
     ) -> None:
+        super().__init__()
         if not isinstance(line.port, Master):
             raise InvalidValue("port", line.port, "a running Master (gateway() opens ports)")
         self.name = name
         self.master = line.port
         self.units = line.units
-        self.queue: FairQueue[_Job] = FairQueue()
-        self.window = anyio.Semaphore(_ENGINE_WINDOW)
         self.shared: dict[tuple[int, bytes], _Shared] = {}
         self.cache = cache
         self.stats = stats
 
 
-class _Connection:
-    """One client: its lane in the fair queue, its in-flight slots, its writer."""
-
-    def __init__(
-        self, stream: anyio.abc.ByteStream, priority: int, max_in_flight: int, framing: Framing
-    ) -> None:
-        self.stream = stream
-        self.priority = priority
-        self.framing = framing
-        self.lanes: dict[_Line, Lane[_Job]] = {}
-        self.client = _host(stream)
-        # Without transaction ids, one request at a time keeps the replies in order.
-        self.slots = anyio.Semaphore(1 if framing.in_order else max_in_flight)
-        self.in_flight = 0
-        self.open = True
-        self._send_lock = anyio.Lock()
-
-    def lane(self, line: _Line) -> Lane[_Job]:
-        """The connection's lane in the queue of `line`."""
-        lane = self.lanes.get(line)
-        if lane is None:
-            lane = self.lanes[line] = Lane(self.priority)
-        return lane
-
-    async def answer(self, adu: Adu, reply: bytes | None) -> None:
-        """Send `reply` with the request's ids (None: nothing to send), and free the slot."""
-        try:
-            if reply is not None and self.open:
-                async with self._send_lock:
-                    await self.stream.send(self.framing.encode(adu, reply))
-        except _GONE:
-            self.open = False
-        finally:
-            self.in_flight -= 1
-            self.slots.release()
-
-
 @dataclass(slots=True)
-class _Job:
-    connection: _Connection
+class _Request:
+    connection: Connection
     adu: Adu
     unit: int
-    line: _Line
     """The unit on the line (unit 255 mapped)."""
+    line: _Line
 
 
 @dataclass(slots=True)
 class _Shared:
-    """A read on the line that identical reads wait for."""
+    """A read on the line that identical reads wait for; `reply` stays None when the read's
+    own client left before its reply came (the others then ask again)."""
 
-    reply: bytes
-    done: anyio.Event = field(default_factory=anyio.Event)
+    reply: bytes | None = None
+    done: anyio.Event | None = None
+    """Made by the first read that waits (most reads have none)."""
 
 
 class Gateway:
     """A line server in front of `master` (see the module docstring for what it decides).
 
-    Run it with [`run`][aiortu.gateway.Gateway.run] (the dispatcher) and serve connections with
-    [`serve`][aiortu.gateway.Gateway.serve] (a listener) or
+    Serve connections with [`serve`][aiortu.gateway.Gateway.serve] (a listener) or
     [`serve_connection`][aiortu.gateway.Gateway.serve_connection];
     [`gateway`][aiortu.gateway.gateway] does it all for listen URLs.
 
@@ -200,9 +175,9 @@ class Gateway:
     (01 to 04) of the same unit and block as one answered at most that many milliseconds ago is
     answered again without the line; `clock` gives the cache's time in seconds.
 
-    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a `max_in_flight` or
-    `max_connections` below 1, an `idle_timeout` that is not positive, a `default_unit`
-    outside 1..247, a negative `cache_ms`, or lines whose unit ranges overlap.
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a `max_in_flight`,
+    `max_connections` or `client_statistics` below 1, an `idle_timeout` that is not positive, a
+    `default_unit` outside 1..247, a negative `cache_ms`, or lines whose unit ranges overlap.
     """
 
     def __init__(
@@ -216,20 +191,21 @@ class Gateway:
         coalesce: bool = True,
         cache_ms: float = 0,
         clock: Callable[[], float] = time.monotonic,
+        client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     ) -> None:
         lines = [GatewayLine(master)] if isinstance(master, Master) else list(master)
         check_lines(lines)
-        if not (isinstance(cache_ms, (int, float)) and cache_ms >= 0):
-            raise InvalidValue("cache_ms", cache_ms, "a number of milliseconds, 0 or more")
-        for name, value in (("max_in_flight", max_in_flight), ("max_connections", max_connections)):
-            if type(value) is not int or value < 1:
-                raise InvalidValue(name, value, "an int of at least 1")
-        if not (isinstance(idle_timeout, (int, float)) and idle_timeout > 0):
-            raise InvalidValue("idle_timeout", idle_timeout, "a positive number of seconds")
-        if default_unit is not None and default_unit not in _UNIT_RANGE:
-            raise InvalidValue("default_unit", default_unit, _UNIT_RANGE)
-        self.statistics = GatewayStatistics()
-        """Counters per line, unit and client."""
+        _check_options(
+            max_in_flight=max_in_flight,
+            max_connections=max_connections,
+            client_statistics=client_statistics,
+            idle_timeout=idle_timeout,
+            default_unit=default_unit,
+            cache_ms=cache_ms,
+        )
+        self.statistics = GatewayStatistics(max_clients=client_statistics)
+        """Counters per line, unit and client (the `client_statistics` most recent hosts one
+        by one, the others added up)."""
         self._lines = [
             _Line(
                 line,
@@ -243,8 +219,6 @@ class Gateway:
         """The master whose engine serves the (first) line."""
         self.max_in_flight = max_in_flight
         """Requests a connection may have waiting for their replies."""
-        self.max_connections = max_connections
-        """Connections served at once; more are closed at once."""
         self.idle_timeout = float(idle_timeout)
         """Seconds of silence, with no request waiting, after which a connection is closed."""
         self.default_unit = default_unit
@@ -261,14 +235,21 @@ class Gateway:
         self.unix_paths: list[str] = []
         """The path of each Unix socket listener [`serve`][aiortu.gateway.Gateway.serve]
         serves."""
-        self._connections = 0
-        self._refusing = False
-        self._tasks: anyio.abc.TaskGroup | None = None
+        self._limit = ConnectionLimit("gateway", max_connections, self.counters)
 
     @property
     def connections(self) -> int:
         """The connections open now."""
-        return self._connections
+        return self._limit.open
+
+    @property
+    def max_connections(self) -> int:
+        """Connections served at once, over every listener; more are closed at once."""
+        return self._limit.max_connections
+
+    @max_connections.setter
+    def max_connections(self, value: int) -> None:
+        self._limit.max_connections = value
 
     @property
     def port(self) -> int:
@@ -276,120 +257,6 @@ class Gateway:
         if not self.local_addresses:
             raise RuntimeError("the gateway is not listening yet")
         return self.local_addresses[0][1]
-
-    # -- the dispatcher ----------------------------------------------------------------
-
-    async def run(
-        self, *, task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED
-    ) -> None:
-        """Hand queued requests to each line in turn, until cancelled."""
-        async with anyio.create_task_group() as tasks:
-            self._tasks = tasks
-            for line in self._lines:
-                tasks.start_soon(self._dispatch, line, tasks)
-            task_status.started()
-            try:
-                await anyio.sleep_forever()
-            finally:
-                self._tasks = None
-
-    async def _dispatch(self, line: _Line, tasks: anyio.abc.TaskGroup) -> None:
-        while True:
-            await line.window.acquire()
-            job = await line.queue.take()
-            tasks.start_soon(self._run_job, job)
-
-    async def _run_job(self, job: _Job) -> None:
-        released = False
-
-        def release() -> None:
-            nonlocal released
-            if not released:
-                released = True
-                job.line.window.release()
-
-        reply: bytes | None = None
-        try:
-            reply = await self._reply(job, release)
-        except Exception:
-            # A bug must cost one request, not every connection.
-            _log.exception("gateway: forwarding a request failed; answered with exception 0B")
-            reply = exception_reply(job.adu.pdu, _NO_RESPONSE)
-        finally:
-            release()
-            if reply is not None:
-                self.statistics.answered(job.line.name, job.unit, reply)
-            await self._answer(job.connection, job.adu, reply)
-
-    async def _answer(self, connection: _Connection, adu: Adu, reply: bytes | None) -> None:
-        if reply is not None:
-            self.statistics.client(connection.client).replies += 1
-        await connection.answer(adu, reply)
-
-    async def _reply(self, job: _Job, release: Callable[[], None]) -> bytes | None:
-        """The reply to `job` from the line; `release` frees its place in the engine window
-        early when the cache or another read's transaction answers it."""
-        pdu, unit, line = job.adu.pdu, job.unit, job.line
-        if unit == BROADCAST_UNIT:
-            await self._broadcast(pdu, job.connection.priority)
-            return None
-        if pdu[0] not in COALESCED_CODES:
-            for other in [k for k in line.shared if k[0] == unit]:
-                del line.shared[other]  # later reads of this unit must follow the write
-            if line.cache is not None:
-                line.cache.invalidate(unit, pdu)
-            self._count_transaction(line)
-            return await forward(line.master, unit, pdu, job.connection.priority)
-        cache = line.cache if line.cache is not None and line.cache.cacheable(pdu) else None
-        if cache is not None and (cached := cache.get(unit, pdu)) is not None:
-            release()
-            self.counters.cache_hits += 1
-            line.stats.cache_hits += 1
-            return cached
-        generation = cache.generation(unit) if cache is not None else (0, 0)
-        reply = await self._shared_read(job, release)
-        if cache is not None:
-            cache.put(unit, pdu, reply, generation)
-        return reply
-
-    async def _broadcast(self, pdu: bytes, priority: int) -> None:
-        """Send `pdu` to every unit of every line: a broadcast may write anything."""
-        for line in self._lines:
-            line.shared.clear()
-            if line.cache is not None:
-                line.cache.clear()
-            if await forward_broadcast(line.master, pdu, priority):
-                self._count_transaction(line)
-                self.counters.broadcasts += 1
-                line.stats.broadcasts += 1
-
-    def _count_transaction(self, line: _Line) -> None:
-        self.counters.transactions += 1
-        line.stats.transactions += 1
-
-    async def _shared_read(self, job: _Job, release: Callable[[], None]) -> bytes:
-        """The reply to read `job`, shared with identical reads in flight at the same moment."""
-        pdu, unit, line = job.adu.pdu, job.unit, job.line
-        if not self.coalesce:
-            self._count_transaction(line)
-            return await forward(line.master, unit, pdu, job.connection.priority)
-        key = (unit, pdu)
-        shared = line.shared.get(key)
-        if shared is not None:
-            release()
-            self.counters.coalesced += 1
-            line.stats.coalesced += 1
-            await shared.done.wait()
-            return shared.reply
-        shared = line.shared[key] = _Shared(exception_reply(pdu, _NO_RESPONSE))
-        self._count_transaction(line)
-        try:
-            shared.reply = await forward(line.master, unit, pdu, job.connection.priority)
-        finally:
-            if line.shared.get(key) is shared:
-                del line.shared[key]
-            shared.done.set()
-        return shared.reply
 
     # -- connections -------------------------------------------------------------------
 
@@ -413,44 +280,20 @@ class Gateway:
         task_status.started()
 
         async def accepted(stream: anyio.abc.ByteStream) -> None:
-            await self._accepted(stream, priority, rtu_framing)
-
-        async with listener:
-            await listener.serve(accepted)
-
-    async def _accepted(
-        self, stream: anyio.abc.ByteStream, priority: int, rtu_framing: bool
-    ) -> None:
-        if self._connections >= self.max_connections:
-            self.counters.connections_refused += 1
-            if not self._refusing:
-                self._refusing = True
-                _log.warning(
-                    "gateway: %d connections open, the most allowed; closing %s "
-                    "(logged once until one closes)",
-                    self._connections,
-                    peer_address(stream),
-                )
-            await stream.aclose()
-            return
-        self._connections += 1
-        self.counters.connections_accepted += 1
-        self.statistics.client(_host(stream)).connections += 1
-        try:
+            client = _host(stream)
+            if client is not None:
+                self.statistics.client(client).connections += 1
             await self.serve_connection(stream, priority, rtu_framing=rtu_framing)
-        except Exception:
-            # One connection's failure never ends the others, nor the gateway.
-            _log.exception("gateway: serving %s failed; connection closed", peer_address(stream))
-        finally:
-            self._connections -= 1
-            self._refusing = False
+
+        await serve_listener(listener, accepted, self._limit)
 
     async def serve_connection(
         self, stream: anyio.abc.ByteStream, priority: int = 0, *, rtu_framing: bool = False
     ) -> None:
-        """Serve one connection until the client closes it, it stays idle for
-        [`idle_timeout`][aiortu.gateway.Gateway.idle_timeout], or it sends a malformed header;
-        then close it. Needs [`run`][aiortu.gateway.Gateway.run] running.
+        """Serve one connection until the client closes it (the replies to the requests it sent
+        before are sent first), stays idle for
+        [`idle_timeout`][aiortu.gateway.Gateway.idle_timeout], or sends a malformed header;
+        then close it.
 
         The connection speaks Modbus TCP, or with `rtu_framing` RTU frames (unit, PDU, CRC) as
         a serial device server does: a frame whose length its function code does not tell ends
@@ -458,49 +301,88 @@ class Gateway:
         transaction id the connection has one request on the line at a time.
         """
         framing: Framing = RtuFraming() if rtu_framing else MbapFraming()
-        connection = _Connection(stream, priority, self.max_in_flight, framing)
+        connection = Connection(
+            stream,
+            framing,
+            priority=priority,
+            window=1 if framing.in_order else self.max_in_flight,
+            idle_timeout=self.idle_timeout,
+            client=_host(stream) or "local",
+        )
         try:
-            while (adus := await self._next_requests(connection)) is not None:
-                for adu in adus:
-                    await connection.slots.acquire()
-                    connection.in_flight += 1
-                    self._accept(connection, adu)
-        except _GONE:
-            return
+            async with anyio.create_task_group() as tasks:
+                connection.tasks = tasks
+                tasks.start_soon(self._watch_idle, connection)
+                await self._read(connection)
+                # End of stream: the requests read go on, and their replies are sent.
+                while connection.in_flight:
+                    await connection.freed()
+                tasks.cancel_scope.cancel()  # the watch
         finally:
             connection.open = False
-            for line, lane in connection.lanes.items():
-                line.queue.drop(lane)
             await stream.aclose()
 
-    async def _next_requests(self, connection: _Connection) -> list[Adu] | None:
-        """The requests the connection's next bytes (or silence) complete; None to close it."""
-        stream, framing = connection.stream, connection.framing
+    async def _watch_idle(self, connection: Connection) -> None:
+        """Close `connection` once it has been silent for `idle_timeout` with nothing waiting:
+        one timer per connection, not a deadline per read (the reader only notes the time)."""
         while True:
-            silence = framing.waiting_for_silence()
-            with anyio.move_on_after(RTU_SILENCE if silence else self.idle_timeout) as timer:
-                data = await stream.receive(_READ_SIZE)
-            if not timer.cancelled_caught:
-                break
-            if silence:
+            quiet = time.monotonic() - connection.heard
+            if quiet >= self.idle_timeout and not connection.in_flight:
+                self._idle(connection, "idle")
+                return
+            await anyio.sleep(max(self.idle_timeout - quiet, 0.0) or self.idle_timeout)
+
+    async def _read(self, connection: Connection) -> None:
+        """Read and start the connection's requests, each once its window has room, until the
+        client ends its stream (return) or leaves (the connection's requests cancelled)."""
+        while (adus := await self._next_requests(connection)) is not None:
+            for adu in adus:
+                await connection.room()
+                await self._accept(connection, adu)
+
+    async def _next_requests(self, connection: Connection) -> list[Adu] | None:
+        """The requests the connection's next bytes (or silence) complete; None at the end of
+        the client's stream. A connection to close leaves."""
+        stream, framing = connection.stream, connection.framing
+        try:
+            if framing.waiting_for_silence():
+                with anyio.move_on_after(RTU_SILENCE):
+                    data = await stream.receive(_READ_SIZE)
+                    connection.heard = time.monotonic()
+                    return framing.feed(data)
                 return framing.silence()
-            if not connection.in_flight:
-                self.counters.connections_idle += 1
-                _log.info(
-                    "gateway: %s idle for %g s, closed", peer_address(stream), self.idle_timeout
-                )
-                return None
-            # Not idle: the client waits for the line.
+            data = await stream.receive(_READ_SIZE)
+            connection.heard = time.monotonic()
+        except anyio.EndOfStream:
+            return None
+        except GONE:
+            connection.leave()
+            return None
         try:
             return framing.feed(data)
         except MalformedHeader as error:
             self.counters.connections_malformed += 1
-            _log.warning("gateway: %s sent %s; connection closed", peer_address(stream), error)
+            _log.warning(
+                "gateway: %s sent %s; connection closed", peer_address(connection.stream), error
+            )
+            connection.leave()
             return None
 
-    def _accept(self, connection: _Connection, adu: Adu) -> None:
-        """Queue `adu` for its line, or answer it at once when its unit id names no unit (0B)
-        or a unit no line serves (0A)."""
+    def _idle(self, connection: Connection, why: str) -> None:
+        if not connection.open:
+            return  # closed already
+        self.counters.connections_idle += 1
+        _log.info(
+            "gateway: %s %s for %g s, closed",
+            peer_address(connection.stream),
+            why,
+            self.idle_timeout,
+        )
+        connection.leave()
+
+    async def _accept(self, connection: Connection, adu: Adu) -> None:
+        """Start `adu` on its line, or answer it at once: from the cache, or with an exception
+        when its unit id names no unit (0B) or a unit no line serves (0A)."""
         self.counters.requests += 1
         self.statistics.client(connection.client).requests += 1
         unit = adu.unit
@@ -509,13 +391,25 @@ class Gateway:
         line = self._route(unit)
         if line is None:
             self.counters.refused_units += 1
-            assert self._tasks is not None, "Gateway.run is not running"
             code = _NO_PATH if unit in _UNIT_RANGE else _NO_RESPONSE
-            refusal = exception_reply(adu.pdu, code)
-            self._tasks.start_soon(self._answer, connection, adu, refusal)
+            await self._answer(connection, adu, exception_reply(adu.pdu, code))
             return
         self.statistics.unit(line.name, unit).requests += 1
-        line.queue.put(connection.lane(line), _Job(connection, adu, unit, line))
+        cached = self._cached(line, unit, adu.pdu)
+        if cached is not None:
+            self.statistics.answered(line.name, unit, cached)
+            await self._answer(connection, adu, cached)
+            return
+        assert connection.tasks is not None
+        connection.in_flight += 1
+        connection.tasks.start_soon(
+            self._request, _Request(connection, adu, unit, line), name=_REQUEST_TASK
+        )
+
+    async def _answer(self, connection: Connection, adu: Adu, reply: bytes) -> None:
+        self.statistics.client(connection.client).replies += 1
+        if not await connection.send(adu, reply):
+            self._idle(connection, "read no reply")
 
     def _route(self, unit: int) -> _Line | None:
         """The line of `unit` (the first line for a broadcast, which goes on every line)."""
@@ -526,10 +420,138 @@ class Gateway:
                 return line
         return None
 
+    # -- one request on the line ---------------------------------------------------------
 
-def _host(stream: anyio.abc.ByteStream) -> str:
-    """The client's host, for statistics (its port changes with every connection)."""
-    address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
+    async def _request(self, request: _Request) -> None:
+        """Get `request`'s reply from its line and send it; its window place is freed after."""
+        connection = request.connection
+        try:
+            try:
+                reply = await self._reply(request)
+            except Exception:
+                # A bug must cost one request, not every connection.
+                _log.exception("gateway: forwarding a request failed; answered with exception 0B")
+                reply = exception_reply(request.adu.pdu, _NO_RESPONSE)
+            if reply is not None:
+                self.statistics.answered(request.line.name, request.unit, reply)
+                await self._answer(connection, request.adu, reply)
+        finally:
+            connection.done()
+
+    def _cached(self, line: _Line, unit: int, pdu: bytes) -> bytes | None:
+        """The cache's reply to read `pdu`, counted; None when it has none."""
+        cache = line.cache
+        if cache is None or not cache.cacheable(pdu):
+            return None
+        cached = cache.get(unit, pdu)
+        if cached is not None:
+            self.counters.cache_hits += 1
+            line.stats.cache_hits += 1
+        return cached
+
+    async def _reply(self, request: _Request) -> bytes | None:
+        """The reply to `request` from the line (None for a broadcast)."""
+        pdu, unit, line = request.adu.pdu, request.unit, request.line
+        turn = request.connection.turn(line)
+        priority = request.connection.priority
+        try:
+            if unit == BROADCAST_UNIT:
+                await self._broadcast(pdu, priority, turn)
+                return None
+            if pdu[0] not in COALESCED_CODES:
+                for other in [k for k in line.shared if k[0] == unit]:
+                    del line.shared[other]  # later reads of this unit must follow the write
+                if line.cache is not None:
+                    line.cache.invalidate(unit, pdu)
+                self._count_transaction(line)
+                return await forward(line.master, unit, pdu, priority, turn)
+            cache = line.cache if line.cache is not None and line.cache.cacheable(pdu) else None
+            generation = cache.generation(unit) if cache is not None else (0, 0)
+            reply = await self._shared_read(request, priority, turn)
+            if cache is not None:
+                cache.put(unit, pdu, reply, generation)
+            return reply
+        finally:
+            line.now = max(line.now, turn)
+
+    async def _broadcast(self, pdu: bytes, priority: int, turn: int) -> None:
+        """Send `pdu` to every unit of every line: a broadcast may write anything."""
+        for line in self._lines:
+            line.shared.clear()
+            if line.cache is not None:
+                line.cache.clear()
+            if await forward_broadcast(line.master, pdu, priority, turn):
+                self._count_transaction(line)
+                self.counters.broadcasts += 1
+                line.stats.broadcasts += 1
+
+    def _count_transaction(self, line: _Line) -> None:
+        self.counters.transactions += 1
+        line.stats.transactions += 1
+
+    async def _shared_read(self, request: _Request, priority: int, turn: int) -> bytes:
+        """The reply to read `request`, shared with identical reads in flight at the same
+        moment (the key holds the unit and the whole PDU)."""
+        pdu, unit, line = request.adu.pdu, request.unit, request.line
+        if not self.coalesce:
+            self._count_transaction(line)
+            return await forward(line.master, unit, pdu, priority, turn)
+        key = (unit, pdu)
+        while (shared := line.shared.get(key)) is not None:
+            self.counters.coalesced += 1
+            line.stats.coalesced += 1
+            if shared.done is None:
+                shared.done = anyio.Event()
+            await shared.done.wait()
+            if shared.reply is not None:
+                return shared.reply
+            # Its client left before the reply: ask again.
+            self.counters.coalesced -= 1
+            line.stats.coalesced -= 1
+        shared = line.shared[key] = _Shared()
+        self._count_transaction(line)
+        try:
+            shared.reply = await forward(line.master, unit, pdu, priority, turn)
+        finally:
+            if line.shared.get(key) is shared:
+                del line.shared[key]
+            if shared.done is not None:
+                shared.done.set()
+        return shared.reply
+
+
+def _check_options(
+    *,
+    max_in_flight: int,
+    max_connections: int,
+    client_statistics: int,
+    idle_timeout: float,
+    default_unit: int | None,
+    cache_ms: float,
+) -> None:
+    """Raise InvalidValue for the first of the gateway's options that is wrong."""
+    if not (isinstance(cache_ms, (int, float)) and cache_ms >= 0):
+        raise InvalidValue("cache_ms", cache_ms, "a number of milliseconds, 0 or more")
+    for name, value in (
+        ("max_in_flight", max_in_flight),
+        ("max_connections", max_connections),
+        ("client_statistics", client_statistics),
+    ):
+        if type(value) is not int or value < 1:
+            raise InvalidValue(name, value, "an int of at least 1")
+    if not (isinstance(idle_timeout, (int, float)) and idle_timeout > 0):
+        raise InvalidValue("idle_timeout", idle_timeout, "a positive number of seconds")
+    if default_unit is not None and default_unit not in _UNIT_RANGE:
+        raise InvalidValue("default_unit", default_unit, _UNIT_RANGE)
+
+
+def _host(stream: anyio.abc.ByteStream) -> str | None:
+    """The client's host, for statistics (its port changes with every connection); None for a
+    client already gone."""
+    try:
+        address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
+    except OSError:
+        return None
     if isinstance(address, tuple):
         return str(address[0])
     return "unix" if isinstance(address, str) else "local"

@@ -9,7 +9,14 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, fields
 
-__all__ = ("ClientStatistics", "GatewayStatistics", "LineStatistics", "UnitStatistics")
+__all__ = (
+    "DEFAULT_CLIENT_STATISTICS",
+    "OTHER_CLIENTS",
+    "ClientStatistics",
+    "GatewayStatistics",
+    "LineStatistics",
+    "UnitStatistics",
+)
 
 
 @dataclass(slots=True)
@@ -54,13 +61,25 @@ class ClientStatistics:
     """Replies sent to it (exceptions included; broadcasts have none)."""
 
 
+DEFAULT_CLIENT_STATISTICS = 256
+"""Client hosts counted one by one, unless told otherwise."""
+
+OTHER_CLIENTS = "other"
+"""The name under which the hosts beyond the most recent `max_clients` are added up."""
+
+
 @dataclass(slots=True)
 class GatewayStatistics:
-    """Counters by line name, by (line name, unit) and by client host."""
+    """Counters by line name, by (line name, unit) and by client host.
+
+    At most `max_clients` hosts are counted one by one, those seen most recently; the counts
+    of the others are added up under [`OTHER_CLIENTS`][aiortu.gateway.OTHER_CLIENTS], so that
+    neither memory nor `/metrics` grows with the number of hosts that ever connected."""
 
     lines: dict[str, LineStatistics] = field(default_factory=dict)
     units: dict[tuple[str, int], UnitStatistics] = field(default_factory=dict)
     clients: dict[str, ClientStatistics] = field(default_factory=dict)
+    max_clients: int = DEFAULT_CLIENT_STATISTICS
 
     def line(self, name: str) -> LineStatistics:
         """The statistics of line `name`, created empty."""
@@ -71,8 +90,27 @@ class GatewayStatistics:
         return self.units.setdefault((line, unit), UnitStatistics())
 
     def client(self, host: str) -> ClientStatistics:
-        """The statistics of client `host`, created empty."""
-        return self.clients.setdefault(host, ClientStatistics())
+        """The statistics of client `host`, created empty (the least recent host's then added
+        to the others' when `max_clients` are counted)."""
+        clients = self.clients
+        stats = clients.get(host)
+        if stats is None:
+            stats = clients[host] = ClientStatistics()
+            if len(clients) - (OTHER_CLIENTS in clients) > self.max_clients:
+                self._fold_oldest()
+        elif host != OTHER_CLIENTS and next(reversed(clients)) != host:
+            clients[host] = clients.pop(host)  # the most recent last
+        return stats
+
+    def _fold_oldest(self) -> None:
+        """Add the least recent host's counts to the others' (kept last)."""
+        clients = self.clients
+        oldest = next(host for host in clients if host != OTHER_CLIENTS)
+        folded = clients.pop(oldest)
+        other = clients.pop(OTHER_CLIENTS, None) or ClientStatistics()
+        for item in fields(ClientStatistics):
+            setattr(other, item.name, getattr(other, item.name) + getattr(folded, item.name))
+        clients[OTHER_CLIENTS] = other
 
     def answered(self, line: str, unit: int, reply: bytes) -> None:
         """Count `reply` (a PDU) to a request to `unit` of `line`."""

@@ -214,10 +214,11 @@ class LineEngine:
         return self.unit_turnaround.get(unit, self.min_turnaround) + link.char_time
 
     async def submit(
-        self, transaction: Transaction, priority: int = 0
+        self, transaction: Transaction, priority: int = 0, order: int = 0
     ) -> Response | ExceptionPDU | None:
         """Run `transaction` when the line is free, and return the reply (`None`
-        without one).
+        without one). Queued transactions go by lower `priority`, then lower `order`, then
+        in order of arrival.
 
         Raises the transaction's error (ResponseTimeout, FrameError, ConnectionLost) and
         [`UnitOffline`][aiortu.errors.UnitOffline] when failing fast. If the caller is cancelled,
@@ -231,7 +232,7 @@ class LineEngine:
             self._check_offline(transaction.unit)
         transaction.reply_delay = self.reply_delay(transaction.unit)
         jobs = self._jobs
-        job = jobs.new_job(transaction, priority)
+        job = jobs.new_job(transaction, priority, order)
         if jobs.busy or not self._open:
             # Wait for the turn here, not in a coroutine of its own: one frame less
             # for each of many waiting callers.

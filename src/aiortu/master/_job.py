@@ -2,7 +2,8 @@
 whoever waits for its result.
 
 `LineEngine` queues a `Job` for each transaction
-that must wait for the line (lower `priority` first, then in order of arrival) in its
+that must wait for the line (lower `priority` first, then lower `order`, then in order of
+arrival) in its
 `JobQueue`; the engine hands the line to the first one (`JobQueue.next_job`), either
 running its usual exchange at once or waking its caller (`Job.wake`). The caller waits
 on a future of the event loop (`Job.waiter`) where the link has a loop, else on an
@@ -53,6 +54,7 @@ class Job:
         "done",
         "error",
         "granted",
+        "order",
         "priority",
         "response",
         "sequence",
@@ -62,9 +64,14 @@ class Job:
         "waiter",
     )
 
-    def __init__(self, transaction: Transaction, priority: int, sequence: int) -> None:
+    def __init__(
+        self, transaction: Transaction, priority: int, sequence: int, order: int = 0
+    ) -> None:
         self.transaction = transaction
         self.priority = priority
+        self.order = order
+        """Its place among equal priorities, before the order of arrival (the gateway's turn
+        of the connection, for round-robin)."""
         self.sequence = sequence
         self.waiter: Waiter | None = None
         """A queued job's future, where the link has an event loop: `TURN` when it is
@@ -132,14 +139,14 @@ class Job:
 
 
 class JobQueue:
-    """Who holds the line (`busy`) and who waits for it: lower priority first, then
-    in order of arrival."""
+    """Who holds the line (`busy`) and who waits for it: lower priority first, then lower
+    order, then in order of arrival."""
 
     __slots__ = ("_sequence", "busy", "waiting")
 
     def __init__(self) -> None:
-        self.waiting: list[tuple[int, int, Job]] = []
-        """The queued jobs by (priority, sequence), a heap (read it; change it through
+        self.waiting: list[tuple[int, int, int, Job]] = []
+        """The queued jobs by (priority, order, sequence), a heap (read it; change it through
         the methods). Tuples of ints compare without calling Python code: a queue of
         10,000 callers costs no more per job than one of ten."""
         self._sequence = itertools.count()
@@ -147,20 +154,20 @@ class JobQueue:
         """The line belongs to a transaction (running, handed over, or left to the line
         task)."""
 
-    def new_job(self, transaction: Transaction, priority: int) -> Job:
-        """A job for `transaction`, next in order of arrival among equal priorities."""
-        return Job(transaction, priority, next(self._sequence))
+    def new_job(self, transaction: Transaction, priority: int, order: int = 0) -> Job:
+        """A job for `transaction`, next in order of arrival among equal (priority, order)."""
+        return Job(transaction, priority, next(self._sequence), order)
 
     def push(self, job: Job) -> None:
         """Queue `job` (it has its `Job.waiter` or `Job.turn`)."""
-        heapq.heappush(self.waiting, (job.priority, job.sequence, job))
+        heapq.heappush(self.waiting, (job.priority, job.order, job.sequence, job))
 
     def next_job(self) -> Job | None:
         """Take the first job whose caller still waits, and mark the line as its; None
         (the line marked free) if there is none. The engine hands it the line."""
         heap = self.waiting
         while heap:
-            job = heapq.heappop(heap)[2]
+            job = heapq.heappop(heap)[3]
             waiter = job.waiter
             if job.transaction.abandoned or (waiter is not None and waiter.done()):
                 continue  # its caller was cancelled while queued
@@ -174,6 +181,6 @@ class JobQueue:
         """Fail every queued job with ConnectionLost(`why`)."""
         heap = self.waiting
         while heap:
-            job = heapq.heappop(heap)[2]
+            job = heapq.heappop(heap)[3]
             if not job.done:
                 job.finish(None, ConnectionLost(why))

@@ -19,15 +19,9 @@ from aiortu.slave._handlers import (
     RequestContext,
 )
 from aiortu.slave._routes import RangeAccess, RangeHandler, RoutedStore
-from aiortu.slave._server import (
-    AfterHook,
-    BeforeHook,
-    RtuOverTcpServer,
-    Server,
-    Slave,
-    TraceCallback,
-    serve,
-)
+from aiortu.slave._rtu_over_tcp import RtuOverTcpServer
+from aiortu.slave._serve import Server, serve
+from aiortu.slave._slave import AfterHook, BeforeHook, Slave, TraceCallback
 from aiortu.slave._store import (
     AsyncDataStore,
     Block,

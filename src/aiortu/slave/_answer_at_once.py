@@ -36,17 +36,23 @@ from collections.abc import Callable, Mapping, Sized
 from dataclasses import dataclass
 from typing import Final
 
-from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
+from aiortu.core.codes import FunctionCode
 from aiortu.core.machines import SlaveMachine, SlaveState
 from aiortu.core.model import AsyncDataStore, DataStore, Table
-from aiortu.core.pdu import MAX_READ_BITS, MAX_READ_REGISTERS, MAX_WRITE_REGISTERS, pack_bits
+from aiortu.core.pdu import (
+    MAX_READ_BITS,
+    MAX_READ_REGISTERS,
+    MAX_WRITE_REGISTERS,
+    encode_exception,
+    pack_bits,
+)
 from aiortu.core.rtu import FrameReceived, encode_frame
 from aiortu.errors import ExceptionResponse
 from aiortu.line import Link, LinkEvent
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler
 from aiortu.slave._store import MemoryStore
 
-__all__ = ("FAST_PATHS", "AnswerAtOnce", "FastPath", "Taken", "exception_pdu")
+__all__ = ("FAST_PATHS", "AnswerAtOnce", "FastPath", "Taken")
 
 
 @dataclass(slots=True)
@@ -56,13 +62,6 @@ class Taken:
 
     frame: bytes
     reply: bytes
-
-
-def exception_pdu(function_code: int, exception_code: int | None) -> bytes:
-    """The exception reply PDU to `function_code` (04 when `exception_code` is None)."""
-    # Raw bytes, not ExceptionPDU: a request with code 0 must still get its 01 answer.
-    code = ExceptionCode.SERVER_DEVICE_FAILURE if exception_code is None else exception_code
-    return bytes((function_code | EXCEPTION_BIT, code & 0xFF))
 
 
 class AnswerAtOnce:
@@ -207,7 +206,7 @@ class AnswerAtOnce:
         machine.frame_received(frame[0], frame[1])
         machine.check_request(supported=True)
         machine.processing_failed(code)
-        reply = exception_pdu(frame[1], code)
+        reply = encode_exception(frame[1], code)
         if self._link.send_now(encode_frame(frame[0], reply)) is None:
             self._serve_later(Taken(frame, reply))
         else:

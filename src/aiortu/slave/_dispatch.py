@@ -20,9 +20,8 @@ from aiortu._log import get_logger
 from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode
 from aiortu.core.machines import SlaveMachine
 from aiortu.core.model import AsyncDataStore, DataStore, Table
-from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_request
+from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_request, encode_exception
 from aiortu.errors import ExceptionResponse, InvalidValue, MalformedPDU
-from aiortu.slave._answer_at_once import exception_pdu
 from aiortu.slave._handlers import (
     Answer,
     Handler,
@@ -195,7 +194,10 @@ class Dispatcher:
             except MalformedPDU as error:
                 violation = error.exception_code
         if not machine.check_request(supported=handler is not None, violation=violation):
-            return exception_pdu(function_code, machine.exception_code)
+            code = machine.exception_code
+            return encode_exception(
+                function_code, ExceptionCode.SERVER_DEVICE_FAILURE if code is None else code
+            )
         assert handler is not None
         failure: int = ExceptionCode.SERVER_DEVICE_FAILURE
         try:
@@ -214,7 +216,7 @@ class Dispatcher:
                 machine.processed()
             return reply
         machine.processing_failed(failure)
-        return exception_pdu(function_code, failure)
+        return encode_exception(function_code, failure)
 
     async def _execute(self, handler: Handler, request: Request | None, unit: int) -> HandlerResult:
         """Run `handler` for `unit`, or once per store for a broadcast (no answer then)."""

@@ -51,11 +51,11 @@ from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
 from aiortu.core.machines import SlaveMachine
 from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
 from aiortu.core.model import AsyncDataStore, DataStore
+from aiortu.core.pdu import encode_exception
 from aiortu.errors import InvalidValue
-from aiortu.slave._answer_at_once import exception_pdu
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
-from aiortu.transport import peer_address
+from aiortu.transport import ConnectionLimit, listening_address, peer_address, serve_listener
 
 __all__ = (
     "DEFAULT_IDLE_TIMEOUT",
@@ -64,7 +64,6 @@ __all__ = (
     "SERIAL_LINE_ONLY",
     "ModbusTcpServer",
     "TcpServerCounters",
-    "listening_address",
 )
 
 _log = get_logger(__name__)
@@ -170,8 +169,6 @@ class ModbusTcpServer(Dispatcher):
         """Unit ids answered as another unit (see the module docstring)."""
         self.answer_unknown_units = answer_unknown_units
         """Whether a request for a unit not served gets exception 0B (else no reply)."""
-        self.max_connections = max_connections
-        """Connections served at once; more are closed at once."""
         self.idle_timeout = idle_timeout
         """Seconds of silence after which a connection is closed."""
         self.counters = TcpServerCounters()
@@ -184,15 +181,23 @@ class ModbusTcpServer(Dispatcher):
         self.connection_error: Exception | None = None
         """Why [`serve`][aiortu.slave.ModbusTcpServer.serve] stopped, when the listener failed."""
         self._served = frozenset((*stores, *self.unit_aliases, BROADCAST_UNIT))
-        self._connections = 0
-        self._refusing = False
+        self._limit = ConnectionLimit("Modbus TCP", max_connections, self.counters)
         self._lock = anyio.Lock(fast_acquire=True)
         self._stopped = anyio.Event()
 
     @property
     def connections(self) -> int:
         """The connections open now."""
-        return self._connections
+        return self._limit.open
+
+    @property
+    def max_connections(self) -> int:
+        """Connections served at once; more are closed at once."""
+        return self._limit.max_connections
+
+    @max_connections.setter
+    def max_connections(self, value: int) -> None:
+        self._limit.max_connections = value
 
     @property
     def port(self) -> int:
@@ -223,37 +228,12 @@ class ModbusTcpServer(Dispatcher):
         try:
             self.local_address = listening_address(listener)
             task_status.started()
-            async with listener:
-                await listener.serve(self._accepted)
+            await serve_listener(listener, self.serve_connection, self._limit)
         except Exception as error:
             self.connection_error = error
             _log.error("Modbus TCP: the listener failed: %s", error)
         finally:
             self._stopped.set()
-
-    async def _accepted(self, stream: anyio.abc.ByteStream) -> None:
-        if self._connections >= self.max_connections:
-            self.counters.connections_refused += 1
-            if not self._refusing:
-                self._refusing = True
-                _log.warning(
-                    "Modbus TCP: %d connections open, the most allowed; closing %s "
-                    "(logged once until one closes)",
-                    self._connections,
-                    peer_address(stream),
-                )
-            await stream.aclose()
-            return
-        self._connections += 1
-        self.counters.connections_accepted += 1
-        try:
-            await self.serve_connection(stream)
-        except Exception:
-            # One connection's failure never ends the others, nor the server.
-            _log.exception("Modbus TCP: serving %s failed; connection closed", peer_address(stream))
-        finally:
-            self._connections -= 1
-            self._refusing = False
 
     async def serve_connection(self, stream: anyio.abc.ByteStream) -> None:
         """Serve one connection until the client closes it, it stays silent for
@@ -316,7 +296,7 @@ class ModbusTcpServer(Dispatcher):
             self.counters.unknown_unit += 1
             if not self.answer_unknown_units:
                 return None
-            return self._sent(adu, exception_pdu(pdu[0], _GATEWAY_NO_RESPONSE))
+            return self._sent(adu, encode_exception(pdu[0], _GATEWAY_NO_RESPONSE))
         async with self._lock:
             machine = self.machine
             machine.frame_received(unit, pdu[0])
@@ -372,11 +352,3 @@ def _aliases(stores: Mapping[int, object], aliases: Mapping[int, int] | None) ->
                 "unit_aliases", unit, sorted(stores), f"unit id {unit_id} must name a served unit"
             )
     return dict(aliases)
-
-
-def listening_address(listener: anyio.abc.Listener[anyio.abc.ByteStream]) -> tuple[str, int] | None:
-    """The host and port `listener` listens on, when it is a TCP listener."""
-    address = listener.extra(anyio.abc.SocketAttribute.local_address, None)
-    if isinstance(address, tuple):
-        return (str(address[0]), int(address[1]))
-    return None

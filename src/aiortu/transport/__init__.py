@@ -20,6 +20,20 @@ from anyio.abc import ByteStream
 from aiortu.core.serial import LineSettings
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
+from aiortu.transport._listen import (
+    AcceptCounters,
+    ConnectionCounters,
+    ConnectionLimit,
+    UnixAddress,
+    listen_tcp,
+    listen_unix,
+    listening_address,
+    parse_unix_url,
+    peer_address,
+    remove_socket,
+    serve_listener,
+    write_now,
+)
 from aiortu.transport._mbap_stream import (
     FramedStream,
     ModbusTcpCounters,
@@ -27,7 +41,8 @@ from aiortu.transport._mbap_stream import (
     open_modbus_tcp,
 )
 from aiortu.transport._push import PushStream
-from aiortu.transport._tcp import listen_tcp, open_rtu_over_tcp, peer_address
+from aiortu.transport._server_framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
+from aiortu.transport._tcp import open_rtu_over_tcp
 from aiortu.transport._url import (
     MODBUS_TCP_SCHEME,
     TCP_SCHEME,
@@ -45,29 +60,43 @@ if TYPE_CHECKING:
 
 __all__ = (
     "MODBUS_TCP_SCHEME",
+    "RTU_SILENCE",
     "TCP_SCHEME",
+    "AcceptCounters",
+    "ConnectionCounters",
+    "ConnectionLimit",
     "FileDescriptorStream",
     "FramedStream",
+    "Framing",
     "ListenAddress",
     "LocalEchoFilter",
+    "MbapFraming",
     "ModbusTcpAddress",
     "ModbusTcpCounters",
     "ModbusTcpStream",
     "PortAddress",
     "PushStream",
     "RS485Options",
+    "RtuFraming",
     "SerialAddress",
     "SerialAttribute",
     "SerialStream",
     "TcpAddress",
+    "UnixAddress",
     "listen_tcp",
+    "listen_unix",
+    "listening_address",
     "open_modbus_tcp",
     "open_rtu_over_tcp",
     "open_serial",
     "open_stream",
     "parse_listen_url",
     "parse_port_url",
+    "parse_unix_url",
     "peer_address",
+    "remove_socket",
+    "serve_listener",
+    "write_now",
 )
 
 _SERIAL_NAMES = frozenset({"RS485Options", "SerialAttribute", "SerialStream", "open_serial"})

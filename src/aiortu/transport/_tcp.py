@@ -20,23 +20,16 @@ that trying again later may work. While running, anyio's stream raises
 
 from __future__ import annotations
 
-import errno
 import socket
 
 import anyio
 import anyio.abc
 from anyio.abc import SocketAttribute, SocketStream
 
-from aiortu.errors import InvalidValue, PortBusy, PortError, PortNotFound, PortPermissionDenied
+from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.transport._url import format_tcp_url
 
-__all__ = (
-    "format_tcp_url",
-    "listen_tcp",
-    "open_rtu_over_tcp",
-    "open_tcp_connection",
-    "peer_address",
-)
+__all__ = ("format_tcp_url", "open_rtu_over_tcp", "open_tcp_connection")
 
 
 def _leaf_errors(exc: BaseException) -> list[BaseException]:
@@ -94,42 +87,3 @@ async def open_tcp_connection(
         await stream.aclose()
         raise
     return stream
-
-
-async def listen_tcp(
-    host: str, port: int, *, url: str | None = None
-) -> anyio.abc.Listener[SocketStream]:
-    """Listen on `host`:`port` (0: a free port the system picks) and return the listener.
-
-    Its connections have Nagle's algorithm off (anyio does that for accepted sockets). `url` names
-    the listener in errors. Raises [`PortBusy`][aiortu.errors.PortBusy] when the port is taken,
-    [`PortPermissionDenied`][aiortu.errors.PortPermissionDenied] when it needs privileges (below
-    1024), and [`PortNotFound`][aiortu.errors.PortNotFound] for an address that is not this
-    machine's.
-    """
-    where = url or f"{host}:{port}"
-    try:
-        return await anyio.create_tcp_listener(local_host=host, local_port=port)
-    except socket.gaierror as exc:
-        raise PortNotFound(where, f"unknown host {host!r} ({exc.strerror})") from exc
-    except OSError as exc:
-        raise _listen_error(where, exc) from exc
-
-
-def _listen_error(where: str, exc: OSError) -> PortError:
-    if exc.errno == errno.EADDRINUSE:
-        return PortBusy(where, "the port is in use by another program")
-    if exc.errno == errno.EACCES:
-        return PortPermissionDenied(where, "ports below 1024 need privileges; try 1502")
-    if exc.errno == errno.EADDRNOTAVAIL:
-        return PortNotFound(where, "that address is not one of this machine's")
-    return PortNotFound(where, f"cannot listen: {exc.strerror or exc}")
-
-
-def peer_address(stream: anyio.abc.ByteStream) -> str:
-    """The address of the peer at the other end of `stream` (`host:port`), for logs; "a
-    client" where the stream has no remote address (a Unix socket, an in-memory stream)."""
-    address = stream.extra(anyio.abc.SocketAttribute.remote_address, None)
-    if isinstance(address, tuple):
-        return f"{address[0]}:{address[1]}"
-    return "a client"

@@ -21,6 +21,7 @@ __all__ = (
     "RawPDU",
     "Request",
     "Response",
+    "encode_exception",
     "pack_bits",
     "pack_registers",
     "unpack_bits",
@@ -225,7 +226,7 @@ class ExceptionPDU(PDU):
             object.__setattr__(self, "exception_code", ExceptionCode(self.exception_code))
 
     def encode(self) -> bytes:
-        return bytes((self.function_code | EXCEPTION_BIT, self.exception_code))
+        return encode_exception(self.function_code, self.exception_code)
 
     @classmethod
     def decode(cls, pdu: bytes) -> Self:
@@ -238,6 +239,13 @@ class ExceptionPDU(PDU):
                 allowed="0x81..0xFF",
             )
         return cls._build(lambda: cls(pdu[0] & 0x7F, pdu[1]))
+
+
+def encode_exception(function_code: int, exception_code: int) -> bytes:
+    """The exception response PDU to a request of `function_code` with `exception_code`: the
+    bytes [`ExceptionPDU.encode`][aiortu.core.pdu.ExceptionPDU.encode] writes, for any code a
+    request may carry (code 0 or a reply's own code included, which gets 01 from a server)."""
+    return bytes(((function_code | EXCEPTION_BIT) & 0xFF, exception_code & 0xFF))
 
 
 @dataclass(frozen=True, slots=True)

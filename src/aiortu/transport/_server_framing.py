@@ -1,4 +1,5 @@
-"""How a connection's bytes become requests, and replies bytes: Modbus TCP or RTU over TCP.
+"""How a server connection's bytes become requests, and replies bytes: Modbus TCP or RTU over
+TCP (the gateway's framings, one home for both).
 
 - **Modbus TCP** (`tcp://`): MBAP headers; a reply carries the request's transaction id and
   unit id. A malformed header ends the connection (nothing marks where the next ADU starts).
@@ -6,6 +7,9 @@
   sends them. A frame's length comes from its function code; a frame whose length the code
   does not tell (a user-defined code) ends after `RTU_SILENCE` seconds without bytes. A frame
   with a bad CRC is dropped with whatever follows it in the buffer, as a slave drops noise.
+  The buffer never holds more than `MAX_FRAME_LENGTH` (256) bytes between reads: a client
+  that streams a code of unknown length without a pause has the bytes dropped (counted in
+  `discarded`), so it holds at most 256 bytes and one read.
   RTU frames carry no transaction id, so such a connection has one request at a time and
   its replies keep the order of its requests.
 """
@@ -40,6 +44,11 @@ class Framing(Protocol):
     discarded: int
     """Frames dropped (bad CRC, wrong length)."""
 
+    @property
+    def buffered(self) -> int:
+        """Bytes held for a frame not complete yet."""
+        ...
+
     def feed(self, data: bytes) -> list[Adu]:
         """The requests the bytes so far complete (`MalformedHeader` ends the connection)."""
         ...
@@ -66,6 +75,10 @@ class MbapFraming:
         self.discarded = 0
         self._decoder = AduDecoder()
 
+    @property
+    def buffered(self) -> int:
+        return self._decoder.buffered
+
     def feed(self, data: bytes) -> list[Adu]:
         return self._decoder.feed(data)
 
@@ -87,6 +100,10 @@ class RtuFraming:
     def __init__(self) -> None:
         self.discarded = 0
         self._buffer = bytearray()
+
+    @property
+    def buffered(self) -> int:
+        return len(self._buffer)
 
     def feed(self, data: bytes) -> list[Adu]:
         self._buffer += data

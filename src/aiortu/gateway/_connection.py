@@ -1,0 +1,117 @@
+"""One client connection of the gateway: its window, its turns on each line, its writer.
+
+- **The window.** At most `window` requests of the connection wait for the line at once;
+  the connection's reader waits (`room`) before it takes the next, so nothing more is read
+  from a client whose window is full, and TCP holds it back.
+- **Turns.** Each request to a line takes the connection's next turn there (`turn`), never
+  earlier than the line's current turn: the engine's queue serves lower turns first, so busy
+  connections interleave round-robin and a newcomer waits for one request of each.
+- **Leaving.** `leave` cancels the connection's requests: those still queued are dropped
+  before they reach the line, one on the wire completes there (the engine finishes it).
+- **Stalls.** A reply that cannot be written (the client reads nothing) for `idle_timeout`
+  seconds makes the connection idle: `send` says so, and the gateway closes it.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Final
+
+import anyio
+import anyio.abc
+
+from aiortu.core.mbap import Adu
+from aiortu.transport import Framing, write_now
+
+__all__ = ("GONE", "Connection", "Turns")
+
+GONE: Final = (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError)
+"""What a stream raises once its client has gone."""
+
+
+class Turns:
+    """A line's current turn: the highest turn of a request the line has answered."""
+
+    __slots__ = ("now",)
+
+    def __init__(self) -> None:
+        self.now = 0
+
+
+class Connection:
+    """One client (see the module docstring)."""
+
+    def __init__(
+        self,
+        stream: anyio.abc.ByteStream,
+        framing: Framing,
+        *,
+        priority: int,
+        window: int,
+        idle_timeout: float,
+        client: str,
+    ) -> None:
+        self.stream = stream
+        self.priority = priority
+        self.window = window
+        self.framing = framing
+        self.idle_timeout = idle_timeout
+        self.client = client
+        self.in_flight = 0
+        """Requests started and not answered yet."""
+        self.heard = time.monotonic()
+        """When the client last sent bytes or was answered (`time.monotonic()`)."""
+        self.open = True
+        self.tasks: anyio.abc.TaskGroup | None = None
+        """The connection's requests (set while it is served)."""
+        self._turns: dict[Turns, int] = {}
+        self._freed: anyio.Event | None = None
+        self._send_lock = anyio.Lock(fast_acquire=True)
+
+    def turn(self, line: Turns) -> int:
+        """The connection's next turn on `line` (see the module docstring)."""
+        turn = max(self._turns.get(line, 0), line.now)
+        self._turns[line] = turn + 1
+        return turn
+
+    async def room(self) -> None:
+        """Wait until the window has room."""
+        while self.in_flight >= self.window:
+            await self.freed()
+
+    async def freed(self) -> None:
+        """Wait until a request is answered."""
+        freed = self._freed = anyio.Event()
+        await freed.wait()
+
+    def done(self) -> None:
+        """A request is answered (or dropped): its place in the window is free."""
+        self.in_flight -= 1
+        self.heard = time.monotonic()
+        freed = self._freed
+        if freed is not None:
+            self._freed = None
+            freed.set()
+
+    async def send(self, request: Adu, reply: bytes) -> bool:
+        """Send `reply` with `request`'s ids; a client gone leaves (see `leave`). False when
+        the reply could not be written for `idle_timeout` seconds: the client reads nothing."""
+        if not self.open:
+            return True
+        data = self.framing.encode(request, reply)
+        if not self._send_lock.locked() and write_now(self.stream, data):
+            return True
+        with anyio.move_on_after(self.idle_timeout):
+            async with self._send_lock:
+                try:
+                    await self.stream.send(data)
+                except GONE:
+                    self.leave()
+            return True
+        return not self.open
+
+    def leave(self) -> None:
+        """The client has gone, or is sent away: drop its requests (see the module docstring)."""
+        self.open = False
+        if self.tasks is not None:
+            self.tasks.cancel_scope.cancel()

@@ -1,0 +1,222 @@
+"""Promises of the line server that a rewrite of its request path could quietly lose.
+
+Each test goes through public behaviour only: real sockets on 127.0.0.1, a virtual line whose
+slave holds a request until the test lets it go (so a read is in flight for as long as the
+test needs, whatever the machine's load), and the gateway's public counters. Assertions are on
+the content and order of what the clients receive, never on time.
+"""
+
+from __future__ import annotations
+
+import tracemalloc
+from collections.abc import Callable
+
+import anyio
+import pytest
+
+from aiortu.core.rtu import encode_frame
+from aiortu.gateway import GatewayLine, gateway
+from aiortu.slave import MemoryStore, RequestContext
+from tests.gateway.helpers import UNIT, Line, client, device, line
+
+pytestmark = pytest.mark.timeout(30)
+
+OTHER = 18
+"""A second unit on the line, whose registers differ from `UNIT`'s."""
+
+HELD = {"timeout": 10.0}
+"""Master options: the hold, not the master's timeout, decides when a request is answered."""
+
+BOTH = ("tcp://127.0.0.1:0", "rtu+tcp://127.0.0.1:0")
+
+
+class Hold:
+    """A slave hook that holds every request on the line until `release`."""
+
+    def __init__(self) -> None:
+        self.released = anyio.Event()
+        self.held = 0
+
+    async def __call__(self, request: object, context: RequestContext) -> None:
+        self.held += 1
+        await self.released.wait()
+
+    def release(self) -> None:
+        self.released.set()
+
+
+async def _until(condition: Callable[[], bool]) -> None:
+    """Wait (at most 10 s) for `condition`: counters of several objects, none of which signals."""
+    with anyio.fail_after(10):
+        while not condition():  # noqa: ASYNC110
+            await anyio.sleep(0.001)
+
+
+def _on_the_line_or_shared(bench: Line, reads: int) -> Callable[[], bool]:
+    """Whether the gateway has handed on `reads` reads: each either sent or sharing another's."""
+    counters = bench.gateway.counters
+    return lambda: counters.transactions + counters.coalesced >= reads
+
+
+async def _two_reads_in_flight(bench: Line, first: tuple[int, str], second: tuple[int, str]) -> str:
+    """Send read `first` (unit, PDU) from one client, hold it on the line, send `second` from
+    another client, let both go; the second client's reply PDU, after checking its ids."""
+    hold = Hold()
+    bench.slave.before_request(hold)
+    async with client(bench.gateway) as a, client(bench.gateway) as b:
+        await a.send(first[1], first[0], 1)
+        await _until(lambda: hold.held == 1)
+        await b.send(second[1], second[0], 2)
+        await _until(_on_the_line_or_shared(bench, 2))
+        hold.release()
+        first_reply, second_reply = await a.receive(), await b.receive()
+    assert first_reply is not None
+    assert second_reply is not None
+    assert (second_reply.transaction_id, second_reply.unit) == (2, second[0])
+    return second_reply.pdu.hex(" ").upper()
+
+
+async def test_identical_reads_to_two_units_in_flight_at_once_get_each_units_data() -> None:
+    other = MemoryStore(holding_registers={0: [0x0BAD, 0xF00D]})
+    async with line({UNIT: device(), OTHER: other}, master_options=HELD) as bench:
+        reply = await _two_reads_in_flight(bench, (UNIT, "03 0000 0002"), (OTHER, "03 0000 0002"))
+        assert reply == "03 04 0B AD F0 0D"  # never unit 17's 12 34 AB CD
+        assert bench.messages == 2
+
+
+async def test_reads_of_different_counts_in_flight_at_once_get_their_own_reply() -> None:
+    async with line(master_options=HELD) as bench:
+        reply = await _two_reads_in_flight(bench, (UNIT, "03 0000 0001"), (UNIT, "03 0000 0002"))
+        assert reply == "03 04 12 34 AB CD"  # never the one-register read's 03 02 12 34
+        assert bench.messages == 2
+
+
+async def test_a_broadcast_between_two_cached_reads_drops_the_cache() -> None:
+    async with line(cache_ms=60_000) as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        on_the_line = bench.messages
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        assert bench.messages == on_the_line  # the cache answered
+        await tcp.send("06 0000 0042", unit=0, transaction_id=2)  # never answered
+        await _until(lambda: bench.gateway.counters.broadcasts == 1)
+        assert bench.messages == on_the_line + 1
+        assert await tcp.request("03 0000 0001", transaction_id=3) == "03 02 00 42"
+
+
+async def test_rtu_over_tcp_replies_keep_the_order_of_the_requests() -> None:
+    # A served unit's read, held on the line, then a unit the gateway refuses at once, in one
+    # chunk: the refusal must not overtake the read's reply (RTU frames carry no ids).
+    async with line(listen=BOTH, master_options=HELD) as bench:
+        hold = Hold()
+        bench.slave.before_request(hold)
+        port = bench.gateway.local_addresses[1][1]
+        async with await anyio.connect_tcp("127.0.0.1", port) as stream:
+            read = encode_frame(UNIT, bytes.fromhex("03 0000 0001"))
+            refused = encode_frame(250, bytes.fromhex("03 0000 0001"))
+            await stream.send(read + refused)
+            await _until(lambda: hold.held == 1)
+            received = b""
+            with anyio.move_on_after(0.5):  # what the gateway sends while the read is held
+                received += await stream.receive()
+            hold.release()
+            expected = encode_frame(UNIT, bytes.fromhex("03 02 1234")) + encode_frame(
+                250, bytes.fromhex("83 0B")
+            )
+            with anyio.fail_after(5):
+                while len(received) < len(expected):
+                    received += await stream.receive()
+            assert received == expected
+
+
+async def test_a_connection_waiting_for_a_slow_line_is_not_closed_as_idle() -> None:
+    idle = 0.25
+    async with line(idle_timeout=idle, master_options=HELD) as bench:
+        hold = Hold()
+        bench.slave.before_request(hold)
+        async with client(bench.gateway) as tcp:
+            await tcp.send("03 0000 0001", UNIT, 7)
+            await _until(lambda: hold.held == 1)
+            # Eight idle timeouts with the read on the line: the connection stays open.
+            assert not await tcp.closed_by_server(wait=8 * idle)
+            hold.release()
+            reply = await tcp.receive()
+            assert reply is not None
+            assert (reply.transaction_id, reply.pdu.hex(" ")) == (7, "03 02 12 34")
+            assert bench.gateway.counters.connections_idle == 0
+            # Answered, it is idle again, and closed as such.
+            assert await tcp.closed_by_server()
+            assert bench.gateway.counters.connections_idle == 1
+
+
+def _label_value(sample: str, metric: str) -> str:
+    """The value of the one label of `metric` in Prometheus text, unescaped as the format says."""
+    start = sample.index(metric + '{line="') + len(metric) + len('{line="')
+    value, index = [], start
+    while sample[index] != '"':
+        if sample[index] == "\\":
+            index += 1
+            value.append({"n": "\n", "\\": "\\", '"': '"'}[sample[index]])
+        else:
+            value.append(sample[index])
+        index += 1
+    assert sample[index : index + 2] == '"}', "the label value runs on past its closing quote"
+    return "".join(value)
+
+
+async def _get_metrics(address: tuple[str, int]) -> str:
+    async with await anyio.connect_tcp(*address) as stream:
+        await stream.send(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n")
+        data = b""
+        with anyio.fail_after(5):
+            try:
+                while True:
+                    data += await stream.receive()
+            except anyio.EndOfStream:
+                pass
+    head, _, body = data.decode().partition("\r\n\r\n")
+    assert head.startswith("HTTP/1.1 200 OK")
+    return body
+
+
+async def test_a_line_name_with_a_quote_a_backslash_and_a_newline_is_escaped_in_metrics() -> None:
+    name = 'bench "A"\\left\nside'
+    metrics = "http://127.0.0.1:0/metrics"
+    async with line() as bench:
+        lines = [GatewayLine(bench.master, name=name)]
+        async with gateway(lines, ["tcp://127.0.0.1:0"], metrics=metrics) as named:
+            async with client(named) as tcp:
+                assert await tcp.request("03 0000 0001") == "03 02 12 34"
+            assert named.metrics_address is not None
+            body = await _get_metrics(named.metrics_address)
+    metric = "aiortu_gateway_line_transactions_total"
+    expected = f'{metric}{{line="bench \\"A\\"\\\\left\\nside"}} 1'
+    assert expected in body.splitlines()
+    assert _label_value(body, metric) == name
+    for text in body.splitlines():  # every line a comment or a whole sample
+        assert text.startswith(("# ", "aiortu_gateway_")), text
+
+
+async def test_an_endless_rtu_frame_of_unknown_length_is_not_buffered_whole() -> None:
+    # A user-defined function code has no length: only a silence ends its frame. A client that
+    # never pauses must not make the gateway buffer everything it sends.
+    chunk = b"\x41" * 4096
+    flood = 1024  # chunks: 4 MiB, each sent as soon as the last is taken
+    async with line(listen=BOTH) as bench:
+        port = bench.gateway.local_addresses[1][1]
+        async with await anyio.connect_tcp("127.0.0.1", port) as stream:
+            tracemalloc.start()
+            try:
+                before, _ = tracemalloc.get_traced_memory()
+                await stream.send(encode_frame(UNIT, b"\x41"))
+                for _ in range(flood):
+                    await stream.send(chunk)
+                await anyio.sleep(0.2)  # a silence: whatever is buffered ends as a frame
+                _, peak = tracemalloc.get_traced_memory()
+            finally:
+                tracemalloc.stop()
+            assert peak - before < 1024 * 1024, f"{(peak - before) // 1024} KiB held"
+            assert bench.messages == 0  # noise, never sent on the line
+            # The connection goes on.
+            await stream.send(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
+            with anyio.fail_after(5):
+                assert await stream.receive() == encode_frame(UNIT, bytes.fromhex("03 02 1234"))

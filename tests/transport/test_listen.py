@@ -1,0 +1,194 @@
+"""The one accept loop (`serve_listener`) and the server framings, on loopback: the limit and
+its log, back-pressure from the first byte, accept errors, Unix socket modes, and the RTU
+framing's bounded buffer."""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import socket
+import stat
+from pathlib import Path
+
+import anyio
+import anyio.abc
+import pytest
+
+from aiortu.core.pdu import ExceptionPDU, encode_exception
+from aiortu.core.rtu import MAX_FRAME_LENGTH, crc16, encode_frame
+from aiortu.errors import InvalidValue, PortNotFound
+from aiortu.transport import (
+    ConnectionLimit,
+    RtuFraming,
+    UnixAddress,
+    listen_tcp,
+    listen_unix,
+    parse_unix_url,
+    serve_listener,
+)
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_the_exception_encoder_is_the_exception_pdus() -> None:
+    for code in range(1, 0x80):
+        assert encode_exception(code, 2) == ExceptionPDU(code, 2).encode()
+    assert encode_exception(0, 1) == b"\x80\x01"  # code 0 still gets its answer
+    assert encode_exception(0x83, 1) == b"\x83\x01"
+
+
+def test_the_rtu_framing_never_holds_more_than_a_frame_between_reads() -> None:
+    framing = RtuFraming()
+    stream = bytes((17, 0x41)) + bytes(range(256)) * 40  # a user code: its length unknown
+    most = 0
+    for start in range(0, len(stream), 100):
+        framing.feed(stream[start : start + 100])
+        most = max(most, framing.buffered)
+    assert most <= MAX_FRAME_LENGTH
+    assert framing.discarded >= 1
+    # ...and it still frames what follows a silence.
+    framing.silence()
+    request = encode_frame(17, bytes.fromhex("03 0000 0001"))
+    assert [adu.pdu for adu in framing.feed(request)] == [bytes.fromhex("03 0000 0001")]
+    assert crc16(request[:-2]) == int.from_bytes(request[-2:], "little")
+
+
+async def _hold(stream: anyio.abc.ByteStream) -> None:
+    await anyio.sleep_forever()
+
+
+async def test_refusals_of_a_burst_are_logged_once(caplog: pytest.LogCaptureFixture) -> None:
+    limit = ConnectionLimit("test server", 1)
+    listener = await listen_tcp("127.0.0.1", 0)
+    port = listener.extra(anyio.abc.SocketAttribute.local_port)
+    with caplog.at_level(logging.WARNING, logger="aiortu.transport"):
+        async with anyio.create_task_group() as tasks:
+            tasks.start_soon(serve_listener, listener, _hold, limit)
+            held = await anyio.connect_tcp("127.0.0.1", port)
+            for _ in range(20):
+                async with await anyio.connect_tcp("127.0.0.1", port) as refused:
+                    with pytest.raises((anyio.EndOfStream, anyio.BrokenResourceError)):
+                        with anyio.fail_after(5):
+                            await refused.receive()
+            assert limit.counters.connections_refused == 20
+            assert limit.open == 1
+            tasks.cancel_scope.cancel()
+            await held.aclose()
+    refusals = [r for r in caplog.records if "the most allowed" in r.getMessage()]
+    assert len(refusals) == 1
+
+
+def _kernel_buffers() -> int:
+    """The most a paused connection can hold in the kernel: the receiver's and the sender's
+    buffers at their largest (tcp_rmem and tcp_wmem maximums)."""
+    total = 0
+    for name in ("tcp_rmem", "tcp_wmem"):
+        with open(f"/proc/sys/net/ipv4/{name}") as file:
+            total += int(file.read().split()[2])
+    return total
+
+
+async def test_a_client_streaming_before_the_first_read_is_held_back() -> None:
+    """The accept loop pauses reading right after accept: a client that streams requests
+    that are never read can send no more than the kernel's buffers hold."""
+    limit = ConnectionLimit("test server", 4)
+    received = anyio.Event()
+
+    async def slow(stream: anyio.abc.ByteStream) -> None:
+        await anyio.sleep(0.3)  # the client streams before the first receive()
+        await stream.receive(10)
+        received.set()
+        await anyio.sleep_forever()
+
+    listener = await listen_tcp("127.0.0.1", 0)
+    port = listener.extra(anyio.abc.SocketAttribute.local_port)
+    bound = _kernel_buffers() + (1 << 20)
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(serve_listener, listener, slow, limit)
+        sent = await anyio.to_thread.run_sync(_stream_until_blocked, port, bound + (8 << 20))
+        await received.wait()
+        tasks.cancel_scope.cancel()
+    assert sent <= bound, f"{sent} bytes accepted, more than the {bound} the kernel can hold"
+
+
+def _stream_until_blocked(port: int, most: int) -> int:
+    """Send up to `most` bytes of requests without reading; stop once the server has taken
+    nothing for 1 s. Return the bytes sent."""
+    chunk = bytes.fromhex("0001 0000 0006 11 03 0000 0001") * 4096
+    sent = 0
+    with socket.create_connection(("127.0.0.1", port)) as sock:
+        sock.settimeout(1.0)
+        while sent < most:
+            try:
+                sent += sock.send(chunk)
+            except TimeoutError:
+                break
+    return sent
+
+
+async def test_an_accept_error_backs_off_is_logged_once_and_the_loop_goes_on(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    class Failing(anyio.abc.SocketListener):
+        """A listener whose first accepts fail as a process out of descriptors sees."""
+
+        def __init__(self, inner: anyio.abc.SocketListener) -> None:
+            self.inner, self.failures = inner, 5
+
+        async def accept(self) -> anyio.abc.SocketStream:
+            if self.failures:
+                self.failures -= 1
+                raise OSError(errno.EMFILE, "Too many open files")
+            return await self.inner.accept()
+
+        async def aclose(self) -> None:
+            await self.inner.aclose()
+
+        @property
+        def _raw_socket(self) -> socket.socket:
+            return self.inner.extra(anyio.abc.SocketAttribute.raw_socket)
+
+    inner = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+    (socket_listener,) = inner.listeners
+    assert isinstance(socket_listener, anyio.abc.SocketListener)
+    port = socket_listener.extra(anyio.abc.SocketAttribute.local_port)
+    limit = ConnectionLimit("test server", 4)
+
+    async def echo(stream: anyio.abc.ByteStream) -> None:
+        await stream.send(await stream.receive())
+
+    with caplog.at_level(logging.WARNING, logger="aiortu.transport"):
+        async with anyio.create_task_group() as tasks:
+            tasks.start_soon(serve_listener, Failing(socket_listener), echo, limit)
+            async with await anyio.connect_tcp("127.0.0.1", port) as client:
+                await client.send(b"ping")
+                with anyio.fail_after(5):
+                    assert await client.receive() == b"ping"
+            tasks.cancel_scope.cancel()
+    assert limit.accept_failures == 5
+    failures = [r for r in caplog.records if "cannot accept" in r.getMessage()]
+    assert len(failures) == 1
+
+
+def test_unix_urls_take_a_mode_and_a_group() -> None:
+    assert parse_unix_url("tcp://127.0.0.1:1") is None
+    assert parse_unix_url("unix:/run/x.sock") == UnixAddress("/run/x.sock")
+    assert parse_unix_url("unix:/run/x.sock?mode=0660&group=dialout") == UnixAddress(
+        "/run/x.sock", 0o660, "dialout"
+    )
+    for bad in ("unix:/x?mode=999", "unix:/x?mode=", "unix:/x?owner=me", "unix:/x?mode=1&mode=2"):
+        with pytest.raises(InvalidValue):
+            parse_unix_url(bad)
+
+
+async def test_a_unix_socket_gets_the_mode_and_group_asked(tmp_path: Path) -> None:
+    path = str(tmp_path / "s.sock")
+    group = os.getgid()
+    listener = await listen_unix(UnixAddress(path, 0o600, str(group)), f"unix:{path}")
+    async with listener:
+        info = os.stat(path)
+        assert stat.S_IMODE(info.st_mode) == 0o600
+        assert info.st_gid == group
+    with pytest.raises(PortNotFound, match="no group named"):
+        await listen_unix(UnixAddress(str(tmp_path / "t.sock"), None, "no-such-group-x"), "unix:t")
