@@ -66,3 +66,36 @@ def test_bad_settings_are_one_line(args: list[str], message: str) -> None:
     result = run_aiortu("serve", port, "--config", DEVICES, *options)
     assert (result.returncode, result.stdout) == (2, "")
     assert result.stderr == f"aiortu serve: error: {message}\n"
+
+
+WITH_TCP_TABLE = """\
+[[slave]]
+unit = 17
+[[slave.holding_registers]]
+start = 0
+values = [7]
+[slave.server_id]
+id = [0x11]
+run = true
+
+[[slave]]
+unit = 5
+[[slave.holding_registers]]
+start = 0
+values = [5]
+
+[modbus_tcp]
+serial_line_codes = true
+unit_aliases = { "255" = 17 }
+"""
+
+
+def test_the_files_modbus_tcp_table_sets_the_same(tmp_path: Path) -> None:
+    config = tmp_path / "devices.toml"
+    config.write_text(WITH_TCP_TABLE)
+    with serving_tcp(config, "--unit-alias", "0=5") as url:
+        identified = run_aiortu("identify", url, "--unit", "255", "--level", "basic")
+        as_17 = run_aiortu("read", url, "--unit", "255", "--ref", "40001")
+        as_5 = run_aiortu("read", url, "--unit", "0", "--ref", "40001")
+    assert identified.stdout.splitlines()[-1] == "server id: 0x11, run indicator on"
+    assert (as_17.stdout, as_5.stdout) == ("40001 7\n", "40001 5\n")

@@ -100,7 +100,8 @@ def register(subparsers: Subparsers) -> None:
         action="store_true",
         help=(
             "answer the serial-line-only codes 07, 08, 0B, 0C and 11 (server id) as a serial "
-            "device would; without it they get exception 01, as the spec marks them"
+            "device would; without it they get exception 01, as the spec marks them (also "
+            "serial_line_codes in the file's [modbus_tcp] table)"
         ),
     )
     tcp.add_argument(
@@ -110,8 +111,8 @@ def register(subparsers: Subparsers) -> None:
         default=[],
         metavar="ID=UNIT",
         help=(
-            "answer unit id ID (0..255) as the served UNIT; repeat for several (default, "
-            "with one unit: 0 and 255 are that unit)"
+            "answer unit id ID (0..255) as the served UNIT; repeat for several, added to "
+            "the file's [modbus_tcp] unit_aliases (default, with one unit: 0 and 255 are it)"
         ),
     )
     parser.add_argument(
@@ -134,8 +135,7 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as error:
         print(f"aiortu serve: error: {error}", file=sys.stderr)
         return 2
-    tcp_options = _tcp_options(args)
-    if tcp_options and not args.port.strip().lower().startswith("tcp://"):
+    if _tcp_options(args) and not args.port.strip().lower().startswith("tcp://"):
         given = "--serial-line-codes" if args.serial_line_codes else "--unit-alias"
         print(
             f"aiortu serve: error: {given} is for a Modbus TCP server (tcp://): a serial line "
@@ -151,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    args.modbus_tcp = config.modbus_tcp
     resolve_line_settings(args)
     with library_warnings_on_stderr("serve"):
         return anyio.run(_serve, args, config.units)
@@ -244,7 +245,7 @@ async def _serve_once(
         frame_gap=args.frame_gap,
         timing=args.timing,
         trace=tracer,
-        **_tcp_options(args),
+        **_modbus_tcp_settings(args),
     ) as slave:
         listing = ", ".join(str(unit) for unit in sorted(units))
         which = "unit" if len(units) == 1 else "units"
@@ -284,6 +285,18 @@ def _tcp_options(args: argparse.Namespace) -> dict[str, Any]:
     if args.unit_alias:
         options["unit_aliases"] = dict(args.unit_alias)
     return options
+
+
+def _modbus_tcp_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """The Modbus TCP server's settings: the file's `[modbus_tcp]` table, then the flags
+    (a flag wins, and `--unit-alias` adds to the file's aliases); none for another port."""
+    if not args.port.strip().lower().startswith("tcp://"):
+        return {}
+    settings = dict(getattr(args, "modbus_tcp", {}))
+    flags = _tcp_options(args)
+    if "unit_aliases" in flags:
+        flags["unit_aliases"] = {**settings.get("unit_aliases", {}), **flags["unit_aliases"]}
+    return {**settings, **flags}
 
 
 def _say(message: str) -> None:
