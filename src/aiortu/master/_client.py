@@ -312,8 +312,9 @@ class Master(SerialLineFunctions):
             self.engine.unit_turnaround[unit] = check_turnaround(seconds)
 
     def unit_stats(self, unit: int) -> UnitStats:
-        """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
-        counted = self.unit_range if self.unit_range.stop > _STATS_UNITS.stop else _STATS_UNITS
+        """The statistics and health of `unit` (0..247, and up to 255 over Modbus TCP; on a
+        serial line unit 0 counts the broadcasts)."""
+        counted = range(max(self.unit_range.stop, _STATS_UNITS.stop))
         return self.engine.unit_stats(check_int("unit", unit, counted, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
