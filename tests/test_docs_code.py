@@ -2,7 +2,7 @@
 
 A marker line right above each block says how the block is tested:
 
-    <!-- test: KIND[, endless[, kept]][; expect EXPRESSION][; prints] -->
+    <!-- test: KIND[, endless[, kept]][, thread][; expect EXPRESSION][; prints] -->
     <!-- test: compile: REASON -->
 
 KIND is one of
@@ -23,12 +23,13 @@ ports of a pty bus ("/dev/ttyUSB0" is port 0, "/dev/ttyUSB1" port 1), parity E b
 (a pty keeps no parity), a device server's address by a local TCP listener, and
 `anyio.run(main)` by `await main()`.
 
-`endless` runs the block in the background until every task waits, checks the
-expectation, then cancels it (`kept`: at the end of the page). EXPRESSION is evaluated
-(await allowed) with `line`, a master on the in-memory line of `stream` or `slave`, and
-`port`, a master on pty port 0. `prints` compares what the block printed with the
-```console block that follows it. `compile` only compiles the block: REASON says what
-the block needs that a test machine does not have.
+`thread` runs the block in a worker thread, so that the event loop goes on serving the
+devices while the block blocks (the blocking API's blocks). `endless` runs the block in the
+background until every task waits, checks the expectation, then cancels it (`kept`: at the
+end of the page). EXPRESSION is evaluated (await allowed) with `line`, a master on the
+in-memory line of `stream` or `slave`, and `port`, a master on pty port 0. `prints` compares
+what the block printed with the ```console block that follows it. `compile` only compiles the
+block: REASON says what the block needs that a test machine does not have.
 """
 
 from __future__ import annotations
@@ -79,6 +80,7 @@ class Block:
     kind: str
     endless: bool = False
     kept: bool = False
+    thread: bool = False
     expect: str | None = None
     prints: str | None = None
     reason: str | None = None
@@ -96,8 +98,13 @@ def _parse_marker(spec: str) -> dict[str, Any]:
     head, *clauses = (part.strip() for part in spec.split(";"))
     kind, *flags = (part.strip() for part in head.split(","))
     assert kind in KINDS, f"unknown kind {kind!r}; the kinds are {', '.join(KINDS)}"
-    assert set(flags) <= {"endless", "kept"}, flags
-    found: dict[str, Any] = {"kind": kind, "endless": "endless" in flags, "kept": "kept" in flags}
+    assert set(flags) <= {"endless", "kept", "thread"}, flags
+    found: dict[str, Any] = {
+        "kind": kind,
+        "endless": "endless" in flags,
+        "kept": "kept" in flags,
+        "thread": "thread" in flags,
+    }
     for clause in clauses:
         if clause.startswith("expect "):
             found["expect"] = clause.removeprefix("expect ")
@@ -224,6 +231,9 @@ class Page:
         code = compile(
             self.prepare(block.code), block.where, "exec", flags=ast.PyCF_ALLOW_TOP_LEVEL_AWAIT
         )
+        if block.thread:
+            await anyio.to_thread.run_sync(eval, code, namespace)
+            return
         result = eval(code, namespace)
         if inspect.iscoroutine(result):
             await result

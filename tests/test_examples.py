@@ -12,6 +12,12 @@ EXAMPLES = Path(__file__).parent.parent / "examples"
 
 # Each script, and lines (or line beginnings) its output must contain.
 EXPECTED = {
+    "profile_device.py": [
+        "flow_temperature  35.5 °C",
+        "mode              heat",
+        "setpoint now 48.5",
+        "refused: heat-pump.toml: point setpoint: value 70 is outside the limits 20..55",
+    ],
     "poll_several_devices.py": ["cycle 2 unit 3 voltage3   231.250", "unit 4: offline"],
     "typed_values.py": [
         "float32 CDAB at 2: 0000 41AC -> 21.5",
@@ -22,6 +28,12 @@ EXPECTED = {
         "observer: holding_registers 2: [0, 0] -> [7, 8]",
     ],
     "proxy_store.py": ["the far device now holds: [100, 200, 300, 401]"],
+    "blocking_read.py": [
+        "registers 0x6B..0x6D = [215, 7, 8]",
+        "float32 at 0x10 = 21.5",
+        "from two threads: {16: [16812, 0], 107: [215, 7]}",
+        "unit 17: 6 requests, online True",
+    ],
     "broadcast.py": ["unit 1: setpoint 215, registers 0..2 = [1, 2, 3]", "unit 3: setpoint 215"],
     "rtu_over_tcp.py": ["after the write: [1234]"],
     "modbus_tcp_master.py": [

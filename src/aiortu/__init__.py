@@ -1,7 +1,8 @@
 """aiortu: an asyncio Modbus RTU master/slave framework.
 
 See the README and `docs/` for the guides; the names they use are re-exported here. The packages
-[`aiortu.master`][aiortu.master], [`aiortu.slave`][aiortu.slave],
+[`aiortu.master`][aiortu.master], [`aiortu.blocking`][aiortu.blocking] (the same API
+without async), [`aiortu.slave`][aiortu.slave],
 [`aiortu.gateway`][aiortu.gateway], [`aiortu.testing`][aiortu.testing],
 [`aiortu.transport`][aiortu.transport], [`aiortu.line`][aiortu.line] and
 [`aiortu.core`][aiortu.core] hold the rest.
@@ -14,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from aiortu.core.codes import ExceptionCode, FunctionCode
+    from aiortu.core.model import Profile, load_profile
     from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response
     from aiortu.core.serial import LineSettings
     from aiortu.errors import (
@@ -34,15 +36,19 @@ if TYPE_CHECKING:
     from aiortu.gateway import gateway
     from aiortu.master import (
         BroadcastHandle,
+        Device,
         HealthPolicy,
         Master,
         Point,
         Poller,
+        ProfilePoller,
+        Reading,
         ReconnectPolicy,
         Sample,
         UnitHandle,
         UnitStats,
         open_master,
+        walk_sunspec,
     )
     from aiortu.slave import (
         AsyncDataStore,
@@ -50,6 +56,7 @@ if TYPE_CHECKING:
         Change,
         DataStore,
         MemoryStore,
+        ProfileStore,
         Reply,
         RequestContext,
         Slave,
@@ -66,6 +73,7 @@ _LAZY: dict[str, str] = {
     "ConfigError": "aiortu.errors",
     "ConnectionLost": "aiortu.errors",
     "DataStore": "aiortu.slave",
+    "Device": "aiortu.master",
     "ExceptionCode": "aiortu.core.codes",
     "ExceptionPDU": "aiortu.core.pdu",
     "ExceptionResponse": "aiortu.errors",
@@ -78,6 +86,10 @@ _LAZY: dict[str, str] = {
     "MalformedPDU": "aiortu.errors",
     "Master": "aiortu.master",
     "MemoryStore": "aiortu.slave",
+    "Profile": "aiortu.core.model",
+    "ProfilePoller": "aiortu.master",
+    "ProfileStore": "aiortu.slave",
+    "Reading": "aiortu.master",
     "ModbusError": "aiortu.errors",
     "Point": "aiortu.master",
     "Poller": "aiortu.master",
@@ -97,6 +109,8 @@ _LAZY: dict[str, str] = {
     "UnitStats": "aiortu.master",
     "gateway": "aiortu.gateway",
     "load_config": "aiortu.slave",
+    "load_profile": "aiortu.core.model",
+    "walk_sunspec": "aiortu.master",
     "open_master": "aiortu.master",
     "serve": "aiortu.slave",
 }
@@ -114,6 +128,7 @@ __all__ = (
     "ConfigError",
     "ConnectionLost",
     "DataStore",
+    "Device",
     "ExceptionCode",
     "ExceptionPDU",
     "ExceptionResponse",
@@ -130,7 +145,11 @@ __all__ = (
     "Point",
     "Poller",
     "PortError",
+    "Profile",
+    "ProfilePoller",
+    "ProfileStore",
     "RawPDU",
+    "Reading",
     "ReconnectPolicy",
     "Reply",
     "Request",
@@ -146,8 +165,10 @@ __all__ = (
     "__version__",
     "gateway",
     "load_config",
+    "load_profile",
     "open_master",
     "serve",
+    "walk_sunspec",
 )
 
 

@@ -32,6 +32,7 @@ SUMMARIES: dict[str, str] = {
     "identify": "read what a device says it is: identification objects and server id",
     "monitor": "watch a bus: print every frame with its meaning, never send",
     "poll": "poll points on one or more units and show them as a live table",
+    "profile": "check device profiles; read and write a device's points by name",
     "read": "read coils, discrete inputs or registers from a device once",
     "scan": "find the units that answer on a port, and their line settings",
     "serve": "simulate Modbus RTU devices described in a TOML file",

@@ -106,6 +106,7 @@ def register(subparsers: Subparsers) -> None:
         "--unit", help="unit address(es) for --ref: 1..247, comma-separated for several"
     )
     what.add_argument("--ref", help="the first reference, e.g. 40001 (with --unit)")
+    what.add_argument("--profile", help="poll every point of a profile (a file or a shipped name)")
     what.add_argument("--count", type=positive_int, default=1, help="values from --ref (1)")
     what.add_argument(
         "--type",
@@ -340,6 +341,10 @@ def _json_sample(sample: Sample) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Poll what `args` ask for until told to stop; return the exit code."""
+    if args.profile is not None:
+        from aiortu.cli._profile import run_poll
+
+        return run_poll(args)
 
     async def body() -> int:
         points = points_from_args(args)

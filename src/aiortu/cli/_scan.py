@@ -275,6 +275,14 @@ def register(subparsers: Subparsers) -> None:
         help="drop the echo of our own requests (adapters that hear themselves)",
     )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument(
+        "--profile",
+        action="append",
+        dest="profiles",
+        metavar="PROFILE",
+        help="say which of these profiles (files or shipped names) each unit found matches",
+    )
+    parser.add_argument("--match", action="store_true", help="--profile with every shipped one")
     parser.set_defaults(run=run)
 
 
@@ -561,7 +569,16 @@ async def _scan(args: argparse.Namespace) -> int:
         return 128 + interrupted[0]  # 130 for Ctrl-C, as a shell reports it
     if all(result.skipped is not None for result in results):
         raise CommandFailed(f"{args.port}: the port refused every line setting tried")
-    return 0 if report(results, sys.stdout) else 1
+    if not report(results, sys.stdout):
+        return 1
+    if args.profiles or args.match:
+        from aiortu.cli._profile import report_matches
+
+        found = [(a.unit, a.settings) for r in results for a in r.answers]
+        await report_matches(
+            args.port, found, args.profiles or [], response_timeout=1.0, out=sys.stdout
+        )
+    return 0
 
 
 def _check_port_exists(port: str) -> None:

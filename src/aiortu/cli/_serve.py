@@ -87,8 +87,17 @@ def register(subparsers: Subparsers) -> None:
         metavar="PORT",
         help="serial device path, rtu+tcp://host:port, or tcp://host:port to listen on",
     )
+    parser.add_argument("--config", metavar="FILE.toml", help="the device description")
     parser.add_argument(
-        "--config", required=True, metavar="FILE.toml", help="the device description"
+        "--profile", metavar="PROFILE", help="serve a device profile instead (file or shipped name)"
+    )
+    parser.add_argument("--unit", type=int, default=1, help="the unit of --profile (1)")
+    parser.add_argument(
+        "--move",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="with --profile: move the measurements (float points) every SECONDS",
     )
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
@@ -124,6 +133,13 @@ def register(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT or SIGTERM; return the exit code."""
+    if (args.config is None) == (args.profile is None):
+        print("aiortu serve: error: give --config or --profile (one of them)", file=sys.stderr)
+        return 2
+    if args.profile is not None:
+        from aiortu.cli._profile import serve_profile
+
+        return serve_profile(args, _serve)
     if not os.path.isfile(args.config):
         problem = (
             "is a directory, not a TOML file" if os.path.isdir(args.config) else "does not exist"

@@ -12,45 +12,68 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 from aiortu.errors import UnitOffline, UnitSkipped
-from aiortu.master._calls import FileRecordLike, RecordRequestLike
 from aiortu.master._client import Master, open_master
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
-from aiortu.master._handles import BroadcastHandle, UnitHandle
+from aiortu.master._handles import BroadcastHandle, BroadcastMethod, UnitHandle
+from aiortu.master._records import FileRecordLike, RecordRequestLike
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
 
 if TYPE_CHECKING:
+    from aiortu.master._device import Device, Reading
+    from aiortu.master._identify import ProfileMatch, match_profiles
     from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
+    from aiortu.master._profile_poller import ProfilePoller
+    from aiortu.master._sunspec import FoundModel, SunSpecDevice, walk_sunspec
 
 __all__ = (
     "BroadcastHandle",
+    "BroadcastMethod",
     "CycleReport",
     "CycleStats",
+    "Device",
     "FileRecordLike",
+    "FoundModel",
     "HealthPolicy",
     "LineConnection",
     "Master",
     "Point",
     "Poller",
+    "ProfileMatch",
+    "ProfilePoller",
+    "Reading",
     "ReconnectPolicy",
     "RecordRequestLike",
     "Sample",
     "StreamOpener",
+    "SunSpecDevice",
     "UnitHandle",
     "UnitHealth",
     "UnitOffline",
     "UnitSkipped",
     "UnitState",
     "UnitStats",
+    "match_profiles",
     "open_master",
+    "walk_sunspec",
 )
 
-_POLLER_NAMES = frozenset({"CycleReport", "CycleStats", "Point", "Poller", "Sample", "UnitHealth"})
-"""Imported on first use: a command that reads once needs no poller (nor its planner)."""
+_ON_FIRST_USE = {
+    **dict.fromkeys(("Device", "Reading"), "aiortu.master._device"),
+    **dict.fromkeys(("ProfileMatch", "match_profiles"), "aiortu.master._identify"),
+    **dict.fromkeys(
+        ("CycleReport", "CycleStats", "Point", "Poller", "Sample", "UnitHealth"),
+        "aiortu.master._poller",
+    ),
+    "ProfilePoller": "aiortu.master._profile_poller",
+    **dict.fromkeys(("FoundModel", "SunSpecDevice", "walk_sunspec"), "aiortu.master._sunspec"),
+}
+"""Imported on first use: a command that reads once needs no poller, no device profiles."""
 
 
 def __getattr__(name: str) -> Any:
-    if name not in _POLLER_NAMES:
+    module = _ON_FIRST_USE.get(name)
+    if module is None:
         raise AttributeError(f"module 'aiortu.master' has no attribute {name!r}")
-    value = getattr(importlib.import_module("aiortu.master._poller"), name)
+    value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value

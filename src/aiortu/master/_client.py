@@ -30,7 +30,7 @@ docs/protocol.md.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Awaitable, Callable, Collection, Mapping, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Collection, Mapping
 from types import TracebackType
 from typing import Any, Self, TypeVar
 
@@ -39,41 +39,18 @@ import anyio.abc
 
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.machines import Failure, RetryPolicy, Transaction
-from aiortu.core.pdu import (
-    ExceptionPDU,
-    MaskWriteRegisterRequest,
-    RawPDU,
-    ReadCoilsRequest,
-    ReadCoilsResponse,
-    ReadDiscreteInputsRequest,
-    ReadFifoQueueRequest,
-    ReadFifoQueueResponse,
-    ReadHoldingRegistersRequest,
-    ReadHoldingRegistersResponse,
-    ReadInputRegistersRequest,
-    ReadWriteMultipleRegistersRequest,
-    Request,
-    Response,
-    WriteMultipleCoilsRequest,
-    WriteMultipleRegistersRequest,
-    WriteSingleCoilRequest,
-    WriteSingleRegisterRequest,
-    decode_request,
-)
+from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response, decode_request
 from aiortu.core.rtu import Role, TimingMode
 from aiortu.core.serial import LineSettings
-from aiortu.errors import ExceptionResponse, InvalidRequest, MalformedPDU
+from aiortu.errors import InvalidRequest, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
     UNIT_RANGE,
     WHOLE_FRAME_UNIT_RANGE,
     check_at_least,
-    check_coil,
-    check_coils,
     check_int,
     check_master_settings,
     check_priority,
-    check_registers,
     check_timeout,
     check_turnaround,
     check_unit,
@@ -81,36 +58,13 @@ from aiortu.master._arguments import (
 from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
 from aiortu.master._engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
 from aiortu.master._handles import BroadcastHandle, UnitHandle
-from aiortu.master._serial_line import SerialLineFunctions
+from aiortu.master._operations import Operations, answer
 
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
 
 _ResponseT = TypeVar("_ResponseT", bound=Response)
-_ReadT = TypeVar(
-    "_ReadT",
-    ReadCoilsRequest,
-    ReadDiscreteInputsRequest,
-    ReadHoldingRegistersRequest,
-    ReadInputRegistersRequest,
-)
-
 _STATS_UNITS = range(248)
 """The units a master keeps statistics of: unit 0 counts the broadcasts."""
-
-_READ_CACHE_SIZE = 256
-"""Read requests a master keeps made (see `Master._read_request`)."""
-
-
-def _answer(
-    response: Response | ExceptionPDU | None, pdu: Request, unit: int, expected: type[_ResponseT]
-) -> _ResponseT:
-    """`response` as the reply to `pdu`; raise ExceptionResponse for an exception reply
-    and MalformedPDU for a reply of another kind."""
-    if isinstance(response, ExceptionPDU):
-        raise ExceptionResponse(response.exception_code, pdu.function_code, unit)
-    if not isinstance(response, expected):
-        raise MalformedPDU(f"{type(response).__name__} does not answer {type(pdu).__name__}")
-    return response
 
 
 def _known_form(pdu: object) -> Request:
@@ -126,7 +80,7 @@ def _known_form(pdu: object) -> Request:
     return pdu
 
 
-class Master(SerialLineFunctions):
+class Master(Operations):
     """A Modbus RTU master on `stream`; an async context manager.
 
     `settings` give the line timing. `timeout` is the response timeout of each attempt,
@@ -266,6 +220,7 @@ class Master(SerialLineFunctions):
             stack.callback(task_group.cancel_scope.cancel)
             task_group.start_soon(self.connection.run, name="aiortu master line task")
             self._exit_stack = stack.pop_all()
+        self._entered_in = anyio.get_current_task().id
         return self
 
     async def __aexit__(
@@ -274,9 +229,16 @@ class Master(SerialLineFunctions):
         exc: BaseException | None,
         traceback: TracebackType | None,
     ) -> bool | None:
-        stack, self._exit_stack = self._exit_stack, None
-        if stack is None:
+        if self._exit_stack is None:
             return None
+        if anyio.get_current_task().id != self._entered_in:
+            # The line task runs in a task group of the entering task; no other may end it.
+            raise RuntimeError(
+                "a master must be left in the task that entered it, and this is another"
+                " (the asyncio REPL runs each statement in a task of its own): use `async with`"
+                " in one statement, or aiortu.blocking, whose masters close from any thread"
+            )
+        stack, self._exit_stack = self._exit_stack, None
         return await stack.__aexit__(exc_type, exc, traceback)
 
     @property
@@ -395,7 +357,7 @@ class Master(SerialLineFunctions):
         policy = policy.for_function(pdu.function_code)
         response = await self._submit(unit, pdu, timeout, priority, policy)
         assert response is not None
-        return _answer(response, pdu, unit, expected)
+        return answer(response, pdu, unit, expected)
 
     def _submit(
         self,
@@ -421,188 +383,8 @@ class Master(SerialLineFunctions):
                 policy = policy.for_function(request.function_code)
         return self.engine.submit_request(unit, request, response_timeout, policy, priority)
 
-    def _read_request(self, kind: type[_ReadT], address: int, count: int) -> _ReadT:
-        """`kind(address, count)`, made once per address and count: a poll loop reads
-        the same blocks again and again, and the master encodes a request object once."""
-        if type(address) is not int or type(count) is not int:
-            return kind(address, count)  # the constructor says what is wrong (a float...)
-        key = (kind, address, count)
-        request = self._reads.get(key)
-        if request is None:
-            request = kind(address, count)
-            if len(self._reads) >= _READ_CACHE_SIZE:
-                self._reads.clear()
-            self._reads[key] = request
-        return request  # type: ignore[return-value]  # the key's kind made it
-
     def _timeout(self, timeout: float | None) -> float:
         return self.timeout if timeout is None else check_timeout(timeout)
-
-    # -- bits ------------------------------------------------------------------------
-
-    async def read_coils(
-        self,
-        unit: int,
-        address: int,
-        count: int,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> list[bool]:
-        """Read `count` (1..2000) coils from `address` (01)."""
-        request = self._read_request(ReadCoilsRequest, address, count)
-        reply = await self.request(
-            unit, request, ReadCoilsResponse, timeout=timeout, priority=priority
-        )
-        return request.bits_of(reply)
-
-    async def read_discrete_inputs(
-        self,
-        unit: int,
-        address: int,
-        count: int,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> list[bool]:
-        """Read `count` (1..2000) discrete inputs from `address` (02)."""
-        request = self._read_request(ReadDiscreteInputsRequest, address, count)
-        reply = await self.request(
-            unit, request, ReadCoilsResponse, timeout=timeout, priority=priority
-        )
-        return request.bits_of(reply)
-
-    async def write_coil(
-        self,
-        unit: int,
-        address: int,
-        value: bool,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """Set the coil at `address` on or off (05); the echo is verified.
-
-        `value` is a bool, 1 or 0, or the spec's encoding 0xFF00 or 0x0000; anything
-        else (`"off"` is true to Python) raises InvalidRequest.
-        """
-        request = WriteSingleCoilRequest(address, check_coil(value))
-        await self.request(unit, request, Response, timeout=timeout, priority=priority)
-
-    async def write_coils(
-        self,
-        unit: int,
-        address: int,
-        values: Sequence[bool],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """Set 1..1968 coils from `address` (0F), each a bool, 1 or 0; the reply's address
-        and count are verified."""
-        request = WriteMultipleCoilsRequest(address, check_coils(values))
-        await self.request(unit, request, Response, timeout=timeout, priority=priority)
-
-    # -- registers -------------------------------------------------------------------
-
-    async def read_holding_registers(
-        self,
-        unit: int,
-        address: int,
-        count: int,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> list[int]:
-        """Read `count` (1..125) holding registers from `address` (03)."""
-        request = self._read_request(ReadHoldingRegistersRequest, address, count)
-        response = await self._submit(unit, request, timeout, priority)
-        return list(_answer(response, request, unit, ReadHoldingRegistersResponse).values)
-
-    async def read_input_registers(
-        self,
-        unit: int,
-        address: int,
-        count: int,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> list[int]:
-        """Read `count` (1..125) input registers from `address` (04)."""
-        request = self._read_request(ReadInputRegistersRequest, address, count)
-        response = await self._submit(unit, request, timeout, priority)
-        return list(_answer(response, request, unit, ReadHoldingRegistersResponse).values)
-
-    async def write_register(
-        self,
-        unit: int,
-        address: int,
-        value: int,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """Write `value` (0..65535) to the holding register at `address` (06); echo verified."""
-        request = WriteSingleRegisterRequest(address, value)  # checks the value's type
-        await self.request(unit, request, Response, timeout=timeout, priority=priority)
-
-    async def write_registers(
-        self,
-        unit: int,
-        address: int,
-        values: Sequence[int],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """Write 1..123 registers from `address` (10); the echoed address and count are checked."""
-        request = WriteMultipleRegistersRequest(address, check_registers("values", values))
-        await self.request(unit, request, Response, timeout=timeout, priority=priority)
-
-    async def mask_write_register(
-        self,
-        unit: int,
-        address: int,
-        and_mask: int,
-        or_mask: int,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """Mask write the register at `address` (16): it becomes
-        `(current & and_mask) | (or_mask & ~and_mask)`; the echo is verified."""
-        request = MaskWriteRegisterRequest(address, and_mask, or_mask)
-        await self.request(unit, request, Response, timeout=timeout, priority=priority)
-
-    async def read_write_registers(
-        self,
-        unit: int,
-        read_address: int,
-        read_count: int,
-        write_address: int,
-        values: Sequence[int],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> list[int]:
-        """Write `values` from `write_address`, then read `read_count` registers (17)."""
-        request = ReadWriteMultipleRegistersRequest(
-            read_address, read_count, write_address, check_registers("values", values)
-        )
-        reply = await self.request(
-            unit, request, ReadHoldingRegistersResponse, timeout=timeout, priority=priority
-        )
-        return list(reply.values)
-
-    async def read_fifo_queue(
-        self, unit: int, address: int, *, timeout: float | None = None, priority: int = 0
-    ) -> list[int]:
-        """Read the 0..31 values queued in the FIFO whose pointer is at `address` (18)."""
-        request = ReadFifoQueueRequest(address)
-        reply = await self.request(
-            unit, request, ReadFifoQueueResponse, timeout=timeout, priority=priority
-        )
-        return list(reply.values)
 
 
 def _opener(port_or_url: str, settings: LineSettings, options: dict[str, Any]) -> StreamOpener:

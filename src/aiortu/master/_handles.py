@@ -15,10 +15,12 @@ that the slaves can execute it.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import inspect
+from collections.abc import Callable, Coroutine
+from typing import Any, Concatenate, ParamSpec, Protocol, TypeVar, TypeVarTuple, Unpack
 
-from aiortu.core import pdu as pdu_files
-from aiortu.core.codes import BROADCAST_UNIT, DeviceIdReadCode
+from aiortu._derived import derive
+from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import InvalidRequest
 from aiortu.core.model import (
     Layout,
@@ -33,39 +35,22 @@ from aiortu.core.model import (
     registers_to_string,
     string_to_registers,
 )
-from aiortu.core.pdu import (
-    DiagnosticsResponse,
-    ExceptionPDU,
-    GetCommEventCounterResponse,
-    GetCommEventLogResponse,
-    MaskWriteRegisterRequest,
-    ReportServerIdResponse,
-    Request,
-    Response,
-    WriteMultipleCoilsRequest,
-    WriteMultipleRegistersRequest,
-    WriteSingleCoilRequest,
-    WriteSingleRegisterRequest,
+from aiortu.core.pdu import Request
+from aiortu.master._operations import (
+    Operations,
+    mask_write_register_request,
+    write_coil_request,
+    write_coils_request,
+    write_file_record_request,
+    write_register_request,
+    write_registers_request,
 )
-from aiortu.master._arguments import (
-    check_coil,
-    check_coils,
-    check_int,
-    check_items,
-    check_registers,
-)
-from aiortu.master._calls import FileRecordLike, MasterCalls, RecordRequestLike, Requester
 
-__all__ = (
-    "BroadcastHandle",
-    "FileRecordLike",
-    "RecordRequestLike",
-    "UnitHandle",
-    "as_file_record",
-    "as_record_request",
-    "file_records",
-    "record_requests",
-)
+__all__ = ("BroadcastHandle", "BroadcastMethod", "UnitHandle", "on_unit")
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+_Ts = TypeVarTuple("_Ts")
 
 _REGISTER_TABLES = {
     "holding": Table.HOLDING_REGISTERS,
@@ -75,93 +60,76 @@ _REGISTER_TABLES = {
 }
 
 
-def _fields(name: str, item: object, kind: type, names: tuple[str, str, str]) -> tuple[object, ...]:
-    """The three fields of `item`, an instance of `kind` or a tuple of three."""
-    if isinstance(item, kind):
-        return tuple(getattr(item, field) for field in names)
-    if not isinstance(item, tuple | list) or len(item) != 3:
-        raise InvalidRequest(name, item, f"a {kind.__name__} or ({', '.join(names)})")
-    return tuple(item)
+def on_unit(
+    operation: Callable[Concatenate[Operations, int, _P], Coroutine[Any, Any, _R]],
+) -> Callable[Concatenate[UnitHandle, _P], Coroutine[Any, Any, _R]]:
+    """The method of [`UnitHandle`][aiortu.master.UnitHandle] made from a master's `operation`:
+    the same call with the handle's unit first (the master's own method is called, so that
+    what it overrides counts)."""
+    name = operation.__name__
+
+    async def bound(self: UnitHandle, /, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        method = getattr(self.master, name)
+        result: _R = await method(self.unit, *args, **kwargs)
+        return result
+
+    derive(bound, operation, "UnitHandle", drop=1)
+    return bound
 
 
-def as_record_request(sub: RecordRequestLike) -> pdu_files.FileRecordRequest:
-    """A read file record sub-request from the class or a `(file, record, length)` tuple."""
-    names = ("file_number", "record_number", "record_length")
-    fields = _fields("sub_request", sub, pdu_files.FileRecordRequest, names)
-    for name, value in zip(names, fields, strict=True):
-        check_int(name, value, range(0x10000), InvalidRequest)
-    if isinstance(sub, pdu_files.FileRecordRequest):
-        return sub
-    return pdu_files.FileRecordRequest(*sub)
+class BroadcastMethod(Protocol[*_Ts]):
+    """A method of [`BroadcastHandle`][aiortu.master.BroadcastHandle]: a write's arguments
+    without the unit, and `priority=`."""
+
+    def __call__(self, *args: *_Ts, priority: int = 0) -> Coroutine[Any, Any, None]: ...
 
 
-def as_file_record(record: FileRecordLike) -> pdu_files.FileRecord:
-    """A write file record sub-record from the class or a `(file, record, values)` tuple."""
-    names = ("file_number", "record_number", "values")
-    file_number, record_number, values = _fields("record", record, pdu_files.FileRecord, names)
-    check_int("file_number", file_number, range(0x10000), InvalidRequest)
-    check_int("record_number", record_number, range(0x10000), InvalidRequest)
-    return pdu_files.FileRecord(
-        file_number,  # type: ignore[arg-type]  # checked above
-        record_number,  # type: ignore[arg-type]
-        check_registers("values", values),
+def _broadcast(
+    operation: Callable[..., Coroutine[Any, Any, None]], build: Callable[[Unpack[_Ts]], Request]
+) -> BroadcastMethod[*_Ts]:
+    """The broadcast form of the master's write `operation`, whose request `build` makes."""
+    name = operation.__name__
+
+    # The write's arguments by keyword too, as its signature shows (the protocol's type
+    # cannot say so: a TypeVarTuple has no names).
+    async def send(self: BroadcastHandle, /, *args: *_Ts, priority: int = 0, **named: Any) -> None:
+        request = build(*args, **named)
+        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
+
+    code = inspect.signature(build, eval_str=True).return_annotation.function_code
+    doc = (
+        f"[`Master.{name}`][aiortu.master.Master.{name}] on every unit at once (unit 0, function"
+        f" code {code:02X}): no reply is awaited; returns once the request is sent and the"
+        " turnaround delay has passed."
     )
-
-
-def record_requests(sub_requests: object) -> tuple[pdu_files.FileRecordRequest, ...]:
-    """The sub-requests of a read file record (14), each checked."""
-    items = check_items("sub_requests", sub_requests, "an iterable of sub-requests")
-    return tuple(as_record_request(sub) for sub in items)  # type: ignore[arg-type]
-
-
-def file_records(records: object) -> tuple[pdu_files.FileRecord, ...]:
-    """The sub-records of a write file record (15), each checked."""
-    items = check_items("records", records, "an iterable of records")
-    return tuple(as_file_record(record) for record in items)  # type: ignore[arg-type]
+    parameters = list(inspect.signature(build).parameters.values())
+    derive(send, operation, "BroadcastHandle", doc=doc)
+    send.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+        [
+            inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD),
+            *parameters,
+            inspect.Parameter(
+                "priority", inspect.Parameter.KEYWORD_ONLY, default=0, annotation="int"
+            ),
+        ],
+        return_annotation="None",
+    )
+    return send  # type: ignore[return-value]  # its call is BroadcastMethod's
 
 
 class BroadcastHandle:
     """The broadcast writes of a master (see the module docstring); each returns once the
     request is sent and the turnaround delay has passed."""
 
-    def __init__(self, master: Requester) -> None:
+    def __init__(self, master: Operations) -> None:
         self._master = master
 
-    async def write_coil(self, address: int, value: bool, *, priority: int = 0) -> None:
-        """Set the coil at `address` on every unit (05)."""
-        request = WriteSingleCoilRequest(address, check_coil(value))
-        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
-
-    async def write_register(self, address: int, value: int, *, priority: int = 0) -> None:
-        """Write the holding register at `address` on every unit (06)."""
-        request = WriteSingleRegisterRequest(address, value)
-        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
-
-    async def write_coils(self, address: int, values: Sequence[bool], *, priority: int = 0) -> None:
-        """Set 1..1968 coils from `address` on every unit (0F)."""
-        request = WriteMultipleCoilsRequest(address, check_coils(values))
-        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
-
-    async def write_registers(
-        self, address: int, values: Sequence[int], *, priority: int = 0
-    ) -> None:
-        """Write 1..123 registers from `address` on every unit (10)."""
-        request = WriteMultipleRegistersRequest(address, check_registers("values", values))
-        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
-
-    async def mask_write_register(
-        self, address: int, and_mask: int, or_mask: int, *, priority: int = 0
-    ) -> None:
-        """Mask write the register at `address` on every unit (16)."""
-        request = MaskWriteRegisterRequest(address, and_mask, or_mask)
-        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
-
-    async def write_file_record(
-        self, records: Iterable[FileRecordLike], *, priority: int = 0
-    ) -> None:
-        """Write file records on every unit (15)."""
-        request = pdu_files.WriteFileRecordRequest(file_records(records))
-        await self._master.send_without_reply(BROADCAST_UNIT, request, priority=priority)
+    write_coil = _broadcast(Operations.write_coil, write_coil_request)
+    write_register = _broadcast(Operations.write_register, write_register_request)
+    write_coils = _broadcast(Operations.write_coils, write_coils_request)
+    write_registers = _broadcast(Operations.write_registers, write_registers_request)
+    mask_write_register = _broadcast(Operations.mask_write_register, mask_write_register_request)
+    write_file_record = _broadcast(Operations.write_file_record, write_file_record_request)
 
 
 class UnitHandle:
@@ -170,218 +138,32 @@ class UnitHandle:
     Every method takes `timeout=` and `priority=` as the master's do.
     """
 
-    def __init__(self, master: MasterCalls, unit: int) -> None:
+    def __init__(self, master: Operations, unit: int) -> None:
         self.master = master
         self.unit = unit
 
-    # -- the master's methods, bound to the unit -------------------------------------
+    # -- the master's operations, bound to the unit ----------------------------------
 
-    async def read_coils(
-        self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
-    ) -> list[bool]:
-        """See [Master.read_coils][aiortu.master.Master.read_coils]."""
-        return await self.master.read_coils(
-            self.unit, address, count, timeout=timeout, priority=priority
-        )
-
-    async def read_discrete_inputs(
-        self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
-    ) -> list[bool]:
-        """See
-        [`aiortu.master.Master.read_discrete_inputs`][aiortu.master.Master.read_discrete_inputs]."""
-        return await self.master.read_discrete_inputs(
-            self.unit, address, count, timeout=timeout, priority=priority
-        )
-
-    async def read_holding_registers(
-        self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
-    ) -> list[int]:
-        """See
-        [`aiortu.master.Master.read_holding_registers`][aiortu.master.Master.read_holding_registers]."""
-        return await self.master.read_holding_registers(
-            self.unit, address, count, timeout=timeout, priority=priority
-        )
-
-    async def read_input_registers(
-        self, address: int, count: int, *, timeout: float | None = None, priority: int = 0
-    ) -> list[int]:
-        """See
-        [`aiortu.master.Master.read_input_registers`][aiortu.master.Master.read_input_registers]."""
-        return await self.master.read_input_registers(
-            self.unit, address, count, timeout=timeout, priority=priority
-        )
-
-    async def write_coil(
-        self, address: int, value: bool, *, timeout: float | None = None, priority: int = 0
-    ) -> None:
-        """See [`aiortu.master.Master.write_coil`][aiortu.master.Master.write_coil]."""
-        await self.master.write_coil(self.unit, address, value, timeout=timeout, priority=priority)
-
-    async def write_coils(
-        self,
-        address: int,
-        values: Sequence[bool],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """See [`aiortu.master.Master.write_coils`][aiortu.master.Master.write_coils]."""
-        await self.master.write_coils(
-            self.unit, address, values, timeout=timeout, priority=priority
-        )
-
-    async def write_register(
-        self, address: int, value: int, *, timeout: float | None = None, priority: int = 0
-    ) -> None:
-        """See [`aiortu.master.Master.write_register`][aiortu.master.Master.write_register]."""
-        await self.master.write_register(
-            self.unit, address, value, timeout=timeout, priority=priority
-        )
-
-    async def write_registers(
-        self,
-        address: int,
-        values: Sequence[int],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """See [`aiortu.master.Master.write_registers`][aiortu.master.Master.write_registers]."""
-        await self.master.write_registers(
-            self.unit, address, values, timeout=timeout, priority=priority
-        )
-
-    async def mask_write_register(
-        self,
-        address: int,
-        and_mask: int,
-        or_mask: int,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """See
-        [`aiortu.master.Master.mask_write_register`][aiortu.master.Master.mask_write_register]."""
-        await self.master.mask_write_register(
-            self.unit, address, and_mask, or_mask, timeout=timeout, priority=priority
-        )
-
-    async def read_write_registers(
-        self,
-        read_address: int,
-        read_count: int,
-        write_address: int,
-        values: Sequence[int],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> list[int]:
-        """See
-        [`aiortu.master.Master.read_write_registers`][aiortu.master.Master.read_write_registers]."""
-        return await self.master.read_write_registers(
-            self.unit,
-            read_address,
-            read_count,
-            write_address,
-            values,
-            timeout=timeout,
-            priority=priority,
-        )
-
-    async def read_fifo_queue(
-        self, address: int, *, timeout: float | None = None, priority: int = 0
-    ) -> list[int]:
-        """See [`aiortu.master.Master.read_fifo_queue`][aiortu.master.Master.read_fifo_queue]."""
-        return await self.master.read_fifo_queue(
-            self.unit, address, timeout=timeout, priority=priority
-        )
-
-    async def read_file_record(
-        self,
-        sub_requests: Iterable[RecordRequestLike],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> list[list[int]]:
-        """See [`aiortu.master.Master.read_file_record`][aiortu.master.Master.read_file_record]."""
-        return await self.master.read_file_record(
-            self.unit, sub_requests, timeout=timeout, priority=priority
-        )
-
-    async def write_file_record(
-        self,
-        records: Iterable[FileRecordLike],
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> None:
-        """See
-        [`aiortu.master.Master.write_file_record`][aiortu.master.Master.write_file_record]."""
-        await self.master.write_file_record(self.unit, records, timeout=timeout, priority=priority)
-
-    async def read_exception_status(
-        self, *, timeout: float | None = None, priority: int = 0
-    ) -> int:
-        """See
-        [`aiortu.master.Master.read_exception_status`][aiortu.master.Master.read_exception_status]."""
-        return await self.master.read_exception_status(
-            self.unit, timeout=timeout, priority=priority
-        )
-
-    async def diagnostics(
-        self,
-        sub_function: int,
-        data: bytes = b"\x00\x00",
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> DiagnosticsResponse | None:
-        """See [`aiortu.master.Master.diagnostics`][aiortu.master.Master.diagnostics]."""
-        return await self.master.diagnostics(
-            self.unit, sub_function, data, timeout=timeout, priority=priority
-        )
-
-    async def get_comm_event_counter(
-        self, *, timeout: float | None = None, priority: int = 0
-    ) -> GetCommEventCounterResponse:
-        """See
-        [`aiortu.master.Master.get_comm_event_counter`][aiortu.master.Master.get_comm_event_counter]."""
-        return await self.master.get_comm_event_counter(
-            self.unit, timeout=timeout, priority=priority
-        )
-
-    async def get_comm_event_log(
-        self, *, timeout: float | None = None, priority: int = 0
-    ) -> GetCommEventLogResponse:
-        """See
-        [`aiortu.master.Master.get_comm_event_log`][aiortu.master.Master.get_comm_event_log]."""
-        return await self.master.get_comm_event_log(self.unit, timeout=timeout, priority=priority)
-
-    async def report_server_id(
-        self, *, timeout: float | None = None, priority: int = 0
-    ) -> ReportServerIdResponse:
-        """See [`aiortu.master.Master.report_server_id`][aiortu.master.Master.report_server_id]."""
-        return await self.master.report_server_id(self.unit, timeout=timeout, priority=priority)
-
-    async def read_device_identification(
-        self,
-        read_code: int = DeviceIdReadCode.BASIC,
-        object_id: int = 0,
-        *,
-        timeout: float | None = None,
-        priority: int = 0,
-    ) -> dict[int, bytes]:
-        """See
-        [`aiortu.master.Master.read_device_identification`][aiortu.master.Master.read_device_identification]."""
-        return await self.master.read_device_identification(
-            self.unit, read_code, object_id, timeout=timeout, priority=priority
-        )
-
-    async def execute(
-        self, pdu: Request, *, timeout: float | None = None, priority: int = 0
-    ) -> Response | ExceptionPDU:
-        """See [`aiortu.master.Master.execute`][aiortu.master.Master.execute]."""
-        return await self.master.execute(self.unit, pdu, timeout=timeout, priority=priority)
+    read_coils = on_unit(Operations.read_coils)
+    read_discrete_inputs = on_unit(Operations.read_discrete_inputs)
+    read_holding_registers = on_unit(Operations.read_holding_registers)
+    read_input_registers = on_unit(Operations.read_input_registers)
+    write_coil = on_unit(Operations.write_coil)
+    write_coils = on_unit(Operations.write_coils)
+    write_register = on_unit(Operations.write_register)
+    write_registers = on_unit(Operations.write_registers)
+    mask_write_register = on_unit(Operations.mask_write_register)
+    read_write_registers = on_unit(Operations.read_write_registers)
+    read_fifo_queue = on_unit(Operations.read_fifo_queue)
+    read_file_record = on_unit(Operations.read_file_record)
+    write_file_record = on_unit(Operations.write_file_record)
+    read_exception_status = on_unit(Operations.read_exception_status)
+    diagnostics = on_unit(Operations.diagnostics)
+    get_comm_event_counter = on_unit(Operations.get_comm_event_counter)
+    get_comm_event_log = on_unit(Operations.get_comm_event_log)
+    report_server_id = on_unit(Operations.report_server_id)
+    read_device_identification = on_unit(Operations.read_device_identification)
+    execute = on_unit(Operations.execute)
 
     # -- typed values ----------------------------------------------------------------
 

@@ -18,6 +18,7 @@ from aiortu.slave._handlers import (
     Reply,
     RequestContext,
 )
+from aiortu.slave._profile_store import ProfileStore
 from aiortu.slave._routes import RangeAccess, RangeHandler, RoutedStore
 from aiortu.slave._rtu_over_tcp import RtuOverTcpServer
 from aiortu.slave._serve import Server, serve
@@ -55,6 +56,7 @@ __all__ = (
     "HandlerResult",
     "MemoryStore",
     "ModbusTcpServer",
+    "ProfileStore",
     "RangeAccess",
     "RangeHandler",
     "Reply",
