@@ -23,7 +23,15 @@ from state_diagrams import FENCE, _clutter, _place, parse, render  # noqa: E402
 PROTOCOL = (ROOT / "docs" / "protocol.md").read_text(encoding="utf-8")
 BLOCKS = [found.group(1) for found in FENCE.finditer(PROTOCOL)]
 DOCUMENTED = [
-    "master", "slave", "testing", "gateway", "transport", "line", "errors", "core", "blocking",
+    "master",
+    "slave",
+    "testing",
+    "gateway",
+    "transport",
+    "line",
+    "errors",
+    "core",
+    "blocking",
 ]
 
 
