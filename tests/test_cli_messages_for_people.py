@@ -40,8 +40,9 @@ NOWHERE = "/nonexistent/ttyX"
         (["poll", NOWHERE, "--unit", "1", "--ref", "40001", "--scale", "abc"],
          "aiortu poll: error: argument --scale: 'abc' is not a number"),
         (["read", "tcp://127.0.0.1", "--unit", "1", "--ref", "40001"],
-         "aiortu read: error: PORT must be a serial device path, rtu+tcp://host:port or "
-         "tcp://host:port, not tcp://127.0.0.1 (the port number is missing: tcp://host:port)"),
+         "aiortu read: error: PORT must be a serial device path, rtu+tcp://host:port, "
+         "ascii+tcp://host:port, tcp://host:port, udp://host:port or tls://host:port, not "
+         "tcp://127.0.0.1 (the port number is missing: tcp://host:port)"),
         (["read", "/tmp", "--unit", "1", "--ref", "40001"],
          "aiortu read: /tmp: a directory, not a device file"),
         (["serve", "/dev/null", "--config", "/tmp"],

@@ -46,11 +46,11 @@ def test_without_them_the_server_keeps_the_specs_defaults() -> None:
     ("args", "message"),
     [
         (["/dev/null", "--serial-line-codes"],
-         "--serial-line-codes is for a Modbus TCP server (tcp://): a serial line serves every "
-         "code and has no unit ids but its units"),
+         "--serial-line-codes is for a Modbus TCP server (tcp://, udp://, tls://): a serial "
+         "line serves every code and has no unit ids but its units"),
         (["/dev/null", "--unit-alias", "255=17"],
-         "--unit-alias is for a Modbus TCP server (tcp://): a serial line serves every code "
-         "and has no unit ids but its units"),
+         "--unit-alias is for a Modbus TCP server (tcp://, udp://, tls://): a serial line "
+         "serves every code and has no unit ids but its units"),
         (["tcp://127.0.0.1:0", "--unit-alias", "255=99"],
          f"--unit-alias names unit 99, which {DEVICES} does not describe (it has 5, 6, 17)"),
         (["tcp://127.0.0.1:0", "--unit-alias", "256=5"],

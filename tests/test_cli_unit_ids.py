@@ -3,12 +3,13 @@ device by its IP address (its reply awaited); a serial line keeps 1..247."""
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from .cli_helpers import run_aiortu, serving_tcp
+from .cli_helpers import run_aiortu, serving_tcp, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -53,5 +54,21 @@ def test_a_serial_line_keeps_units_1_to_247(tmp_path: Path, unit: str, message: 
 def test_no_framing_takes_256(tcp_url: str) -> None:
     result = run_aiortu("read", tcp_url, "--unit", "256", "--ref", "40001")
     assert result.returncode == 2
-    assert result.stderr.endswith("--unit: must be a unit address 1..247 (0..255 over tcp://), "
-                                  "not 256\n")  # fmt: skip
+    assert result.stderr.endswith(
+        "--unit: must be a unit address 1..247 (0..255 over tcp://, udp://, tls://), not 256\n"
+    )
+
+
+def test_modbus_udp_takes_unit_255_too(tmp_path: Path) -> None:
+    config = tmp_path / "one.toml"
+    config.write_text(ONE_UNIT)
+    process = start_aiortu("serve", "udp://127.0.0.1:0", "--config", str(config))
+    try:
+        assert process.stderr is not None
+        found = re.search(r"\(port (\d+)\)", process.stderr.readline())
+        assert found is not None
+        url = f"udp://127.0.0.1:{found.group(1)}"
+        read = run_aiortu("read", url, "--unit", "255", "--ref", "40001", "--count", "3")
+    finally:
+        stop(process)
+    assert (read.returncode, read.stdout, read.stderr) == (0, "40001 1\n40002 2\n40003 3\n", "")

@@ -303,3 +303,16 @@ async def test_a_serial_line_master_keeps_units_1_to_247() -> None:
         for unit in (0, 248, 255):
             with pytest.raises(aiortu.InvalidRequest):
                 await master.read_holding_registers(unit, 0, 1)
+
+
+async def test_modbus_ascii_keeps_units_1_to_247_though_its_frames_come_whole() -> None:
+    from aiortu.testing import PtyBus
+
+    async with (
+        PtyBus() as bus,
+        aiortu.open_master(
+            bus.paths[0], parity="N", stopbits=2, timeout=0.1, framing="ascii"
+        ) as master,
+    ):
+        assert master.link.whole_frames
+        assert master.unit_range == range(1, 248)

@@ -71,7 +71,7 @@ def unit_id(text: str) -> int:
     value = _integer(text)
     if not 0 <= value <= 255:
         raise argparse.ArgumentTypeError(
-            f"must be a unit address 1..247 (0..255 over tcp://), not {text}"
+            f"must be a unit address 1..247 (0..255 over tcp://, udp://, tls://), not {text}"
         )
     return value
 

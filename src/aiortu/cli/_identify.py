@@ -71,7 +71,10 @@ def register(subparsers: Subparsers) -> None:
     )
     add_line_options(parser)
     parser.add_argument(
-        "--unit", type=unit_id, required=True, help="unit address 1..247 (0..255 over tcp://)"
+        "--unit",
+        type=unit_id,
+        required=True,
+        help="unit address 1..247 (0..255 over tcp://, udp://, tls://)",
     )
     parser.add_argument(
         "--level",

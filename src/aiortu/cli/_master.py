@@ -32,6 +32,7 @@ from aiortu.cli._arguments import (
     unit_id,
 )
 from aiortu.cli._messages import invalid_value, port_failure
+from aiortu.cli._transport_options import add_transport_options, transport_options
 from aiortu.core.model import Reference, Table, parse_reference
 from aiortu.errors import (
     ConnectionLost,
@@ -105,8 +106,9 @@ def add_line_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "port",
         metavar="PORT",
-        help="a serial device path, rtu+tcp://host:port, or tcp://host:port (Modbus TCP)",
+        help="a serial device path, rtu+tcp://, ascii+tcp://, tcp://, udp:// or tls://host:port",
     )
+    add_transport_options(parser)
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
     line.add_argument(
@@ -227,9 +229,9 @@ def check_span(table: Table, start: int, count: int, verb: str) -> None:
 
 
 def check_unit_for_port(port: str, unit_address: int) -> None:
-    """Refuse a unit id the port's framing cannot take: a serial line (or RTU over TCP)
-    takes 1..247, Modbus TCP (`tcp://`) any id 0..255, as given in its header."""
-    if port.strip().lower().startswith("tcp://"):
+    """Refuse a unit id the port's framing cannot take: a serial line (or RTU or ASCII over
+    TCP) takes 1..247, Modbus TCP, UDP and TLS any id 0..255, as given in their header."""
+    if port.strip().lower().startswith(("tcp://", "udp://", "tls://")):
         return
     try:
         unit(str(unit_address))
@@ -260,6 +262,7 @@ async def open_from_args(
         timeout=args.timeout,
         retries=args.retries,
         reconnect=reconnect,
+        **transport_options(args),
         **options,  # type: ignore[arg-type]
     ) as master:
         yield master

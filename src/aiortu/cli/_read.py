@@ -75,7 +75,10 @@ def register(subparsers: Subparsers) -> None:
     add_line_options(parser)
     what = parser.add_argument_group("what to read")
     what.add_argument(
-        "--unit", type=unit_id, required=True, help="unit address 1..247 (0..255 over tcp://)"
+        "--unit",
+        type=unit_id,
+        required=True,
+        help="unit address 1..247 (0..255 over tcp://, udp://, tls://)",
     )
     what.add_argument("--table", choices=tuple(TABLES), help="the table (with --address)")
     what.add_argument("--address", type=address, help="the first protocol address (0-based)")

@@ -28,10 +28,11 @@ from aiortu.cli._arguments import (
     add_timing,
     resolve_line_settings,
 )
-from aiortu.cli._messages import library_warnings_on_stderr, port_failure
+from aiortu.cli._messages import invalid_value, library_warnings_on_stderr, port_failure
+from aiortu.cli._transport_options import add_transport_options, transport_options
 from aiortu.core.pdu import Request, decode_request
 from aiortu.core.rtu import describe_frame, encode_frame
-from aiortu.errors import ConnectionLost, ModbusError, PortError
+from aiortu.errors import ConnectionLost, InvalidValue, ModbusError, PortError
 from aiortu.slave import ConfigError, MemoryStore, load_config, serve
 
 __all__ = ("register", "run")
@@ -85,8 +86,10 @@ def register(subparsers: Subparsers) -> None:
     parser.add_argument(
         "port",
         metavar="PORT",
-        help="serial device path, rtu+tcp://host:port, or tcp://host:port to listen on",
+        help="serial device path, rtu+tcp://host:port or ascii+tcp://host:port, or "
+        "tcp://, udp:// or tls://host:port to listen on",
     )
+    add_transport_options(parser, server=True)
     parser.add_argument("--config", metavar="FILE.toml", help="the device description")
     parser.add_argument(
         "--profile", metavar="PROFILE", help="serve a device profile instead (file or shipped name)"
@@ -103,7 +106,7 @@ def register(subparsers: Subparsers) -> None:
     add_line_settings(line)
     add_frame_gap(line, before="reply")
     add_timing(line)
-    tcp = parser.add_argument_group("Modbus TCP (tcp:// only)")
+    tcp = parser.add_argument_group("Modbus TCP (tcp://, udp:// and tls:// only)")
     tcp.add_argument(
         "--serial-line-codes",
         action="store_true",
@@ -151,11 +154,11 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as error:
         print(f"aiortu serve: error: {error}", file=sys.stderr)
         return 2
-    if _tcp_options(args) and not args.port.strip().lower().startswith("tcp://"):
+    if _tcp_options(args) and not _mbap(args.port):
         given = "--serial-line-codes" if args.serial_line_codes else "--unit-alias"
         print(
-            f"aiortu serve: error: {given} is for a Modbus TCP server (tcp://): a serial line "
-            "serves every code and has no unit ids but its units",
+            f"aiortu serve: error: {given} is for a Modbus TCP server (tcp://, udp://, tls://): "
+            "a serial line serves every code and has no unit ids but its units",
             file=sys.stderr,
         )
         return 2
@@ -228,12 +231,15 @@ async def _serve(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> 
 
 async def _serve_until_stopped(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> None:
     """Serve; after the line fails, reopen the port (backing off) unless told not to."""
-    tracer = Tracer(mbap=args.port.lower().startswith("tcp:")) if args.trace else None
+    tracer = Tracer(mbap=args.port.lower()[:4] in ("tcp:", "udp:", "tls:")) if args.trace else None
     backoff = _Backoff()
     opened = False
     while True:
         try:
             error = await _serve_once(args, units, tracer)
+        except (InvalidValue, ConfigError) as failure:  # a TLS file or rule file, say
+            shown = invalid_value(failure) if isinstance(failure, InvalidValue) else failure
+            raise CommandFailed(f"error: {shown}") from failure
         except PortError as failure:
             # The port must open the first time; once served, it may be gone a while.
             if not opened:
@@ -261,6 +267,7 @@ async def _serve_once(
         frame_gap=args.frame_gap,
         timing=args.timing,
         trace=tracer,
+        **transport_options(args),
         **_modbus_tcp_settings(args),
     ) as slave:
         listing = ", ".join(str(unit) for unit in sorted(units))
@@ -293,6 +300,11 @@ def unit_alias(text: str) -> tuple[int, int]:
     return pair
 
 
+def _mbap(port: str) -> bool:
+    """Whether `port` is served by a Modbus TCP server (MBAP framing: TCP, UDP or TLS)."""
+    return port.strip().lower().startswith(("tcp://", "udp://", "tls://"))
+
+
 def _tcp_options(args: argparse.Namespace) -> dict[str, Any]:
     """What `--serial-line-codes` and `--unit-alias` ask of the Modbus TCP server."""
     options: dict[str, Any] = {}
@@ -306,7 +318,7 @@ def _tcp_options(args: argparse.Namespace) -> dict[str, Any]:
 def _modbus_tcp_settings(args: argparse.Namespace) -> dict[str, Any]:
     """The Modbus TCP server's settings: the file's `[modbus_tcp]` table, then the flags
     (a flag wins, and `--unit-alias` adds to the file's aliases); none for another port."""
-    if not args.port.strip().lower().startswith("tcp://"):
+    if not _mbap(args.port):
         return {}
     settings = dict(getattr(args, "modbus_tcp", {}))
     flags = _tcp_options(args)

@@ -22,7 +22,7 @@ from aiortu.core.serial import LineSettings
 
 __all__ = (
     "UNIT_RANGE",
-    "WHOLE_FRAME_UNIT_RANGE",
+    "MBAP_UNIT_RANGE",
     "check_at_least",
     "check_bool",
     "check_coil",
@@ -44,9 +44,10 @@ __all__ = (
 UNIT_RANGE: Final = range(1, 248)
 """The unit addresses a unicast request may go to on a serial line."""
 
-WHOLE_FRAME_UNIT_RANGE: Final = range(256)
-"""The unit ids a request may carry over Modbus TCP: the MBAP header's byte as given (a device
-reached by its IP address is often 255 or 0, and 0 is then a unicast whose reply is awaited)."""
+MBAP_UNIT_RANGE: Final = range(256)
+"""The unit ids a request may carry in an MBAP header (Modbus TCP, UDP and TLS): the byte as
+given (a device reached by its IP address is often 255 or 0, and 0 is then a unicast whose
+reply is awaited)."""
 
 _TEXT_TYPES: Final = (str, bytes, bytearray, memoryview)
 """Iterables that are never a sequence of values: text, and bytes (each byte an int)."""

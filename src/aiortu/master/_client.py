@@ -45,8 +45,8 @@ from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidRequest, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
+    MBAP_UNIT_RANGE,
     UNIT_RANGE,
-    WHOLE_FRAME_UNIT_RANGE,
     check_at_least,
     check_int,
     check_master_settings,
@@ -65,6 +65,13 @@ __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
 _ResponseT = TypeVar("_ResponseT", bound=Response)
 _STATS_UNITS = range(248)
 """The units a master keeps statistics of: unit 0 counts the broadcasts."""
+
+
+def _unit_range(stream: anyio.abc.ByteStream) -> range:
+    """The unit ids `stream`'s framing carries: any byte in an MBAP header, else 1..247."""
+    from aiortu.transport import ModbusTcpStream
+
+    return MBAP_UNIT_RANGE if isinstance(stream, ModbusTcpStream) else UNIT_RANGE
 
 
 def _known_form(pdu: object) -> Request:
@@ -189,10 +196,11 @@ class Master(Operations):
             return link
 
         link = make_link(stream)
-        self.unit_range = WHOLE_FRAME_UNIT_RANGE if link.whole_frames else UNIT_RANGE
-        """The unit ids a request may go to: 1..247 on a serial line; over Modbus TCP, whose
-        framing carries any byte, 0..255 as given (0 then awaits a reply like any other id;
-        [`broadcast`][aiortu.master.Master] is the broadcast)."""
+        self.unit_range = _unit_range(stream)
+        """The unit ids a request may go to: 1..247 on a serial line (RTU or ASCII); over
+        Modbus TCP, UDP or TLS, whose MBAP header carries any byte, 0..255 as given (0 then
+        awaits a reply like any other id; [`broadcast`][aiortu.master.Master] is the
+        broadcast)."""
         self.engine = LineEngine(
             link,
             health=HealthPolicy(offline_after, fail_fast_offline, probe_interval),
