@@ -60,12 +60,16 @@ PACKAGES = {
     "master engine": Package(
         (
             "src/aiortu/master/**/_engine*.py",
-            "src/aiortu/master/**/_usual_exchange.py",
-            "src/aiortu/master/**/_job.py",
+            "src/aiortu/master/**/_fast_path.py",
+            "src/aiortu/master/**/_queue.py",
+            "src/aiortu/master/**/_attempt.py",
+            "src/aiortu/master/**/_line_state.py",
+            "src/aiortu/master/**/_line_task.py",
         ),
         (
             "tests/master/**/test_engine_*.py",
-            "tests/master/**/test_usual_exchange.py",
+            "tests/master/**/test_fast_path.py",
+            "tests/faults/**/test_late_replies.py",
             "tests/master/**/test_master_api.py",
             "tests/master/**/test_master_faults.py",
             "tests/master/**/test_reconnect.py",

@@ -13,9 +13,11 @@ from typing import TYPE_CHECKING, Any
 
 from aiortu.errors import UnitOffline, UnitSkipped
 from aiortu.master._client import Master, open_master
-from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
+from aiortu.master._config import MasterConfig, ReconnectPolicy, TimingPolicy
+from aiortu.master._connection import LineConnection, StreamOpener
 from aiortu.master._handles import BroadcastHandle, BroadcastMethod, UnitHandle
 from aiortu.master._records import FileRecordLike, RecordRequestLike
+from aiortu.master._seam import Seam
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
 
 if TYPE_CHECKING:
@@ -36,6 +38,7 @@ __all__ = (
     "HealthPolicy",
     "LineConnection",
     "Master",
+    "MasterConfig",
     "Point",
     "Poller",
     "ProfileMatch",
@@ -44,8 +47,10 @@ __all__ = (
     "ReconnectPolicy",
     "RecordRequestLike",
     "Sample",
+    "Seam",
     "StreamOpener",
     "SunSpecDevice",
+    "TimingPolicy",
     "UnitHandle",
     "UnitHealth",
     "UnitOffline",

@@ -50,6 +50,10 @@ class HealthPolicy:
     fail_fast_offline: bool = False
     probe_interval: float = 5.0
 
+    # A transaction answered only after one of its attempts timed out counts as a failure
+    # here (see UnitStats.count_late_success): a unit that answers only late goes offline
+    # like one that does not answer, even though each of its late replies is taken.
+
 
 @dataclass(slots=True)
 class UnitStats:
@@ -63,6 +67,9 @@ class UnitStats:
     """Transactions sent to the unit (a broadcast counts for unit 0)."""
     successes: int = 0
     """Transactions that got their reply (an exception response counts: the unit answered)."""
+    late_successes: int = 0
+    """Of those, the ones answered only after an attempt had timed out: the unit is too slow
+    for the timeout, and its health counts them as failures."""
     failures: int = 0
     """Transactions that ended without a usable reply (timeouts, frame errors)."""
     timeouts: int = 0
@@ -76,7 +83,9 @@ class UnitStats:
     retries: int = 0
     """Attempts repeated."""
     skipped_frames: int = 0
-    """Frames skipped while waiting for this unit (stale, other units, not matching)."""
+    """Frames skipped while waiting for this unit (stale, other units, not matching, late)."""
+    late_replies: int = 0
+    """Of those, the replies to this unit's timed-out requests that came too late."""
     last_latency: float | None = None
     """Seconds from the start of the request to the end of the reply, last success."""
     mean_latency: float | None = None
@@ -122,10 +131,25 @@ class UnitStats:
         elif transaction.failures and transaction.failures[-1] is Failure.TIMEOUT:
             self.timeouts += 1
 
+    def count_late_success(
+        self, latency: float, health: HealthPolicy, now: float, *, exception: bool = False
+    ) -> None:
+        """A transaction got its reply at `now`, but only after an attempt had timed out:
+        the caller has its reply, and the unit's health counts a failure (a unit that
+        answers only late goes offline like one that never answers)."""
+        online, failures = self.online, self.consecutive_failures
+        self.count_success(latency, exception=exception)
+        self.late_successes += 1
+        self.online, self.consecutive_failures = online, failures
+        self._failed_in_a_row(health, now)
+
     def count_failure(self, health: HealthPolicy, now: float) -> None:
         """A transaction ended without a usable reply at `now`: the unit goes offline after
         `health.offline_after` of them in a row."""
         self.failures += 1
+        self._failed_in_a_row(health, now)
+
+    def _failed_in_a_row(self, health: HealthPolicy, now: float) -> None:
         self.consecutive_failures += 1
         if self.online and self.consecutive_failures >= health.offline_after:
             self.online = False
