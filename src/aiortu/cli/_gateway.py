@@ -65,7 +65,7 @@ two programs sharing one virtual line:
   aiortu virtual-bus --ports 2                      # prints /dev/pts/5 and /dev/pts/6
   aiortu serve /dev/pts/6 --config examples/devices.toml
   aiortu gateway /dev/pts/5 --listen tcp://127.0.0.1:1502
-  mbpoll -m tcp -p 1502 -a 17 -t 4 -r 1 -c 3 127.0.0.1     # from any number of programs
+  mbpoll -m tcp -p 1502 -a 17 -t 4 -r 108 -c 3 -1 127.0.0.1   # from any number of programs
 
 a client whose unit does not answer gets exception 0B (gateway target device failed to
 respond), at once while the unit is offline; 0A (gateway path unavailable) while the port

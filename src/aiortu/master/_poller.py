@@ -12,7 +12,11 @@
 The points are planned once
 ([`aiortu.core.model.plan_reads`][aiortu.core.model.plan_reads]): neighbours on the same
 unit and table share one read when the gap between them is at most `max_gap` elements, within the
-spec's limits. Points with their own `interval` are polled on their own schedule; each interval has
+spec's limits. A device whose map has a hole inside a merged read refuses the whole block with
+exception 02 (illegal data address): the poller then splits that read into the reads of its
+points alone ([`PlannedRead.split`][aiortu.core.model.PlannedRead.split]), at once and for
+good, so the hole costs one request once and only a point that is really missing shows the
+exception. Points with their own `interval` are polled on their own schedule; each interval has
 its own cycle.
 
 A cycle runs its reads one after the other (the line carries one transaction at a time anyway) and
@@ -50,6 +54,7 @@ import anyio
 import anyio.abc
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
+from aiortu.core.codes import ExceptionCode
 from aiortu.core.model import (
     MAX_READ_BITS,
     MAX_READ_REGISTERS,
@@ -280,6 +285,9 @@ class Poller:
         self._task_group: anyio.abc.TaskGroup | None = None
         self.dropped = 0
         """Samples dropped because the iterating consumer fell behind."""
+        self.split_reads = 0
+        """Merged reads a device refused with exception 02 (a hole in its map), each
+        replaced by the reads of its points alone (see [`reads`][aiortu.master.Poller])."""
 
     # -- what is polled, and how it goes ----------------------------------------------
 
@@ -403,7 +411,9 @@ class Poller:
         samples: list[Sample] = []
         skip: dict[int, Exception] = {}
         self._probe_slots = self._units_to_probe(group, start)
-        for read in group.reads:
+        pending = list(group.reads)
+        while pending:
+            read = pending.pop(0)
             error = skip.get(read.unit) or self._gate(read.unit)
             if error is not None:
                 skip[read.unit] = error
@@ -416,6 +426,15 @@ class Poller:
                 # would stall the cycle for every other unit.
                 elements = await self._read(read, 0 if self._failing(read.unit) else None)
             except ModbusError as failure:
+                parts = _split_for(read, failure)
+                if parts:
+                    # A hole in the device's map: read the points alone, now and from now
+                    # on, so that the hole costs one request once, not every point.
+                    position = group.reads.index(read)
+                    group.reads[position : position + 1] = parts
+                    pending[:0] = parts
+                    self.split_reads += 1
+                    continue
                 samples += await self._deliver_error(read, failure, index)
                 if isinstance(failure, ConnectionLost):
                     # The line is down: every other unit would fail the same way.
@@ -496,6 +515,17 @@ class Poller:
             self._send.send_nowait(sample)
         except anyio.ClosedResourceError:
             pass
+
+
+def _split_for(read: PlannedRead, failure: ModbusError) -> list[PlannedRead]:
+    """The reads to make instead of `read` that `failure` refused as a block: its points
+    alone when the device said "illegal data address" to a read of several; else none."""
+    hole = ExceptionCode.ILLEGAL_DATA_ADDRESS
+    if isinstance(failure, ExceptionResponse) and failure.code == hole:
+        parts = read.split()
+        if len(parts) > 1:
+            return parts
+    return []
 
 
 _READS: dict[Table, tuple[type[ReadCoilsRequest | ReadHoldingRegistersRequest], type[Response]]] = {
