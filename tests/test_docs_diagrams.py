@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from aiortu.core import ascii
 from aiortu.core.machines import _master_machine as master_machine
 from aiortu.core.machines import _slave_machine as slave_machine
 from aiortu.core.machines import state_diagram
@@ -17,6 +18,7 @@ DOCS = Path(__file__).resolve().parent.parent / "docs"
 
 MACHINES: dict[str, tuple[Mapping[tuple[enum.Enum, enum.Enum], object], enum.Enum]] = {
     "receiver": (receiver.TRANSITIONS, receiver.ReceiverState.INIT),
+    "ascii receiver": (ascii.ASCII_TRANSITIONS, ascii.AsciiState.IDLE),
     "master": (master_machine.TRANSITIONS, master_machine.MasterState.IDLE),
     "slave": (slave_machine.TRANSITIONS, slave_machine.SlaveState.IDLE),
 }

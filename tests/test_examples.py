@@ -47,6 +47,20 @@ EXPECTED = {
         "logger: registers 0..2 = [215, 7, 8]",
         "the device: setpoint 215",
     ],
+    "modbus_ascii.py": [
+        "registers 0..2 = [215, 7, 8]",
+        "ASCII frames the slave received: 2",
+    ],
+    "modbus_udp.py": [
+        "registers 0..2 = [215, 7, 8]",
+        "requests 2, replies 2, from strangers 0, refused 0",
+    ],
+    "modbus_tls.py": [
+        "operator: setpoint written",
+        "viewer: write refused with exception 01",
+        "viewer: setpoint = 230",
+        "requests denied by the rules: 1",
+    ],
     "modbus_tcp_server.py": [
         "Modbus TCP transaction 2: reply 03 06 00 d7 00 07 00 08",
         "RTU over TCP: registers 0..2 = [215, 7, 8]",

@@ -13,6 +13,7 @@ needs to decide whether to fix their code, retry, or look at the wiring:
     │   └── UnitSkipped              (the peer)   the poller skipped an offline unit's read
     ├── FrameError                   (peer or line) bytes that are not a valid frame
     │   ├── CRCError                 (the line)   the CRC does not match: noise, wrong settings
+    │   ├── LRCError                 (the line)   an ASCII frame's LRC does not match
     │   └── MalformedPDU             (the peer)   the CRC is good but the content breaks the spec
     ├── ConnectionLost               (the line)   the byte stream closed or failed under us
     ├── ConfigError                  (the caller) a device description file is wrong
@@ -42,6 +43,7 @@ from aiortu.core.errors import (
     FrameError,
     InvalidRequest,
     InvalidValue,
+    LRCError,
     MalformedPDU,
     ModbusError,
     PortBusy,
@@ -62,6 +64,7 @@ __all__ = (
     "FrameError",
     "InvalidValue",
     "InvalidRequest",
+    "LRCError",
     "MalformedPDU",
     "ModbusError",
     "PortBusy",

@@ -56,7 +56,7 @@ def test_parse_valid(text: str, expected: PortAddress) -> None:
     [
         ("", "empty"),
         ("   ", "empty"),
-        ("udp://host:502", "unknown scheme 'udp'"),
+        ("mbaps://host:802", "unknown scheme 'mbaps'"),
         ("tcp://host:0", "outside 1..65535"),
         ("tcp://::1:502", "tcp://[::1]:5020"),
         ("socket://host:502", "unknown scheme"),

@@ -30,6 +30,7 @@ from aiortu.cli._arguments import (
     unit,
 )
 from aiortu.cli._messages import invalid_value, port_failure
+from aiortu.cli._transport_options import add_transport_options, transport_options
 from aiortu.core.model import Reference, Table, parse_reference
 from aiortu.errors import (
     ConnectionLost,
@@ -98,8 +99,9 @@ def add_line_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "port",
         metavar="PORT",
-        help="a serial device path, rtu+tcp://host:port, or tcp://host:port (Modbus TCP)",
+        help="a serial device path, rtu+tcp://, ascii+tcp://, tcp://, udp:// or tls://host:port",
     )
+    add_transport_options(parser)
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
     line.add_argument(
@@ -143,6 +145,7 @@ async def open_from_args(
         timeout=args.timeout,
         retries=args.retries,
         reconnect=reconnect,
+        **transport_options(args),
         **options,  # type: ignore[arg-type]
     ) as master:
         yield master

@@ -27,10 +27,11 @@ from aiortu.cli._arguments import (
     add_timing,
     resolve_line_settings,
 )
-from aiortu.cli._messages import library_warnings_on_stderr, port_failure
+from aiortu.cli._messages import invalid_value, library_warnings_on_stderr, port_failure
+from aiortu.cli._transport_options import add_transport_options, transport_options
 from aiortu.core.pdu import Request, decode_request
 from aiortu.core.rtu import describe_frame, encode_frame
-from aiortu.errors import ConnectionLost, ModbusError, PortError
+from aiortu.errors import ConnectionLost, InvalidValue, ModbusError, PortError
 from aiortu.slave import ConfigError, MemoryStore, load_config, serve
 
 __all__ = ("register", "run")
@@ -80,9 +81,11 @@ def register(subparsers: Subparsers) -> None:
     parser.add_argument(
         "port",
         metavar="PORT",
-        help="serial device path, rtu+tcp://host:port, or tcp://host:port to listen on",
+        help="serial device path, rtu+tcp://host:port or ascii+tcp://host:port, or "
+        "tcp://, udp:// or tls://host:port to listen on",
     )
     parser.add_argument("--config", metavar="FILE.toml", help="the device description")
+    add_transport_options(parser, server=True)
     parser.add_argument(
         "--profile", metavar="PROFILE", help="serve a device profile instead (file or shipped name)"
     )
@@ -182,12 +185,15 @@ async def _serve(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> 
 
 async def _serve_until_stopped(args: argparse.Namespace, units: Mapping[int, MemoryStore]) -> None:
     """Serve; after the line fails, reopen the port (backing off) unless told not to."""
-    tracer = Tracer(mbap=args.port.lower().startswith("tcp:")) if args.trace else None
+    tracer = Tracer(mbap=args.port.lower()[:4] in ("tcp:", "udp:", "tls:")) if args.trace else None
     backoff = _Backoff()
     opened = False
     while True:
         try:
             error = await _serve_once(args, units, tracer)
+        except (InvalidValue, ConfigError) as failure:  # a TLS file or rule file, say
+            shown = invalid_value(failure) if isinstance(failure, InvalidValue) else failure
+            raise CommandFailed(f"error: {shown}") from failure
         except PortError as failure:
             # The port must open the first time; once served, it may be gone a while.
             if not opened:
@@ -215,6 +221,7 @@ async def _serve_once(
         frame_gap=args.frame_gap,
         timing=args.timing,
         trace=tracer,
+        **transport_options(args),
     ) as slave:
         listing = ", ".join(str(unit) for unit in sorted(units))
         which = "unit" if len(units) == 1 else "units"

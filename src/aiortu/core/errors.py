@@ -18,6 +18,7 @@ __all__ = (
     "FrameError",
     "InvalidValue",
     "InvalidRequest",
+    "LRCError",
     "MalformedPDU",
     "ModbusError",
     "PortBusy",
@@ -172,6 +173,23 @@ class CRCError(FrameError):
         self.computed = computed
         super().__init__(
             f"CRC mismatch: frame carries 0x{received:04X}, content gives 0x{computed:04X}"
+        )
+
+
+class LRCError(FrameError):
+    """The LRC of an ASCII frame does not match its content. Caused by the line.
+
+    The ASCII framing's counterpart of [`CRCError`][aiortu.errors.CRCError]: noise, or line
+    settings that differ between the ends.
+    """
+
+    reason = "lrc"
+
+    def __init__(self, received: int, computed: int) -> None:
+        self.received = received
+        self.computed = computed
+        super().__init__(
+            f"LRC mismatch: frame carries 0x{received:02X}, content gives 0x{computed:02X}"
         )
 
 

@@ -39,6 +39,8 @@ from aiortu.slave._store import (
     Table,
 )
 from aiortu.slave._tcp_server import ModbusTcpServer, TcpServerCounters
+from aiortu.slave._tls_server import ModbusTlsServer
+from aiortu.slave._udp_server import ModbusUdpServer
 
 __all__ = (
     "BUILTIN_HANDLERS",
@@ -56,6 +58,8 @@ __all__ = (
     "HandlerResult",
     "MemoryStore",
     "ModbusTcpServer",
+    "ModbusTlsServer",
+    "ModbusUdpServer",
     "ProfileStore",
     "RangeAccess",
     "RangeHandler",

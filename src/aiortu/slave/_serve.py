@@ -17,9 +17,13 @@ from aiortu.slave._handlers import Handler
 from aiortu.slave._rtu_over_tcp import RtuOverTcpServer
 from aiortu.slave._slave import Slave, TraceCallback
 from aiortu.slave._tcp_server import ModbusTcpServer
+from aiortu.slave._tls_server import ModbusTlsServer
+from aiortu.slave._udp_server import ModbusUdpServer
 from aiortu.transport import (
     MODBUS_TCP_SCHEME,
+    MODBUS_UDP_SCHEME,
     TCP_SCHEME,
+    TLS_SCHEME,
     ListenAddress,
     listen_tcp,
     open_stream,
@@ -39,8 +43,8 @@ _WILDCARDS = frozenset({"0.0.0.0", "::"})
 def _listen_address(port_or_url: str, listen: bool | None) -> ListenAddress | None:
     """Where `port_or_url` listens, or None when it is a port to open (see serve)."""
     scheme = port_or_url.partition("://")[0].lower() if "://" in port_or_url else ""
-    if scheme == MODBUS_TCP_SCHEME:
-        return parse_listen_url(port_or_url)
+    if scheme in (MODBUS_TCP_SCHEME, MODBUS_UDP_SCHEME, TLS_SCHEME):
+        return parse_listen_url(port_or_url, (scheme,))
     if scheme == TCP_SCHEME:
         address = parse_listen_url(port_or_url)
         if listen or (listen is None and (address.port == 0 or address.host in _WILDCARDS)):
@@ -92,11 +96,17 @@ async def serve(
     - A serial device path, or `rtu+tcp://host:port` to connect to a serial device server: yields
       the running [`Slave`][aiortu.slave.Slave]. The line settings are the spec's 19200 8E1 by
       default; `options` go to [`aiortu.transport.open_stream`][aiortu.transport.open_stream]
-      (`exclusive`, `rs485`, `local_echo`, `connect_timeout`).
+      (`exclusive`, `rs485`, `local_echo`, `connect_timeout`, and `framing="ascii"` for Modbus
+      ASCII; `ascii+tcp://host:port` connects in ASCII).
     - `tcp://host:port`: listens for Modbus TCP and yields the running
       [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]; `options` go to it
       (`max_connections`, `idle_timeout`, `unit_aliases`, `answer_unknown_units`,
       `serial_line_codes`).
+    - `udp://host:port`: Modbus UDP, the same server answering each datagram to its source
+      ([`ModbusUdpServer`][aiortu.slave.ModbusUdpServer]; the same `options`).
+    - `tls://host:port`: Modbus/TCP Security, mutual TLS with roles
+      ([`ModbusTlsServer`][aiortu.slave.ModbusTlsServer]; `options` `certfile`, `keyfile`,
+      `cafile` and `rules`, and the Modbus TCP server's).
     - `rtu+tcp://host:port` with `listen` true, or with a wildcard host (`0.0.0.0`, `[::]`) or port
       0 (addresses nobody can connect to): listens for RTU framing over TCP and yields the running
       [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (option `max_connections`).
@@ -107,9 +117,16 @@ async def serve(
     """
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     address = _listen_address(port_or_url, listen)
+    if address is not None and address.scheme == MODBUS_UDP_SCHEME:
+        udp = ModbusUdpServer(units, handlers=handlers, trace=trace, **options)
+        async with udp.running(address, port_or_url):
+            yield udp
+        return
     if address is not None:
         server: ModbusTcpServer | RtuOverTcpServer
-        if address.scheme == MODBUS_TCP_SCHEME:
+        if address.scheme == TLS_SCHEME:
+            server = ModbusTlsServer(units, handlers=handlers, trace=trace, **options)
+        elif address.scheme == MODBUS_TCP_SCHEME:
             server = ModbusTcpServer(units, handlers=handlers, trace=trace, **options)
         else:
             server = RtuOverTcpServer(

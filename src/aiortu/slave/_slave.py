@@ -63,6 +63,7 @@ from aiortu.line import Link, LinkEvent, Waiter
 from aiortu.slave._answer_at_once import AnswerAtOnce, Taken
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, AfterHook, BeforeHook, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
+from aiortu.transport import AsciiStream
 
 __all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback")
 
@@ -107,6 +108,8 @@ class Slave(Dispatcher):
             if unit not in _UNIT_RANGE:
                 raise InvalidValue("unit", unit, _UNIT_RANGE)
         stores: dict[int, DataStore | AsyncDataStore] = dict(units)
+        if isinstance(stream, AsciiStream):
+            stream.answering = True  # 08/03 changes this end's input delimiter
         self.link = Link(
             stream,
             settings,

@@ -17,6 +17,15 @@ from typing import Any
 from anyio.abc import ByteStream
 
 from aiortu.core.serial import LineSettings
+from aiortu.errors import InvalidValue
+from aiortu.transport._ascii_stream import ASCII_BYTESIZE, AsciiStream, check_ascii_settings
+from aiortu.transport._authorization import (
+    WRITE_FUNCTION_CODES,
+    AccessRule,
+    RoleRules,
+    load_rules,
+    parse_rules,
+)
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._listen import (
@@ -43,9 +52,29 @@ from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
 from aiortu.transport._server_framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
 from aiortu.transport._tcp import open_rtu_over_tcp
+from aiortu.transport._tls import (
+    ROLE_OID,
+    CertificateError,
+    TlsListener,
+    certificate_role,
+    client_tls_context,
+    describe_tls_failure,
+    open_modbus_tls,
+    server_tls_context,
+)
+from aiortu.transport._udp import (
+    DatagramCounters,
+    check_datagram,
+    listen_udp,
+    open_modbus_udp,
+    serve_datagrams,
+)
 from aiortu.transport._url import (
+    ASCII_TCP_SCHEME,
     MODBUS_TCP_SCHEME,
+    MODBUS_UDP_SCHEME,
     TCP_SCHEME,
+    TLS_SCHEME,
     ListenAddress,
     ModbusTcpAddress,
     PortAddress,
@@ -56,12 +85,22 @@ from aiortu.transport._url import (
 )
 
 __all__ = (
+    "ASCII_BYTESIZE",
+    "ASCII_TCP_SCHEME",
     "MODBUS_TCP_SCHEME",
+    "MODBUS_UDP_SCHEME",
+    "ROLE_OID",
     "RTU_SILENCE",
     "TCP_SCHEME",
+    "TLS_SCHEME",
+    "WRITE_FUNCTION_CODES",
     "AcceptCounters",
+    "AccessRule",
+    "AsciiStream",
+    "CertificateError",
     "ConnectionCounters",
     "ConnectionLimit",
+    "DatagramCounters",
     "FileDescriptorStream",
     "FramedStream",
     "Framing",
@@ -73,32 +112,48 @@ __all__ = (
     "ModbusTcpStream",
     "PortAddress",
     "PushStream",
+    "RoleRules",
     "RS485Options",
     "RtuFraming",
     "SerialAddress",
     "SerialAttribute",
     "SerialStream",
     "TcpAddress",
+    "TlsListener",
     "UnixAddress",
+    "certificate_role",
+    "check_ascii_settings",
+    "check_datagram",
+    "client_tls_context",
+    "describe_tls_failure",
     "listen_tcp",
+    "listen_udp",
     "listen_unix",
     "listening_address",
+    "load_rules",
     "open_modbus_tcp",
+    "open_modbus_tls",
+    "open_modbus_udp",
     "open_rtu_over_tcp",
     "open_serial",
     "open_stream",
     "parse_listen_url",
     "parse_port_url",
+    "parse_rules",
     "parse_unix_url",
     "peer_address",
     "remove_socket",
+    "serve_datagrams",
     "serve_listener",
+    "server_tls_context",
     "write_now",
 )
 
-_SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo"})
-_TCP_OPTIONS = frozenset({"connect_timeout"})
+_SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo", "framing", "ascii_timeout"})
+_TCP_OPTIONS = frozenset({"connect_timeout", "framing", "ascii_timeout"})
 _MODBUS_TCP_OPTIONS = frozenset({"connect_timeout", "counters"})
+_MODBUS_UDP_OPTIONS = frozenset({"counters"})
+_MODBUS_TLS_OPTIONS = frozenset({"connect_timeout", "counters", "certfile", "keyfile", "cafile"})
 
 
 async def open_stream(
@@ -114,19 +169,32 @@ async def open_stream(
     `tcp://host:port` connects to a Modbus TCP server and returns a
     [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream], which carries RTU frames as MBAP ADUs
     ([`open_modbus_tcp`][aiortu.transport.open_modbus_tcp]; options `connect_timeout` and
-    `counters`; `settings` are not used). Anything else is a serial device path
+    `counters`; `settings` are not used). `udp://host:port` talks Modbus UDP, one ADU per
+    datagram, through the same stream ([`open_modbus_udp`][aiortu.transport.open_modbus_udp];
+    option `counters`). `tls://host:port` talks Modbus/TCP Security
+    ([`open_modbus_tls`][aiortu.transport.open_modbus_tls]; options `certfile`, `keyfile` and
+    `cafile`, required, and `connect_timeout` and `counters`). Anything else is a serial device path
     ([`open_serial`][aiortu.transport.open_serial]; options `exclusive`, `rs485` and
-    `local_echo`).
+    `local_echo`). `framing="ascii"` carries Modbus ASCII frames on a serial port or an
+    `rtu+tcp://` connection instead of RTU ones, as `ascii+tcp://host:port` does
+    ([`AsciiStream`][aiortu.transport.AsciiStream]; option `ascii_timeout`, the
+    inter-character timeout, 1 s by default); a serial port without the spec's 7 data bits is
+    opened as asked, with a warning.
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a malformed URL,
     `TypeError` for an option the transport does not take, and the transport's
     [`PortError`][aiortu.errors.PortError] subclasses when it cannot be opened.
     """
     address = parse_port_url(port_or_url)
-    if isinstance(address, ModbusTcpAddress):
+    if isinstance(address, ModbusTcpAddress) and address.scheme == MODBUS_UDP_SCHEME:
+        kind, allowed = "Modbus UDP", _MODBUS_UDP_OPTIONS
+    elif isinstance(address, ModbusTcpAddress) and address.scheme == TLS_SCHEME:
+        kind, allowed = "Modbus/TCP Security", _MODBUS_TLS_OPTIONS
+    elif isinstance(address, ModbusTcpAddress):
         kind, allowed = "Modbus TCP", _MODBUS_TCP_OPTIONS
     elif isinstance(address, TcpAddress):
-        kind, allowed = "RTU over TCP", _TCP_OPTIONS
+        kind = "ASCII over TCP" if address.framing == "ascii" else "RTU over TCP"
+        allowed = _TCP_OPTIONS
     else:
         kind, allowed = "a serial port", _SERIAL_OPTIONS
     unknown = sorted(set(options) - allowed)
@@ -135,8 +203,42 @@ async def open_stream(
             f"{port_or_url}: {kind} takes no option {', '.join(unknown)} "
             f"(it takes {', '.join(sorted(allowed))})"
         )
+    ascii_options = _ascii_framing(port_or_url, address, options)
+    stream = await _open(address, settings, options)
+    if ascii_options is None:
+        return stream
+    if isinstance(address, SerialAddress):
+        check_ascii_settings(port_or_url, settings)
+    return AsciiStream(stream, settings, **ascii_options)
+
+
+async def _open(address: PortAddress, settings: LineSettings, options: Any) -> ByteStream:
+    if isinstance(address, ModbusTcpAddress) and address.scheme == MODBUS_UDP_SCHEME:
+        return await open_modbus_udp(address.host, address.port, **options)
+    if isinstance(address, ModbusTcpAddress) and address.scheme == TLS_SCHEME:
+        return await open_modbus_tls(address.host, address.port, **options)
     if isinstance(address, ModbusTcpAddress):
         return await open_modbus_tcp(address.host, address.port, **options)
     if isinstance(address, TcpAddress):
         return await open_rtu_over_tcp(address.host, address.port, **options)
     return await open_serial(address.path, settings, **options)
+
+
+def _ascii_framing(
+    url: str, address: PortAddress, options: dict[str, Any]
+) -> dict[str, Any] | None:
+    """The [`AsciiStream`][aiortu.transport.AsciiStream] options when `url` is to carry ASCII
+    frames (taken out of `options`), else None."""
+    framing = options.pop("framing", None)
+    timeout = options.pop("ascii_timeout", None)
+    if isinstance(address, TcpAddress) and address.framing == "ascii":
+        if framing not in (None, "ascii"):
+            raise InvalidValue("framing", framing, "'ascii' for an ascii+tcp:// URL")
+        framing = "ascii"
+    if framing not in (None, "rtu", "ascii"):
+        raise InvalidValue("framing", framing, "'rtu' or 'ascii'")
+    if framing != "ascii":
+        if timeout is not None:
+            raise InvalidValue("ascii_timeout", timeout, "given with framing='ascii' only")
+        return None
+    return {} if timeout is None else {"timeout": timeout}

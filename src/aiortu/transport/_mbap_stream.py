@@ -79,6 +79,10 @@ class ModbusTcpCounters:
     """ADUs received with the outstanding transaction id, handed on."""
     dropped: int = 0
     """ADUs received with another transaction id (stale or unknown), dropped."""
+    strangers: int = 0
+    """Modbus UDP: datagrams from an address other than the server's, dropped."""
+    refused: int = 0
+    """Modbus UDP: datagrams that were not exactly one well-formed ADU, dropped."""
 
 
 class ModbusTcpStream(anyio.abc.ByteStream):

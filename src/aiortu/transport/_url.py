@@ -1,10 +1,12 @@
-"""Port names: a serial device path, `rtu+tcp://host:port` for RTU over TCP, or
-`tcp://host:port` for Modbus TCP.
+"""Port names: a serial device path, `rtu+tcp://host:port` for RTU over TCP,
+`tcp://host:port` for Modbus TCP, `udp://host:port` for Modbus UDP, or `tls://host:port` for
+Modbus/TCP Security.
 
 [`parse_port_url`][aiortu.transport.parse_port_url] turns the text a user gives (on the command
 line, in `open_master`) into a [`SerialAddress`][aiortu.transport.SerialAddress], a
-[`TcpAddress`][aiortu.transport.TcpAddress] or a
-[`ModbusTcpAddress`][aiortu.transport.ModbusTcpAddress], or raises
+[`TcpAddress`][aiortu.transport.TcpAddress], a
+[`ModbusTcpAddress`][aiortu.transport.ModbusTcpAddress] (with its `scheme`: `tcp`, `udp` or
+`tls`), or raises
 [`InvalidValue`][aiortu.errors.InvalidValue] saying what is wrong with it.
 [`parse_listen_url`][aiortu.transport.parse_listen_url] does the same for the address a server
 listens on (`serve`), where port 0 asks the system for a free port.
@@ -19,12 +21,16 @@ a device path. Any other text is taken as a serial device path, unchanged.
 from __future__ import annotations
 
 import ipaddress
+from collections.abc import Collection
 from dataclasses import dataclass
 
 from aiortu.errors import InvalidValue
 
 __all__ = (
+    "ASCII_TCP_SCHEME",
     "MODBUS_TCP_SCHEME",
+    "MODBUS_UDP_SCHEME",
+    "TLS_SCHEME",
     "ListenAddress",
     "ModbusTcpAddress",
     "PortAddress",
@@ -41,6 +47,17 @@ TCP_SCHEME = "rtu+tcp"
 MODBUS_TCP_SCHEME = "tcp"
 """The URL scheme of Modbus TCP (MBAP framing)."""
 
+MODBUS_UDP_SCHEME = "udp"
+"""The URL scheme of Modbus UDP (one MBAP ADU per datagram)."""
+
+TLS_SCHEME = "tls"
+"""The URL scheme of Modbus/TCP Security (MBAP framing inside mutual TLS)."""
+
+ASCII_TCP_SCHEME = "ascii+tcp"
+"""The URL scheme of Modbus ASCII over TCP, to a serial device server."""
+
+_MBAP_SCHEMES = (MODBUS_TCP_SCHEME, MODBUS_UDP_SCHEME, TLS_SCHEME)
+
 
 def format_tcp_url(host: str, port: int, scheme: str = TCP_SCHEME) -> str:
     """The `scheme://host:port` URL of a server, with IPv6 hosts in brackets."""
@@ -49,8 +66,10 @@ def format_tcp_url(host: str, port: int, scheme: str = TCP_SCHEME) -> str:
     return f"{scheme}://{host}:{port}"
 
 
-_URL_FORM = "a serial device path, rtu+tcp://host:port or tcp://host:port"
-_LISTEN_FORM = "tcp://host:port or rtu+tcp://host:port"
+_URL_FORM = (
+    "a serial device path, rtu+tcp://host:port, ascii+tcp://host:port, tcp://host:port, "
+    "udp://host:port or tls://host:port"
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,33 +84,40 @@ class SerialAddress:
 
 @dataclass(frozen=True, slots=True)
 class TcpAddress:
-    """A serial device server reached by RTU over TCP."""
+    """A serial device server reached over TCP, its frames in RTU (`rtu+tcp://`) or ASCII
+    (`ascii+tcp://`) framing."""
 
     host: str
     """A host name, an IPv4 address, or an IPv6 address without brackets."""
     port: int
+    framing: str = "rtu"
+    """`rtu` or `ascii`."""
 
     def __str__(self) -> str:
-        return format_tcp_url(self.host, self.port, TCP_SCHEME)
+        scheme = ASCII_TCP_SCHEME if self.framing == "ascii" else TCP_SCHEME
+        return format_tcp_url(self.host, self.port, scheme)
 
 
 @dataclass(frozen=True, slots=True)
 class ModbusTcpAddress:
-    """A Modbus TCP device or server (MBAP framing)."""
+    """A device or server reached with MBAP framing: over TCP (`scheme` `tcp`), UDP (`udp`)
+    or mutual TLS (`tls`)."""
 
     host: str
     """A host name, an IPv4 address, or an IPv6 address without brackets."""
     port: int
+    scheme: str = MODBUS_TCP_SCHEME
+    """`tcp`, `udp` or `tls`."""
 
     def __str__(self) -> str:
-        return format_tcp_url(self.host, self.port, MODBUS_TCP_SCHEME)
+        return format_tcp_url(self.host, self.port, self.scheme)
 
 
 @dataclass(frozen=True, slots=True)
 class ListenAddress:
-    """Where a server listens: `scheme` `tcp` (Modbus TCP) or `rtu+tcp` (RTU framing
-    over TCP), a `host` to bind (`0.0.0.0` or `::` for every interface) and a `port`
-    (0: a free port the system picks)."""
+    """Where a server listens: `scheme` `tcp` (Modbus TCP), `udp` (Modbus UDP), `tls`
+    (Modbus/TCP Security) or `rtu+tcp` (RTU framing over TCP), a `host` to bind (`0.0.0.0`
+    or `::` for every interface) and a `port` (0: a free port the system picks)."""
 
     scheme: str
     host: str
@@ -157,16 +183,16 @@ def _parse_host_port(
 
 
 def parse_port_url(text: str) -> PortAddress:
-    """Parse a port name: a serial device path, `rtu+tcp://host:port` or
-    `tcp://host:port`.
+    """Parse a port name: a serial device path, `rtu+tcp://host:port`, `ascii+tcp://host:port`,
+    `tcp://host:port`, `udp://host:port` or `tls://host:port`.
 
     >>> parse_port_url("/dev/ttyUSB0")
     SerialAddress(path='/dev/ttyUSB0')
     >>> parse_port_url("rtu+tcp://[::1]:5020")
-    TcpAddress(host='::1', port=5020)
+    TcpAddress(host='::1', port=5020, framing='rtu')
 
-    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for an empty name, a scheme other than
-    `rtu+tcp` and `tcp`, or a URL without a valid host and port (1..65535).
+    Raises [`InvalidValue`][aiortu.errors.InvalidValue] for an empty name, an unknown scheme, or
+    a URL without a valid host and port (1..65535).
     """
     if not isinstance(text, str):
         raise InvalidValue("port", text, _URL_FORM, "not a string")
@@ -176,20 +202,25 @@ def parse_port_url(text: str) -> PortAddress:
     if not separator:
         return SerialAddress(text)
     scheme = scheme.lower()
-    if scheme == MODBUS_TCP_SCHEME:
-        return ModbusTcpAddress(*_parse_host_port(text, rest, scheme))
+    if scheme in _MBAP_SCHEMES:
+        return ModbusTcpAddress(*_parse_host_port(text, rest, scheme), scheme)
+    if scheme == ASCII_TCP_SCHEME:
+        return TcpAddress(*_parse_host_port(text, rest, scheme), "ascii")
     if scheme != TCP_SCHEME:
         raise _bad(
             text,
-            f"unknown scheme {scheme!r}: only {TCP_SCHEME}:// and {MODBUS_TCP_SCHEME}:// "
-            "are supported",
+            f"unknown scheme {scheme!r}: only rtu+tcp://, ascii+tcp://, tcp://, udp:// and "
+            "tls:// are supported",
         )
     return TcpAddress(*_parse_host_port(text, rest, scheme))
 
 
-def parse_listen_url(text: str) -> ListenAddress:
+def parse_listen_url(
+    text: str, schemes: Collection[str] = (MODBUS_TCP_SCHEME, TCP_SCHEME)
+) -> ListenAddress:
     """Parse the address a server listens on: `tcp://host:port` (Modbus TCP) or
-    `rtu+tcp://host:port` (RTU framing over TCP); port 0 asks for a free port.
+    `rtu+tcp://host:port` (RTU framing over TCP) by default, and the other `schemes` a server
+    takes (`udp` for Modbus UDP, `tls` for Modbus/TCP Security); port 0 asks for a free port.
 
     >>> parse_listen_url("tcp://0.0.0.0:1502")
     ListenAddress(scheme='tcp', host='0.0.0.0', port=1502)
@@ -197,10 +228,12 @@ def parse_listen_url(text: str) -> ListenAddress:
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for another scheme, a device path, or a
     URL without a valid host and port (0..65535).
     """
+    names = [f"{scheme}://" for scheme in schemes]
+    form = f"{', '.join(names[:-1])} or {names[-1]}" if len(names) > 1 else names[0]
     if not isinstance(text, str):
-        raise InvalidValue("port", text, _LISTEN_FORM, "not a string")
+        raise InvalidValue("port", text, f"{form}host:port", "not a string")
     scheme, separator, rest = text.partition("://")
     scheme = scheme.lower()
-    if not separator or scheme not in (MODBUS_TCP_SCHEME, TCP_SCHEME):
-        raise _bad(text, "a server listens on a tcp:// or rtu+tcp:// URL", _LISTEN_FORM)
-    return ListenAddress(scheme, *_parse_host_port(text, rest, scheme, 0, _LISTEN_FORM))
+    if not separator or scheme not in schemes:
+        raise _bad(text, f"a server listens on a {form} URL", f"{form}host:port")
+    return ListenAddress(scheme, *_parse_host_port(text, rest, scheme, 0, f"{form}host:port"))

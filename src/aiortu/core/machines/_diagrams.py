@@ -41,12 +41,15 @@ def state_diagram(
 
 
 def _main() -> None:
+    from aiortu.core.ascii import ASCII_TRANSITIONS, AsciiState
     from aiortu.core.machines import _master_machine as master_machine
     from aiortu.core.machines import _slave_machine as slave_machine
     from aiortu.core.rtu import RECEIVER_TRANSITIONS, ReceiverState
 
     print("Receiver:")
     print(state_diagram(RECEIVER_TRANSITIONS, ReceiverState.INIT))
+    print("ASCII receiver:")
+    print(state_diagram(ASCII_TRANSITIONS, AsciiState.IDLE))
     print("Master:")
     print(state_diagram(master_machine.TRANSITIONS, master_machine.MasterState.IDLE))
     print("Slave:")

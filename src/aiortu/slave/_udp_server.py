@@ -1,0 +1,79 @@
+"""Modbus UDP for the slave: the Modbus TCP server's answers, one datagram at a time.
+
+[`ModbusUdpServer`][aiortu.slave.ModbusUdpServer] is a
+[`ModbusTcpServer`][aiortu.slave.ModbusTcpServer] fed by datagrams instead of connections: the
+same stores, handlers, hooks, unit aliases and exception codes, each reply sent to the address
+the request came from. A datagram that is not exactly one well-formed ADU is refused and counted
+(see [`aiortu.transport.serve_datagrams`][aiortu.transport.serve_datagrams]); the connection
+limits of the TCP server (`max_connections`, `idle_timeout`) mean nothing here.
+`aiortu.serve("udp://0.0.0.0:1502", {17: store})` runs one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+import anyio
+import anyio.abc
+
+from aiortu._log import get_logger
+from aiortu.core.mbap import Adu
+from aiortu.slave._tcp_server import ModbusTcpServer
+from aiortu.transport import DatagramCounters, ListenAddress, listen_udp, serve_datagrams
+
+__all__ = ("ModbusUdpServer",)
+
+_log = get_logger(__name__)
+
+
+class ModbusUdpServer(ModbusTcpServer):
+    """A Modbus UDP server for `units` (see the module docstring); it takes
+    [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]'s arguments."""
+
+    def __init__(self, units: Any, **options: Any) -> None:
+        super().__init__(units, **options)
+        self.datagrams = DatagramCounters()
+        """Datagrams received, refused and answered."""
+
+    @asynccontextmanager
+    async def running(self, address: ListenAddress, url: str) -> AsyncIterator[None]:
+        """Bind to `address` and serve for the duration of the `async with`; `url` names it in
+        errors ([`PortError`][aiortu.errors.PortError] when the port cannot be bound)."""
+        sock = await listen_udp(address.host, address.port, url=url)
+        group = anyio.create_task_group()
+        await group.__aenter__()
+        try:
+            await group.start(self._serve_socket, sock)
+            yield
+        finally:
+            group.cancel_scope.cancel()
+            # The body's own exception propagates as it is, not wrapped in an ExceptionGroup.
+            await group.__aexit__(None, None, None)
+
+    async def _serve_socket(
+        self,
+        sock: anyio.abc.UDPSocket,
+        *,
+        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
+    ) -> None:
+        try:
+            local = sock.extra(anyio.abc.SocketAttribute.local_address)
+            self.local_address = (str(local[0]), int(local[1]))
+            task_status.started()
+            async with sock:
+                await serve_datagrams(sock, self._answer_datagram, self.datagrams)
+        except Exception as error:
+            self.connection_error = error
+            _log.error("Modbus UDP: the socket failed: %s", error)
+        finally:
+            self._stopped.set()
+
+    async def _answer_datagram(self, adu: Adu) -> bytes | None:
+        outgoing = await self._respond(adu)
+        if outgoing is None:
+            return None
+        if outgoing.delay > 0:
+            await anyio.sleep(outgoing.delay)
+        return outgoing.adu

@@ -1,0 +1,339 @@
+"""Modbus ASCII in the core: the LRC, the frame, and the receiver's table, timing and bounds."""
+
+from __future__ import annotations
+
+import itertools
+import random
+import re
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from aiortu.core.ascii import (
+    ASCII_TRANSITIONS,
+    MAX_ASCII_FRAME_LENGTH,
+    AsciiDiscardReason,
+    AsciiEvent,
+    AsciiFrameDiscarded,
+    AsciiFrameReceived,
+    AsciiReceiver,
+    AsciiReceiverOutput,
+    AsciiState,
+    decode_ascii_frame,
+    encode_ascii_frame,
+    lrc,
+)
+from aiortu.core.errors import FrameError, InvalidValue, LRCError
+from aiortu.core.rtu import ReceiverError
+
+READ = encode_ascii_frame(1, bytes.fromhex("03 00 00 00 01"))
+pdus = st.binary(min_size=1, max_size=253)
+units = st.integers(0, 255)
+
+
+def _frames(outputs: list[AsciiReceiverOutput]) -> list[bytes]:
+    return [out.frame for out in outputs if isinstance(out, AsciiFrameReceived)]
+
+
+def _discards(outputs: list[AsciiReceiverOutput]) -> list[AsciiDiscardReason]:
+    return [out.reason for out in outputs if isinstance(out, AsciiFrameDiscarded)]
+
+
+def _one_sentence(message: str) -> None:
+    assert message
+    assert "\n" not in message
+    assert "Traceback" not in message
+
+
+# -- the LRC and the frame ------------------------------------------------------------
+
+
+def test_the_spec_example_lrc() -> None:
+    assert lrc(bytes.fromhex("01 03 00 00 00 01")) == 0xFB
+    assert READ == b":010300000001FB\r\n"
+
+
+@given(st.binary(max_size=300))
+def test_the_lrc_makes_the_sum_zero(data: bytes) -> None:
+    assert (sum(data) + lrc(data)) & 0xFF == 0
+
+
+@given(units, pdus)
+def test_encode_then_decode_round_trips_in_either_case(unit: int, pdu: bytes) -> None:
+    frame = encode_ascii_frame(unit, pdu)
+    assert len(frame) <= MAX_ASCII_FRAME_LENGTH
+    assert re.fullmatch(rb":[0-9A-F]+\r\n", frame)
+    for text in (frame, frame.lower()):
+        decoded = decode_ascii_frame(text)
+        assert (decoded.unit, decoded.pdu) == (unit, pdu)
+
+
+def test_the_longest_frame_is_513_characters() -> None:
+    frame = encode_ascii_frame(1, bytes(253))
+    assert len(frame) == MAX_ASCII_FRAME_LENGTH
+    assert decode_ascii_frame(frame).pdu == bytes(253)
+    with pytest.raises(InvalidValue):
+        encode_ascii_frame(1, bytes(254))
+    with pytest.raises(InvalidValue):
+        encode_ascii_frame(256, b"\x03")
+    with pytest.raises(InvalidValue):
+        encode_ascii_frame(1, b"\x03", delimiter=ord(":"))
+
+
+@pytest.mark.parametrize(
+    ("frame", "words"),
+    [
+        (b":0103000000\r\n" + b"0", "ends with CR"),  # end missing
+        (b"010300000001FB\r\n", "starts with ':'"),
+        (b":010300000001F\r\n", "even number"),
+        (b":0103000 0001FB\r\n", "hex digits only"),  # fromhex would skip the space
+        (b":01030000+001FB\r\n", "hex digits only"),
+        (b":0103000\xff0001FB\r\n", "hex digits only"),
+        (b":01FE\r\n", "6..510"),
+        (b":" + b"0" * 511 + b"\r\n", "at most 513"),
+        (b":" + b"00" * 300 + b"\r\n", "at most 513"),
+        (b":010300000001FB\n\r", "ends with CR"),
+    ],
+)
+def test_malformed_frames_are_refused_in_one_sentence(frame: bytes, words: str) -> None:
+    with pytest.raises(FrameError) as caught:
+        decode_ascii_frame(frame)
+    assert caught.value.reason == "ascii"
+    assert words in str(caught.value)
+    _one_sentence(str(caught.value))
+
+
+def test_a_wrong_lrc_is_an_lrc_error() -> None:
+    with pytest.raises(LRCError) as caught:
+        decode_ascii_frame(b":010300000001FC\r\n")
+    assert (caught.value.received, caught.value.computed) == (0xFC, 0xFB)
+    assert caught.value.reason == "lrc"
+    _one_sentence(str(caught.value))
+
+
+@given(st.binary(max_size=600))
+def test_decoding_any_bytes_gives_a_frame_or_a_frame_error(data: bytes) -> None:
+    try:
+        frame = decode_ascii_frame(data)
+    except FrameError as error:
+        _one_sentence(str(error))
+    else:
+        assert decode_ascii_frame(encode_ascii_frame(frame.unit, frame.pdu)) == frame
+
+
+# -- the receiver's table ---------------------------------------------------------------
+
+
+def test_the_table_names_only_real_actions() -> None:
+    receiver = AsciiReceiver()
+    for target, action in ASCII_TRANSITIONS.values():
+        assert isinstance(target, AsciiState)
+        assert callable(getattr(receiver, f"_{action}"))
+
+
+def test_a_pair_missing_from_the_table_raises() -> None:
+    receiver = AsciiReceiver()
+    assert (AsciiState.IDLE, AsciiEvent.TIMEOUT) not in ASCII_TRANSITIONS
+    with pytest.raises(ReceiverError, match="TIMEOUT in state IDLE"):
+        receiver._fire(AsciiEvent.TIMEOUT, b"", 0, 0.0)
+
+
+def test_every_event_goes_through_the_table() -> None:
+    receiver = AsciiReceiver()
+    seen: list[tuple[AsciiState, AsciiEvent]] = []
+    original = receiver._fire
+
+    def spy(event: AsciiEvent, data: bytes, position: int, now: float) -> int:
+        seen.append((receiver.state, event))
+        return original(event, data, position, now)
+
+    receiver._fire = spy  # type: ignore[method-assign]
+    assert _frames(receiver.feed(READ, 0.0)) == [bytes.fromhex("010300000001FB")]
+    assert seen == [
+        (AsciiState.IDLE, AsciiEvent.START),
+        (AsciiState.RECEPTION, AsciiEvent.CHARS),
+        (AsciiState.RECEPTION, AsciiEvent.CR),
+        (AsciiState.WAITING_END, AsciiEvent.END),
+    ]
+    assert receiver.state is AsciiState.IDLE
+
+
+# -- framing --------------------------------------------------------------------------
+
+
+def _split(stream: bytes, cuts: list[int]) -> list[bytes]:
+    points = sorted({cut % (len(stream) + 1) for cut in cuts})
+    edges = [0, *points, len(stream)]
+    return [stream[a:b] for a, b in itertools.pairwise(edges) if b > a]
+
+
+@settings(max_examples=200)
+@given(
+    st.lists(st.tuples(units, pdus), min_size=1, max_size=6),
+    st.lists(st.integers(0, 10_000), max_size=12),
+    st.lists(st.binary(max_size=20).map(lambda b: b.replace(b":", b"")), max_size=7),
+    st.booleans(),
+)
+def test_frames_survive_any_split_and_garbage_between_them(
+    frames: list[tuple[int, bytes]], cuts: list[int], garbage: list[bytes], lower: bool
+) -> None:
+    stream = bytearray()
+    for index, (unit, pdu) in enumerate(frames):
+        stream += garbage[index] if index < len(garbage) else b""
+        frame = encode_ascii_frame(unit, pdu)
+        stream += frame.lower() if lower else frame
+    receiver = AsciiReceiver()
+    outputs: list[AsciiReceiverOutput] = []
+    for step, chunk in enumerate(_split(bytes(stream), cuts)):
+        outputs += receiver.feed(chunk, step * 0.01)
+    received = [out for out in outputs if isinstance(out, AsciiFrameReceived)]
+    assert [(out.unit, out.pdu) for out in received] == frames
+    assert set(_discards(outputs)) <= {AsciiDiscardReason.NOISE}
+    assert receiver.state is AsciiState.IDLE
+
+
+@settings(max_examples=300)
+@given(st.binary(max_size=1200), st.lists(st.integers(0, 10_000), max_size=10))
+def test_a_frame_whose_lrc_fails_is_never_accepted(data: bytes, cuts: list[int]) -> None:
+    receiver = AsciiReceiver()
+    for step, chunk in enumerate(_split(data, cuts)):
+        for out in receiver.feed(chunk, step * 0.01):
+            if isinstance(out, AsciiFrameReceived):
+                assert sum(out.frame) & 0xFF == 0
+                assert len(out.frame) >= 3
+                text = out.frame.hex().encode()
+                assert text in data.lower()
+            else:
+                _one_sentence(out.detail)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_corrupted_character_never_passes(seed: int) -> None:
+    rng = random.Random(seed)
+    pdu = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 40)))
+    frame = bytearray(encode_ascii_frame(rng.randrange(1, 248), pdu))
+    index = rng.randrange(1, len(frame) - 2)
+    original = frame[index]
+    frame[index] = rng.choice([c for c in b"0123456789ABCDEF" if c != original])
+    outputs = AsciiReceiver().feed(bytes(frame), 1.0)
+    assert _frames(outputs) == [], f"seed {seed}: {bytes(frame)!r}"
+    assert _discards(outputs) == [AsciiDiscardReason.LRC], f"seed {seed}"
+
+
+def test_a_colon_inside_a_frame_starts_a_new_one() -> None:
+    receiver = AsciiReceiver()
+    outputs = receiver.feed(b":0103" + READ + b":01" + b"\r" + READ, 0.1)
+    assert _frames(outputs) == [bytes.fromhex("010300000001FB")] * 2
+    assert _discards(outputs) == [AsciiDiscardReason.RESTART] * 2
+    restart = outputs[0]
+    assert isinstance(restart, AsciiFrameDiscarded)
+    assert restart.data == b":0103"
+
+
+def test_bad_frames_are_reported_with_their_reason() -> None:
+    receiver = AsciiReceiver()
+    outputs = receiver.feed(b"noise:0103000\r\n:010300000001FC\r\n:010300000001FB\rX" + READ, 0.0)
+    assert _discards(outputs) == [
+        AsciiDiscardReason.NOISE,
+        AsciiDiscardReason.MALFORMED,
+        AsciiDiscardReason.LRC,
+        AsciiDiscardReason.NO_END,
+    ]
+    assert _frames(outputs) == [bytes.fromhex("010300000001FB")]
+    lost = [out for out in outputs if isinstance(out, AsciiFrameDiscarded)]
+    assert b"".join(out.data for out in lost) + READ == (
+        b"noise:0103000\r\n:010300000001FC\r\n:010300000001FB\rX" + READ
+    )
+
+
+def test_an_overlong_frame_is_dropped_and_the_next_one_taken() -> None:
+    longest = encode_ascii_frame(1, bytes(253))
+    receiver = AsciiReceiver()
+    outputs = receiver.feed(longest, 0.0)
+    assert _frames(outputs) == [b"\x01" + bytes(253) + bytes((lrc(b"\x01"),))]
+    too_long = b":" + b"00" * 256 + b"\r\n"
+    outputs = receiver.feed(too_long + READ, 1.0)
+    assert _discards(outputs) == [AsciiDiscardReason.OVERLONG, AsciiDiscardReason.NOISE]
+    first = outputs[0]
+    assert isinstance(first, AsciiFrameDiscarded)
+    assert len(first.data) == MAX_ASCII_FRAME_LENGTH - 1  # ':' and 511 characters: one over
+    assert _frames(outputs) == [bytes.fromhex("010300000001FB")]
+    assert len(receiver._buffer) == 0
+
+
+@given(st.integers(1, 5000))
+def test_memory_stays_bounded_without_delimiters(size: int) -> None:
+    receiver = AsciiReceiver()
+    receiver.feed(b":" + b"A" * size, 0.0)
+    assert len(receiver._buffer) <= MAX_ASCII_FRAME_LENGTH
+
+
+# -- timing ---------------------------------------------------------------------------
+
+
+def test_a_gap_over_the_timeout_drops_the_frame() -> None:
+    receiver = AsciiReceiver(timeout=0.5)
+    receiver.feed(READ[:7], 10.0)
+    assert receiver.next_deadline() == pytest.approx(10.5)
+    assert receiver.expire(10.5) == []
+    outputs = receiver.feed(READ[7:], 10.6)
+    assert _discards(outputs) == [AsciiDiscardReason.TIMEOUT, AsciiDiscardReason.NOISE]
+    assert _frames(outputs) == []
+    assert receiver.next_deadline() is None
+
+
+def test_a_gap_within_the_timeout_keeps_the_frame() -> None:
+    receiver = AsciiReceiver()  # 1 s, the spec's default
+    receiver.feed(READ[:7], 10.0)
+    outputs = receiver.feed(READ[7:], 10.9)
+    assert _frames(outputs) == [bytes.fromhex("010300000001FB")]
+
+
+def test_expire_drops_a_stalled_frame_at_its_deadline() -> None:
+    receiver = AsciiReceiver(timeout=0.25)
+    receiver.feed(READ[:-1], 3.0)
+    assert receiver.state is AsciiState.WAITING_END
+    assert receiver.expire(3.2) == []
+    outputs = receiver.expire(3.3)
+    assert _discards(outputs) == [AsciiDiscardReason.TIMEOUT]
+    dropped = outputs[0]
+    assert isinstance(dropped, AsciiFrameDiscarded)
+    assert dropped.end == pytest.approx(3.25)
+    assert dropped.data == READ[:-1]
+    assert receiver.state is AsciiState.IDLE
+
+
+def test_times_are_the_arrivals_of_colon_and_delimiter() -> None:
+    receiver = AsciiReceiver()
+    char = receiver.char_time
+    (out,) = receiver.feed(READ, 5.0)
+    assert isinstance(out, AsciiFrameReceived)
+    assert out.end == 5.0
+    assert out.start == pytest.approx(5.0 - (len(READ) - 1) * char)
+
+
+def test_bad_settings_are_refused() -> None:
+    with pytest.raises(InvalidValue, match="timeout"):
+        AsciiReceiver(timeout=0)
+    with pytest.raises(InvalidValue, match="delimiter"):
+        AsciiReceiver(delimiter=ord(":"))
+
+
+# -- the delimiter of Diagnostics 08/03 -------------------------------------------------
+
+
+def test_a_changed_delimiter_ends_frames_in_place_of_lf() -> None:
+    receiver = AsciiReceiver()
+    receiver.delimiter = ord("!")
+    bang = encode_ascii_frame(1, bytes.fromhex("03 00 00 00 01"), delimiter=ord("!"))
+    assert bang.endswith(b"\r!")
+    outputs = receiver.feed(READ + bang, 0.0)
+    assert _discards(outputs) == [AsciiDiscardReason.NO_END]
+    assert _frames(outputs) == [bytes.fromhex("010300000001FB")]
+
+
+def test_cr_may_be_the_delimiter() -> None:
+    receiver = AsciiReceiver(delimiter=0x0D)
+    outputs = receiver.feed(READ[:-1] + b"\r", 0.0)
+    assert _frames(outputs) == [bytes.fromhex("010300000001FB")]

@@ -1,0 +1,119 @@
+"""The command over Modbus/TCP Security and Modbus ASCII: `serve` and `read` with certificates,
+rules and `--framing ascii`, and their errors in one line."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from aiortu.testing import PtyBus
+from tests.cli_helpers import run_aiortu, start_aiortu, stop
+from tests.transport.certificates import Authority
+
+pytestmark = pytest.mark.timeout(60)
+
+DEVICE = "[[slave]]\nunit = 17\n[[slave.holding_registers]]\nstart = 0\nvalues = [5, 6, 7]\n"
+READ = ["--unit", "17", "--table", "holding", "--address", "0", "--count", "2"]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    directory = tmp_path_factory.mktemp("cli-tls")
+    ca = Authority(directory)
+    server, operator = ca.issue("server", server=True), ca.issue("operator", role="operator")
+    config = directory / "device.toml"
+    config.write_text(DEVICE, encoding="utf-8")
+    rules = directory / "rules.toml"
+    rules.write_text("[roles.operator]\nfunction_codes = [3]\n", encoding="utf-8")
+    return {
+        "config": str(config),
+        "rules": str(rules),
+        "server": ["--certfile", str(server.certfile), "--keyfile", str(server.keyfile)],
+        "client": ["--certfile", str(operator.certfile), "--keyfile", str(operator.keyfile)],
+        "ca": ["--cafile", str(ca.cafile)],
+        "directory": directory,
+    }
+
+
+@contextmanager
+def serving(*args: str) -> Iterator[tuple[subprocess.Popen[str], str]]:
+    """`aiortu serve ARGS` until the block ends; yields it and its first line on stderr."""
+    server = start_aiortu("serve", *args)
+    try:
+        assert server.stderr is not None
+        yield server, server.stderr.readline()
+    finally:
+        stop(server)
+
+
+def test_serve_and_read_over_tls_with_a_role(files: dict[str, Any]) -> None:
+    with serving(
+        "tls://127.0.0.1:0", "--config", files["config"], "--rules", files["rules"],
+        *files["server"], *files["ca"],
+    ) as (_, first):  # fmt: skip
+        found = re.search(r"\(port (\d+)\)", first)
+        assert found, first
+        url = f"tls://127.0.0.1:{found[1]}"
+        read = run_aiortu("read", url, *READ, *files["client"], *files["ca"])
+        assert read.returncode == 0, read.stderr
+        assert read.stdout.split() == ["0", "5", "1", "6"]
+        write = run_aiortu(
+            "write", url, "--unit", "17", "--table", "holding", "--address", "0", "--values", "9",
+            *files["client"], *files["ca"],
+        )  # fmt: skip
+        assert write.returncode == 4
+        assert "ILLEGAL_FUNCTION" in write.stderr
+        assert len(write.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    ("leave_out", "message"),
+    [
+        ("--keyfile", "aiortu serve: error: keyfile must be given (Modbus/TCP Security needs "
+         "the server's certificate and private key)"),
+        ("--rules", "aiortu serve: error: rules must be given (a tls:// server grants each "
+         "role what its rules allow)"),
+    ],
+)  # fmt: skip
+def test_serve_tls_without_a_key_or_rules_is_one_line(
+    files: dict[str, Any], leave_out: str, message: str
+) -> None:
+    args = ["tls://127.0.0.1:0", "--config", files["config"], "--rules", files["rules"],
+            *files["server"], *files["ca"]]  # fmt: skip
+    at = args.index(leave_out)
+    del args[at : at + 2]
+    done = run_aiortu("serve", *args)
+    assert done.returncode == 1
+    assert done.stderr.strip() == message
+
+
+def test_a_rule_file_with_an_unknown_key_is_one_line(files: dict[str, Any]) -> None:
+    rules = Path(files["directory"]) / "typo.toml"
+    rules.write_text("[roles.viewer]\nfunction_codes = [3]\nreadonly = true\n", encoding="utf-8")
+    done = run_aiortu(
+        "serve", "tls://127.0.0.1:0", "--config", files["config"], "--rules", str(rules),
+        *files["server"], *files["ca"],
+    )  # fmt: skip
+    assert done.returncode == 1
+    assert done.stderr.strip() == (
+        f"aiortu serve: error: {rules}: roles.viewer.readonly: unknown key "
+        "(expected addresses, function_codes, read_only, units)"
+    )
+
+
+def test_serve_and_read_in_ascii_on_a_pty_bus(files: dict[str, Any]) -> None:
+    with PtyBus(ports=2).running_in_thread() as bus:
+        first, second = bus.paths
+        with serving(second, "--config", files["config"], "--framing", "ascii") as (server, line):
+            assert "7 data bits" in line, line  # the pty's 8 bits, said once
+            assert server.stderr is not None
+            assert "unit 17 on" in server.stderr.readline()
+            read = run_aiortu("read", first, *READ, "--framing", "ascii")
+    assert read.returncode == 0, read.stderr
+    assert read.stdout.split() == ["0", "5", "1", "6"]
