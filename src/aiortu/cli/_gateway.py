@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import signal
+import ssl
 import sys
 
 import anyio
@@ -25,8 +26,9 @@ from aiortu.cli._arguments import (
     unit,
 )
 from aiortu.cli._messages import library_warnings_on_stderr, port_failure
-from aiortu.errors import InvalidValue, PortError
+from aiortu.errors import ConfigError, InvalidValue, PortError
 from aiortu.gateway import Gateway, GatewayLine, Listen, gateway
+from aiortu.transport import server_tls_context
 
 __all__ = ("register", "run")
 
@@ -98,13 +100,20 @@ def register(subparsers: Subparsers) -> None:
         "--listen",
         action="append",
         required=True,
-        metavar="URL[,priority=N]",
+        metavar="URL[,priority=N][,rules=FILE]",
         help=(
-            "tcp://host:port (Modbus TCP), rtu+tcp://host:port (RTU frames) or "
-            "unix:PATH[?mode=0660&group=NAME] (Modbus TCP on a Unix socket, with its file "
-            "mode and group) to listen on; repeat for several; lower priorities go first (0)"
+            "tcp://host:port (Modbus TCP), rtu+tcp://host:port (RTU frames), "
+            "tls://host:port (Modbus/TCP Security: --certfile, --keyfile, --cafile and rules) "
+            "or unix:PATH[?mode=0660&group=NAME] (Modbus TCP on a Unix socket, with its file "
+            "mode and group) to listen on; repeat for several; lower priorities go first (0); "
+            "rules=FILE: what the listener's clients may do (a rule file, as for tls://; a "
+            "refused request gets exception 01)"
         ),
     )
+    tls = parser.add_argument_group("tls:// listeners")
+    tls.add_argument("--certfile", metavar="PEM", help="the gateway's certificate")
+    tls.add_argument("--keyfile", metavar="PEM", help="the gateway's private key")
+    tls.add_argument("--cafile", metavar="PEM", help="the CAs of the trusted clients")
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
     add_frame_gap(line, before="request")
@@ -193,17 +202,23 @@ def _listens(texts: list[str]) -> list[Listen] | str:
     """The `--listen` values as [`Listen`][aiortu.gateway.Listen]s, or what is wrong with one."""
     listens = []
     for text in texts:
-        url, _, option = text.partition(",")
-        priority = 0
-        if option:
+        url, *options = text.split(",")
+        priority, rules = 0, None
+        for option in options:
             name, _, value = option.partition("=")
             try:
-                if name != "priority":
+                if name == "priority":
+                    priority = int(value)
+                elif name == "rules" and value:
+                    rules = value
+                else:
                     raise ValueError(name)
-                priority = int(value)
             except ValueError:
-                return f"--listen {text}: after the URL only ',priority=N' (an integer) is allowed"
-        listens.append(Listen(url, priority))
+                return (
+                    f"--listen {text}: after the URL only ',priority=N' (an integer) and "
+                    "',rules=FILE' are allowed"
+                )
+        listens.append(Listen(url, priority, rules))
     return listens
 
 
@@ -265,6 +280,7 @@ async def _serve(
                 cache_ms=args.cache_ms,
                 metrics=args.metrics,
                 client_statistics=args.stats_clients,
+                tls=_tls_context(args, listens),
                 baudrate=args.baudrate,
                 parity=args.parity,
                 stopbits=args.stopbits,
@@ -282,13 +298,20 @@ async def _serve(
                     tasks.cancel_scope.cancel()
         except PortError as error:
             failure = CommandFailed(port_failure(error))
-        except InvalidValue as error:
+        except (InvalidValue, ConfigError) as error:
             print(f"aiortu gateway: error: {error}", file=sys.stderr)
             return 2
     # Raised out here, not from inside the gateway's task group.
     if failure is not None:
         raise failure
     return 0
+
+
+def _tls_context(args: argparse.Namespace, listens: list[Listen]) -> ssl.SSLContext | None:
+    """The server context of the tls:// listeners (None when there is none)."""
+    if not any(item.url.lower().startswith("tls://") for item in listens):
+        return None
+    return server_tls_context(args.certfile, args.keyfile, args.cafile)
 
 
 def _shared_what(args: argparse.Namespace, server: Gateway) -> str:

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import ssl
 import time
 from collections.abc import AsyncIterator, Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import anyio
@@ -25,35 +27,61 @@ from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS
 from aiortu.master import Master, open_master
 from aiortu.transport import (
     MODBUS_TCP_SCHEME,
+    TCP_SCHEME,
+    TLS_SCHEME,
+    RoleRules,
+    TlsListener,
     listen_tcp,
     listen_unix,
     listening_address,
+    load_rules,
     parse_listen_url,
     parse_unix_url,
     remove_socket,
 )
+
+_SCHEMES = (MODBUS_TCP_SCHEME, TCP_SCHEME, TLS_SCHEME)
+_HANDSHAKE_TIMEOUT = 10.0  # seconds a TLS client has to finish its handshake
 
 __all__ = ("Listen", "gateway")
 
 
 @dataclass(frozen=True, slots=True)
 class Listen:
-    """A listen URL and the priority of its connections: lower values are served first.
+    """A listen URL, the priority of its connections (lower values are served first) and its
+    access rules.
 
     `tcp://host:port` serves Modbus TCP, `rtu+tcp://host:port` RTU frames over TCP (as a
-    serial device server sends them), `unix:PATH` Modbus TCP on a Unix socket; port 0 asks
-    for a free port."""
+    serial device server sends them), `unix:PATH` Modbus TCP on a Unix socket, `tls://host:port`
+    Modbus/TCP Security (mutual TLS: give [`gateway`][aiortu.gateway.gateway] the certificate
+    files); port 0 asks for a free port.
+
+    `rules` are [`RoleRules`][aiortu.transport.RoleRules] or the path of a rule file
+    ([`load_rules`][aiortu.transport.load_rules]): a request they refuse gets exception 01. Every
+    client of a listener without certificates gets the rule of their `default_role`; a `tls://`
+    client the rule of its certificate's role. None (not allowed for `tls://`): every request
+    is forwarded."""
 
     url: str
     priority: int = 0
+    rules: RoleRules | str | Path | None = None
 
 
 def _listen(item: str | Listen) -> Listen:
     listen = item if isinstance(item, Listen) else Listen(item)
     if type(listen.priority) is not int:
         raise InvalidValue("priority", listen.priority, "an int (lower values go first)")
-    if parse_unix_url(listen.url) is None:
-        parse_listen_url(listen.url)  # raises for a bad one, before anything is opened
+    # parse_listen_url raises for a bad URL, before anything is opened.
+    unix = parse_unix_url(listen.url) is not None
+    tls = not unix and parse_listen_url(listen.url, _SCHEMES).scheme == TLS_SCHEME
+    if tls and listen.rules is None:
+        raise InvalidValue(
+            "rules", None, "given", message=f"{listen.url}: a tls:// listener needs rules"
+        )
+    if isinstance(listen.rules, (str, Path)):
+        listen = replace(listen, rules=load_rules(listen.rules))
+    elif listen.rules is not None and not isinstance(listen.rules, RoleRules):
+        raise InvalidValue("rules", listen.rules, "RoleRules or the path of a rule file")
     return listen
 
 
@@ -88,7 +116,7 @@ async def _open_lines(
 
 
 async def _listener(
-    stack: contextlib.AsyncExitStack, url: str
+    stack: contextlib.AsyncExitStack, url: str, tls: ssl.SSLContext | None = None
 ) -> anyio.abc.Listener[anyio.abc.ByteStream]:
     unix = parse_unix_url(url)
     if unix is not None:
@@ -98,14 +126,24 @@ async def _listener(
         where = parse_metrics_url(url)
         listener = await listen_tcp(where.host, where.port, url=url)
     else:
-        address = parse_listen_url(url)
+        address = parse_listen_url(url, _SCHEMES)
         listener = await listen_tcp(address.host, address.port, url=url)
+        if address.scheme == TLS_SCHEME:
+            if tls is None:
+                raise InvalidValue(
+                    "certfile", None, "given", message=f"{url}: give certfile, keyfile and cafile"
+                )
+            listener = TlsListener(
+                listener, tls, standard_compatible=False, handshake_timeout=_HANDSHAKE_TIMEOUT
+            )
     stack.push_async_callback(listener.aclose)
     return listener
 
 
 def _rtu_framing(url: str) -> bool:
-    return parse_unix_url(url) is None and parse_listen_url(url).scheme != MODBUS_TCP_SCHEME
+    if parse_unix_url(url) is not None:
+        return False
+    return parse_listen_url(url, _SCHEMES).scheme not in (MODBUS_TCP_SCHEME, TLS_SCHEME)
 
 
 @contextlib.asynccontextmanager
@@ -122,6 +160,7 @@ async def gateway(
     clock: Callable[[], float] = time.monotonic,
     metrics: str | None = None,
     client_statistics: int = DEFAULT_CLIENT_STATISTICS,
+    tls: ssl.SSLContext | None = None,
     **master_options: Any,
 ) -> AsyncIterator[Gateway]:
     """Share serial lines with network clients: yield a running
@@ -132,12 +171,16 @@ async def gateway(
     clients get exceptions 0B and 0A at once), a running [`Master`][aiortu.master.Master], used
     as it is, or several [`GatewayLine`][aiortu.gateway.GatewayLine]s, each with its unit range.
     With `metrics` (`http://127.0.0.1:9102/metrics`), the statistics are served there as
-    Prometheus text, from [`metrics_address`][aiortu.gateway.Gateway.metrics_address]. The other
-    arguments are [`Gateway`][aiortu.gateway.Gateway]'s.
+    Prometheus text, from [`metrics_address`][aiortu.gateway.Gateway.metrics_address]. `tls` is
+    the server context of the `tls://` listeners
+    ([`server_tls_context`][aiortu.transport.server_tls_context]). The other arguments are
+    [`Gateway`][aiortu.gateway.Gateway]'s.
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a listen URL that is not
-    `tcp://host:port`, `rtu+tcp://host:port` or `unix:PATH`, or lines whose unit ranges
-    overlap, and [`PortError`][aiortu.errors.PortError]s when a port cannot be opened.
+    `tcp://host:port`, `rtu+tcp://host:port`, `tls://host:port` or `unix:PATH`, a `tls://` one
+    without rules or `tls`, or lines whose unit ranges overlap,
+    [`ConfigError`][aiortu.errors.ConfigError] for a bad rule file, and
+    [`PortError`][aiortu.errors.PortError]s when a port cannot be opened.
     """
     listens = [_listen(item) for item in listen]
     lines = _lines(serial_port_or_master, master_options)
@@ -145,7 +188,7 @@ async def gateway(
     async with contextlib.AsyncExitStack() as stack:
         # Listeners first: an address that cannot be had fails before any line is opened (and
         # before any task group, which would wrap the error).
-        listeners = [(await _listener(stack, item.url), item) for item in listens]
+        listeners = [(await _listener(stack, item.url, tls), item) for item in listens]
         http = None if where is None or metrics is None else await _listener(stack, metrics)
         server = Gateway(
             await _open_lines(stack, lines, master_options),
@@ -161,8 +204,13 @@ async def gateway(
         tasks = await stack.enter_async_context(anyio.create_task_group())
         stack.callback(tasks.cancel_scope.cancel)
         for listener, item in listeners:
+            assert item.rules is None or isinstance(item.rules, RoleRules)
             serve = functools.partial(
-                server.serve, listener, priority=item.priority, rtu_framing=_rtu_framing(item.url)
+                server.serve,
+                listener,
+                priority=item.priority,
+                rtu_framing=_rtu_framing(item.url),
+                rules=item.rules,
             )
             await tasks.start(serve)
         if http is not None and where is not None:

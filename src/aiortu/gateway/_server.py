@@ -26,6 +26,12 @@ each to the engine of its line at once, with a key that keeps the line fair. Wha
   never gets a reply read before it.
 - **Cache.** With `cache_ms`, a read of a block answered at most that long ago is answered
   again without the line; a write drops the blocks it touches.
+- **Access rules.** A listener may have [`RoleRules`][aiortu.transport.RoleRules]: a request
+  they refuse (a write on a read-only listener, a function code or unit not allowed, a
+  broadcast) is answered with exception 01 at once, never sent, and counted
+  (`refused_by_rules`, and per client host); the first refusal of a connection is logged as a
+  warning. A `tcp://`, `rtu+tcp://` or `unix:` client gets the default role's rule; a `tls://`
+  client the rule of its certificate's role.
 - **Statistics.** Per line, unit and client host, in `statistics`.
 - **Framing.** A connection speaks Modbus TCP, or RTU frames over TCP (see
   [`serve_connection`][aiortu.gateway.Gateway.serve_connection]).
@@ -42,6 +48,7 @@ each to the engine of its line at once, with a key that keeps the line fair. Wha
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -49,6 +56,7 @@ from typing import Final
 
 import anyio
 import anyio.abc
+from anyio.streams.tls import TLSAttribute
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
@@ -62,10 +70,13 @@ from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS, GatewayStatistics, 
 from aiortu.master import Master
 from aiortu.transport import (
     RTU_SILENCE,
+    CertificateError,
     ConnectionLimit,
     Framing,
     MbapFraming,
+    RoleRules,
     RtuFraming,
+    certificate_role,
     peer_address,
     serve_listener,
 )
@@ -95,6 +106,7 @@ _UNIT_RANGE = range(1, 248)
 _ALL_UNITS = 0xFF
 _NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
 _NO_PATH = ExceptionCode.GATEWAY_PATH_UNAVAILABLE
+_REFUSED = ExceptionCode.ILLEGAL_FUNCTION
 
 
 @dataclass(slots=True)
@@ -123,6 +135,8 @@ class GatewayCounters:
     default unit), or 0A for a unit no line serves."""
     cache_hits: int = 0
     """Reads answered from the read cache: no transaction of their own."""
+    refused_by_rules: int = 0
+    """Requests the listener's access rules refused (answered with exception 01)."""
 
 
 class _Line(Turns):
@@ -266,10 +280,12 @@ class Gateway:
         *,
         priority: int = 0,
         rtu_framing: bool = False,
+        rules: RoleRules | None = None,
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
         """Accept connections from `listener` and serve each with `priority` (lower values go
-        first), until cancelled: Modbus TCP, or RTU frames with `rtu_framing` (see
+        first) and the access `rules` (None: everything allowed), until cancelled: Modbus TCP,
+        or RTU frames with `rtu_framing` (see
         [`serve_connection`][aiortu.gateway.Gateway.serve_connection]). Reports started once its
         address is in [`local_addresses`][aiortu.gateway.Gateway.local_addresses]."""
         address = listener.extra(anyio.abc.SocketAttribute.local_address, None)
@@ -283,12 +299,17 @@ class Gateway:
             client = _host(stream)
             if client is not None:
                 self.statistics.client(client).connections += 1
-            await self.serve_connection(stream, priority, rtu_framing=rtu_framing)
+            await self.serve_connection(stream, priority, rtu_framing=rtu_framing, rules=rules)
 
         await serve_listener(listener, accepted, self._limit)
 
     async def serve_connection(
-        self, stream: anyio.abc.ByteStream, priority: int = 0, *, rtu_framing: bool = False
+        self,
+        stream: anyio.abc.ByteStream,
+        priority: int = 0,
+        *,
+        rtu_framing: bool = False,
+        rules: RoleRules | None = None,
     ) -> None:
         """Serve one connection until the client closes it (the replies to the requests it sent
         before are sent first), stays idle for
@@ -298,7 +319,9 @@ class Gateway:
         The connection speaks Modbus TCP, or with `rtu_framing` RTU frames (unit, PDU, CRC) as
         a serial device server does: a frame whose length its function code does not tell ends
         after 20 ms of silence, a frame with a bad CRC is dropped, and as RTU frames carry no
-        transaction id the connection has one request on the line at a time.
+        transaction id the connection has one request on the line at a time. With `rules`, each
+        request is checked first (see the module docstring); a TLS stream's client has the role
+        its certificate carries.
         """
         framing: Framing = RtuFraming() if rtu_framing else MbapFraming()
         connection = Connection(
@@ -308,6 +331,8 @@ class Gateway:
             window=1 if framing.in_order else self.max_in_flight,
             idle_timeout=self.idle_timeout,
             client=_host(stream) or "local",
+            rules=rules,
+            role=certificate_role_of(stream) if rules is not None else None,
         )
         try:
             async with anyio.create_task_group() as tasks:
@@ -388,6 +413,9 @@ class Gateway:
         unit = adu.unit
         if unit == _ALL_UNITS and self.default_unit is not None:
             unit = self.default_unit
+        if connection.rules is not None and self._refused(connection, unit, adu.pdu):
+            await self._answer(connection, adu, exception_reply(adu.pdu, _REFUSED))
+            return
         line = self._route(unit)
         if line is None:
             self.counters.refused_units += 1
@@ -405,6 +433,25 @@ class Gateway:
         connection.tasks.start_soon(
             self._request, _Request(connection, adu, unit, line), name=_REQUEST_TASK
         )
+
+    def _refused(self, connection: Connection, unit: int, pdu: bytes) -> bool:
+        """Whether the connection's rules refuse `pdu` to `unit`; a refusal is counted, and
+        logged as a warning the first time on each connection."""
+        assert connection.rules is not None
+        refusal = connection.rules.refusal(connection.role, unit, pdu)
+        if refusal is None:
+            return False
+        self.counters.refused_by_rules += 1
+        self.statistics.client(connection.client).refused += 1
+        _log.log(
+            logging.DEBUG if connection.warned else logging.WARNING,
+            "gateway: refused a request of %s to unit %d: %s",
+            peer_address(connection.stream),
+            unit,
+            refusal,
+        )
+        connection.warned = True
+        return True
 
     async def _answer(self, connection: Connection, adu: Adu, reply: bytes) -> None:
         self.statistics.client(connection.client).replies += 1
@@ -543,6 +590,18 @@ def _check_options(
         raise InvalidValue("idle_timeout", idle_timeout, "a positive number of seconds")
     if default_unit is not None and default_unit not in _UNIT_RANGE:
         raise InvalidValue("default_unit", default_unit, _UNIT_RANGE)
+
+
+def certificate_role_of(stream: anyio.abc.ByteStream) -> str | None:
+    """The role in the client certificate of a TLS `stream` (None: not TLS, no certificate, or
+    no readable role: the rules' default role applies)."""
+    der = stream.extra(TLSAttribute.peer_certificate_binary, None)
+    if der is None:
+        return None
+    try:
+        return certificate_role(der)
+    except CertificateError:
+        return None
 
 
 def _host(stream: anyio.abc.ByteStream) -> str | None:

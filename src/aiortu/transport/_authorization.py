@@ -143,9 +143,7 @@ class RoleRules:
 
 
 _TOP_KEYS: Final = frozenset({"default_role", "roles"})
-_RULE_KEYS: Final = frozenset(
-    {"function_codes", "units", "addresses", "read_only", "broadcast"}
-)
+_RULE_KEYS: Final = frozenset({"function_codes", "units", "addresses", "read_only", "broadcast"})
 
 
 def load_rules(path: str | Path) -> RoleRules:
