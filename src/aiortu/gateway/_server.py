@@ -64,7 +64,16 @@ from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.errors import InvalidValue
 from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._connection import GONE, Connection, Turns
-from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
+from aiortu.gateway._forward import (
+    COALESCED_CODES,
+    FORCE_LISTEN_ONLY,
+    RESTART,
+    exception_reply,
+    forward,
+    forward_broadcast,
+    forward_unanswered,
+    request_of,
+)
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS, GatewayStatistics, LineStatistics
 from aiortu.master import Master
@@ -131,8 +140,9 @@ class GatewayCounters:
     broadcasts: int = 0
     """Requests to unit 0 sent on the line."""
     refused_units: int = 0
-    """Requests answered with exception 0B at once for their unit id (248..254, or 255 with no
-    default unit), or 0A for a unit no line serves."""
+    """Requests answered with an exception at once for their unit id: 0B for 248..254, 255
+    with no default unit, or a unit in listen-only mode; 0A for a unit no line serves; 01 for a
+    read (any request that may not be broadcast) to unit 0."""
     cache_hits: int = 0
     """Reads answered from the read cache: no transaction of their own."""
     refused_by_rules: int = 0
@@ -154,6 +164,8 @@ class _Line(Turns):
         self.shared: dict[tuple[int, bytes], _Shared] = {}
         self.cache = cache
         self.stats = stats
+        self.listen_only: set[int] = set()
+        """Units the gateway put in listen-only mode (08/04), until an 08/01 to them."""
 
 
 @dataclass(slots=True)
@@ -417,11 +429,12 @@ class Gateway:
             await self._answer(connection, adu, exception_reply(adu.pdu, _REFUSED))
             return
         line = self._route(unit)
-        if line is None:
+        code = self._refused_unit(line, unit, adu.pdu)
+        if code is not None:
             self.counters.refused_units += 1
-            code = _NO_PATH if unit in _UNIT_RANGE else _NO_RESPONSE
             await self._answer(connection, adu, exception_reply(adu.pdu, code))
             return
+        assert line is not None
         self.statistics.unit(line.name, unit).requests += 1
         cached = self._cached(line, unit, adu.pdu)
         if cached is not None:
@@ -433,6 +446,20 @@ class Gateway:
         connection.tasks.start_soon(
             self._request, _Request(connection, adu, unit, line), name=_REQUEST_TASK
         )
+
+    @staticmethod
+    def _refused_unit(line: _Line | None, unit: int, pdu: bytes) -> ExceptionCode | None:
+        """The exception that answers `pdu` to `unit` at once, or None to forward it: 0A for a
+        unit no line serves, 0B for a unit id that names no unit or a unit in listen-only mode
+        (it answers nothing but 08/01), 01 for a request to unit 0 that may not be broadcast
+        (a read: no device answers a broadcast, and the client would wait for nothing)."""
+        if line is None:
+            return _NO_PATH if unit in _UNIT_RANGE else _NO_RESPONSE
+        if unit == BROADCAST_UNIT:
+            return None if request_of(pdu).broadcastable else _REFUSED
+        if line.listen_only and unit in line.listen_only and not pdu.startswith(RESTART):
+            return _NO_RESPONSE
+        return None
 
     def _refused(self, connection: Connection, unit: int, pdu: bytes) -> bool:
         """Whether the connection's rules refuse `pdu` to `unit`; a refusal is counted, and
@@ -511,6 +538,10 @@ class Gateway:
                 if line.cache is not None:
                     line.cache.invalidate(unit, pdu)
                 self._count_transaction(line)
+                if pdu.startswith(FORCE_LISTEN_ONLY) or (
+                    unit in line.listen_only and pdu.startswith(RESTART)
+                ):
+                    return await self._unanswered(line, unit, pdu, priority, turn)
                 return await forward(line.master, unit, pdu, priority, turn)
             cache = line.cache if line.cache is not None and line.cache.cacheable(pdu) else None
             generation = cache.generation(unit) if cache is not None else (0, 0)
@@ -520,6 +551,18 @@ class Gateway:
             return reply
         finally:
             line.now = max(line.now, turn)
+
+    @staticmethod
+    async def _unanswered(line: _Line, unit: int, pdu: bytes, priority: int, turn: int) -> bytes:
+        """Send 08/04, or 08/01 to a unit in listen-only mode, which no reply follows; note the
+        unit's mode once sent."""
+        reply = await forward_unanswered(line.master, unit, pdu, priority, turn)
+        if reply is pdu:
+            if pdu.startswith(FORCE_LISTEN_ONLY):
+                line.listen_only.add(unit)
+            else:
+                line.listen_only.discard(unit)
+        return reply
 
     async def _broadcast(self, pdu: bytes, priority: int, turn: int) -> None:
         """Send `pdu` to every unit of every line: a broadcast may write anything."""

@@ -57,6 +57,7 @@ import anyio
 from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import FrameError
 from aiortu.core.machines import (
+    Failure,
     MasterMachine,
     MasterState,
     Outcome,
@@ -228,7 +229,9 @@ class LineEngine:
             raise ConnectionLost(str(self._failed))
         if not self._connected.is_set():
             await self._wait_connected(transaction.timeout)
-        if self.health.fail_fast_offline:
+        if self.health.fail_fast_offline and transaction.expects_reply:
+            # A request that gets no reply is sent all the same: 08/01 to a unit in
+            # listen-only mode is how it comes back.
             self._check_offline(transaction.unit)
         transaction.reply_delay = self.reply_delay(transaction.unit)
         jobs = self._jobs
@@ -806,8 +809,12 @@ class LineEngine:
             return
         response = outcome.response
         if response is not None:
+            now = self.link.clock()
             stats.count_success(
-                self.link.clock() - transaction.attempt_start,
+                now - transaction.attempt_start,
                 exception=isinstance(response, ExceptionPDU),
+                after_timeout=Failure.TIMEOUT in transaction.failures,
+                health=self.health,
+                now=now,
             )
         job.finish(response, None)

@@ -41,7 +41,10 @@ class HealthPolicy:
     """When a unit counts as offline, and what calls to it do then.
 
     `offline_after` consecutive failed transactions (timeouts, frame errors) mark a unit
-    offline; a success marks it online. With `fail_fast_offline`, calls to an offline
+    offline; a success marks it online. A transaction answered only after an attempt that timed
+    out counts as a failure here (the unit answers late, or not at all): a unit that keeps
+    timing out goes offline even when a retry is answered now and then, and an offline unit
+    comes back only with a reply to a first attempt. With `fail_fast_offline`, calls to an offline
     unit raise [`UnitOffline`][aiortu.errors.UnitOffline] without sending, except one probe every
     `probe_interval` seconds.
     """
@@ -81,10 +84,14 @@ class UnitStats:
     """Seconds from the start of the request to the end of the reply, last success."""
     mean_latency: float | None = None
     """The mean of that latency over every success."""
+    late_successes: int = 0
+    """Transactions answered only after an attempt that timed out (counted in `successes`, and
+    as failures for the unit's health)."""
     consecutive_failures: int = 0
-    """Failed transactions since the last success."""
+    """Failed transactions since the last success at the first attempt."""
     online: bool = True
-    """False after `offline_after` consecutive failures, until a success."""
+    """False after `offline_after` consecutive failures, until a success at the first
+    attempt."""
     last_probe: float = -math.inf
     """When the unit went offline, or a probe was last let through to it since (by the
     master failing fast, or by a poller)."""
@@ -100,12 +107,26 @@ class UnitStats:
         """When an offline unit may be probed next, on the master's clock; None unless offline."""
         return None if self.online else self.last_probe + probe_interval
 
-    def count_success(self, latency: float, *, exception: bool = False) -> None:
+    def count_success(
+        self,
+        latency: float,
+        *,
+        exception: bool = False,
+        after_timeout: bool = False,
+        health: HealthPolicy | None = None,
+        now: float = 0.0,
+    ) -> None:
         """A transaction got its reply, `latency` seconds after its request began to go
-        out (`exception`: an exception response, which counts: the unit answered)."""
+        out (`exception`: an exception response, which counts: the unit answered). With
+        `after_timeout` (an earlier attempt timed out) it counts as a failure for the unit's
+        health as well (see [`HealthPolicy`][aiortu.master.HealthPolicy])."""
         self.successes += 1
-        self.consecutive_failures = 0
-        self.online = True
+        if after_timeout and health is not None:
+            self.late_successes += 1
+            self._strike(health, now)
+        else:
+            self.consecutive_failures = 0
+            self.online = True
         if exception:
             self.exceptions += 1
         self.last_latency = latency
@@ -126,6 +147,9 @@ class UnitStats:
         """A transaction ended without a usable reply at `now`: the unit goes offline after
         `health.offline_after` of them in a row."""
         self.failures += 1
+        self._strike(health, now)
+
+    def _strike(self, health: HealthPolicy, now: float) -> None:
         self.consecutive_failures += 1
         if self.online and self.consecutive_failures >= health.offline_after:
             self.online = False
