@@ -27,7 +27,14 @@ from aiortu.cli._arguments import (
 )
 from aiortu.cli._messages import library_warnings_on_stderr, port_failure
 from aiortu.errors import ConfigError, InvalidValue, PortError
-from aiortu.gateway import Gateway, GatewayLine, Listen, gateway
+from aiortu.gateway import (
+    DEFAULT_RETRIES,
+    DEFAULT_TIMEOUT,
+    Gateway,
+    GatewayLine,
+    Listen,
+    gateway,
+)
 from aiortu.transport import server_tls_context
 
 __all__ = ("register", "run")
@@ -118,8 +125,16 @@ def register(subparsers: Subparsers) -> None:
     add_line_settings(line)
     add_frame_gap(line, before="request")
     master = parser.add_argument_group("the master on the line")
-    master.add_argument("--timeout", type=seconds, default=1.0, help="response timeout (1.0)")
-    master.add_argument("--retries", type=int, default=2, help="extra attempts of a read (2)")
+    master.add_argument(
+        "--timeout", type=seconds, default=DEFAULT_TIMEOUT,
+        help=f"response timeout ({DEFAULT_TIMEOUT}; with --retries, a unit that does not "
+        "answer gets 0B within 1 s; give a slow line more, as --timeout 1 --retries 2)",
+    )  # fmt: skip
+    master.add_argument(
+        "--retries", type=int, default=DEFAULT_RETRIES,
+        help=f"extra attempts of a read (01-04, 07, 0B, 0C, 11, 14, 18, 2B) after a timeout or "
+        f"a bad frame; writes and diagnostics are sent once ({DEFAULT_RETRIES})",
+    )  # fmt: skip
     master.add_argument(
         "--offline-after",
         type=positive_int,

@@ -9,11 +9,12 @@ import time
 from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import anyio
 import anyio.abc
 
+from aiortu.core.machines import SAFE_TO_REPEAT
 from aiortu.errors import InvalidValue
 from aiortu.gateway._lines import GatewayLine, check_lines
 from aiortu.gateway._metrics import parse_metrics_url, serve_metrics
@@ -29,6 +30,7 @@ from aiortu.transport import (
     MODBUS_TCP_SCHEME,
     TCP_SCHEME,
     TLS_SCHEME,
+    WRITE_FUNCTION_CODES,
     RoleRules,
     TlsListener,
     listen_tcp,
@@ -43,7 +45,24 @@ from aiortu.transport import (
 _SCHEMES = (MODBUS_TCP_SCHEME, TCP_SCHEME, TLS_SCHEME)
 _HANDSHAKE_TIMEOUT = 10.0  # seconds a TLS client has to finish its handshake
 
-__all__ = ("Listen", "gateway")
+__all__ = ("DEFAULT_RETRIES", "DEFAULT_TIMEOUT", "REPEATED_CODES", "Listen", "gateway")
+
+DEFAULT_TIMEOUT = 0.3
+"""The response timeout of a line the gateway opens, unless told otherwise: a unit that does
+not answer costs 2 x (0.3 s + the request's wire time) + the 0.1 s late-reply guard, about
+0.72 s at 9600 baud, within the 1 s a client such as mbpoll waits by default."""
+
+DEFAULT_RETRIES = 1
+"""Extra attempts of a request in [`REPEATED_CODES`][aiortu.gateway.REPEATED_CODES], unless told
+otherwise; see [`DEFAULT_TIMEOUT`][aiortu.gateway.DEFAULT_TIMEOUT]."""
+
+REPEATED_CODES: Final = frozenset(
+    code for code in SAFE_TO_REPEAT if code not in WRITE_FUNCTION_CODES
+)
+"""The function codes the master of a line the gateway opens repeats after a failed attempt,
+unless told otherwise (`repeatable`): the reads of
+[`SAFE_TO_REPEAT`][aiortu.core.machines.SAFE_TO_REPEAT]. A write is sent once: a timed-out
+write may have been done, and its client, which sees 0B, decides whether to send it again."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,6 +125,9 @@ async def _open_lines(
     """The lines with a running master each: those given, and those opened with `options`."""
     options.setdefault("fail_fast_offline", True)
     options.setdefault("reconnect_fail_fast", True)
+    options.setdefault("timeout", DEFAULT_TIMEOUT)
+    options.setdefault("retries", DEFAULT_RETRIES)
+    options.setdefault("repeatable", REPEATED_CODES)
     opened = []
     for line in lines:
         master = line.port
@@ -168,8 +190,13 @@ async def gateway(
 
     `serial_port_or_master` is a port name for [`open_master`][aiortu.master.open_master] (with
     `master_options`; `fail_fast_offline` and `reconnect_fail_fast` default to true here, so that
-    clients get exceptions 0B and 0A at once), a running [`Master`][aiortu.master.Master], used
-    as it is, or several [`GatewayLine`][aiortu.gateway.GatewayLine]s, each with its unit range.
+    clients get exceptions 0B and 0A at once, `timeout` and `retries` to
+    [`DEFAULT_TIMEOUT`][aiortu.gateway.DEFAULT_TIMEOUT] and
+    [`DEFAULT_RETRIES`][aiortu.gateway.DEFAULT_RETRIES], so that a unit that does not answer
+    gets 0B within a client's 1 s, and `repeatable` to
+    [`REPEATED_CODES`][aiortu.gateway.REPEATED_CODES]: writes are sent once), a running
+    [`Master`][aiortu.master.Master], used as it is, or several
+    [`GatewayLine`][aiortu.gateway.GatewayLine]s, each with its unit range.
     With `metrics` (`http://127.0.0.1:9102/metrics`), the statistics are served there as
     Prometheus text, from [`metrics_address`][aiortu.gateway.Gateway.metrics_address]. `tls` is
     the server context of the `tls://` listeners
