@@ -52,6 +52,13 @@ examples:
       local clients (the SCADA) go before those of the other listener
   aiortu gateway /dev/ttyUSB0 --listen 'unix:/run/aiortu-ttyUSB0.sock?mode=0660&group=modbus'
       Modbus TCP framing on a Unix socket, for programs of group modbus on this machine
+  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:1502,rules=viewer.toml \
+                              --listen tcp://127.0.0.1:1503
+      clients of port 1502 may do what viewer.toml allows (exception 01 otherwise);
+      see "Exposing a line safely" in docs/gateway.md
+  aiortu gateway /dev/ttyUSB0 --listen tls://0.0.0.0:802,rules=roles.toml \
+                 --certfile gw.crt --keyfile gw.key --cafile clients.pem
+      Modbus/TCP Security: each client certificate's role gets its rule
   aiortu gateway --line /dev/ttyUSB0:1-20 --line /dev/ttyUSB1:21-40 \\
                  --listen tcp://0.0.0.0:502
       two lines, each with its own master; units 41..247 get exception 0A
@@ -67,8 +74,11 @@ two programs sharing one virtual line:
   mbpoll -m tcp -p 1502 -a 17 -t 4 -r 1 -c 3 127.0.0.1     # from any number of programs
 
 a client whose unit does not answer gets exception 0B (gateway target device failed to
-respond), at once while the unit is offline; 0A (gateway path unavailable) while the port
-is gone. Unit 0 is a broadcast: executed, never answered.
+respond) within 1 s with the defaults (--timeout 0.3 --retries 1), at once while the unit is
+offline; 0A (gateway path unavailable) while the port is gone. A write to unit 0 is a
+broadcast: executed, never answered; a read to unit 0 gets exception 01 at once. 08/04
+(force listen-only) is answered at once with its echo; the unit then gets 0B at once until
+an 08/01 brings it back.
 
 as a service, one instance per serial device: examples/aiortu-gateway@.service
 
