@@ -128,6 +128,7 @@ async def test_a_request_that_may_not_be_broadcast_is_not_sent_to_unit_0() -> No
     async with line() as bench, client(bench.gateway) as tcp:
         await tcp.send("03 0000 0001", unit=0, transaction_id=1)
         reply = await tcp.receive(wait=0.3)
-        assert reply is not None and reply.pdu.hex(" ") == "83 01"  # at once, not a wait
+        assert reply is not None  # at once, not a wait
+        assert reply.pdu.hex(" ") == "83 01"
         assert bench.gateway.counters.broadcasts == 0
         assert not [entry for entry in bench.bus.trace if entry.sender == 0]

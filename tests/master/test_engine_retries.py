@@ -95,7 +95,7 @@ async def test_a_refused_attempt_is_retried_without_the_guard() -> None:
 async def test_a_unit_answered_only_on_retries_goes_offline() -> None:
     # Every first attempt times out and its retry is answered: three such transactions in a
     # row are three failures for the unit's health, although each got its reply.
-    late_only = {index: silent for index in range(0, 6, 2)}
+    late_only = dict.fromkeys(range(0, 6, 2), silent)
     options = {"timeout": TIMEOUT, "retries": 1, "late_reply_guard": 0.001, "offline_after": 3}
     async with line(script=late_only, default=answer, **options) as (master, _, _):
         for _ in range(2):
