@@ -84,8 +84,8 @@ def register(subparsers: Subparsers) -> None:
         help="serial device path, rtu+tcp://host:port or ascii+tcp://host:port, or "
         "tcp://, udp:// or tls://host:port to listen on",
     )
-    parser.add_argument("--config", metavar="FILE.toml", help="the device description")
     add_transport_options(parser, server=True)
+    parser.add_argument("--config", metavar="FILE.toml", help="the device description")
     parser.add_argument(
         "--profile", metavar="PROFILE", help="serve a device profile instead (file or shipped name)"
     )
