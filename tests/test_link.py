@@ -173,9 +173,11 @@ async def test_bytes_in_the_first_silence_are_noise() -> None:
     # A stream read by a task, like a serial port: it may open mid-frame. (A pushing
     # in-memory bus never does: its link starts between frames.)
     near, far = virtual_pair(chunk_size=256)
-    async with Link(near, FAST, role=Role.MASTER, frame_gap=0) as link:
-        # A tail of a frame already on the line when the link opened.
-        await far.send(REPLY[5:])
+    # A tail of a frame already on the line when the link opens. At 1200 baud the first
+    # silence lasts 32 ms, so a busy machine that reads the bytes late does not turn them
+    # into the start of a frame.
+    await far.send(REPLY[5:])
+    async with Link(near, LineSettings(1200), role=Role.MASTER, frame_gap=0) as link:
         with anyio.fail_after(2):
             event = await link.receive()
         assert isinstance(event, FrameDiscarded)

@@ -27,6 +27,7 @@ Subparsers: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
 Runner: TypeAlias = "Callable[[argparse.Namespace], int]"
 
 SUMMARIES: dict[str, str] = {
+    "bridge": "publish the devices of lines to an MQTT broker (Home Assistant, Sparkplug B)",
     "demo": "watch three simulated devices being polled on a virtual bus (no hardware)",
     "gateway": "share one serial line with many Modbus TCP clients (the line server)",
     "monitor": "watch a bus: print every frame with its meaning, never send",

@@ -1,0 +1,207 @@
+"""MQTT 3.1.1 packets, sans-IO: the few a bridge sends and receives, built and parsed.
+
+The bridge speaks MQTT 3.1.1 (OASIS standard, 2014), which every broker in use accepts:
+CONNECT with a will, user name and password; PUBLISH at QoS 0 and 1 with its PUBACK;
+SUBSCRIBE and its SUBACK; PINGREQ and PINGRESP; DISCONNECT. A QoS 2 message from the broker
+is refused (the bridge subscribes at QoS 1 at most, so none comes).
+"""
+
+from __future__ import annotations
+
+import enum
+import struct
+from dataclasses import dataclass
+
+__all__ = (
+    "ConnectRefused",
+    "Packet",
+    "PacketReader",
+    "PacketType",
+    "Publish",
+    "connect_packet",
+    "disconnect_packet",
+    "pingreq_packet",
+    "puback_packet",
+    "publish_packet",
+    "subscribe_packet",
+)
+
+_MAX_REMAINING = 268_435_455
+"""The largest remaining length four bytes can say (MQTT 3.1.1, 2.2.3)."""
+
+
+class PacketType(enum.IntEnum):
+    """The control packet types used (the high nibble of the first byte)."""
+
+    CONNECT = 1
+    CONNACK = 2
+    PUBLISH = 3
+    PUBACK = 4
+    SUBSCRIBE = 8
+    SUBACK = 9
+    PINGREQ = 12
+    PINGRESP = 13
+    DISCONNECT = 14
+
+
+CONNACK_REASONS = {
+    1: "the broker does not accept MQTT 3.1.1",
+    2: "the broker refused the client id",
+    3: "the broker is unavailable",
+    4: "the broker refused the user name or password",
+    5: "the broker says the client is not authorised",
+}
+"""What each refusing CONNACK return code means."""
+
+
+class ConnectRefused(Exception):
+    """The broker answered CONNECT with a refusal; `code` is its return code."""
+
+    def __init__(self, code: int) -> None:
+        super().__init__(CONNACK_REASONS.get(code, f"the broker refused the connection ({code})"))
+        self.code = code
+
+
+@dataclass(frozen=True, slots=True)
+class Packet:
+    """A received packet: its `type`, the flags of its first byte and its `body`."""
+
+    type: int
+    flags: int
+    body: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Publish:
+    """A received PUBLISH: `topic`, `payload`, `qos`, `retain` and (QoS 1) `packet_id`."""
+
+    topic: str
+    payload: bytes
+    qos: int
+    retain: bool
+    packet_id: int | None
+
+    @classmethod
+    def parse(cls, packet: Packet) -> Publish:
+        """The PUBLISH in `packet`."""
+        qos = (packet.flags >> 1) & 3
+        (length,) = struct.unpack_from(">H", packet.body)
+        topic = packet.body[2 : 2 + length].decode()
+        at = 2 + length
+        packet_id = None
+        if qos:
+            (packet_id,) = struct.unpack_from(">H", packet.body, at)
+            at += 2
+        return cls(topic, packet.body[at:], qos, bool(packet.flags & 1), packet_id)
+
+
+def _length(n: int) -> bytes:
+    if n > _MAX_REMAINING:
+        raise ValueError(f"an MQTT packet holds at most {_MAX_REMAINING} bytes, not {n}")
+    out = bytearray()
+    while True:
+        n, digit = divmod(n, 128)
+        out.append(digit | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
+
+
+def _text(value: str | bytes) -> bytes:
+    data = value.encode() if isinstance(value, str) else value
+    return struct.pack(">H", len(data)) + data
+
+
+def _packet(first: int, body: bytes) -> bytes:
+    return bytes((first,)) + _length(len(body)) + body
+
+
+def connect_packet(
+    client_id: str,
+    *,
+    keepalive: int,
+    username: str | None = None,
+    password: str | None = None,
+    will: tuple[str, bytes, int, bool] | None = None,
+    clean_session: bool = True,
+) -> bytes:
+    """CONNECT: `will` is `(topic, payload, qos, retain)`."""
+    flags = 0x02 if clean_session else 0
+    payload = _text(client_id)
+    if will is not None:
+        topic, message, qos, retain = will
+        flags |= 0x04 | (qos << 3) | (0x20 if retain else 0)
+        payload += _text(topic) + _text(message)
+    if username is not None:
+        flags |= 0x80
+        payload += _text(username)
+    if password is not None:
+        flags |= 0x40
+        payload += _text(password)
+    header = _text("MQTT") + bytes((4, flags)) + struct.pack(">H", keepalive)
+    return _packet(PacketType.CONNECT << 4, header + payload)
+
+
+def publish_packet(
+    topic: str, payload: bytes, *, qos: int = 0, retain: bool = False, packet_id: int = 0,
+    dup: bool = False,
+) -> bytes:  # fmt: skip
+    """PUBLISH of `payload` on `topic` (`packet_id` for QoS 1)."""
+    first = PacketType.PUBLISH << 4 | (0x08 if dup else 0) | qos << 1 | (1 if retain else 0)
+    body = _text(topic) + (struct.pack(">H", packet_id) if qos else b"") + payload
+    return _packet(first, body)
+
+
+def puback_packet(packet_id: int) -> bytes:
+    """PUBACK of a received QoS 1 PUBLISH."""
+    return _packet(PacketType.PUBACK << 4, struct.pack(">H", packet_id))
+
+
+def subscribe_packet(packet_id: int, topics: list[tuple[str, int]]) -> bytes:
+    """SUBSCRIBE to `topics`, each `(filter, qos)`."""
+    body = struct.pack(">H", packet_id)
+    for topic, qos in topics:
+        body += _text(topic) + bytes((qos,))
+    return _packet(PacketType.SUBSCRIBE << 4 | 0x02, body)
+
+
+def pingreq_packet() -> bytes:
+    """PINGREQ."""
+    return bytes((PacketType.PINGREQ << 4, 0))
+
+
+def disconnect_packet() -> bytes:
+    """DISCONNECT."""
+    return bytes((PacketType.DISCONNECT << 4, 0))
+
+
+class PacketReader:
+    """Splits received bytes into packets: `feed` bytes, get the whole packets they end."""
+
+    def __init__(self) -> None:
+        self._buffer = bytearray()
+
+    def feed(self, data: bytes) -> list[Packet]:
+        """The packets completed by `data`; raises ValueError for a malformed length."""
+        buffer = self._buffer
+        buffer += data
+        packets: list[Packet] = []
+        while len(buffer) >= 2:
+            length = shift = 0
+            at = 1
+            while True:
+                if at >= len(buffer):
+                    return packets
+                byte = buffer[at]
+                length |= (byte & 0x7F) << shift
+                at += 1
+                if not byte & 0x80:
+                    break
+                shift += 7
+                if shift > 21:
+                    raise ValueError("a malformed MQTT remaining length")
+            if len(buffer) < at + length:
+                return packets
+            first = buffer[0]
+            packets.append(Packet(first >> 4, first & 0x0F, bytes(buffer[at : at + length])))
+            del buffer[: at + length]
+        return packets

@@ -1,0 +1,118 @@
+"""The plain topic layout, with or without Home Assistant discovery.
+
+Under the prefix (`aiortu` by default), for the bridge named NODE and each device DEVICE:
+
+| topic | payload |
+|---|---|
+| `PREFIX/bridge/NODE/status` | `online`, or `offline` (the last will), retained |
+| `PREFIX/bridge/NODE/dropped` | messages dropped while the broker was away, retained |
+| `PREFIX/DEVICE/POINT` | the point's value (retained unless the layout says not) |
+| `PREFIX/DEVICE/POINT/set` | a write of a writable point (the bridge subscribes) |
+| `PREFIX/DEVICE/availability` | `online` or `offline`, from the unit's health, retained |
+| `PREFIX/DEVICE/health` | `online`, `suspect` or `offline`, retained |
+| `PREFIX/DEVICE/error` | a refused or failed write: JSON with the point, payload and reason |
+"""
+
+from __future__ import annotations
+
+import json
+
+from aiortu.bridge._config import TopicLayout
+from aiortu.bridge._discovery import discovery_config
+from aiortu.bridge._outbox import Message
+from aiortu.bridge._packets import Publish
+from aiortu.bridge._payloads import format_value
+from aiortu.bridge._state import Command, DeviceState
+from aiortu.core.model import Value
+from aiortu.master import UnitState
+
+__all__ = ("PlainLayout",)
+
+
+class PlainLayout:
+    """The plain layout of `topics` (see the module docstring); with `discovery`, Home
+    Assistant's discovery configs too."""
+
+    def __init__(self, topics: TopicLayout, *, discovery: bool) -> None:
+        self.topics = topics
+        self.discovery = discovery
+        self.prefix = topics.prefix
+        self.status_topic = f"{self.prefix}/bridge/{topics.node}/status"
+        self._command_prefixes: dict[str, DeviceState] = {}
+
+    def will(self) -> Message | None:
+        """The bridge's status `offline`, retained."""
+        return Message(self.status_topic, b"offline", qos=1, retain=True)
+
+    def subscriptions(self) -> list[str]:
+        """The command topics of the devices with writable points."""
+        return [f"{self.prefix}/{name}/+/set" for name in self._command_prefixes]
+
+    def bind(self, devices: list[DeviceState]) -> None:
+        """Learn the devices (before the first connection)."""
+        self._command_prefixes = {d.name: d for d in devices if d.writable}
+
+    def on_connect(self, devices: list[DeviceState], dropped: int, now: float) -> list[Message]:
+        """Status, the dropped count, discovery, and each device's availability and values."""
+        qos = self.topics.qos
+        dropped_topic = f"{self.prefix}/bridge/{self.topics.node}/dropped"
+        messages = [
+            Message(self.status_topic, b"online", qos, True, now),
+            Message(dropped_topic, str(dropped).encode(), qos, True, now),
+        ]
+        for device in devices:
+            if self.discovery:
+                messages += self._discovery(device, now)
+            messages += self.health(device, now)
+        return messages
+
+    def _discovery(self, device: DeviceState, now: float) -> list[Message]:
+        messages = []
+        base = f"{self.prefix}/{device.name}"
+        for point in device.points:
+            topic, payload = discovery_config(
+                device, point, node=self.topics.node, qos=self.topics.qos,
+                discovery_prefix=self.topics.discovery_prefix,
+                topics={"state": f"{base}/{point.name}", "command": f"{base}/{point.name}/set",
+                        "availability": f"{base}/availability", "status": self.status_topic},
+            )  # fmt: skip
+            messages.append(Message(topic, payload, self.topics.qos, True, now))
+        return messages
+
+    def values(self, device: DeviceState, changed: dict[str, Value], now: float) -> list[Message]:
+        """One message per value, on the point's topic."""
+        base = f"{self.prefix}/{device.name}/"
+        qos, retain = self.topics.qos, self.topics.retain
+        points = device.config.profile.point
+        return [
+            Message(base + name, format_value(points(name), value), qos, retain, now)
+            for name, value in changed.items()
+        ]
+
+    def health(self, device: DeviceState, now: float) -> list[Message]:
+        """The device's availability and its three-state health."""
+        base = f"{self.prefix}/{device.name}/"
+        available = b"offline" if device.health is UnitState.OFFLINE else b"online"
+        qos = self.topics.qos
+        return [
+            Message(base + "availability", available, qos, True, now),
+            Message(base + "health", device.health.value.encode(), qos, True, now),
+        ]
+
+    def command(self, publish: Publish, devices: list[DeviceState], now: float,
+                ) -> tuple[list[Command], list[Message]]:  # fmt: skip
+        """A write from `PREFIX/DEVICE/POINT/set`."""
+        parts = publish.topic[len(self.prefix) + 1 :].split("/")
+        if len(parts) != 3 or parts[2] != "set" or parts[0] not in self._command_prefixes:
+            return [], []
+        return [Command(parts[0], parts[1], publish.payload)], []
+
+    def error(self, device: str, point: str, payload: bytes, reason: str, now: float) -> Message:
+        """`PREFIX/DEVICE/error`, not retained."""
+        body = {"point": point, "payload": payload.decode("utf-8", "replace"), "error": reason}
+        return Message(f"{self.prefix}/{device}/error", json.dumps(body).encode(),
+                       self.topics.qos, False, now)  # fmt: skip
+
+    def prepare(self, message: Message) -> bytes:
+        """The payload as made."""
+        return message.payload

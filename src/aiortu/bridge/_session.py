@@ -1,0 +1,302 @@
+"""The bridge's connection to its broker: connect with the last will, send the outbox in
+order, take the commands, keep the connection alive, and connect again when it drops.
+
+A QoS 1 message leaves the [`Outbox`][aiortu.bridge.Outbox] for the in-flight window
+when it is written and is forgotten only when the broker acknowledges it; the messages in
+flight when the connection drops go back to the front of the outbox, so the order holds and
+nothing is lost but what the outbox's bound drops (a broker may then get a message twice:
+QoS 1 is at least once). After each connection the session first sends what
+`on_connect` returns (availability, discovery, Sparkplug births), then the backlog.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ssl
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import anyio
+import anyio.abc
+
+from aiortu._log import get_logger
+from aiortu.bridge._broker import Broker, BrokerError
+from aiortu.bridge._outbox import Message, Outbox
+from aiortu.bridge._packets import (
+    ConnectRefused,
+    Packet,
+    PacketReader,
+    PacketType,
+    Publish,
+    connect_packet,
+    disconnect_packet,
+    pingreq_packet,
+    puback_packet,
+    publish_packet,
+    subscribe_packet,
+)
+
+__all__ = ("BrokerSession", "SessionHooks")
+
+_LINK_ERRORS = (
+    OSError, TimeoutError, anyio.BrokenResourceError, anyio.EndOfStream,
+    anyio.ClosedResourceError, ValueError, BrokerError,
+)  # fmt: skip
+"""What ends a connection and calls for the next one (a ValueError: bytes that are not MQTT)."""
+
+
+def _link_failure(error: Exception) -> Exception | None:
+    """The connection failure `error` is (or holds, alone, in a group), else None."""
+    if isinstance(error, _LINK_ERRORS):
+        return error
+    if isinstance(error, ExceptionGroup):
+        matched, rest = error.split(_LINK_ERRORS)
+        if rest is None and matched is not None:
+            leaf: Exception = matched
+            while isinstance(leaf, ExceptionGroup):
+                leaf = leaf.exceptions[0]
+            return leaf
+    return None
+
+
+_log = get_logger(__name__)
+
+_FATAL = (1, 2, 4, 5)
+"""CONNACK refusals that trying again will not cure: protocol, client id, login."""
+
+
+@dataclass(slots=True)
+class SessionHooks:
+    """What the bridge tells the session: the last `will` of each connection (made anew for
+    each: Sparkplug's bdSeq counts connections), the `subscriptions`, the messages to send
+    first after connecting (`on_connect`), how to encode a message when it is sent
+    (`prepare`: its Sparkplug sequence number), and where received messages go
+    (`on_publish`, which must not block)."""
+
+    will: Callable[[], Message | None]
+    subscriptions: Callable[[], list[str]]
+    on_connect: Callable[[], list[Message]]
+    on_publish: Callable[[Publish], None]
+    prepare: Callable[[Message], bytes] = lambda message: message.payload
+
+
+class BrokerSession:
+    """Keeps the bridge connected to `broker`, delivering `outbox` (see the module
+    docstring). `window` QoS 1 messages may wait for their acknowledgement at once; the
+    waits between connection attempts double from `reconnect_delay[0]` to
+    `reconnect_delay[1]` seconds."""
+
+    def __init__(
+        self,
+        broker: Broker,
+        outbox: Outbox,
+        hooks: SessionHooks,
+        *,
+        window: int = 256,
+        reconnect_delay: tuple[float, float] = (0.1, 5.0),
+        connect_timeout: float = 5.0,
+    ) -> None:
+        self.broker = broker
+        self.outbox = outbox
+        self.hooks = hooks
+        self.window = window
+        self.reconnect_delay = reconnect_delay
+        self.connect_timeout = connect_timeout
+        self.connected = False
+        """Whether the session is connected now."""
+        self.connections = 0
+        """Connections made (the first one counts)."""
+        self.delivered = 0
+        """Messages the broker took: acknowledged (QoS 1) or written (QoS 0)."""
+        self.last_error: str | None = None
+        """Why the last connection failed or ended."""
+        self._inflight: dict[int, Message] = {}
+        self._next_id = 0
+        self._stream: anyio.abc.ByteStream | None = None
+        self._acked = anyio.Event()
+        self._reader = PacketReader()
+        self._early: list[Packet] = []
+        self._sending = anyio.Lock()
+
+    async def _write(self, stream: anyio.abc.ByteStream, data: bytes) -> None:
+        # The sender, the pinger and the acknowledgements of commands share the stream.
+        async with self._sending:
+            await stream.send(data)
+
+    async def connect(self) -> None:
+        """Connect once: raise [`BrokerError`][aiortu.bridge.BrokerError] if the broker
+        refuses the login or its certificate does not check, OSError (or TimeoutError) if it
+        cannot be reached; either is kept in `last_error`."""
+        try:
+            self._stream = await self._open()
+        except (OSError, BrokerError) as error:
+            self.last_error = str(error) or type(error).__name__
+            raise
+
+    async def run(self) -> None:
+        """Deliver until cancelled, connecting again (with back-off) whenever the connection
+        fails; an open connection from [`connect`][aiortu.bridge.BrokerSession.connect] is used
+        first."""
+        delay = self.reconnect_delay[0]
+        while True:
+            try:
+                if self._stream is None:
+                    self._stream = await self._open()
+                delay = self.reconnect_delay[0]
+                await self._serve(self._stream)
+            except Exception as error:  # a group, from the connection's tasks
+                failure = _link_failure(error)
+                if failure is None:
+                    raise
+                self.last_error = str(failure) or type(failure).__name__
+                _log.warning("broker %s: %s; connecting again in %.1f s",
+                             self.broker.url, self.last_error, delay)  # fmt: skip
+            finally:
+                await self._drop()
+            await anyio.sleep(delay)
+            delay = min(delay * 2, self.reconnect_delay[1])
+
+    async def close(self) -> None:
+        """Say goodbye to the broker (DISCONNECT: no last will) and close the connection."""
+        stream, self._stream = self._stream, None
+        if stream is None:
+            return
+        with anyio.move_on_after(1, shield=True):
+            with contextlib.suppress(OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
+                await stream.send(disconnect_packet())
+            await stream.aclose()
+
+    async def _open(self) -> anyio.abc.ByteStream:
+        broker = self.broker
+        will = self.hooks.will()
+        with anyio.fail_after(self.connect_timeout):
+            context = broker.ssl_context()
+            stream: anyio.abc.ByteStream
+            if context is None:
+                stream = await anyio.connect_tcp(broker.host, broker.port)
+            else:
+                try:
+                    stream = await anyio.connect_tcp(
+                        broker.host, broker.port, ssl_context=context,
+                        tls_standard_compatible=False,
+                    )  # fmt: skip
+                except ssl.SSLError as error:
+                    # A certificate that does not check is the configuration's fault.
+                    reason = getattr(error, "verify_message", None) or error.reason or error
+                    raise BrokerError(f"broker {broker.url}: TLS failed: {reason}") from None
+            try:
+                await stream.send(connect_packet(
+                    broker.client_id, keepalive=broker.keepalive, username=broker.username,
+                    password=broker.password,
+                    will=None if will is None else (will.topic, will.payload, will.qos,
+                                                    will.retain),
+                ))  # fmt: skip
+                await self._connack(stream)
+            except BaseException:
+                await anyio.aclose_forcefully(stream)
+                raise
+        self.connections += 1
+        self.connected = True
+        _log.info("connected to broker %s", broker.url)
+        return stream
+
+    async def _connack(self, stream: anyio.abc.ByteStream) -> None:
+        reader = PacketReader()
+        while True:
+            packets = reader.feed(await stream.receive())
+            if packets:
+                break
+        first = packets[0]
+        if first.type != PacketType.CONNACK or len(first.body) != 2:
+            raise OSError("the broker did not answer CONNECT with CONNACK")
+        if first.body[1]:
+            refused = ConnectRefused(first.body[1])
+            message = f"broker {self.broker.url}: {refused}"
+            if first.body[1] in _FATAL:
+                raise BrokerError(message)
+            raise OSError(message)
+        self._reader = reader
+        self._early = packets[1:]  # what came with the CONNACK, handled once serving
+
+    async def _serve(self, stream: anyio.abc.ByteStream) -> None:
+        topics = self.hooks.subscriptions()
+        if topics:
+            await self._write(stream, subscribe_packet(self._packet_id(), [(t, 1) for t in topics]))
+        await self._send(stream, self.hooks.on_connect())
+        async with anyio.create_task_group() as tasks:
+            tasks.start_soon(self._receive, stream, tasks.cancel_scope)
+            tasks.start_soon(self._ping, stream)
+            while True:
+                await self.outbox.wait()
+                while len(self._inflight) >= self.window:
+                    self._acked = anyio.Event()
+                    await self._acked.wait()
+                await self._send(stream, self.outbox.take(self.window - len(self._inflight)))
+
+    async def _send(self, stream: anyio.abc.ByteStream, messages: list[Message]) -> None:
+        if not messages:
+            return
+        data = bytearray()
+        prepare = self.hooks.prepare
+        for message in messages:
+            packet_id = 0
+            if message.qos:
+                packet_id = self._packet_id()
+                self._inflight[packet_id] = message
+            else:
+                self.delivered += 1
+            data += publish_packet(
+                message.topic, prepare(message), qos=message.qos, retain=message.retain,
+                packet_id=packet_id,
+            )  # fmt: skip
+        await self._write(stream, bytes(data))
+
+    async def _receive(self, stream: anyio.abc.ByteStream, scope: anyio.CancelScope) -> None:
+        reader = self._reader
+        # The broker answers a PINGREQ within the keep-alive; silence beyond it is a dead link.
+        limit = self.broker.keepalive * 1.5
+        early, self._early = self._early, []
+        for packet in early:
+            await self._handle(stream, packet)
+        while True:
+            with anyio.fail_after(limit):
+                data = await stream.receive()
+            for packet in reader.feed(data):
+                await self._handle(stream, packet)
+
+    async def _handle(self, stream: anyio.abc.ByteStream, packet: Packet) -> None:
+        if packet.type == PacketType.PUBACK:
+            message = self._inflight.pop(int.from_bytes(packet.body[:2], "big"), None)
+            if message is not None:
+                self.delivered += 1
+                self._acked.set()
+        elif packet.type == PacketType.PUBLISH:
+            publish = Publish.parse(packet)
+            if publish.qos == 1 and publish.packet_id is not None:
+                await self._write(stream, puback_packet(publish.packet_id))
+            self.hooks.on_publish(publish)
+        elif packet.type == PacketType.SUBACK and 0x80 in packet.body[2:]:
+            _log.warning("broker %s refused a subscription: commands may not arrive",
+                         self.broker.url)  # fmt: skip
+
+    async def _ping(self, stream: anyio.abc.ByteStream) -> None:
+        while True:
+            await anyio.sleep(self.broker.keepalive / 2)
+            await self._write(stream, pingreq_packet())
+
+    def _packet_id(self) -> int:
+        for _ in range(65535):
+            self._next_id = self._next_id % 65535 + 1
+            if self._next_id not in self._inflight:
+                return self._next_id
+        raise OSError("every MQTT packet id is in flight")
+
+    async def _drop(self) -> None:
+        """The connection ended: its unacknowledged messages go back first, in order."""
+        self.connected = False
+        stream, self._stream = self._stream, None
+        if stream is not None:
+            await anyio.aclose_forcefully(stream)
+        self.outbox.put_back(self._inflight.values())  # a dict keeps the order they were sent
+        self._inflight.clear()
+        self._acked.set()

@@ -1,0 +1,176 @@
+"""The bridge's codecs without a broker: MQTT packets, Sparkplug payloads (read back by
+pysparkplug), the outbox's bound, and the payloads of values and commands."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from pysparkplug import Topic
+
+from aiortu.bridge import (
+    CommandError,
+    DataType,
+    Message,
+    Metric,
+    Outbox,
+    SparkplugPayload,
+    decode_payload,
+    encode_payload,
+    format_value,
+    parse_command,
+)
+from aiortu.bridge._packets import PacketReader, Publish, publish_packet
+from aiortu.core.model import load_profile
+from tests.bridge.helpers import HEAT_PUMP
+
+PROFILE = load_profile(HEAT_PUMP)
+
+_RANGES = {
+    DataType.INT16: (-(2**15), 2**15 - 1), DataType.INT32: (-(2**31), 2**31 - 1),
+    DataType.INT64: (-(2**63), 2**63 - 1), DataType.UINT16: (0, 2**16 - 1),
+    DataType.UINT32: (0, 2**32 - 1), DataType.UINT64: (0, 2**64 - 1),
+}  # fmt: skip
+
+
+@st.composite
+def metrics(draw: st.DrawFn) -> Metric:
+    datatype = draw(st.sampled_from(list(DataType)))
+    value: bool | int | float | str | None
+    if draw(st.booleans()) and draw(st.booleans()):
+        value = None
+    elif datatype in _RANGES:
+        value = draw(st.integers(*_RANGES[datatype]))
+    elif datatype is DataType.BOOLEAN:
+        value = draw(st.booleans())
+    elif datatype is DataType.STRING:
+        value = draw(st.text())
+    elif datatype is DataType.FLOAT:
+        value = draw(st.floats(width=32, allow_nan=False))
+    else:
+        value = draw(st.floats(allow_nan=False))
+    name = draw(st.text(min_size=1, max_size=20))
+    return Metric(name, datatype, value, draw(st.none() | st.integers(0, 2**63)))
+
+
+@given(st.lists(metrics(), max_size=5), st.integers(0, 2**63), st.none() | st.integers(0, 255))
+def test_sparkplug_payloads_round_trip_and_pysparkplug_reads_them(
+    metric_list: list[Metric], timestamp: int, seq: int | None
+) -> None:
+    payload = SparkplugPayload(timestamp, tuple(metric_list), seq)
+    data = encode_payload(payload)
+    assert decode_payload(data) == payload
+    if seq is None:
+        return
+    theirs = Topic.from_str("spBv1.0/g/DDATA/n/d").message_type.payload.decode(data)
+    assert theirs.seq == seq
+    assert theirs.timestamp == timestamp
+    for mine, other in zip(metric_list, theirs.metrics, strict=True):
+        assert (other.name, int(other.datatype)) == (mine.name, int(mine.datatype))
+        if mine.value is None:
+            assert other.is_null
+        else:
+            assert other.value == mine.value
+
+
+def test_a_truncated_payload_is_refused() -> None:
+    data = encode_payload(SparkplugPayload(1, (Metric("power", DataType.FLOAT, 1.5),), 3))
+    for cut in (data[:-1], data[:12], data + b"\x0a"):
+        with pytest.raises(ValueError, match=r"Sparkplug B payload|truncated"):
+            decode_payload(cut)
+
+
+@given(st.lists(st.tuples(st.text(max_size=30), st.binary(max_size=300), st.integers(0, 1),
+                          st.booleans()), max_size=8), st.integers(1, 50))  # fmt: skip
+def test_publish_packets_split_at_any_point_read_back(
+    messages: list[tuple[str, bytes, int, bool]], chunk: int
+) -> None:
+    stream = b"".join(
+        publish_packet(topic, payload, qos=qos, retain=retain, packet_id=n + 1)
+        for n, (topic, payload, qos, retain) in enumerate(messages)
+    )
+    reader = PacketReader()
+    packets = [
+        p for at in range(0, len(stream), chunk) for p in reader.feed(stream[at : at + chunk])
+    ]
+    got = [Publish.parse(p) for p in packets]
+    assert [(p.topic, p.payload, p.qos, p.retain) for p in got] == messages
+    assert [p.packet_id for p in got] == [n + 1 if m[2] else None for n, m in enumerate(messages)]
+
+
+@given(st.lists(st.binary(max_size=40), max_size=60), st.integers(1, 20), st.integers(20, 400))
+def test_the_outbox_keeps_the_newest_within_its_bound(
+    payloads: list[bytes], max_messages: int, max_bytes: int
+) -> None:
+    outbox = Outbox(max_messages, max_bytes)
+    for payload in payloads:
+        outbox.put(Message("t", payload))
+        assert len(outbox) <= max_messages
+        assert outbox.bytes <= max_bytes or len(outbox) == 1
+    kept = outbox.take(len(outbox))
+    assert [m.payload for m in kept] == payloads[len(payloads) - len(kept) :]
+    assert outbox.dropped + len(kept) == len(payloads)
+
+
+def test_messages_put_back_go_first_in_their_order() -> None:
+    outbox = Outbox()
+    for n in range(4):
+        outbox.put(Message("t", bytes([n])))
+    first = outbox.take(2)
+    outbox.put(Message("t", b"\x09"))
+    outbox.put_back(first)
+    assert [m.payload for m in outbox.take(10)] == [b"\x00", b"\x01", b"\x02", b"\x03", b"\x09"]
+
+
+@pytest.mark.parametrize(
+    ("point", "value", "payload"),
+    [
+        ("power", 230.10000610351562, b"230.1"),
+        ("power", 1800.0, b"1800.0"),
+        ("power", math.nan, b"null"),
+        ("setpoint", 45.1, b"45.1"),
+        ("model_code", 7, b"7"),
+        ("mode", "heat", b"heat"),
+        ("alarms", ("high_pressure", "sensor_fault"), b'["high_pressure", "sensor_fault"]'),
+        ("pump", True, b"true"),
+        ("serial", None, b"null"),
+    ],
+)
+def test_values_as_payloads(point: str, value: object, payload: bytes) -> None:
+    assert format_value(PROFILE.point(point), value) == payload  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("point", "payload", "value"),
+    [
+        ("setpoint", b"50.5", 50.5),
+        ("setpoint", b" 50 ", 50),
+        ("pump", b"ON", True),
+        ("pump", b"false", False),
+        ("pump", b"0", False),
+        ("mode", b"cool", "cool"),
+        ("mode", b'"cool"', "cool"),
+        ("alarms", b'["low_pressure"]', ("low_pressure",)),
+    ],
+)
+def test_command_payloads(point: str, payload: bytes, value: object) -> None:
+    assert parse_command(PROFILE.point(point), payload) == value
+
+
+@pytest.mark.parametrize(
+    ("point", "payload", "reason"),
+    [
+        ("setpoint", b"", "the payload is empty"),
+        ("setpoint", b"warm", "'warm' is not a number"),
+        ("setpoint", b"true", "'true' is not a number"),
+        ("pump", b"maybe", "'maybe' is not a boolean (true/false, on/off, 1/0)"),
+        ("alarms", b"low_pressure", "'low_pressure' is not a JSON list of flag names"),
+        ("setpoint", b"\xff\xfe", "the payload is not UTF-8 text"),
+    ],
+)
+def test_bad_command_payloads_say_why(point: str, payload: bytes, reason: str) -> None:
+    with pytest.raises(CommandError) as caught:
+        parse_command(PROFILE.point(point), payload)
+    assert str(caught.value) == reason

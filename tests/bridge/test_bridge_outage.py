@@ -1,0 +1,204 @@
+"""Nothing lost while the broker is away: the bridge polls on, buffers within its bound,
+reconnects and delivers the backlog in order; what the bound dropped is counted and
+published. And the bad inputs: an unreachable broker, a bad URL, a refused login, unknown
+profiles and points."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import anyio
+import pytest
+
+from aiortu.bridge import Bridge, BrokerError, parse_config
+from aiortu.errors import ConfigError
+from tests.bridge.helpers import HEAT_PUMP, config
+from tests.bridge.mosquitto import Mosquitto, Subscriber, free_port
+from tests.bridge.test_bridge_broker import until
+
+pytestmark = pytest.mark.timeout(90)
+
+
+def _distinct(payloads: list[bytes]) -> list[bytes]:
+    """`payloads` without repeats in a row: QoS 1 is at least once, and a subscriber that
+    subscribes again gets the retained value again."""
+    return [p for n, p in enumerate(payloads) if n == 0 or payloads[n - 1] != p]
+
+
+async def _count_through_an_outage(broker: Mosquitto, bridge: Bridge, values: int) -> None:
+    """Stop the broker, change the power `values` times a poll apart, start it again."""
+    broker.stop()
+    await until(lambda: not bridge.session.connected, 10)
+    store = bridge.simulated["hp-1"]
+    for n in range(values):
+        store.set_value("power", float(n))
+        await until(lambda n=n: len(bridge.outbox) > n, 5)
+    broker.start()
+
+
+async def test_the_backlog_arrives_in_order_after_a_broker_restart(mosquitto: Mosquitto) -> None:
+    # The subscriber's session persists on the broker: it misses nothing after the restart.
+    subscriber = Subscriber(mosquitto.port, ["aiortu/hp-1/power"], "keeper", persistent=True)
+    try:
+        async with Bridge(config(mosquitto.url, units=(1,))) as bridge:
+            await until(lambda: subscriber.on("aiortu/hp-1/power") == [b"1800.0"])
+            await _count_through_an_outage(mosquitto, bridge, 5)
+            expected = [b"1800.0"] + [f"{n}.0".encode() for n in range(5)]
+            await until(lambda: _distinct(subscriber.on("aiortu/hp-1/power")) == expected, 20)
+            assert bridge.outbox.dropped == 0
+            assert bridge.session.connections >= 2
+    finally:
+        subscriber.close()
+
+
+async def test_what_the_bound_drops_is_counted_and_published(mosquitto: Mosquitto) -> None:
+    subscriber = Subscriber(mosquitto.port, ["aiortu/#"], "keeper", persistent=True)
+    # Every point every poll: about 6 messages a second for a bound of 20.
+    bounded = config(mosquitto.url, units=(1,), device='publish = "every"',
+                     extra="[buffer]\nmax_messages = 20\n")  # fmt: skip
+    try:
+        async with Bridge(bounded) as bridge:
+            await until(lambda: subscriber.on("aiortu/hp-1/power")[:1] == [b"1800.0"])
+            mosquitto.stop()
+            await until(lambda: bridge.outbox.dropped > 0, 15)
+            bridge.simulated["hp-1"].set_value("power", 4.0)
+            await anyio.sleep(1.1)
+            assert len(bridge.outbox) <= 20
+            mosquitto.start()
+            await until(lambda: bridge.session.connected and not bridge.outbox, 20)
+            dropped = str(bridge.outbox.dropped).encode()
+            await until(lambda: subscriber.on("aiortu/bridge/test/dropped")[-1:] == [dropped], 10)
+            # The newest values are the ones kept.
+            assert b"4.0" in subscriber.on("aiortu/hp-1/power")
+    finally:
+        subscriber.close()
+
+
+async def test_an_unreachable_broker_is_waited_for_while_polling() -> None:
+    port = free_port()
+    broker = Mosquitto(port)
+    async with Bridge(config(broker.url, units=(1,))) as bridge:
+        await until(lambda: bridge.stats.readings > 0, 5)
+        assert not bridge.session.connected
+        assert len(bridge.outbox) > 0
+        broker.start()
+        try:
+            subscriber = Subscriber(port, ["aiortu/hp-1/power"])
+            await until(lambda: subscriber.on("aiortu/hp-1/power") == [b"1800.0"], 20)
+            subscriber.close()
+        finally:
+            broker.close()
+
+
+async def test_a_refused_login_stops_the_start(tmp_path: Path) -> None:
+    passwords = tmp_path / "passwords"
+    passwords.write_text("")
+    await anyio.run_process(["mosquitto_passwd", "-b", str(passwords), "user", "right"])
+    broker = Mosquitto(extra=f"password_file {passwords}\n")
+    broker.config.write_text(
+        broker.config.read_text().replace("allow_anonymous true", "allow_anonymous false")
+    )
+    broker.start()
+    try:
+        wrong = config(broker.url.replace("mqtt://", "mqtt://user:wrong@"), units=(1,))
+        with pytest.raises(BrokerError, match=r"refused the user name or password|not authorised"):
+            async with Bridge(wrong):
+                pass
+        right = config(broker.url.replace("mqtt://", "mqtt://user:right@"), units=(1,))
+        async with Bridge(right) as bridge:
+            assert bridge.session.connected
+    finally:
+        broker.close()
+
+
+@pytest.mark.parametrize(
+    ("url", "problem"),
+    [
+        ("http://127.0.0.1:1883", "the scheme must be mqtt:// or mqtts://"),
+        ("mqtt://127.0.0.1:99999", "the port must be a number 1..65535"),
+        ("mqtt://:1883", "names no host"),
+        ("mqtt://host:1883/topic", "has more than a host and port"),
+    ],
+)
+def test_bad_broker_urls_are_one_sentence(url: str, problem: str) -> None:
+    with pytest.raises(BrokerError) as caught:
+        config(url)
+    assert str(caught.value) == f"test.toml: broker URL {url!r}: {problem}"
+
+
+_LINE = '[broker]\nurl = "{url}"\n[[line]]\nport = "virtual"\n[[line.device]]\n'
+_KNOWN = "every_poll, name, points, profile, publish, unit"
+_SHIPPED = "eastron-sdm630, sunspec-inverter"
+
+
+@pytest.mark.parametrize(
+    ("device", "message"),
+    [
+        (
+            'profile = "nope"',
+            f"line[0].device[0].profile: unknown profile 'nope' (a file, or one of: {_SHIPPED})",
+        ),
+        (
+            f'profile = "{HEAT_PUMP}"\npoints = ["power", "watts"]',
+            "line[0].device[0].points[1]: profile 'HP-7' has no point named 'watts'",
+        ),
+        (
+            f'profile = "{HEAT_PUMP}"\nevery_poll = ["volts"]',
+            "line[0].device[0].every_poll[0]: profile 'HP-7' has no point named 'volts'",
+        ),
+        (
+            f'profile = "{HEAT_PUMP}"\npublish = "sometimes"',
+            'line[0].device[0].publish: must be "change" or "every", not \'sometimes\'',
+        ),
+        (
+            f'profile = "{HEAT_PUMP}"\npoints = []',
+            "line[0].device[0].points: must be a list of point names (none: omit it)",
+        ),
+        (
+            f'profile = "{HEAT_PUMP}"\ncolour = 1',
+            f"line[0].device[0].colour: unknown key (known: {_KNOWN})",
+        ),
+    ],
+)
+def test_config_mistakes_are_one_line(device: str, message: str) -> None:
+    text = _LINE.format(url="mqtt://127.0.0.1:1883") + f"unit = 1\n{device}\n"
+    with pytest.raises(ConfigError) as caught:
+        parse_config(text, "bridge.toml")
+    assert str(caught.value) == f"bridge.toml: {message}"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('[topics]\nretain = "yes"\n', "topics.retain: must be true or false, not 'yes'"),
+        (
+            '[topics]\nlayout = "xml"\n',
+            "topics.layout: must be one of home-assistant, plain, sparkplug",
+        ),
+        ("[topics]\nqos = 2\n", "topics.qos: must be 0 or 1, not 2"),
+        ("[buffer]\nmax_messages = 0\n", "buffer.max_messages: must be an integer >= 1, not 0"),
+    ],
+)
+def test_topic_and_buffer_mistakes_are_one_line(text: str, message: str) -> None:
+    line = _LINE.format(url="mqtt://127.0.0.1:1883") + f'unit = 1\nprofile = "{HEAT_PUMP}"\n'
+    with pytest.raises(ConfigError) as caught:
+        parse_config(text + line, "bridge.toml")
+    assert str(caught.value) == f"bridge.toml: {message}"
+
+
+def test_the_command_says_what_is_wrong_in_one_line(tmp_path: Path) -> None:
+    bad_url = tmp_path / "url.toml"
+    bad_url.write_text(_LINE.format(url="mqtt:/x") + f'unit = 1\nprofile = "{HEAT_PUMP}"\n')
+    bad_profile = tmp_path / "profile.toml"
+    bad_profile.write_text(_LINE.format(url="mqtt://127.0.0.1:1") + 'unit = 1\nprofile = "nope"\n')
+    for path, code, text in (
+        (bad_url, 1, "names no host"),
+        (bad_profile, 2, "unknown profile 'nope'"),
+    ):
+        done = subprocess.run([sys.executable, "-m", "aiortu", "bridge", "--config", str(path)],
+                              capture_output=True, text=True, timeout=60, check=False)  # fmt: skip
+        assert done.returncode == code
+        assert done.stderr.count("\n") == 1
+        assert text in done.stderr
