@@ -17,9 +17,7 @@ from aiortu.core.pdu import ReadHoldingRegistersRequest, ReadHoldingRegistersRes
 from aiortu.core.rtu import FrameReceived, Receiver, Role, encode_frame
 from aiortu.core.serial import LineSettings
 from aiortu.line import Link
-from aiortu.master import UnitStats
-from aiortu.master._job import JobQueue
-from aiortu.master._usual_exchange import UsualExchange, send_usual_exchange, take_over
+from aiortu.master._engine import LineEngine
 from aiortu.testing import VirtualBus
 from aiortu.transport import open_serial
 from tests.transport.ptys import open_pty
@@ -49,69 +47,76 @@ def test_a_frame_begun_before_the_unit_could_answer_is_stale(observer: bool) -> 
 
 
 class _Line:
-    """What the usual exchange uses of a link: the request leaves the wire at 1.005."""
+    """What the fast path uses of a link: the request leaves the wire at 1.005."""
 
     char_time = 0.0005
+    queue_size = 16
 
-    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop, wire_timed: bool) -> None:
         self.loop = loop
+        self.wire_timed = wire_timed
+        self.expected: object = None
 
     def send_now(self, frame: bytes) -> float:
         return 1.005
 
+    def call_at(self, when: float, callback: object) -> asyncio.TimerHandle:
+        return self.loop.call_at(when + 1e9, lambda: None)  # never fires here
 
-def _usual_exchange(
-    loop: asyncio.AbstractEventLoop, reply_delay: float | None, stale: list[FrameReceived]
-) -> tuple[UsualExchange, list[str]]:
-    """A usual exchange of a read of 2 registers from unit 7 (sent 1.001 to 1.005)."""
-    known = MasterMachine().usual_exchange(7, ReadHoldingRegistersRequest(0, 2))
-    assert known is not None
-    released: list[str] = []
-    exchange = send_usual_exchange(
-        cast("Link", _Line(loop)),
-        known,
-        UnitStats(),
-        timeout=0.5,
-        policy=RetryPolicy(),
-        priority=0,
-        done=lambda: released.append("line"),
-        stale=stale.append,
-        reply_delay=reply_delay,
-    )
-    assert exchange is not None
-    return exchange, released
+    def expect(self, tap: object) -> None:
+        self.expected = tap
+
+    def forget_expected(self) -> None:
+        self.expected = None
+
+
+def _fast_path(
+    loop: asyncio.AbstractEventLoop, min_turnaround: float | None
+) -> tuple[LineEngine, asyncio.Future[object]]:
+    """A fast-path read of 2 registers from unit 7 (sent 1.001 to 1.005)."""
+    wire_timed = min_turnaround is not None
+    config = aiortu.MasterConfig.of(min_turnaround=min_turnaround or 0.0, retries=0)
+    engine = LineEngine(cast("Link", _Line(loop, wire_timed)), config)
+    engine.open = True
+    transaction = Transaction(7, ReadHoldingRegistersRequest(0, 2), 0.5, RetryPolicy(0))
+    future = engine.submit(transaction)
+    assert isinstance(future, asyncio.Future)
+    return engine, future
 
 
 def test_the_usual_reply_taken_at_once_obeys_the_same_rule() -> None:
-    # The read callback's fast path: a reply whose first byte came before 1.007 is
-    # handed to the machine as a frame (dated by its first byte), not taken.
+    # The read callback's fast path: a reply whose first byte came before 1.007 (the end
+    # of the request, the unit's 1.5 ms turnaround and the byte's own 0.5 ms) is handed to
+    # the machine as a frame (dated by its first byte), not taken.
     frame = encode_frame(7, REPLY)  # 9 bytes: the first one 4 ms before the last
     loop = asyncio.new_event_loop()
     try:
-        stale: list[FrameReceived] = []
-        exchange, released = _usual_exchange(loop, 0.002, stale)
-        exchange.on_reply(frame, 1.0105)  # began at 1.0065
-        assert [(event.frame, event.start, event.end) for event in stale] == [
+        engine, future = _fast_path(loop, 0.0015)
+        engine.fast.on_reply(frame, 1.0105)  # began at 1.0065
+        assert [(event.frame, event.start, event.end) for event in engine.attempts.events] == [
             (frame, pytest.approx(1.0065), 1.0105)
         ]
-        assert not exchange.caller.done()
-        assert released == []
-        transaction = take_over(exchange, MasterMachine(), JobQueue()).transaction
-        assert transaction.reply_delay == 0.002  # the machine keeps the same rule
+        assert not future.done()
+        assert engine.busy  # the line task has the transaction now
+        transaction = engine.machine.transaction
+        assert transaction is not None
+        assert engine.line_task.job is not None
+        assert engine.line_task.job.transaction is transaction
+        assert transaction.reply_delay == pytest.approx(0.002)  # the same rule
         assert transaction.earliest_reply == pytest.approx(1.007)
 
-        stale.clear()
-        exchange, released = _usual_exchange(loop, 0.002, stale)
-        exchange.on_reply(frame, 1.0111)  # began at 1.0071
-        assert stale == []
-        assert released == ["line"]
-        assert exchange.caller.result().values == (1, 2)  # type: ignore[union-attr]
+        engine, future = _fast_path(loop, 0.0015)
+        engine.fast.on_reply(frame, 1.0111)  # began at 1.0071
+        assert not engine.attempts.events
+        assert not engine.busy
+        assert future.result().values == (1, 2)  # type: ignore[attr-defined]
 
         # Without real wire times no reply is stale by its time here.
-        exchange, released = _usual_exchange(loop, None, stale)
-        exchange.on_reply(frame, 1.0)
-        assert stale == []
-        assert released == ["line"]
+        engine, future = _fast_path(loop, None)
+        engine.fast.on_reply(frame, 1.0)
+        assert not engine.attempts.events
+        assert not engine.busy
+        assert future.done()
     finally:
         loop.close()
 

@@ -24,8 +24,8 @@ def test_help_has_examples_exit_codes_and_mbpoll(capsys: pytest.CaptureFixture[s
     [
         ("tcp://127.0.0.1:0,prio=1", "only ',priority=N' (an integer) and ',rules=FILE'"),
         ("tcp://127.0.0.1:0,rules=", "only ',priority=N' (an integer) and ',rules=FILE'"),
-        ("udp://127.0.0.1:0", "a server listens on a tcp://, rtu+tcp:// or tls:// URL"),
-        ("/dev/ttyUSB1", "a server listens on a tcp://, rtu+tcp:// or tls:// URL"),
+        ("ftp://127.0.0.1:0", "a server listens on a tcp://, udp://"),
+        ("/dev/ttyUSB1", "a server listens on a tcp://, udp://"),
         ("tcp://127.0.0.1:0,rules=/no/such/rules.toml", "/no/such/rules.toml: (file): cannot"),
         ("tls://127.0.0.1:0", "cafile is missing"),
     ],

@@ -8,6 +8,8 @@ the content and order of what the clients receive, never on time.
 
 from __future__ import annotations
 
+import logging
+import re
 import tracemalloc
 from collections.abc import Callable
 
@@ -15,7 +17,8 @@ import anyio
 import pytest
 
 from aiortu.core.rtu import encode_frame
-from aiortu.gateway import GatewayLine, gateway
+from aiortu.errors import InvalidValue
+from aiortu.gateway import Gateway, GatewayLine, gateway
 from aiortu.slave import MemoryStore, RequestContext
 from tests.gateway.helpers import UNIT, Line, client, device, line
 
@@ -91,6 +94,14 @@ async def test_reads_of_different_counts_in_flight_at_once_get_their_own_reply()
         assert bench.messages == 2
 
 
+async def test_without_coalescing_identical_reads_in_flight_each_go_on_the_line() -> None:
+    async with line(master_options=HELD, coalesce=False) as bench:
+        reply = await _two_reads_in_flight(bench, (UNIT, "03 0000 0001"), (UNIT, "03 0000 0001"))
+        assert reply == "03 02 12 34"
+        assert bench.messages == 2
+        assert bench.gateway.counters.coalesced == 0
+
+
 async def test_a_broadcast_between_two_cached_reads_drops_the_cache() -> None:
     async with line(cache_ms=60_000) as bench, client(bench.gateway) as tcp:
         assert await tcp.request("03 0000 0001") == "03 02 12 34"
@@ -163,9 +174,9 @@ def _label_value(sample: str, metric: str) -> str:
     return "".join(value)
 
 
-async def _get_metrics(address: tuple[str, int]) -> str:
+async def _get_metrics(address: tuple[str, int], target: str = "/metrics") -> str:
     async with await anyio.connect_tcp(*address) as stream:
-        await stream.send(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n")
+        await stream.send(f"GET {target} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
         data = b""
         with anyio.fail_after(5):
             try:
@@ -188,6 +199,8 @@ async def test_a_line_name_with_a_quote_a_backslash_and_a_newline_is_escaped_in_
                 assert await tcp.request("03 0000 0001") == "03 02 12 34"
             assert named.metrics_address is not None
             body = await _get_metrics(named.metrics_address)
+            # A query string is allowed, and changes nothing.
+            assert await _get_metrics(named.metrics_address, "/metrics?name[]=x") == body
     metric = "aiortu_gateway_line_transactions_total"
     expected = f'{metric}{{line="bench \\"A\\"\\\\left\\nside"}} 1'
     assert expected in body.splitlines()
@@ -220,3 +233,146 @@ async def test_an_endless_rtu_frame_of_unknown_length_is_not_buffered_whole() ->
             await stream.send(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
             with anyio.fail_after(5):
                 assert await stream.receive() == encode_frame(UNIT, bytes.fromhex("03 02 1234"))
+
+
+async def test_a_write_drops_only_the_cached_blocks_it_touches() -> None:
+    async with line(cache_ms=60_000) as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 07"
+        on_the_line = bench.messages
+        # Registers 0 and 3 lie just before and just after the block: it stays cached.
+        assert await tcp.request("06 0000 0042") == "06 00 00 00 42"
+        assert await tcp.request("06 0003 0042") == "06 00 03 00 42"
+        assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 07"
+        assert bench.messages == on_the_line + 2  # the writes alone
+        # Register 2 lies in it: read again.
+        assert await tcp.request("06 0002 0009") == "06 00 02 00 09"
+        assert await tcp.request("03 0001 0002") == "03 04 AB CD 00 09"
+        assert bench.messages == on_the_line + 4
+
+
+async def test_a_truncated_write_drops_every_cached_block_of_its_unit() -> None:
+    # 06 with one address byte: the cache cannot tell what it writes, so nothing it kept for
+    # the unit may be trusted after it (the device decides what it makes of the request).
+    async with line(cache_ms=60_000) as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0005 0001") == "03 02 00 00"
+        assert await tcp.request("03 0005 0001") == "03 02 00 00"
+        on_the_line = bench.messages
+        await tcp.request("06 00")
+        assert await tcp.request("03 0005 0001") == "03 02 00 00"
+        assert bench.messages == on_the_line + 2  # the write, and the read again
+
+
+async def test_replies_are_counted_by_kind_per_unit() -> None:
+    dead = OTHER  # no device answers it
+    async with line() as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        assert await tcp.request("03 FFF0 0001") == "83 02"  # the device's own exception
+        assert await tcp.request("03 0000 0001", dead) == "83 0B"
+        assert await tcp.request("03 0000 0001", 250) == "83 0B"  # refused at once
+        units = bench.gateway.statistics.units
+        assert (units[("line", UNIT)].replies, units[("line", UNIT)].exceptions) == (1, 1)
+        assert (units[("line", dead)].no_response, units[("line", dead)].exceptions) == (1, 0)
+        assert bench.gateway.counters.refused_units == 1
+
+
+@pytest.mark.parametrize(
+    ("url", "reason"),
+    [
+        ("ftp://127.0.0.1:9102/metrics", "expected an http:// URL"),
+        ("http://127.0.0.1:9102", None),  # the default path
+        ("http://127.0.0.1:70000/metrics", "the port '70000' is not in 0..65535"),
+        ("http://:9102/metrics", "expected an http:// URL"),
+    ],
+)
+async def test_a_metrics_url_is_checked_before_anything_is_opened(
+    url: str, reason: str | None
+) -> None:
+    async with line() as bench:
+        if reason is None:
+            async with gateway(bench.master, [], metrics=url.replace("9102", "0")) as served:
+                assert served.metrics_address is not None
+                assert (await _get_metrics(served.metrics_address)).startswith("# HELP")
+            return
+        with pytest.raises(InvalidValue, match=re.escape(reason)):
+            async with gateway(bench.master, [], metrics=url):
+                pass
+
+
+async def test_a_connection_has_four_requests_waiting_at_most_by_default() -> None:
+    async with line(master_options=HELD) as bench:
+        hold = Hold()
+        bench.slave.before_request(hold)
+        async with client(bench.gateway) as tcp:
+            for transaction_id in range(6):
+                await tcp.send("03 0000 0001", UNIT, transaction_id)
+            await _until(lambda: bench.gateway.counters.requests >= 4)
+            await anyio.wait_all_tasks_blocked()
+            await anyio.sleep(0.05)  # time for a fifth to be read, were it allowed
+            assert bench.gateway.counters.requests == 4
+            hold.release()
+            replies = [await tcp.receive() for _ in range(6)]
+            assert [reply.transaction_id for reply in replies if reply] == list(range(6))
+
+
+async def test_a_connection_over_the_limit_is_logged_once_until_one_closes(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.WARNING, logger="aiortu")
+    async with line(max_connections=1) as bench, client(bench.gateway) as first:
+        assert await first.request("03 0000 0001") == "03 02 12 34"
+        for _ in range(2):
+            async with client(bench.gateway) as refused:
+                assert await refused.closed_by_server()
+        assert bench.gateway.counters.connections_refused == 2
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1
+    assert warnings[0].startswith("gateway: 1 connections open, the most allowed; closing")
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("max_in_flight", 0, "max_in_flight must be an int of at least 1, not 0"),
+        ("max_connections", 0, "max_connections must be an int of at least 1, not 0"),
+        ("idle_timeout", 0, "idle_timeout must be a positive number of seconds, not 0"),
+    ],
+)
+async def test_a_limit_below_its_least_value_is_refused_in_one_sentence(
+    option: str, value: int, message: str
+) -> None:
+    async with line() as bench:
+        with pytest.raises(InvalidValue) as raised:
+            Gateway(bench.master, **{option: value})
+    assert str(raised.value) == message
+
+
+class Clock:
+    """A clock the test moves: the cache's age is asserted without waiting."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+async def test_a_cached_read_is_answered_until_exactly_cache_ms_old() -> None:
+    clock = Clock()
+    async with line(cache_ms=500, clock=clock) as bench, client(bench.gateway) as tcp:
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        on_the_line = bench.messages
+        clock.now += 0.5
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        assert bench.messages == on_the_line  # 500 ms old: still answered
+        clock.now += 0.001
+        assert await tcp.request("03 0000 0001") == "03 02 12 34"
+        assert bench.messages == on_the_line + 1
+
+
+async def test_a_gateway_made_directly_coalesces_and_has_no_port_before_it_listens() -> None:
+    async with line() as bench:
+        made = Gateway(bench.master)
+        assert made.coalesce is True
+        assert (made.max_in_flight, made.max_connections) == (4, 32)
+        with pytest.raises(RuntimeError, match="the gateway is not listening yet"):
+            _ = made.port

@@ -16,6 +16,7 @@ from aiortu.master._client import Master
 from aiortu.transport._serial import open_serial
 from tests.master.fakes import FakeSlave, answer, line, silent
 from tests.transport.ptys import LINE, open_pty, read_master
+from tests.virtual_clock import on_virtual_clock
 
 
 async def _until(condition: Callable[[], bool]) -> None:
@@ -24,6 +25,7 @@ async def _until(condition: Callable[[], bool]) -> None:
             await anyio.sleep(0.001)
 
 
+@on_virtual_clock
 async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_queued_write() -> (
     None
 ):
@@ -33,11 +35,13 @@ async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_q
     # the write: the machine still waits for the read's reply.
     ended: list[BaseException] = []
     async with anyio.create_task_group() as callers:
-        async with line(default=silent, timeout=5.0, retries=0) as (master, _, _):
+        # The machine's route; the fast path taken over is the pty test below.
+        async with line(default=silent, timeout=5.0, retries=0, fast_path=False) as (
+            master,
+            _,
+            _,
+        ):
             engine = master.engine
-            # The machine's route (the in-memory bus would take the usual exchange); the
-            # usual exchange taken over is the pty test below.
-            engine.usual_exchanges = False
             read_scope = anyio.CancelScope()
 
             async def read() -> None:
@@ -55,7 +59,7 @@ async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_q
             callers.start_soon(write)
             await _until(lambda: engine.queued > 0)
             read_scope.cancel()
-            await _until(lambda: engine._for_line_task is not None)
+            await _until(lambda: engine.line_task.job is not None)
         with anyio.fail_after(2):
             while not ended:  # noqa: ASYNC110
                 await anyio.sleep(0.001)
@@ -69,6 +73,7 @@ async def _slow(slave: FakeSlave, unit: int, request: Request) -> None:
     await answer(slave, unit, request)
 
 
+@on_virtual_clock
 async def test_a_caller_cancelled_while_queued_is_dropped_and_the_line_goes_on() -> None:
     async with line(default=_slow, timeout=1.0) as (master, slave, _):
         engine = master.engine
@@ -148,7 +153,7 @@ async def test_closing_while_the_line_task_runs_a_read_taken_over_fails_the_queu
 
                 callers.start_soon(read)
                 await read_master(pty, 8)
-                assert engine._usual is not None  # the usual exchange waits
+                assert engine.fast.on_wire  # the fast path's exchange waits
 
                 async def write() -> None:
                     try:
@@ -159,7 +164,7 @@ async def test_closing_while_the_line_task_runs_a_read_taken_over_fails_the_queu
                 callers.start_soon(write)
                 await _until(lambda: engine.queued > 0)
                 pty.write(encode_frame(2, bytes.fromhex("030400090009")))
-                await _until(lambda: engine._for_line_task is not None)
+                await _until(lambda: engine.line_task.job is not None)
             with anyio.fail_after(2):
                 while not ended:  # noqa: ASYNC110
                     await anyio.sleep(0.001)

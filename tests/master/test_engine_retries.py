@@ -13,9 +13,10 @@ import pytest
 from aiortu.core.pdu import Request
 from aiortu.core.rtu import crc16
 from aiortu.errors import ResponseTimeout
+from aiortu.master._attempt import guard_ends
 from aiortu.master._client import Master
-from aiortu.master._engine import guard_ends
 from tests.master.fakes import FakeSlave, answer, line, silent
+from tests.virtual_clock import on_virtual_clock
 
 TIMEOUT = 0.05
 GUARD = 0.4
@@ -30,6 +31,7 @@ def test_the_guard_ends_a_guard_after_the_failure_or_after_the_last_byte_once() 
     assert guard_ends(-math.inf, 50.0, 1.0) == -math.inf  # no guard pending
 
 
+@on_virtual_clock
 async def test_a_reply_late_for_its_attempt_is_not_taken_for_the_retrys() -> None:
     # Unit 1 answers the first request only once the master has decided to retry it:
     # back to back, the retry would be on the wire and take that reply as its own.
@@ -55,6 +57,7 @@ async def test_a_reply_late_for_its_attempt_is_not_taken_for_the_retrys() -> Non
         assert (stats.requests, stats.retries, stats.timeouts, stats.failures) == (1, 1, 2, 1)
 
 
+@on_virtual_clock
 async def test_every_retry_after_a_timeout_waits_the_guard() -> None:
     options = {"timeout": TIMEOUT, "retries": 2, "late_reply_guard": GUARD}
     async with line(default=silent, **options) as (master, slave, _):
@@ -72,6 +75,7 @@ async def _garbled(slave: FakeSlave, unit: int, request: Request) -> None:
     await slave.send_raw(body + bytes((crc & 0xFF, crc >> 8)))
 
 
+@on_virtual_clock
 async def test_a_retry_after_a_frame_error_waits_the_guard_after_the_bad_bytes() -> None:
     options = {"timeout": 1.0, "retries": 1, "late_reply_guard": GUARD}
     async with line(default=_garbled, script={1: answer}, **options) as (master, slave, _):
@@ -81,6 +85,7 @@ async def test_a_retry_after_a_frame_error_waits_the_guard_after_the_bad_bytes()
         assert master.unit_stats(1).crc_errors == 1
 
 
+@on_virtual_clock
 async def test_a_refused_attempt_is_retried_without_the_guard() -> None:
     # An exception reply is an answer: nothing late can follow it.
     async def busy(slave: FakeSlave, unit: int, request: Request) -> None:

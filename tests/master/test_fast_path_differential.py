@@ -1,7 +1,7 @@
 """The master's fast path (the usual exchange) against the machine's route, differentially.
 
 Seeded random sequences of reads and writes, each with a device plan (a fault or not)
-and sometimes a cancellation, run four times: with ``engine.usual_exchanges`` on and
+and sometimes a cancellation, run four times: with ``fast_path`` on and
 off, on a serial port over a pty (the push path, where the fast path runs) and on a
 VirtualBus. Every run must give the same results, the same per-unit statistics and the
 same requests on the wire. The device plays each plan reacting to what it sees (the
@@ -249,8 +249,8 @@ async def on_a_pty(
     with open_pty() as pty:
         stream = await open_serial(pty.path, LINE)
         options = {"timeout": TIMEOUT, "retries": 1, "frame_gap": 0, "late_reply_guard": GUARD}
+        options["fast_path"] = usual_exchanges
         async with Master(stream, LINE, **options) as master:  # type: ignore[arg-type]
-            master.engine.usual_exchanges = usual_exchanges
             await anyio.sleep(0.05)  # past the receiver's first silence
 
             async def write(data: bytes, pty: Pty = pty) -> None:
@@ -276,8 +276,8 @@ async def on_a_virtual_bus(
         return data
 
     options = {"timeout": TIMEOUT, "retries": 1, "frame_gap": 0, "late_reply_guard": GUARD}
+    options["fast_path"] = usual_exchanges
     async with Master(bus.endpoints[0], LineSettings(19200), **options) as master:  # type: ignore[arg-type]
-        master.engine.usual_exchanges = usual_exchanges
         await anyio.sleep(0.05)
         device = Device(read, end.send)
         results = await player(master, device, ops)

@@ -12,10 +12,12 @@ from aiortu.core.codes import DeviceIdReadCode
 from aiortu.core.model import Layout, encode_value
 from aiortu.core.pdu import ExceptionPDU, RawPDU, ReadHoldingRegistersRequest
 from aiortu.errors import InvalidRequest
+from tests.virtual_clock import on_virtual_clock
 
 from .fakes import FakeSlave, coil_value, line, register_value, standard_reply
 
 
+@on_virtual_clock
 async def test_reads_return_the_values_trimmed_to_the_count() -> None:
     async with line() as (master, slave, _):
         assert await master.read_holding_registers(17, 0x6B, 3) == [
@@ -32,6 +34,7 @@ async def test_reads_return_the_values_trimmed_to_the_count() -> None:
         assert [seen.unit for seen in slave.seen] == [17, 2, 3, 4]
 
 
+@on_virtual_clock
 async def test_writes_send_the_request_and_verify_the_echo() -> None:
     async with line() as (master, slave, _):
         await master.write_coil(1, 5, True)
@@ -44,6 +47,7 @@ async def test_writes_send_the_request_and_verify_the_echo() -> None:
         assert sent[3].values == (1, 2, 3)  # type: ignore[attr-defined]
 
 
+@on_virtual_clock
 async def test_a_write_whose_echo_differs_is_not_accepted() -> None:
     async def wrong_echo(slave: FakeSlave, unit: int, request: object) -> None:
         await slave.reply(unit, bytes.fromhex("06 00 06 00 01"))
@@ -53,6 +57,7 @@ async def test_a_write_whose_echo_differs_is_not_accepted() -> None:
             await master.write_register(1, 6, 0xBEEF)
 
 
+@on_virtual_clock
 async def test_the_other_function_codes() -> None:
     async with line() as (master, _, _):
         assert await master.read_write_registers(9, 100, 2, 200, [7, 8]) == [
@@ -76,6 +81,7 @@ async def test_the_other_function_codes() -> None:
         assert server.run_indicator
 
 
+@on_virtual_clock
 async def test_device_identification_follows_more_follows() -> None:
     async with line() as (master, slave, _):
         objects = await master.read_device_identification(5)
@@ -85,6 +91,7 @@ async def test_device_identification_follows_more_follows() -> None:
         assert one == {1: b"FAKE-1"}
 
 
+@on_virtual_clock
 async def test_execute_takes_custom_codes_and_returns_exceptions_as_values() -> None:
     async def refuse(slave: FakeSlave, unit: int, request: object) -> None:
         await slave.reply(unit, bytes((0x41 | 0x80, 0x01)))
@@ -98,6 +105,7 @@ async def test_execute_takes_custom_codes_and_returns_exceptions_as_values() -> 
         assert reply.exception_code == 1
 
 
+@on_virtual_clock
 async def test_diagnostics_force_listen_only_awaits_no_reply() -> None:
     async with line(turnaround_delay=0.01) as (master, slave, _):
         assert await master.diagnostics(4, 4) is None
@@ -105,6 +113,7 @@ async def test_diagnostics_force_listen_only_awaits_no_reply() -> None:
         assert slave.seen[0].request.function_code == 0x08
 
 
+@on_virtual_clock
 async def test_the_unit_handle_and_typed_values() -> None:
     float_registers = encode_value(123.456, "float32", Layout.CDAB)
 
@@ -179,6 +188,7 @@ async def test_a_call_timeout_must_be_positive(bad: float) -> None:
         assert await master.read_holding_registers(1, 0, 1, timeout=0.5) is not None
 
 
+@on_virtual_clock
 async def test_a_read_cannot_be_broadcast() -> None:
     async with line() as (master, _, bus):
         with pytest.raises(InvalidRequest):
@@ -186,6 +196,7 @@ async def test_a_read_cannot_be_broadcast() -> None:
         assert not bus.trace
 
 
+@on_virtual_clock
 async def test_broadcast_waits_the_turnaround_and_no_reply() -> None:
     async with line(turnaround_delay=0.05) as (master, slave, _):
         start = anyio.current_time()

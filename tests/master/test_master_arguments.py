@@ -17,10 +17,12 @@ from aiortu.core.rtu import encode_frame
 from aiortu.errors import InvalidRequest, InvalidValue, ModbusError
 from aiortu.master._client import Master
 from aiortu.testing import VirtualBus
+from tests.virtual_clock import on_virtual_clock
 
 from .fakes import FakeSlave, line, register_value, standard_reply
 
 
+@on_virtual_clock
 async def test_bad_priorities_fail_at_once_and_leave_the_queue_to_the_others() -> None:
     results: dict[object, object] = {}
 
@@ -98,6 +100,7 @@ async def test_a_bad_argument_raises_before_anything_is_sent(
         assert not slave.seen
 
 
+@on_virtual_clock
 async def test_coil_values_the_spec_and_python_agree_on() -> None:
     async with line() as (master, slave, _):
         for value in (True, 1, 0xFF00):
@@ -162,6 +165,7 @@ def test_good_settings_are_taken() -> None:
     assert master.policy.repeatable == {0x41}
 
 
+@on_virtual_clock
 async def test_a_raw_pdu_of_a_known_code_gets_its_reply() -> None:
     # Write single register as raw bytes: the reply, decoded as 06's, answers it.
     async with line(offline_after=1) as (master, slave, _):
@@ -182,6 +186,7 @@ def late_by(delay: float):  # type: ignore[no-untyped-def]
     return step
 
 
+@on_virtual_clock
 async def test_a_custom_code_is_sent_once_unless_the_caller_says_so() -> None:
     # A 0x41 handler that answers after 150 ms, a call with timeout=0.1.
     async with line(default=late_by(0.15), retries=2) as (master, slave, _):
@@ -223,6 +228,7 @@ def test_the_default_repeats_reads_and_idempotent_writes_only() -> None:
     assert FunctionCode.READ_WRITE_MULTIPLE_REGISTERS not in SAFE_TO_REPEAT
 
 
+@on_virtual_clock
 async def test_the_first_crc_failure_after_opening_is_a_crc_error() -> None:
     async def bad_crc(slave: FakeSlave, unit: int, request: Request) -> None:
         frame = bytearray(encode_frame(unit, standard_reply(unit, request)))
@@ -245,6 +251,7 @@ async def test_the_first_crc_failure_after_opening_is_a_crc_error() -> None:
         tasks.cancel_scope.cancel()
 
 
+@on_virtual_clock
 async def test_broadcast_values_are_checked_too() -> None:
     async with line() as (master, _, bus):
         with pytest.raises(InvalidRequest):
@@ -259,6 +266,7 @@ async def test_broadcast_values_are_checked_too() -> None:
         assert not bus.trace
 
 
+@on_virtual_clock
 async def test_open_master_checks_its_settings_before_opening_the_port() -> None:
     # The port does not exist: the setting is refused before it is looked for.
     with pytest.raises(InvalidValue, match=r"^late_reply_guard "):
@@ -266,6 +274,7 @@ async def test_open_master_checks_its_settings_before_opening_the_port() -> None
             pass
 
 
+@on_virtual_clock
 async def test_reads_follow_the_repeatable_codes_too() -> None:
     async def silent(slave: FakeSlave, unit: int, request: Request) -> None:
         pass
@@ -278,6 +287,7 @@ async def test_reads_follow_the_repeatable_codes_too() -> None:
             await master.request(17, slave.seen[0].request, Response, retries=-1)
 
 
+@on_virtual_clock
 async def test_a_typed_value_is_refused_before_the_read_goes_out() -> None:
     async with line() as (master, slave, bus):
         handle = master.slave(17)

@@ -14,7 +14,8 @@ import aiortu
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.pdu import ReadHoldingRegistersResponse, Request
 from aiortu.core.rtu import encode_frame
-from aiortu.master._engine import UnitOffline
+from aiortu.errors import UnitOffline
+from tests.virtual_clock import on_virtual_clock
 
 from .fakes import FakeSlave, answer, line, register_value, silent, standard_reply
 
@@ -27,6 +28,7 @@ def late(delay: float, values: tuple[int, ...]):  # type: ignore[no-untyped-def]
     return step
 
 
+@on_virtual_clock
 async def test_no_reply_times_out_after_the_retries() -> None:
     async with line(default=silent, timeout=0.05, retries=2) as (master, slave, _):
         with pytest.raises(aiortu.ResponseTimeout):
@@ -36,6 +38,7 @@ async def test_no_reply_times_out_after_the_retries() -> None:
         assert (stats.requests, stats.timeouts, stats.retries, stats.failures) == (1, 3, 2, 1)
 
 
+@on_virtual_clock
 async def test_the_timeout_runs_from_the_end_of_transmission() -> None:
     async with line(default=silent, timeout=0.1, retries=0) as (master, _, _):
         start = anyio.current_time()
@@ -64,6 +67,7 @@ async def test_a_late_reply_never_reaches_the_next_request(retries: int) -> None
             ]
 
 
+@on_virtual_clock
 async def test_a_reply_from_another_unit_is_skipped() -> None:
     async def other_first(slave: FakeSlave, unit: int, request: Request) -> None:
         await slave.reply(unit + 1, standard_reply(unit + 1, request))
@@ -74,6 +78,7 @@ async def test_a_reply_from_another_unit_is_skipped() -> None:
         assert master.unit_stats(3).skipped_frames == 1
 
 
+@on_virtual_clock
 async def test_a_bad_crc_then_the_right_reply() -> None:
     async def bad_then_good(slave: FakeSlave, unit: int, request: Request) -> None:
         frame = bytearray(encode_frame(unit, standard_reply(unit, request)))
@@ -86,6 +91,7 @@ async def test_a_bad_crc_then_the_right_reply() -> None:
         assert await master.read_holding_registers(3, 4, 2) == [3004, 3005]
 
 
+@on_virtual_clock
 async def test_bad_crc_every_time_raises_crc_error_after_the_retries() -> None:
     async def bad(slave: FakeSlave, unit: int, request: Request) -> None:
         frame = bytearray(encode_frame(unit, standard_reply(unit, request)))
@@ -102,6 +108,7 @@ async def test_bad_crc_every_time_raises_crc_error_after_the_retries() -> None:
         assert master.unit_stats(3).crc_errors == 2
 
 
+@on_virtual_clock
 async def test_a_short_reply() -> None:
     async def truncated(slave: FakeSlave, unit: int, request: Request) -> None:
         await slave.send_raw(encode_frame(unit, standard_reply(unit, request))[:-3])
@@ -118,6 +125,7 @@ async def test_a_short_reply() -> None:
             await master.read_holding_registers(3, 4, 2)
 
 
+@on_virtual_clock
 async def test_an_exception_reply_raises_and_is_not_retried() -> None:
     async def refuse(slave: FakeSlave, unit: int, request: Request) -> None:
         await slave.reply(unit, bytes((request.function_code | 0x80, 0x02)))
@@ -132,6 +140,7 @@ async def test_an_exception_reply_raises_and_is_not_retried() -> None:
         assert master.is_online(3)
 
 
+@on_virtual_clock
 async def test_exception_codes_can_be_retried_on_request() -> None:
     async def busy_once(slave: FakeSlave, unit: int, request: Request) -> None:
         await slave.reply(unit, bytes((request.function_code | 0x80, 0x06)))
@@ -143,6 +152,7 @@ async def test_exception_codes_can_be_retried_on_request() -> None:
         assert len(slave.seen) == 2
 
 
+@on_virtual_clock
 async def test_garbage_before_the_reply() -> None:
     async def garbage_first(slave: FakeSlave, unit: int, request: Request) -> None:
         frame = encode_frame(unit, standard_reply(unit, request))
@@ -152,6 +162,7 @@ async def test_garbage_before_the_reply() -> None:
         assert await master.read_holding_registers(3, 4, 2) == [3004, 3005]
 
 
+@on_virtual_clock
 async def test_many_callers_share_one_line() -> None:
     callers, per_caller = 100, 20
     async with line(timeout=1.0) as (master, slave, bus):
@@ -189,6 +200,7 @@ async def test_many_callers_share_one_line() -> None:
         assert all(len(entry.data) == 8 for entry in trace if entry.sender == 0)
 
 
+@on_virtual_clock
 async def test_cancelled_callers_never_desynchronise_the_line() -> None:
     # Also run under trio by tests/test_trio.py: anyio's task list, not asyncio's.
     generator = random.Random(4)
@@ -217,6 +229,7 @@ async def test_cancelled_callers_never_desynchronise_the_line() -> None:
             await anyio.sleep(0.01)
 
 
+@on_virtual_clock
 async def test_health_offline_after_failures_and_online_after_a_success() -> None:
     script = dict.fromkeys(range(3), silent)
     async with line(script=script, timeout=0.03, retries=0) as (master, _, _):
@@ -236,6 +249,7 @@ async def test_health_offline_after_failures_and_online_after_a_success() -> Non
         assert stats.mean_latency is not None
 
 
+@on_virtual_clock
 async def test_fail_fast_on_an_offline_unit_except_for_probes() -> None:
     options = {"timeout": 0.03, "retries": 0, "offline_after": 2, "probe_interval": 0.2}
     async with line(default=silent, fail_fast_offline=True, **options) as (master, slave, _):
@@ -256,6 +270,7 @@ async def test_fail_fast_on_an_offline_unit_except_for_probes() -> None:
         assert master.is_online(8)
 
 
+@on_virtual_clock
 async def test_requests_in_flight_fail_when_the_line_dies() -> None:
     async def hang_up(slave: FakeSlave, unit: int, request: Request) -> None:
         assert slave.link is not None
@@ -269,6 +284,7 @@ async def test_requests_in_flight_fail_when_the_line_dies() -> None:
                 await master.read_coils(1, 0, 1)
 
 
+@on_virtual_clock
 async def test_priority_goes_first() -> None:
     async with line() as (master, slave, _):
         order: list[int] = []

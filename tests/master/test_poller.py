@@ -24,6 +24,7 @@ from aiortu.core.rtu import encode_frame
 from aiortu.master._poller import CycleReport, Sample, UnitHealth, UnitSkipped
 from aiortu.master._stats import UnitState
 from aiortu.testing import VirtualBus
+from tests.virtual_clock import on_virtual_clock
 
 from .fakes import FakeSlave, answer, coil_value, line, register_value, standard_reply
 
@@ -52,6 +53,7 @@ def wire(request: object) -> tuple[int, int, int]:
     raise AssertionError(request)
 
 
+@on_virtual_clock
 async def test_the_requests_on_the_wire_are_the_merged_ranges_and_values_decode() -> None:
     async with line() as (master, slave, _):
         poller = Poller(master, POINTS, max_gap=5, max_bit_gap=80)
@@ -88,6 +90,7 @@ async def test_the_requests_on_the_wire_are_the_merged_ranges_and_values_decode(
     assert samples["i"].value is coil_value(2, 1)
 
 
+@on_virtual_clock
 async def test_samples_reach_callbacks_and_the_async_iterator() -> None:
     seen: list[Sample] = []
     cycles: list[CycleReport] = []
@@ -115,6 +118,7 @@ async def test_samples_reach_callbacks_and_the_async_iterator() -> None:
     assert poller.health()[1].online
 
 
+@on_virtual_clock
 async def test_run_stops_after_the_cycles_and_ends_the_iteration() -> None:
     async with line() as (master, _, _):
         poller = Poller(master, POINTS[:2], interval=0.01)
@@ -124,6 +128,7 @@ async def test_run_stops_after_the_cycles_and_ends_the_iteration() -> None:
         assert len([s async for s in poller]) == 8
 
 
+@on_virtual_clock
 async def test_points_with_their_own_interval_poll_on_their_own_schedule() -> None:
     async with line() as (master, _, _):
         fast = Point.of("fast", 1, "40001", interval=0.02)
@@ -160,6 +165,7 @@ async def _dead_unit_per_cycle(points: list[Point], cycles: int) -> tuple[list[f
     return durations, dead_requests
 
 
+@on_virtual_clock
 async def test_a_dead_unit_does_not_stall_the_cycle() -> None:
     alive = [Point.of(f"u{u}r{r}", u, f"4{r * 20 + 1:04d}") for u in (1, 2, 3) for r in range(3)]
     dead = [Point.of(f"u4r{r}", 4, f"4{r * 20 + 1:04d}") for r in range(3)]
@@ -171,6 +177,7 @@ async def test_a_dead_unit_does_not_stall_the_cycle() -> None:
     assert durations[0] >= 0.5
 
 
+@on_virtual_clock
 async def test_an_offline_unit_is_probed_every_offline_probe_interval() -> None:
     # Unit 1 answers: a timeout no load reaches. Unit 2 never does.
     options = {"timeout": 0.5, "retries": 0, "offline_after": 1}
@@ -203,6 +210,7 @@ async def test_an_offline_unit_is_probed_every_offline_probe_interval() -> None:
     assert health[2].next_probe is not None
 
 
+@on_virtual_clock
 async def test_the_poll_command_redraws_its_table_in_place_on_a_terminal() -> None:
     async with line() as (master, _, _):
         out = io.StringIO()
@@ -234,6 +242,7 @@ async def test_dead_units_take_turns_for_one_probe_per_cycle() -> None:
     assert sent[3:] == [4, 5, 6, 4, 5, 6, 4, 5, 6]
 
 
+@on_virtual_clock
 async def test_max_probes_per_cycle_none_probes_every_due_unit() -> None:
     options = {"timeout": 0.05, "retries": 0, "offline_after": 1}  # no reply is due
     async with line(units=frozenset({1}), **options) as (master, slave, _):
@@ -248,6 +257,7 @@ async def test_max_probes_per_cycle_none_probes_every_due_unit() -> None:
         Poller(master, points, max_probes_per_cycle=0)
 
 
+@on_virtual_clock
 async def test_a_dead_unit_is_suspect_then_offline_and_then_only_probed() -> None:
     # The master keeps its defaults: 2 retries, offline after 3 failed transactions. Unit 1
     # answers (a timeout no load reaches); unit 2 never does.
@@ -290,6 +300,7 @@ async def test_a_dead_unit_is_suspect_then_offline_and_then_only_probed() -> Non
     assert poller.health()[1].state is UnitState.ONLINE
 
 
+@on_virtual_clock
 async def test_one_crc_error_costs_one_sample_not_seconds() -> None:
     garbled = {"done": False}
 

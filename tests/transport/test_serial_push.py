@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import anyio
 import pytest
 
 import aiortu
 from aiortu.core.rtu import DiscardReason, FrameDiscarded, FrameReceived, Role, crc16
 from aiortu.errors import ConnectionLost, ResponseTimeout
+from aiortu.line import ReplyTap
 from aiortu.line._link import Link
 from aiortu.master._client import Master
 from aiortu.transport._serial import open_serial
@@ -124,7 +123,7 @@ async def test_an_expected_frame_goes_to_its_callback_and_anything_else_as_event
                 taken.append((frame, end))
                 arrived.set()
 
-            link.expect(reply[:3], len(reply), on_frame)
+            link.expect(ReplyTap(reply[:3], len(reply), on_frame, None))
             # Another unit's frame of the same length is not the one expected.
             other = _with_crc(bytes([18]) + REPLY[1:])
             pty.write(other)
@@ -145,7 +144,7 @@ async def test_an_expected_frame_goes_to_its_callback_and_anything_else_as_event
                 event = await link.receive()
             assert isinstance(event, FrameReceived)
             # A bad CRC is never handed over: the receiver discards it.
-            link.expect(reply[:3], len(reply), on_frame)
+            link.expect(ReplyTap(reply[:3], len(reply), on_frame, None))
             pty.write(reply[:-1] + bytes([reply[-1] ^ 1]))
             with anyio.fail_after(2):
                 event = await link.receive()
@@ -232,17 +231,14 @@ async def test_master_reads_on_a_port_whatever_way_the_reply_comes(
             expect = link.expect
             usual_replies: list[bytes] = []
 
-            def counting_expect(
-                prefix: bytes,
-                length: int,
-                on_frame: Callable[[bytes, float], None],
-                checked: bytes | None = None,
-            ) -> None:
+            def counting_expect(tap: ReplyTap) -> None:
+                on_frame = tap.on_frame
+
                 def counted(frame: bytes, end: float) -> None:
                     usual_replies.append(frame)
                     on_frame(frame, end)
 
-                expect(prefix, length, counted, checked)
+                expect(ReplyTap(tap.prefix, tap.length, counted, tap.checked))
 
             link.expect = counting_expect  # type: ignore[method-assign]
 

@@ -114,8 +114,17 @@ def parity(text: str) -> str:
 
 
 def add_line_settings(group: argparse._ArgumentGroup) -> None:
-    """Add `--baudrate`, `--parity` and `--stopbits`; see `resolve_line_settings`."""
+    """Add `--baudrate`, `--bytesize`, `--parity` and `--stopbits`; see
+    `resolve_line_settings`."""
     group.add_argument("--baudrate", type=positive_int, default=19200, help="baud rate (19200)")
+    group.add_argument(
+        "--bytesize",
+        type=int,
+        choices=(7, 8),
+        default=None,
+        help="data bits (8; 7 with --framing ascii, as the spec says, except on a "
+        "pseudo-terminal, which keeps 8)",
+    )
     group.add_argument(
         "--parity",
         type=parity,
@@ -168,9 +177,13 @@ def add_no_reconnect(parser: argparse.ArgumentParser) -> None:
 
 
 def resolve_line_settings(args: argparse.Namespace) -> None:
-    """Fill in the parity and stop bits `args` leave out: the spec's 8E1 on a serial port,
-    8N2 on a pseudo-terminal (such as `aiortu virtual-bus` makes), and 2 stop bits
-    whenever the parity is N, as the spec says."""
+    """Fill in the data bits, parity and stop bits `args` leave out: the spec's 8E1 on a serial
+    port (7E1 with `--framing ascii`), 8N2 on a pseudo-terminal (such as `aiortu virtual-bus`
+    makes; it keeps neither parity nor 7 data bits, so ASCII too), and 2 stop bits whenever the
+    parity is N, as the spec says."""
+    if getattr(args, "bytesize", None) is None:
+        ascii_framing = getattr(args, "framing", "rtu") == "ascii"
+        args.bytesize = 7 if ascii_framing and not is_pty(args.port) else 8
     if args.parity is None:
         args.parity = "N" if is_pty(args.port) else "E"
     if args.stopbits is None:

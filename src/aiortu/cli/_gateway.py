@@ -13,6 +13,7 @@ import argparse
 import signal
 import ssl
 import sys
+from typing import Any
 
 import anyio
 
@@ -20,6 +21,7 @@ from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import (
     add_frame_gap,
     add_line_settings,
+    is_pty,
     positive_int,
     resolve_line_settings,
     seconds,
@@ -38,6 +40,8 @@ from aiortu.gateway import (
 from aiortu.transport import server_tls_context
 
 __all__ = ("register", "run")
+
+_FRAMINGS = ("rtu", "ascii")
 
 _EXAMPLES = """\
 examples:
@@ -62,6 +66,12 @@ examples:
   aiortu gateway --line /dev/ttyUSB0:1-20 --line /dev/ttyUSB1:21-40 \\
                  --listen tcp://0.0.0.0:502
       two lines, each with its own master; units 41..247 get exception 0A
+  aiortu gateway /dev/ttyUSB0 --framing ascii --listen tcp://0.0.0.0:502 \\
+                              --listen udp://0.0.0.0:502
+      a Modbus ASCII line (7E1) for Modbus TCP and Modbus UDP clients
+  aiortu gateway --line /dev/ttyUSB0:1-20 --line /dev/ttyUSB1:21-40,framing=ascii \\
+                 --listen tcp://0.0.0.0:502
+      an RTU line and an ASCII line behind one address
   aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:502 --cache-ms 500 \\
                  --stats 60 --metrics http://127.0.0.1:9102/metrics
       reads answered again for 500 ms, statistics on stderr every minute and
@@ -119,12 +129,12 @@ def register(subparsers: Subparsers) -> None:
         required=True,
         metavar="URL[,priority=N][,rules=FILE]",
         help=(
-            "tcp://host:port (Modbus TCP), rtu+tcp://host:port (RTU frames), "
-            "tls://host:port (Modbus/TCP Security: --certfile, --keyfile, --cafile and rules) "
-            "or unix:PATH[?mode=0660&group=NAME] (Modbus TCP on a Unix socket, with its file "
-            "mode and group) to listen on; repeat for several; lower priorities go first (0); "
-            "rules=FILE: what the listener's clients may do (a rule file, as for tls://; a "
-            "refused request gets exception 01)"
+            "tcp://host:port (Modbus TCP), udp://host:port (Modbus UDP), rtu+tcp://host:port "
+            "(RTU frames), tls://host:port (Modbus/TCP Security: --certfile, --keyfile, "
+            "--cafile and rules) or unix:PATH[?mode=0660&group=NAME] (Modbus TCP on a Unix "
+            "socket, with its file mode and group) to listen on; repeat for several; lower "
+            "priorities go first (0); rules=FILE: what the listener's clients may do (a rule "
+            "file, as for tls://; a refused request gets exception 01)"
         ),
     )
     tls = parser.add_argument_group("tls:// listeners")
@@ -134,6 +144,13 @@ def register(subparsers: Subparsers) -> None:
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
     add_frame_gap(line, before="request")
+    line.add_argument(
+        "--framing",
+        choices=_FRAMINGS,
+        default="rtu",
+        help="the lines' framing: rtu, or ascii (7E1 by default; 8N2 on a pseudo-terminal); "
+        "per line as --line PORT:1-20,framing=ascii (rtu)",
+    )
     master = parser.add_argument_group("the master on the line")
     master.add_argument(
         "--timeout", type=seconds, default=DEFAULT_TIMEOUT,
@@ -257,45 +274,74 @@ def run(args: argparse.Namespace) -> int:
     except InvalidValue as error:
         print(f"aiortu gateway: error: {error}", file=sys.stderr)
         return 2
-    # Every line shares the settings; the first port's kind picks the defaults.
-    given = args.port
+    # Every line shares the baud rate and parity; the first port's kind picks the defaults.
+    given, bytesize = args.port, args.bytesize
     args.port = ports if isinstance(ports, str) else str(ports[0].port)
     resolve_line_settings(args)
-    args.port = given
+    args.port, args.bytesize = given, bytesize  # per line, by its framing and kind
     with library_warnings_on_stderr("gateway"):
         return anyio.run(_serve, args, ports, listens)
 
 
 def _parse_line(text: str) -> GatewayLine:
-    """A `--line PORT:FIRST-LAST` value (or `PORT:UNIT`); raises InvalidValue when wrong."""
-    port, colon, units = text.rpartition(":")
+    """A `--line PORT:FIRST-LAST[,framing=ascii]` value (or `PORT:UNIT`); raises InvalidValue
+    when wrong. The framing goes in the line's options (see `_line_options`)."""
+    where, _, option = text.partition(",")
+    port, colon, units = where.rpartition(":")
     first, dash, last = units.partition("-")
+    name, _, framing = option.partition("=")
     try:
-        if not (colon and port):
+        if not (colon and port) or (option and (name != "framing" or framing not in _FRAMINGS)):
             raise ValueError(text)
         low = int(first)
         high = int(last) if dash else low
     except ValueError:
         raise InvalidValue(
-            "--line", text, "PORT:FIRST-LAST", message=f"--line {text}: expected PORT:FIRST-LAST "
-            "with unit ids in 1..247, as /dev/ttyUSB0:1-20"
+            "--line", text, "PORT:FIRST-LAST", message=f"--line {text}: expected "
+            "PORT:FIRST-LAST[,framing=rtu|ascii] with unit ids in 1..247, as /dev/ttyUSB0:1-20"
         ) from None  # fmt: skip
     if not 1 <= low <= high <= 247:
         raise InvalidValue(
             "--line", text, "PORT:FIRST-LAST", message=f"--line {text}: the units must be "
             "FIRST-LAST with 1 <= FIRST <= LAST <= 247"
         )  # fmt: skip
-    return GatewayLine(port, range(low, high + 1))
+    return GatewayLine(port, range(low, high + 1), options={"framing": framing} if option else {})
+
+
+def _line_options(args: argparse.Namespace, port: str, framing: str) -> dict[str, Any]:
+    """The framing and data bits of the line on `port`: ASCII's 7 data bits unless
+    `--bytesize` says otherwise or the port is a pseudo-terminal, which keeps 8."""
+    if framing != "ascii":
+        return {"bytesize": args.bytesize or 8}
+    return {"framing": "ascii", "bytesize": args.bytesize or (8 if is_pty(port) else 7)}
+
+
+def _with_options(
+    args: argparse.Namespace, ports: str | list[GatewayLine]
+) -> tuple[str | list[GatewayLine], dict[str, Any]]:
+    """The lines, each with its framing and data bits, and the options of a single port."""
+    if isinstance(ports, str):
+        return ports, _line_options(args, ports, args.framing)
+    lines = [
+        GatewayLine(
+            line.port,
+            line.units,
+            options=_line_options(args, str(line.port), line.options.get("framing", args.framing)),
+        )
+        for line in ports
+    ]
+    return lines, {}
 
 
 async def _serve(
     args: argparse.Namespace, ports: str | list[GatewayLine], listens: list[Listen]
 ) -> int:
     failure: CommandFailed | None = None
+    lines, options = _with_options(args, ports)
     with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
         try:
             async with gateway(
-                ports,
+                lines,
                 listens,
                 max_in_flight=args.max_in_flight,
                 max_connections=args.max_connections,
@@ -313,6 +359,7 @@ async def _serve(
                 timeout=args.timeout,
                 retries=args.retries,
                 offline_after=args.offline_after,
+                **options,
             ) as server:
                 _say(f"{_shared_what(args, server)}; Ctrl-C to stop")
                 async with anyio.create_task_group() as tasks:
@@ -343,7 +390,9 @@ def _shared_what(args: argparse.Namespace, server: Gateway) -> str:
     """What the gateway serves where, for its first line on stderr."""
     where = [f"{host}:{port}" for host, port in server.local_addresses] + server.unix_paths
     names = args.port or ", ".join(args.line)
-    text = f"{names} at {args.baudrate} 8{args.parity}{args.stopbits} shared on {', '.join(where)}"
+    bits = args.bytesize or ("7" if args.framing == "ascii" else "8")
+    text = f"{names} at {args.baudrate} {bits}{args.parity}{args.stopbits} shared on "
+    text += ", ".join(where)
     if server.metrics_address is not None:
         host, port = server.metrics_address
         text += f"; metrics on http://{host}:{port}"

@@ -140,6 +140,7 @@ async def open_from_args(
     async with open_master(
         args.port,
         baudrate=args.baudrate,
+        bytesize=args.bytesize,
         parity=args.parity,
         stopbits=args.stopbits,
         timeout=args.timeout,

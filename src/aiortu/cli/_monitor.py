@@ -21,10 +21,12 @@ from collections.abc import AsyncIterator
 from typing import TextIO
 
 import anyio
+import anyio.abc
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import add_line_settings, add_timing, resolve_line_settings
 from aiortu.cli._messages import port_failure
+from aiortu.cli._monitor_ascii import monitor_ascii
 from aiortu.core.rtu import BusDecoder, DecodedFrame, Role
 from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue, PortError
@@ -43,6 +45,8 @@ examples:
       through a serial device server; one JSON object per frame, errors only
   aiortu monitor /dev/ttyUSB0 --timing strict --time iso
       the spec's t1.5 rule (gaps inside frames break them), wall-clock times
+  aiortu monitor /dev/ttyUSB0 --framing ascii --baudrate 9600
+      a Modbus ASCII bus at 9600 7E1 (the spec's ASCII default)
 
 line settings as mbpoll spells them (mbpoll -m rtu ...):
   aiortu monitor --baudrate 9600    mbpoll -b 9600
@@ -80,6 +84,12 @@ def register(subparsers: Subparsers) -> None:
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
     add_timing(line)
+    line.add_argument(
+        "--framing",
+        choices=("rtu", "ascii"),
+        default="rtu",
+        help="the bus's framing: rtu, or ascii (7E1 by default, 8N2 on a pseudo-terminal) (rtu)",
+    )
     output = parser.add_argument_group("output")
     output.add_argument(
         "--json", action="store_true", help="one JSON object per line instead of text"
@@ -153,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
 
 async def _monitor(args: argparse.Namespace) -> int:
     resolve_line_settings(args)
-    settings = LineSettings(args.baudrate, parity=args.parity, stopbits=args.stopbits)
+    settings = LineSettings(args.baudrate, args.bytesize, args.parity, args.stopbits)
     if isinstance(parse_port_url(args.port), ModbusTcpAddress):
         raise InvalidValue(
             "PORT",
@@ -167,6 +177,8 @@ async def _monitor(args: argparse.Namespace) -> int:
             stream = await open_stream(args.port, settings)
         except PortError as exc:
             raise CommandFailed(f"cannot open the port: {port_failure(exc)}") from exc
+        if args.framing == "ascii":
+            return await _monitor_ascii(args, stream, settings, signals)
         failure: str | None = None
         async with Link(stream, settings, role=Role.MONITOR, timing=args.timing) as link:
             printer = FramePrinter(
@@ -201,6 +213,37 @@ async def _monitor(args: argparse.Namespace) -> int:
                         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
                         group.cancel_scope.cancel()
                         break
+    if failure is not None:
+        raise CommandFailed(failure)
+    return 0
+
+
+async def _monitor_ascii(
+    args: argparse.Namespace,
+    stream: anyio.abc.ByteStream,
+    settings: LineSettings,
+    signals: AsyncIterator[signal.Signals],
+) -> int:
+    clock = time.monotonic
+    printer = FramePrinter(
+        sys.stdout, start=clock(), wall_start=time.time(), json_lines=args.json, raw=args.raw,
+        iso_time=args.time == "iso",
+    )  # fmt: skip
+    print(
+        f"aiortu monitor: listening on {args.port} at {settings} (Modbus ASCII); Ctrl-C to stop",
+        file=sys.stderr,
+        flush=True,
+    )
+    failure: str | None = None
+    async with stream, anyio.create_task_group() as group:
+        group.start_soon(_stop_on_signal, signals, group.cancel_scope)
+        try:
+            await monitor_ascii(stream, settings, clock, printer.emit)
+        except BrokenPipeError:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (ConnectionLost, anyio.EndOfStream, anyio.BrokenResourceError) as exc:
+            failure = str(exc) or f"{args.port}: the line closed"
+        group.cancel_scope.cancel()
     if failure is not None:
         raise CommandFailed(failure)
     return 0

@@ -48,6 +48,8 @@ examples:
       Modbus TCP on every interface, many clients at once
   aiortu serve rtu+tcp://0.0.0.0:5020 --config devices.toml
       RTU framing over TCP, listening (a wildcard host listens, any other connects)
+  aiortu serve ascii+tcp://0.0.0.0:5021 --config devices.toml
+      Modbus ASCII over TCP, listening, for serial device servers that connect in
 
 several processes can share one bus, each with its own units:
   aiortu virtual-bus --ports 3 --parity N --stopbits 2     # prints three paths
@@ -216,6 +218,7 @@ async def _serve_once(
         args.port,
         units,
         baudrate=args.baudrate,
+        bytesize=args.bytesize,
         parity=args.parity,
         stopbits=args.stopbits,
         frame_gap=args.frame_gap,
@@ -229,7 +232,7 @@ async def _serve_once(
         if local is not None:  # listening: say the port, which may have been 0
             where = f"{args.port} (port {local[1]})"
         else:
-            where = f"{args.port} at {args.baudrate} 8{args.parity}{args.stopbits}"
+            where = f"{args.port} at {args.baudrate} {args.bytesize}{args.parity}{args.stopbits}"
         _say(f"{which} {listing} on {where}; Ctrl-C to stop")
         await slave.wait_stopped()
     error = slave.connection_error

@@ -185,4 +185,6 @@ def on_the_line(
     A caller cancelled while queued is dropped from the queue; one whose request is on the wire
     leaves it to complete, without retries. (A plain function: one coroutine frame less on
     every resumption of the transaction.)"""
-    return master.engine.submit(transaction, priority, order)
+    transaction.priority = priority
+    transaction.order = order
+    return master.seam.submit(transaction)

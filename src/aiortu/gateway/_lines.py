@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 from aiortu.errors import InvalidValue
 from aiortu.master import Master
@@ -17,11 +18,14 @@ ALL_UNITS = range(1, 248)
 @dataclass(frozen=True, slots=True)
 class GatewayLine:
     """One line of a gateway: its port name (or a running [`Master`][aiortu.master.Master]),
-    the unit ids routed to it and a name for statistics (the port name when empty)."""
+    the unit ids routed to it, a name for statistics (the port name when empty), and the
+    [`open_master`][aiortu.master.open_master] arguments of this line alone (`options`, as
+    `{"framing": "ascii", "bytesize": 7}` for a Modbus ASCII line), over the gateway's."""
 
     port: str | Master
     units: range = ALL_UNITS
     name: str = ""
+    options: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def label(self) -> str:
@@ -59,6 +63,8 @@ def check_lines(lines: Sequence[GatewayLine]) -> None:
                         "to one line"
                     ),
                 )
+        if line.options and isinstance(line.port, Master):
+            raise InvalidValue("options", dict(line.options), "none with a Master given")
         seen.append(line)
 
 

@@ -28,12 +28,15 @@ from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS
 from aiortu.master import Master, open_master
 from aiortu.transport import (
     MODBUS_TCP_SCHEME,
+    MODBUS_UDP_SCHEME,
     TCP_SCHEME,
     TLS_SCHEME,
     WRITE_FUNCTION_CODES,
+    DatagramListener,
     RoleRules,
     TlsListener,
     listen_tcp,
+    listen_udp,
     listen_unix,
     listening_address,
     load_rules,
@@ -42,7 +45,7 @@ from aiortu.transport import (
     remove_socket,
 )
 
-_SCHEMES = (MODBUS_TCP_SCHEME, TCP_SCHEME, TLS_SCHEME)
+_SCHEMES = (MODBUS_TCP_SCHEME, MODBUS_UDP_SCHEME, TCP_SCHEME, TLS_SCHEME)
 _HANDSHAKE_TIMEOUT = 10.0  # seconds a TLS client has to finish its handshake
 
 __all__ = ("DEFAULT_RETRIES", "DEFAULT_TIMEOUT", "REPEATED_CODES", "Listen", "gateway")
@@ -70,10 +73,11 @@ class Listen:
     """A listen URL, the priority of its connections (lower values are served first) and its
     access rules.
 
-    `tcp://host:port` serves Modbus TCP, `rtu+tcp://host:port` RTU frames over TCP (as a
-    serial device server sends them), `unix:PATH` Modbus TCP on a Unix socket, `tls://host:port`
-    Modbus/TCP Security (mutual TLS: give [`gateway`][aiortu.gateway.gateway] the certificate
-    files); port 0 asks for a free port.
+    `tcp://host:port` serves Modbus TCP, `udp://host:port` Modbus UDP (each source address a
+    connection of its own, answered at that address), `rtu+tcp://host:port` RTU frames over TCP
+    (as a serial device server sends them), `unix:PATH` Modbus TCP on a Unix socket,
+    `tls://host:port` Modbus/TCP Security (mutual TLS: give [`gateway`][aiortu.gateway.gateway]
+    the server context); port 0 asks for a free port.
 
     `rules` are [`RoleRules`][aiortu.transport.RoleRules] or the path of a rule file
     ([`load_rules`][aiortu.transport.load_rules]): a request they refuse gets exception 01. Every
@@ -132,7 +136,8 @@ async def _open_lines(
     for line in lines:
         master = line.port
         if not isinstance(master, Master):
-            master = await stack.enter_async_context(open_master(master, **options))
+            own = {**options, **line.options}
+            master = await stack.enter_async_context(open_master(master, **own))
         opened.append(GatewayLine(master, line.units, line.label))
     return opened
 
@@ -149,7 +154,11 @@ async def _listener(
         listener = await listen_tcp(where.host, where.port, url=url)
     else:
         address = parse_listen_url(url, _SCHEMES)
-        listener = await listen_tcp(address.host, address.port, url=url)
+        if address.scheme == MODBUS_UDP_SCHEME:
+            sock = await listen_udp(address.host, address.port, url=url)
+            listener = DatagramListener(sock, url)
+        else:
+            listener = await listen_tcp(address.host, address.port, url=url)
         if address.scheme == TLS_SCHEME:
             if tls is None:
                 raise InvalidValue(
@@ -163,9 +172,7 @@ async def _listener(
 
 
 def _rtu_framing(url: str) -> bool:
-    if parse_unix_url(url) is not None:
-        return False
-    return parse_listen_url(url, _SCHEMES).scheme not in (MODBUS_TCP_SCHEME, TLS_SCHEME)
+    return parse_unix_url(url) is None and parse_listen_url(url, _SCHEMES).scheme == TCP_SCHEME
 
 
 @contextlib.asynccontextmanager
@@ -204,8 +211,8 @@ async def gateway(
     [`Gateway`][aiortu.gateway.Gateway]'s.
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a listen URL that is not
-    `tcp://host:port`, `rtu+tcp://host:port`, `tls://host:port` or `unix:PATH`, a `tls://` one
-    without rules or `tls`, or lines whose unit ranges overlap,
+    `tcp://host:port`, `udp://host:port`, `rtu+tcp://host:port`, `tls://host:port` or
+    `unix:PATH`, a `tls://` one without rules or `tls`, or lines whose unit ranges overlap,
     [`ConfigError`][aiortu.errors.ConfigError] for a bad rule file, and
     [`PortError`][aiortu.errors.PortError]s when a port cannot be opened.
     """

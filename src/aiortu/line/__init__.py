@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from aiortu.line._link import Link, LinkEvent, LinkListener
 from aiortu.line._native import NativeWaits, Waiter, native_waits
+from aiortu.line._push_reader import ReplyTap
 from aiortu.line._wake_timer import WakeTimer, create_wake_timer
 
 __all__ = (
@@ -18,6 +19,7 @@ __all__ = (
     "LinkEvent",
     "LinkListener",
     "NativeWaits",
+    "ReplyTap",
     "WakeTimer",
     "Waiter",
     "create_wake_timer",

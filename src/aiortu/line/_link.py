@@ -192,6 +192,13 @@ class Link:
         self.receiver = Receiver(
             self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence
         )
+        self._init_events(queue_size)
+        self._init_runtime()
+        self._init_sender(stream)
+        self._init_counters()
+
+    def _init_events(self, queue_size: int) -> None:
+        """The queue of events for `receive`, and the listener that may take them instead."""
         self.queue_size = queue_size
         """The most events kept waiting to be received (by a listener too)."""
         self._send_events: MemoryObjectSendStream[LinkEvent]
@@ -199,8 +206,11 @@ class Link:
         self._send_events, self._receive_events = anyio.create_memory_object_stream[LinkEvent](
             queue_size
         )
-        self._task_group: anyio.abc.TaskGroup | None = None
         self._listener: LinkListener | None = None
+
+    def _init_runtime(self) -> None:
+        """What the link learns of the running backend when it opens, and its run state."""
+        self._task_group: anyio.abc.TaskGroup | None = None
         self.backend: type[anyio.abc.AsyncBackend] | None = None
         """The async backend the link runs on (set when it opens): its events, cancel
         scopes and clock cost no backend lookup."""
@@ -217,8 +227,6 @@ class Link:
         self._error: BaseException | None = None
         self._closed = anyio.Event()
         self._stopped = False
-        self._init_sender(stream)
-        self._init_counters()
 
     def _init_sender(self, stream: anyio.abc.ByteStream) -> None:
         """The sender's state, and the push reader where the stream pushes its bytes."""
@@ -416,27 +424,22 @@ class Link:
         if self._listener is not None:
             self._listener(None)
 
-    def expect(
-        self,
-        prefix: bytes,
-        length: int,
-        on_frame: Callable[[bytes, float], None],
-        checked: bytes | None = None,
-    ) -> None:
-        """Hand the next chunk that is exactly one good frame of `length` bytes starting with
-        `prefix` straight to `on_frame(frame, end)`, once, instead of to the listener as a
-        [`FrameReceived`][aiortu.core.rtu.FrameReceived];
-        [`forget_expected`][aiortu.line.Link.forget_expected] undoes it. `prefix` and `length` must
-        fit one frame layout (the receiver checks the CRC only). `checked` is a frame of that layout
-        whose CRC is known to be good (the last reply to the same request): a chunk equal to it is
-        not checked again.
+    def expect(self, tap: ReplyTap) -> None:
+        """Hand the next chunk that is exactly one good frame of `tap.length` bytes starting
+        with `tap.prefix` straight to `tap.on_frame(frame, end)`, once, instead of to the
+        listener as a [`FrameReceived`][aiortu.core.rtu.FrameReceived];
+        [`forget_expected`][aiortu.line.Link.forget_expected] undoes it. `prefix` and `length`
+        must fit one frame layout (the receiver checks the CRC only). `tap.checked` is a frame of
+        that layout whose CRC is known to be good (the last reply to the same request): a chunk
+        equal to it is not checked again. A tap may be given again (a master keeps one per
+        reply shape).
 
         Only where the stream pushes its bytes (see `_push`); anything else takes
         the usual way. A master waiting for the reply it knows the shape of (a register
         read's) saves the event and the queue this way.
         """
         if self._push_reader is not None:
-            self._push_reader.reply_tap = ReplyTap(prefix, length, on_frame, checked)
+            self._push_reader.reply_tap = tap
 
     def expect_requests(
         self,

@@ -31,7 +31,8 @@ FrameTaker = Callable[[bytes, float], None]
 
 @dataclass(slots=True)
 class ReplyTap:
-    """The one reply a master waits for (see [`Link.expect`][aiortu.line.Link.expect])."""
+    """The one reply a master waits for (see [`Link.expect`][aiortu.line.Link.expect]):
+    `on_frame(frame, end)` takes it."""
 
     prefix: bytes
     """The reply's first bytes."""

@@ -10,13 +10,15 @@ from __future__ import annotations
 
 from aiortu.errors import UnitOffline, UnitSkipped
 from aiortu.master._client import Master, open_master
-from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
+from aiortu.master._config import MasterConfig, ReconnectPolicy, TimingPolicy
+from aiortu.master._connection import LineConnection, StreamOpener
 from aiortu.master._device import Device, Reading
 from aiortu.master._handles import BroadcastHandle, BroadcastMethod, UnitHandle
 from aiortu.master._identify import ProfileMatch, match_profiles
 from aiortu.master._poller import CycleReport, CycleStats, Point, Poller, Sample, UnitHealth
 from aiortu.master._profile_poller import ProfilePoller
 from aiortu.master._records import FileRecordLike, RecordRequestLike
+from aiortu.master._seam import Seam
 from aiortu.master._stats import HealthPolicy, UnitState, UnitStats
 from aiortu.master._sunspec import FoundModel, SunSpecDevice, walk_sunspec
 
@@ -31,6 +33,7 @@ __all__ = (
     "HealthPolicy",
     "LineConnection",
     "Master",
+    "MasterConfig",
     "Point",
     "Poller",
     "ProfileMatch",
@@ -39,8 +42,10 @@ __all__ = (
     "ReconnectPolicy",
     "RecordRequestLike",
     "Sample",
+    "Seam",
     "StreamOpener",
     "SunSpecDevice",
+    "TimingPolicy",
     "UnitHandle",
     "UnitHealth",
     "UnitOffline",

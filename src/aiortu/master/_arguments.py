@@ -17,8 +17,6 @@ from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.errors import InvalidRequest, InvalidValue
 from aiortu.core.machines import Failure
 from aiortu.core.pdu import REGISTER_RANGE
-from aiortu.core.rtu import TimingMode
-from aiortu.core.serial import LineSettings
 
 __all__ = (
     "UNIT_RANGE",
@@ -30,7 +28,6 @@ __all__ = (
     "check_function_codes",
     "check_int",
     "check_items",
-    "check_master_settings",
     "check_priority",
     "check_registers",
     "check_retry_on",
@@ -205,54 +202,3 @@ def check_delays(name: str, delays: object) -> tuple[float, float]:
     if first > longest:
         raise InvalidValue(name, delays, allowed)
     return first, longest
-
-
-def check_master_settings(
-    *,
-    timeout: object,
-    retries: object,
-    retry_on: object,
-    repeatable: object,
-    frame_gap: object,
-    turnaround_delay: object,
-    late_reply_guard: object,
-    offline_after: object,
-    fail_fast_offline: object,
-    probe_interval: object,
-    reconnect: object,
-    reconnect_delay: object,
-    reconnect_fail_fast: object,
-    timing: object,
-    settings: object = None,
-    clock: object = float,
-    opener: object = None,
-    min_turnaround: object = 0.0,
-    wire_timed: object = None,
-) -> None:
-    """Raise InvalidValue, naming the setting, for the first of a master's settings that is
-    out of its range (see [`Master`][aiortu.master.Master])."""
-    check_seconds("timeout", timeout)
-    check_at_least("retries", retries, 0)
-    check_retry_on(retry_on)
-    check_function_codes("repeatable", repeatable)
-    if frame_gap is not None:
-        check_seconds("frame_gap", frame_gap, zero=True)
-    check_seconds("turnaround_delay", turnaround_delay, zero=True)
-    check_seconds("late_reply_guard", late_reply_guard, zero=True)
-    check_at_least("offline_after", offline_after, 1)
-    check_bool("fail_fast_offline", fail_fast_offline)
-    check_seconds("probe_interval", probe_interval, zero=True)
-    check_bool("reconnect", reconnect)
-    check_delays("reconnect_delay", reconnect_delay)
-    check_bool("reconnect_fail_fast", reconnect_fail_fast)
-    if not isinstance(timing, str) or timing not in set(TimingMode):
-        raise InvalidValue("timing", timing, ", ".join(TimingMode))
-    if settings is not None and not isinstance(settings, LineSettings):
-        raise InvalidValue("settings", settings, "a LineSettings or None")
-    if not callable(clock):
-        raise InvalidValue("clock", clock, "a function returning the time in seconds")
-    if opener is not None and not callable(opener):
-        raise InvalidValue("opener", opener, "None or an async function returning a stream")
-    check_turnaround(min_turnaround)
-    if wire_timed is not None and not isinstance(wire_timed, bool):
-        raise InvalidValue("wire_timed", wire_timed, "None (from the stream), True or False")

@@ -30,7 +30,7 @@ docs/protocol.md.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Awaitable, Callable, Collection, Mapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from types import TracebackType
 from typing import Any, Self, TypeVar
 
@@ -38,30 +38,40 @@ import anyio
 import anyio.abc
 
 from aiortu.core.codes import BROADCAST_UNIT
-from aiortu.core.machines import Failure, RetryPolicy, Transaction
-from aiortu.core.pdu import ExceptionPDU, RawPDU, Request, Response, decode_request
-from aiortu.core.rtu import Role, TimingMode
+from aiortu.core.machines import RetryPolicy, Transaction
+from aiortu.core.pdu import (
+    ExceptionPDU,
+    RawPDU,
+    Request,
+    Response,
+    decode_request,
+)
+from aiortu.core.rtu import Role
 from aiortu.core.serial import LineSettings
-from aiortu.errors import InvalidRequest, MalformedPDU
+from aiortu.errors import InvalidRequest, InvalidValue, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
     UNIT_RANGE,
     check_at_least,
     check_int,
-    check_master_settings,
     check_priority,
     check_timeout,
     check_turnaround,
     check_unit,
 )
-from aiortu.master._connection import LineConnection, ReconnectPolicy, StreamOpener
-from aiortu.master._engine import HealthPolicy, LineEngine, UnitOffline, UnitStats
+from aiortu.master._config import MasterConfig
+from aiortu.master._connection import LineConnection, StreamOpener, can_reconnect
+from aiortu.master._engine import LineEngine, UnitOffline, UnitStats
 from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._operations import Operations, answer
+from aiortu.master._seam import Seam
 
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
 
 _ResponseT = TypeVar("_ResponseT", bound=Response)
+_SEND_ONCE = RetryPolicy(0)
+"""The policy of a request without reply: nothing tells a failed attempt."""
+
 _STATS_UNITS = range(248)
 """The units a master keeps statistics of: unit 0 counts the broadcasts."""
 
@@ -82,28 +92,19 @@ def _known_form(pdu: object) -> Request:
 class Master(Operations):
     """A Modbus RTU master on `stream`; an async context manager.
 
-    `settings` give the line timing. `timeout` is the response timeout of each attempt,
-    counted from when the request has left the wire; `retries` extra attempts follow a
-    failure listed in `retry_on` (default: timeouts and frame errors, never exception
-    responses; add exception codes to retry those), for requests whose function code is
-    in `repeatable` (default
-    [`SAFE_TO_REPEAT`][aiortu.core.machines.SAFE_TO_REPEAT]: reads and the idempotent
-    writes; a request of another code is sent once). `frame_gap` is the silence kept
-    before each request (`None`: t3.5, or 0 on a stream of whole frames such as Modbus TCP's
-    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream]; 0 for virtual lines and TCP gateways).
-    `turnaround_delay` is the wait after a broadcast. Health: `offline_after`
-    consecutive failures mark a unit offline; with `fail_fast_offline` calls to it raise
-    [`UnitOffline`][aiortu.errors.UnitOffline] except one probe every `probe_interval`
-    seconds. `timing` is the receiver's t1.5 mode. `min_turnaround` and `wire_timed`
-    decide which replies are stale (see below).
+    `stream` is any `anyio.abc.ByteStream`, or a [`Seam`][aiortu.master.Seam] that answers
+    requests itself (a test's [`MockLine`][aiortu.testing.MockLine]). `settings` give the line
+    timing. The options are a [`MasterConfig`][aiortu.master.MasterConfig] (`config`) and the
+    everyday keywords on top of it (`timeout=`, `retries=`, `offline_after=`, ...: the names of
+    `MasterConfig.KEYWORDS`, each setting one field of one of its policies; see there).
+    `clock` is the master's time.
 
-    Reconnecting (see [`aiortu.master`][aiortu.master]): when the stream fails, the request in
-    flight and the queued ones raise [`ConnectionLost`][aiortu.errors.ConnectionLost]. A master
-    given only a stream cannot reopen it and stays failed. Given an `opener` (an async function
-    returning a new stream for the same port; [`open_master`][aiortu.master.open_master] passes one)
-    and `reconnect` true, it reopens the port, waiting `reconnect_delay` `(first, longest)` seconds
-    between attempts, doubling; requests made meanwhile wait up to their timeout for the port and
-    then raise ConnectionLost, or raise it at once with `reconnect_fail_fast`.
+    Reconnecting (see [`ReconnectPolicy`][aiortu.master.ReconnectPolicy]): when the stream
+    fails, the request in flight and the queued ones raise
+    [`ConnectionLost`][aiortu.errors.ConnectionLost]. A master given only a stream cannot reopen
+    it and stays failed. Given an `opener` (an async function returning a new stream for the
+    same port; [`open_master`][aiortu.master.open_master] passes one), it reopens the port as its
+    reconnect policy says.
 
     Every method takes the unit first, and `timeout=` (this call's response timeout)
     and `priority=` (lower goes first; equal priorities keep their order). Requests
@@ -142,65 +143,54 @@ class Master(Operations):
 
     def __init__(
         self,
-        stream: anyio.abc.ByteStream,
+        stream: anyio.abc.ByteStream | Seam,
         settings: LineSettings | None = None,
         *,
-        timeout: float = 1.0,
-        retries: int = 2,
-        retry_on: Collection[Failure | int] | None = None,
-        repeatable: Collection[int] | None = None,
-        frame_gap: float | None = None,
-        turnaround_delay: float = 0.1,
-        late_reply_guard: float = 0.1,
-        offline_after: int = 3,
-        fail_fast_offline: bool = False,
-        probe_interval: float = 5.0,
-        timing: TimingMode | str = TimingMode.TOLERANT,
+        config: MasterConfig | None = None,
         clock: Callable[[], float] = anyio.current_time,
         opener: StreamOpener | None = None,
-        reconnect: bool = True,
-        reconnect_delay: tuple[float, float] = (0.1, 5.0),
-        reconnect_fail_fast: bool = False,
-        min_turnaround: float = 0.0,
-        wire_timed: bool | None = None,
+        **options: Any,
     ) -> None:
-        check_master_settings(
-            timeout=timeout, retries=retries, retry_on=retry_on, repeatable=repeatable,
-            frame_gap=frame_gap, turnaround_delay=turnaround_delay,
-            late_reply_guard=late_reply_guard, offline_after=offline_after,
-            fail_fast_offline=fail_fast_offline, probe_interval=probe_interval,
-            reconnect=reconnect, reconnect_delay=reconnect_delay,
-            reconnect_fail_fast=reconnect_fail_fast, timing=timing, settings=settings,
-            clock=clock, opener=opener, min_turnaround=min_turnaround, wire_timed=wire_timed,
-        )  # fmt: skip
+        if settings is not None and not isinstance(settings, LineSettings):
+            raise InvalidValue("settings", settings, "a LineSettings or None")
+        if not callable(clock):
+            raise InvalidValue("clock", clock, "a function returning the time in seconds")
+        if opener is not None and not callable(opener):
+            raise InvalidValue("opener", opener, "None or an async function returning a stream")
+        if config is not None and not isinstance(config, MasterConfig):
+            raise InvalidValue("config", config, "a MasterConfig or None")
+        config = (config if config is not None else MasterConfig()).with_options(**options)
+        self.config = config
+        """The master's options (see [`MasterConfig`][aiortu.master.MasterConfig])."""
         self.settings = settings if settings is not None else LineSettings()
-        self.timeout = float(timeout)
-        self.turnaround_delay = turnaround_delay
-        self.policy = RetryPolicy.of(retries, retry_on, repeatable)
+        self.timeout = config.timeout
+        self.turnaround_delay = config.timings.turnaround_delay
+        self.policy = config.retry
+        timings = config.timings
 
         def make_link(stream: anyio.abc.ByteStream) -> Link:
             link = Link(
-                stream, self.settings, role=Role.MASTER, timing=timing, frame_gap=frame_gap,
-                clock=clock,
+                stream, self.settings, role=Role.MASTER, timing=timings.mode,
+                frame_gap=timings.frame_gap, clock=clock,
             )  # fmt: skip
-            if wire_timed is not None:
-                link.wire_timed = wire_timed
+            if timings.wire_timed is not None:
+                link.wire_timed = timings.wire_timed
             return link
 
-        link = make_link(stream)
-        self.engine = LineEngine(
-            link,
-            health=HealthPolicy(offline_after, fail_fast_offline, probe_interval),
-            late_reply_guard=late_reply_guard,
-        )
-        self.engine.min_turnaround = check_turnaround(min_turnaround)
-        self.connection = LineConnection(
-            self.engine,
-            link,
-            make_link,
-            opener,
-            ReconnectPolicy(reconnect, reconnect_delay, reconnect_fail_fast),
-        )
+        self._engine: LineEngine | None = None
+        self._connection: LineConnection | None = None
+        self.seam: Seam
+        """The one seam every request goes through (see [`Seam`][aiortu.master.Seam]): the
+        line's engine, or the Seam given in place of a stream. A caller that builds its own
+        [`Transaction`][aiortu.core.machines.Transaction]s (the line server) submits them
+        here."""
+        if isinstance(stream, Seam):
+            self.seam = stream
+        else:
+            link = make_link(stream)
+            reconnect = can_reconnect(opener, config.reconnection)
+            engine = self.seam = self._engine = LineEngine(link, config, can_reconnect=reconnect)
+            self._connection = LineConnection(engine, link, make_link, opener, config.reconnection)
         """Keeps the line up: reconnect counters, the current link."""
         self.broadcast = BroadcastHandle(self)
         """The writes that may go to every unit at once (unit 0); no reply is awaited."""
@@ -213,7 +203,8 @@ class Master(Operations):
         async with contextlib.AsyncExitStack() as stack:
             task_group = await stack.enter_async_context(anyio.create_task_group())
             stack.callback(task_group.cancel_scope.cancel)
-            task_group.start_soon(self.connection.run, name="aiortu master line task")
+            if self._connection is not None:
+                task_group.start_soon(self._connection.run, name="aiortu master line task")
             self._exit_stack = stack.pop_all()
         self._entered_in = anyio.get_current_task().id
         return self
@@ -237,21 +228,42 @@ class Master(Operations):
         return await stack.__aexit__(exc_type, exc, traceback)
 
     @property
+    def engine(self) -> LineEngine:
+        """The engine of the master's line (not on a [`Seam`][aiortu.master.Seam] given in
+        place of a stream)."""
+        if self._engine is None:
+            raise InvalidValue("engine", self.seam, "a master on a byte stream", "no line")
+        return self._engine
+
+    @property
+    def connection(self) -> LineConnection:
+        """Keeps the line up: reconnect counters, the current link (not on a
+        [`Seam`][aiortu.master.Seam] given in place of a stream)."""
+        if self._connection is None:
+            raise InvalidValue("connection", self.seam, "a master on a byte stream", "no line")
+        return self._connection
+
+    @property
     def link(self) -> Link:
         """The line the master talks on now (a new one after each reconnect)."""
         return self.connection.link
 
     @property
     def connected(self) -> bool:
-        """Whether the line is up: False while reconnecting and once failed or closed."""
-        return self.connection.connected
+        """Whether the line is up: False while reconnecting and once failed or closed
+        (always True on a [`Seam`][aiortu.master.Seam] given in place of a stream)."""
+        return self._connection is None or self._connection.connected
+
+    def clock(self) -> float:
+        """The master's time, in seconds (its line's clock)."""
+        return self.seam.clock()
 
     # -- statistics ------------------------------------------------------------------
 
     @property
     def statistics(self) -> Mapping[int, UnitStats]:
         """[`UnitStats`][aiortu.master.UnitStats] by unit address, for units used so far."""
-        return self.engine.stats
+        return self.seam.stats
 
     def set_min_turnaround(self, unit: int, seconds: float | None) -> None:
         """Set the least time `unit` takes from the end of a request on the wire to the
@@ -263,14 +275,14 @@ class Master(Operations):
         silence. Too large a value drops the device's genuine replies.
         """
         check_unit(unit)
-        if seconds is None:
-            self.engine.unit_turnaround.pop(unit, None)
-        else:
-            self.engine.unit_turnaround[unit] = check_turnaround(seconds)
+        if self._engine is not None:
+            self._engine.set_unit_turnaround(
+                unit, None if seconds is None else check_turnaround(seconds)
+            )
 
     def unit_stats(self, unit: int) -> UnitStats:
         """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
-        return self.engine.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
+        return self.seam.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
         """False once `unit` failed `offline_after` times in a row, until a success."""
@@ -295,8 +307,10 @@ class Master(Operations):
         check_unit(unit)
         pdu = _known_form(pdu)
         policy = self.policy.for_function(pdu.function_code)
-        transaction = Transaction(unit, pdu, self._timeout(timeout), policy)
-        response = await self.engine.submit(transaction, check_priority(priority))
+        transaction = Transaction(
+            unit, pdu, self._timeout(timeout), policy, priority=check_priority(priority)
+        )
+        response = await self.seam.submit(transaction)
         assert response is not None
         return response
 
@@ -313,16 +327,16 @@ class Master(Operations):
                 )
         else:
             check_unit(unit)
-        check_priority(priority)
         transaction = Transaction(
             unit,
             pdu,
             self.timeout,
-            RetryPolicy(0),
+            _SEND_ONCE,
             expects_reply=False,
             turnaround=self.turnaround_delay,
+            priority=check_priority(priority),
         )
-        await self.engine.submit(transaction, priority)
+        await self.seam.submit(transaction)
 
     async def request(
         self,
@@ -374,7 +388,9 @@ class Master(Operations):
             policy = self.policy
             if request.function_code not in policy.repeatable:
                 policy = policy.for_function(request.function_code)
-        return self.engine.submit_request(unit, request, response_timeout, policy, priority)
+        return self.seam.submit(
+            Transaction(unit, request, response_timeout, policy, priority=priority)
+        )
 
     def _timeout(self, timeout: float | None) -> float:
         return self.timeout if timeout is None else check_timeout(timeout)
@@ -399,29 +415,16 @@ async def open_master(
     parity: str = "E",
     stopbits: float = 1,
     bytesize: int = 8,
-    timeout: float = 1.0,
-    retries: int = 2,
-    retry_on: Collection[Failure | int] | None = None,
-    repeatable: Collection[int] | None = None,
-    frame_gap: float | None = None,
-    turnaround_delay: float = 0.1,
-    late_reply_guard: float = 0.1,
-    offline_after: int = 3,
-    fail_fast_offline: bool = False,
-    probe_interval: float = 5.0,
-    timing: TimingMode | str = TimingMode.TOLERANT,
-    reconnect: bool = True,
-    reconnect_delay: tuple[float, float] = (0.1, 5.0),
-    reconnect_fail_fast: bool = False,
-    min_turnaround: float = 0.0,
-    wire_timed: bool | None = None,
-    **transport_options: Any,
+    config: MasterConfig | None = None,
+    **options: Any,
 ) -> AsyncIterator[Master]:
     """Open `port_or_url` (a serial device path, `rtu+tcp://host:port`, or `tcp://host:port` for
     Modbus TCP) and yield a [`Master`][aiortu.master.Master] on it; the port is closed on exit.
 
-    The line settings come from `baudrate`, `parity`, `stopbits` and `bytesize`; the other arguments
-    are [`Master`][aiortu.master.Master]'s, and `transport_options` go to
+    The line settings come from `baudrate`, `parity`, `stopbits` and `bytesize`. `config` and the
+    everyday keywords among `options` (those of
+    [`MasterConfig.KEYWORDS`][aiortu.master.MasterConfig]: `timeout`, `retries`, ...) are the
+    master's; the other `options` go to
     [`aiortu.transport.open_stream`][aiortu.transport.open_stream] (`exclusive`, `rs485`,
     `local_echo`, `connect_timeout`). Opening errors are [`PortError`][aiortu.errors.PortError]s.
 
@@ -432,24 +435,21 @@ async def open_master(
     ([`ModbusTcpCounters`][aiortu.transport.ModbusTcpCounters], at `master.link.stream.counters`)
     go on across reconnects.
 
-    With `reconnect` (the default) the master reopens the same port with the same
-    settings after it disappears (a USB adapter unplugged); see [`Master`][aiortu.master.Master] for
-    `reconnect_delay` and `reconnect_fail_fast`.
+    With reconnecting on (the default) the master reopens the same port with the same
+    settings after it disappears (a USB adapter unplugged); see
+    [`ReconnectPolicy`][aiortu.master.ReconnectPolicy].
     """
-    options: dict[str, Any] = {
-        "timeout": timeout, "retries": retries, "retry_on": retry_on, "repeatable": repeatable,
-        "frame_gap": frame_gap, "turnaround_delay": turnaround_delay,
-        "late_reply_guard": late_reply_guard, "offline_after": offline_after,
-        "fail_fast_offline": fail_fast_offline, "probe_interval": probe_interval,
-        "timing": timing, "reconnect": reconnect, "reconnect_delay": reconnect_delay,
-        "reconnect_fail_fast": reconnect_fail_fast, "min_turnaround": min_turnaround,
-        "wire_timed": wire_timed,
-    }  # fmt: skip
-    check_master_settings(**options)  # before the port is opened: a bad one leaves it shut
+    keywords = MasterConfig.KEYWORDS
+    master_options = {name: value for name, value in options.items() if name in keywords}
+    transport_options = {name: value for name, value in options.items() if name not in keywords}
+    if config is not None and not isinstance(config, MasterConfig):
+        raise InvalidValue("config", config, "a MasterConfig or None")
+    # Checked before the port is opened: a bad option leaves it shut.
+    config = (config if config is not None else MasterConfig()).with_options(**master_options)
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     opener = _opener(port_or_url, settings, transport_options)
     stream = await opener()
-    master = Master(stream, settings, opener=opener, **options)
+    master = Master(stream, settings, opener=opener, config=config)
     try:
         async with master:
             yield master

@@ -18,17 +18,17 @@ the link fails, the request in flight and those queued fail with
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
 
 import anyio
 import anyio.abc
 
 from aiortu._log import get_logger
-from aiortu.errors import ConnectionLost, InvalidValue, ModbusError
+from aiortu.errors import ConnectionLost, ModbusError
 from aiortu.line import Link
+from aiortu.master._config import ReconnectPolicy
 from aiortu.master._engine import LineEngine
 
-__all__ = ("LineConnection", "ReconnectPolicy", "StreamOpener")
+__all__ = ("LineConnection", "StreamOpener", "can_reconnect")
 
 _log = get_logger(__name__)
 
@@ -36,29 +36,9 @@ StreamOpener = Callable[[], Awaitable[anyio.abc.ByteStream]]
 """An async function that opens the line's byte stream again (the same port and settings)."""
 
 
-@dataclass(frozen=True, slots=True)
-class ReconnectPolicy:
-    """Whether and how a master reopens its port (see the module docstring).
-
-    `delay` is `(first, longest)`: seconds before the first attempt to reopen, doubled
-    after each failed attempt up to *longest*. With `fail_fast`, requests made while the
-    port is down raise [`ConnectionLost`][aiortu.errors.ConnectionLost] at once instead of waiting.
-    """
-
-    enabled: bool = True
-    delay: tuple[float, float] = (0.1, 5.0)
-    fail_fast: bool = False
-
-    def __post_init__(self) -> None:
-        first, longest = self.delay
-        if not 0 < first <= longest:
-            raise InvalidValue(
-                "reconnect_delay", self.delay, "(first, longest), 0 < first <= longest"
-            )
-
-
 class LineConnection:
-    """Runs `engine` on `link`, and on links over streams from `opener` after it fails.
+    """Runs `engine` on `link`, and on links over streams from `opener` after it fails
+    (when `policy` lets it: see `can_reconnect`).
 
     `make_link` wraps a freshly opened stream in a link with the master's settings.
     Counters: `disconnects`, `reconnects`, `failed_attempts`.
@@ -69,13 +49,13 @@ class LineConnection:
         engine: LineEngine,
         link: Link,
         make_link: Callable[[anyio.abc.ByteStream], Link],
-        opener: StreamOpener | None = None,
-        policy: ReconnectPolicy | None = None,
+        opener: StreamOpener | None,
+        policy: ReconnectPolicy,
     ) -> None:
         self.engine = engine
         self.link = link
         """The current link (a new one after each reconnect)."""
-        self.policy = policy if policy is not None else ReconnectPolicy()
+        self.policy = policy
         self._make_link = make_link
         self._opener = opener
         self.disconnects = 0
@@ -86,13 +66,11 @@ class LineConnection:
         """Attempts to reopen the port that failed."""
         self.last_error: ConnectionLost | None = None
         """Why the line last failed."""
-        engine.wait_for_reconnect = self.can_reconnect
-        engine.fail_fast_reconnect = self.policy.fail_fast
 
     @property
     def can_reconnect(self) -> bool:
         """Whether the port is reopened after it fails (an opener, and reconnecting on)."""
-        return self._opener is not None and self.policy.enabled
+        return can_reconnect(self._opener, self.policy)
 
     @property
     def connected(self) -> bool:
@@ -109,7 +87,7 @@ class LineConnection:
         try:
             while True:
                 async with link:
-                    error = await self.engine.serve(link)
+                    error = await self.engine.line_task.serve(link)
                 self.disconnects += 1
                 self.last_error = error
                 if not self.can_reconnect:
@@ -133,3 +111,8 @@ class LineConnection:
                 self.failed_attempts += 1
                 _log.debug("reopening failed (%s); next attempt in %.3g s", error, delay)
                 delay = min(2 * delay, longest)
+
+
+def can_reconnect(opener: StreamOpener | None, policy: ReconnectPolicy) -> bool:
+    """Whether a master with `opener` reopens its port after it fails under `policy`."""
+    return opener is not None and policy.enabled

@@ -384,7 +384,7 @@ class Poller:
     # -- the cycles ------------------------------------------------------------------
 
     async def _loop(self, group: _Group, cycles: int | None) -> None:
-        clock = self.master.link.clock
+        clock = self.master.clock
         next_start = clock()
         while cycles is None or group.cycle < cycles:
             await self._cycle(group)
@@ -397,7 +397,7 @@ class Poller:
             await anyio.sleep(max(0.0, next_start - clock()))
 
     async def _cycle(self, group: _Group) -> list[Sample]:
-        clock = self.master.link.clock
+        clock = self.master.clock
         start = clock()
         index = group.cycle
         samples: list[Sample] = []
@@ -457,7 +457,7 @@ class Poller:
         next_probe = self._next_probe(unit, self.master.unit_stats(unit))
         if next_probe is None:
             return None
-        now = self.master.link.clock()
+        now = self.master.clock()
         if now < next_probe:
             return UnitSkipped(unit, next_probe - now)
         if self._probe_slots is not None and unit not in self._probe_slots:
@@ -478,7 +478,7 @@ class Poller:
         return reply.values
 
     async def _deliver_error(self, read: PlannedRead, error: Exception, index: int) -> list[Sample]:
-        now = self.master.link.clock()
+        now = self.master.clock()
         samples = [Sample(point, None, now, index, error) for point in read.points]
         for sample in samples:
             await self._deliver(sample)

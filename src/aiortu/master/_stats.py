@@ -41,10 +41,7 @@ class HealthPolicy:
     """When a unit counts as offline, and what calls to it do then.
 
     `offline_after` consecutive failed transactions (timeouts, frame errors) mark a unit
-    offline; a success marks it online. A transaction answered only after an attempt that timed
-    out counts as a failure here (the unit answers late, or not at all): a unit that keeps
-    timing out goes offline even when a retry is answered now and then, and an offline unit
-    comes back only with a reply to a first attempt. With `fail_fast_offline`, calls to an offline
+    offline; a success marks it online. With `fail_fast_offline`, calls to an offline
     unit raise [`UnitOffline`][aiortu.errors.UnitOffline] without sending, except one probe every
     `probe_interval` seconds.
     """
@@ -52,6 +49,10 @@ class HealthPolicy:
     offline_after: int = 3
     fail_fast_offline: bool = False
     probe_interval: float = 5.0
+
+    # A transaction answered only after one of its attempts timed out counts as a failure
+    # here (see UnitStats.count_late_success): a unit that answers only late goes offline
+    # like one that does not answer, even though each of its late replies is taken.
 
 
 @dataclass(slots=True)
@@ -66,6 +67,9 @@ class UnitStats:
     """Transactions sent to the unit (a broadcast counts for unit 0)."""
     successes: int = 0
     """Transactions that got their reply (an exception response counts: the unit answered)."""
+    late_successes: int = 0
+    """Of those, the ones answered only after an attempt had timed out: the unit is too slow
+    for the timeout, and its health counts them as failures."""
     failures: int = 0
     """Transactions that ended without a usable reply (timeouts, frame errors)."""
     timeouts: int = 0
@@ -79,19 +83,17 @@ class UnitStats:
     retries: int = 0
     """Attempts repeated."""
     skipped_frames: int = 0
-    """Frames skipped while waiting for this unit (stale, other units, not matching)."""
+    """Frames skipped while waiting for this unit (stale, other units, not matching, late)."""
+    late_replies: int = 0
+    """Of those, the replies to this unit's timed-out requests that came too late."""
     last_latency: float | None = None
     """Seconds from the start of the request to the end of the reply, last success."""
     mean_latency: float | None = None
     """The mean of that latency over every success."""
-    late_successes: int = 0
-    """Transactions answered only after an attempt that timed out (counted in `successes`, and
-    as failures for the unit's health)."""
     consecutive_failures: int = 0
-    """Failed transactions since the last success at the first attempt."""
+    """Failed transactions since the last success."""
     online: bool = True
-    """False after `offline_after` consecutive failures, until a success at the first
-    attempt."""
+    """False after `offline_after` consecutive failures, until a success."""
     last_probe: float = -math.inf
     """When the unit went offline, or a probe was last let through to it since (by the
     master failing fast, or by a poller)."""
@@ -107,26 +109,12 @@ class UnitStats:
         """When an offline unit may be probed next, on the master's clock; None unless offline."""
         return None if self.online else self.last_probe + probe_interval
 
-    def count_success(
-        self,
-        latency: float,
-        *,
-        exception: bool = False,
-        after_timeout: bool = False,
-        health: HealthPolicy | None = None,
-        now: float = 0.0,
-    ) -> None:
+    def count_success(self, latency: float, *, exception: bool = False) -> None:
         """A transaction got its reply, `latency` seconds after its request began to go
-        out (`exception`: an exception response, which counts: the unit answered). With
-        `after_timeout` (an earlier attempt timed out) it counts as a failure for the unit's
-        health as well (see [`HealthPolicy`][aiortu.master.HealthPolicy])."""
+        out (`exception`: an exception response, which counts: the unit answered)."""
         self.successes += 1
-        if after_timeout and health is not None:
-            self.late_successes += 1
-            self._strike(health, now)
-        else:
-            self.consecutive_failures = 0
-            self.online = True
+        self.consecutive_failures = 0
+        self.online = True
         if exception:
             self.exceptions += 1
         self.last_latency = latency
@@ -143,13 +131,25 @@ class UnitStats:
         elif transaction.failures and transaction.failures[-1] is Failure.TIMEOUT:
             self.timeouts += 1
 
+    def count_late_success(
+        self, latency: float, health: HealthPolicy, now: float, *, exception: bool = False
+    ) -> None:
+        """A transaction got its reply at `now`, but only after an attempt had timed out:
+        the caller has its reply, and the unit's health counts a failure (a unit that
+        answers only late goes offline like one that never answers)."""
+        online, failures = self.online, self.consecutive_failures
+        self.count_success(latency, exception=exception)
+        self.late_successes += 1
+        self.online, self.consecutive_failures = online, failures
+        self._failed_in_a_row(health, now)
+
     def count_failure(self, health: HealthPolicy, now: float) -> None:
         """A transaction ended without a usable reply at `now`: the unit goes offline after
         `health.offline_after` of them in a row."""
         self.failures += 1
-        self._strike(health, now)
+        self._failed_in_a_row(health, now)
 
-    def _strike(self, health: HealthPolicy, now: float) -> None:
+    def _failed_in_a_row(self, health: HealthPolicy, now: float) -> None:
         self.consecutive_failures += 1
         if self.online and self.consecutive_failures >= health.offline_after:
             self.online = False

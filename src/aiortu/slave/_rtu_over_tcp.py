@@ -1,9 +1,10 @@
-"""RTU framing over TCP, listening: one device for every connection, for serial device servers
-that connect in.
+"""RTU (or ASCII) framing over TCP, listening: one device for every connection, for serial
+device servers that connect in.
 
 [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] is the
-[`ModbusTcpServer`][aiortu.slave.ModbusTcpServer] with the server framing the gateway uses
-([`RtuFraming`][aiortu.transport.RtuFraming]) and a serial device's rules: every connection
+[`ModbusTcpServer`][aiortu.slave.ModbusTcpServer] with a server framing the gateway uses
+([`RtuFraming`][aiortu.transport.RtuFraming], or
+[`AsciiFraming`][aiortu.transport.AsciiFraming]) and a serial device's rules: every connection
 reaches the same device (one state machine, its counters, its listen-only mode), a unit it
 does not serve is silent, unit 0 is a broadcast, and the serial-line codes (07, 08, 0B, 0C, 11)
 are served. There is no idle timeout: a line is quiet whenever no master polls.
@@ -11,16 +12,19 @@ are served. There is no idle timeout: a line is quiet whenever no master polls.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 
+from aiortu.core.ascii import DEFAULT_ASCII_TIMEOUT
 from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.rtu import TimingMode
 from aiortu.core.serial import LineSettings
+from aiortu.errors import InvalidValue
 from aiortu.slave._handlers import Handler
 from aiortu.slave._slave import TraceCallback
 from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS, ModbusTcpServer
-from aiortu.transport import RtuFraming
+from aiortu.transport import AsciiFraming, RtuFraming
 
 __all__ = ("RtuOverTcpServer",)
 
@@ -31,14 +35,14 @@ class RtuOverTcpServer(ModbusTcpServer):
 
     A frame's length comes from its function code; a frame of a code whose length it does not
     tell ends after 20 ms of silence; after noise (a bad CRC) the framing finds the next valid
-    frame in what it holds, and it never holds more than 256 bytes between reads. `settings`
-    and `timing` are accepted for the serial line the frames came from, and do not change what
-    is answered (a TCP connection has no character timing). `trace` sees `("received",
-    frame)` and `("sent", frame)`, RTU frames. At most `max_connections` at once; more are
-    closed at once.
+    frame in what it holds, and it never holds more than 256 bytes between reads. With
+    `framing` `"ascii"` the connections speak Modbus ASCII instead (`ascii_timeout` the longest
+    gap inside a frame, 1 s by default). `settings` and `timing` are accepted for the serial
+    line the frames came from, and do not change what is answered (a TCP connection has no
+    character timing). `trace` sees `("received", frame)` and `("sent", frame)`, in the
+    connection's framing. At most `max_connections` at once; more are closed at once.
     """
 
-    framing = RtuFraming
     _name = "RTU over TCP"
 
     def __init__(
@@ -50,7 +54,20 @@ class RtuOverTcpServer(ModbusTcpServer):
         handlers: Mapping[int, Handler] | None = None,
         trace: TraceCallback | None = None,
         max_connections: int = DEFAULT_MAX_CONNECTIONS,
+        framing: str = "rtu",
+        ascii_timeout: float | None = None,
     ) -> None:
+        if framing not in ("rtu", "ascii"):
+            raise InvalidValue("framing", framing, "'rtu' or 'ascii'")
+        if ascii_timeout is not None and framing != "ascii":
+            raise InvalidValue("ascii_timeout", ascii_timeout, "given with framing='ascii' only")
+        if framing == "ascii":
+            timeout = DEFAULT_ASCII_TIMEOUT if ascii_timeout is None else ascii_timeout
+            self._new_framing = functools.partial(AsciiFraming, timeout)
+        else:
+            self._new_framing = RtuFraming
+        self.framing = framing
+        """`rtu` or `ascii`: the framing the connections speak."""
         super().__init__(
             units,
             handlers=handlers,

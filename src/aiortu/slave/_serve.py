@@ -20,6 +20,7 @@ from aiortu.slave._tcp_server import ModbusTcpServer
 from aiortu.slave._tls_server import ModbusTlsServer
 from aiortu.slave._udp_server import ModbusUdpServer
 from aiortu.transport import (
+    ASCII_TCP_SCHEME,
     MODBUS_TCP_SCHEME,
     MODBUS_UDP_SCHEME,
     TCP_SCHEME,
@@ -45,14 +46,17 @@ def _listen_address(port_or_url: str, listen: bool | None) -> ListenAddress | No
     scheme = port_or_url.partition("://")[0].lower() if "://" in port_or_url else ""
     if scheme in (MODBUS_TCP_SCHEME, MODBUS_UDP_SCHEME, TLS_SCHEME):
         return parse_listen_url(port_or_url, (scheme,))
-    if scheme == TCP_SCHEME:
-        address = parse_listen_url(port_or_url)
+    if scheme in (TCP_SCHEME, ASCII_TCP_SCHEME):
+        address = parse_listen_url(port_or_url, (scheme,))
         if listen or (listen is None and (address.port == 0 or address.host in _WILDCARDS)):
             return address
         return None
     if listen:
         raise InvalidValue(
-            "port", port_or_url, "tcp://host:port or rtu+tcp://host:port", "only a URL listens"
+            "port",
+            port_or_url,
+            "tcp://host:port, rtu+tcp://host:port or ascii+tcp://host:port",
+            "only a URL listens",
         )
     return None
 
@@ -109,7 +113,9 @@ async def serve(
       `cafile` and `rules`, and the Modbus TCP server's).
     - `rtu+tcp://host:port` with `listen` true, or with a wildcard host (`0.0.0.0`, `[::]`) or port
       0 (addresses nobody can connect to): listens for RTU framing over TCP and yields the running
-      [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (option `max_connections`).
+      [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (options `max_connections`, and
+      `framing="ascii"` for Modbus ASCII). `ascii+tcp://host:port` listens in the same cases,
+      its lines in Modbus ASCII (option `ascii_timeout`).
 
     Port 0 asks the system for a free port (see the server's `port`). Raises the
     transport's [`PortError`][aiortu.errors.PortError] subclasses when the port cannot be
@@ -129,6 +135,8 @@ async def serve(
         elif address.scheme == MODBUS_TCP_SCHEME:
             server = ModbusTcpServer(units, handlers=handlers, trace=trace, **options)
         else:
+            if address.scheme == ASCII_TCP_SCHEME:
+                options = {"framing": "ascii", **options}
             server = RtuOverTcpServer(
                 units, settings, timing=timing, handlers=handlers, trace=trace, **options
             )

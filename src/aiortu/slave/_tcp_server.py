@@ -144,7 +144,7 @@ class ModbusTcpServer(Dispatcher):
     positive.
     """
 
-    framing: Callable[[], Framing] = MbapFraming
+    _new_framing: Callable[[], Framing] = MbapFraming
     """How a connection's bytes become requests and its replies bytes (one per connection)."""
     _name = "Modbus TCP"
 
@@ -194,7 +194,7 @@ class ModbusTcpServer(Dispatcher):
         """Why [`serve`][aiortu.slave.ModbusTcpServer.serve] stopped, when the listener failed."""
         self._served = frozenset((*stores, *self.unit_aliases, BROADCAST_UNIT))
         self._limit = ConnectionLimit(self._name, max_connections, self.counters)
-        self._replies = self.framing()  # encodes replies: the same for every connection
+        self._replies = self._new_framing()  # encodes replies: the same for every connection
         self._lock = anyio.Lock(fast_acquire=True)
         self._stopped = anyio.Event()
 
@@ -252,7 +252,7 @@ class ModbusTcpServer(Dispatcher):
         """Serve one connection until the client closes it, it stays silent for
         [`idle_timeout`][aiortu.slave.ModbusTcpServer.idle_timeout], or it sends a malformed header;
         then close it."""
-        framing = self.framing()
+        framing = self._new_framing()
         try:
             while (adus := await self._next_requests(stream, framing)) is not None:
                 if adus:

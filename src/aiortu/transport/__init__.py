@@ -26,6 +26,7 @@ from aiortu.transport._authorization import (
     load_rules,
     parse_rules,
 )
+from aiortu.transport._datagram_listener import PEER_BACKLOG, DatagramListener
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._listen import (
@@ -50,7 +51,13 @@ from aiortu.transport._mbap_stream import (
 )
 from aiortu.transport._push import PushStream
 from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
-from aiortu.transport._server_framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
+from aiortu.transport._server_framing import (
+    RTU_SILENCE,
+    AsciiFraming,
+    Framing,
+    MbapFraming,
+    RtuFraming,
+)
 from aiortu.transport._tcp import open_rtu_over_tcp
 from aiortu.transport._tls import (
     ROLE_OID,
@@ -69,6 +76,7 @@ from aiortu.transport._udp import (
     open_modbus_udp,
     serve_datagrams,
 )
+from aiortu.transport._udp_push import PushDatagramStream
 from aiortu.transport._url import (
     ASCII_TCP_SCHEME,
     MODBUS_TCP_SCHEME,
@@ -89,6 +97,7 @@ __all__ = (
     "ASCII_TCP_SCHEME",
     "MODBUS_TCP_SCHEME",
     "MODBUS_UDP_SCHEME",
+    "PEER_BACKLOG",
     "ROLE_OID",
     "RTU_SILENCE",
     "TCP_SCHEME",
@@ -101,8 +110,10 @@ __all__ = (
     "ConnectionCounters",
     "ConnectionLimit",
     "DatagramCounters",
+    "DatagramListener",
     "FileDescriptorStream",
     "FramedStream",
+    "AsciiFraming",
     "Framing",
     "ListenAddress",
     "LocalEchoFilter",
@@ -111,6 +122,7 @@ __all__ = (
     "ModbusTcpCounters",
     "ModbusTcpStream",
     "PortAddress",
+    "PushDatagramStream",
     "PushStream",
     "RoleRules",
     "RS485Options",

@@ -35,7 +35,7 @@ import anyio.abc
 import anyio.lowlevel
 
 from aiortu._log import get_logger
-from aiortu.core.mbap import AduDecoder, MalformedHeader, encode_adu
+from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
 from aiortu.core.rtu import crc16
 from aiortu.errors import InvalidValue
 from aiortu.transport._tcp import open_tcp_connection
@@ -44,7 +44,36 @@ __all__ = ("FramedStream", "ModbusTcpCounters", "ModbusTcpStream", "open_modbus_
 
 _log = get_logger(__name__)
 
-_NONE_OUTSTANDING = -1
+NONE_OUTSTANDING = -1
+"""The transaction id outstanding when none is: no reply matches it."""
+
+
+def request_adu(counters: ModbusTcpCounters, item: bytes) -> tuple[int, bytes]:
+    """The transaction id and the ADU that carry the RTU frame `item` (its CRC dropped), the
+    id taken from `counters` and the request counted."""
+    if len(item) < 4:
+        raise InvalidValue("len(item)", len(item), "at least 4 (unit, PDU and CRC)")
+    transaction_id = counters.next_transaction_id
+    counters.next_transaction_id = (transaction_id + 1) & 0xFFFF
+    counters.requests += 1
+    return transaction_id, encode_adu(transaction_id, item[0], bytes(item[1:-2]))
+
+
+def reply_frame(counters: ModbusTcpCounters, outstanding: int, adu: Adu) -> bytes | None:
+    """The RTU frame (CRC computed) of `adu` when it answers the transaction `outstanding`,
+    counted as a reply; else None, counted as dropped (a late reply, an id never sent)."""
+    if adu.transaction_id != outstanding:
+        counters.dropped += 1
+        _log.debug(
+            "dropped a reply with transaction id %d (waiting for %d)",
+            adu.transaction_id,
+            outstanding,
+        )
+        return None
+    counters.replies += 1
+    frame = bytes((adu.unit,)) + adu.pdu
+    crc = crc16(frame)
+    return frame + bytes((crc & 0xFF, crc >> 8))
 
 
 @runtime_checkable
@@ -101,7 +130,7 @@ class ModbusTcpStream(anyio.abc.ByteStream):
         [`ModbusTcpCounters`][aiortu.transport.ModbusTcpCounters])."""
         self._decoder = AduDecoder()
         self._ready: deque[bytes] = deque()
-        self._outstanding = _NONE_OUTSTANDING
+        self._outstanding = NONE_OUTSTANDING
 
     @property
     def whole_frames(self) -> bool:
@@ -114,16 +143,11 @@ class ModbusTcpStream(anyio.abc.ByteStream):
 
     async def send(self, item: bytes) -> None:
         """Send the RTU frame `item` as one ADU with the next transaction id."""
-        if len(item) < 4:
-            raise InvalidValue("len(item)", len(item), "at least 4 (unit, PDU and CRC)")
-        counters = self.counters
-        transaction_id = counters.next_transaction_id
-        counters.next_transaction_id = (transaction_id + 1) & 0xFFFF
+        transaction_id, adu = request_adu(self.counters, item)
         # Outstanding before the write: a fast reply may be read while send() yields.
         self._outstanding = transaction_id
         self._ready.clear()  # a new request: nothing that came before answers it
-        counters.requests += 1
-        await self.stream.send(encode_adu(transaction_id, item[0], bytes(item[1:-2])))
+        await self.stream.send(adu)
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
         """The next reply to the request outstanding, as an RTU frame (`max_bytes` is ignored:
@@ -140,19 +164,10 @@ class ModbusTcpStream(anyio.abc.ByteStream):
                 await self.stream.aclose()
                 raise anyio.BrokenResourceError(str(error)) from error
             for adu in adus:
-                if adu.transaction_id != self._outstanding:
-                    self.counters.dropped += 1
-                    _log.debug(
-                        "dropped a reply with transaction id %d (waiting for %d)",
-                        adu.transaction_id,
-                        self._outstanding,
-                    )
-                    continue
-                self._outstanding = _NONE_OUTSTANDING  # one reply per request
-                self.counters.replies += 1
-                frame = bytes((adu.unit,)) + adu.pdu
-                crc = crc16(frame)
-                self._ready.append(frame + bytes((crc & 0xFF, crc >> 8)))
+                frame = reply_frame(self.counters, self._outstanding, adu)
+                if frame is not None:
+                    self._outstanding = NONE_OUTSTANDING  # one reply per request
+                    self._ready.append(frame)
         return self._ready.popleft()
 
     async def send_eof(self) -> None:

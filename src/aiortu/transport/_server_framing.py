@@ -1,5 +1,5 @@
-"""How a server connection's bytes become requests, and replies bytes: Modbus TCP or RTU over
-TCP (the gateway's framings, one home for both).
+"""How a server connection's bytes become requests, and replies bytes: Modbus TCP, RTU over
+TCP or ASCII over TCP (the server framings, one home for all).
 
 - **Modbus TCP** (`tcp://`): MBAP headers; a reply carries the request's transaction id and
   unit id. A malformed header ends the connection (nothing marks where the next ADU starts).
@@ -21,6 +21,15 @@ from __future__ import annotations
 
 from typing import Final, Protocol
 
+import time
+
+from aiortu.core.ascii import (
+    DEFAULT_ASCII_TIMEOUT,
+    AsciiFrameDiscarded,
+    AsciiFrameReceived,
+    AsciiReceiver,
+    encode_ascii_frame,
+)
 from aiortu.core.errors import FrameError
 from aiortu.core.mbap import Adu, AduDecoder, encode_adu
 from aiortu.core.rtu import (
@@ -34,7 +43,7 @@ from aiortu.core.rtu import (
     expected_request_length,
 )
 
-__all__ = ("RTU_SILENCE", "Framing", "MbapFraming", "RtuFraming")
+__all__ = ("RTU_SILENCE", "AsciiFraming", "Framing", "MbapFraming", "RtuFraming")
 
 RTU_SILENCE: Final = 0.02
 """Seconds without bytes that end an RTU frame of unknown length (as a tolerant receiver)."""
@@ -184,3 +193,38 @@ class RtuFraming:
         except FrameError:
             return None
         return Adu(0, checked.unit, checked.pdu)
+
+
+class AsciiFraming:
+    """Modbus ASCII frames over TCP (':' to CR LF, checked by their LRC), told apart by their
+    delimiters: the core's [`AsciiReceiver`][aiortu.core.ascii.AsciiReceiver], with `timeout`
+    the longest gap between two characters of a frame. Like RTU frames they carry no
+    transaction id: one request at a time, replies in order."""
+
+    in_order = True
+
+    def __init__(self, timeout: float = DEFAULT_ASCII_TIMEOUT) -> None:
+        self.discarded = 0
+        self._receiver = AsciiReceiver(timeout=timeout)
+
+    @property
+    def buffered(self) -> int:
+        return 0  # the receiver holds at most one frame, bounded by the spec's length
+
+    def feed(self, data: bytes) -> list[Adu]:
+        requests = []
+        for output in self._receiver.feed(data, time.monotonic()):
+            if isinstance(output, AsciiFrameReceived):
+                requests.append(Adu(0, output.unit, output.pdu))
+            elif isinstance(output, AsciiFrameDiscarded):
+                self.discarded += 1
+        return requests
+
+    def waiting_for_silence(self) -> bool:
+        return False
+
+    def silence(self) -> list[Adu]:
+        return []
+
+    def encode(self, request: Adu, pdu: bytes) -> bytes:
+        return encode_ascii_frame(request.unit, pdu)

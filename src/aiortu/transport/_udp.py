@@ -18,7 +18,6 @@ one, so both ends check every datagram on its own:
 
 from __future__ import annotations
 
-import logging
 import socket
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -32,6 +31,12 @@ from aiortu.core.mbap import MAX_ADU_LENGTH, Adu, decode_adu
 from aiortu.errors import FrameError, InvalidValue, PortNotFound
 from aiortu.transport._listen import _tcp_error as listen_error  # a socket's bind errors
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
+from aiortu.transport._udp_push import (
+    PushDatagramStream,
+    log_level,
+    open_push_datagrams,
+    push_datagrams,
+)
 from aiortu.transport._url import MODBUS_UDP_SCHEME, format_tcp_url
 
 __all__ = (
@@ -43,12 +48,6 @@ __all__ = (
 )
 
 _log = get_logger(__name__)
-
-
-def _level(count: int) -> int:
-    """Log the first of a kind as a warning and the rest at debug level: a flood of bad
-    datagrams costs counts, not log lines."""
-    return logging.WARNING if count == 1 else logging.DEBUG
 
 
 def check_datagram(data: bytes) -> Adu:
@@ -91,7 +90,7 @@ class _DatagramLink(anyio.abc.ByteStream):
             if (source[0], source[1]) != self._peer:
                 self._counters.strangers += 1
                 _log.log(
-                    _level(self._counters.strangers),
+                    log_level(self._counters.strangers),
                     "%s: dropped a datagram from %s, which is not the server (counted in "
                     "strangers; logged at debug level after the first)",
                     self._where,
@@ -103,7 +102,10 @@ class _DatagramLink(anyio.abc.ByteStream):
             except FrameError as error:
                 self._counters.refused += 1
                 _log.log(
-                    _level(self._counters.refused), "%s: refused a datagram: %s", self._where, error
+                    log_level(self._counters.refused),
+                    "%s: refused a datagram: %s",
+                    self._where,
+                    error,
                 )
                 continue
             return data
@@ -117,13 +119,15 @@ class _DatagramLink(anyio.abc.ByteStream):
 
 async def open_modbus_udp(
     host: str, port: int, *, counters: ModbusTcpCounters | None = None
-) -> ModbusTcpStream:
+) -> ModbusTcpStream | PushDatagramStream:
     """Talk Modbus UDP to the server at `host`:`port`; return a
     [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] of RTU frames over its datagrams.
 
     Raises [`PortNotFound`][aiortu.errors.PortNotFound] when the host is unknown and
     [`InvalidValue`][aiortu.errors.InvalidValue] for a port outside 1..65535. Nothing is sent
-    before the first request: whether a server answers shows then.
+    before the first request: whether a server answers shows then. On asyncio the stream is a
+    [`PushDatagramStream`][aiortu.transport.PushDatagramStream], which hands each reply over
+    from the event loop's callback; elsewhere, a `ModbusTcpStream` over a datagram socket.
     """
     if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
         raise InvalidValue("port", port, range(1, 65536))
@@ -133,12 +137,15 @@ async def open_modbus_udp(
     except socket.gaierror as exc:
         raise PortNotFound(where, f"unknown host {host!r} ({exc.strerror})") from exc
     family, _, _, _, address = found[0]
+    counters = counters if counters is not None else ModbusTcpCounters()
+    peer = (str(address[0]), int(address[1]))
+    if push_datagrams():
+        return await open_push_datagrams(family, peer, counters, where, check_datagram)
     if family == socket.AF_INET6:
         sock = await anyio.create_udp_socket(family=socket.AF_INET6)
     else:
         sock = await anyio.create_udp_socket(family=socket.AF_INET)
-    counters = counters if counters is not None else ModbusTcpCounters()
-    link = _DatagramLink(sock, (str(address[0]), int(address[1])), counters, where)
+    link = _DatagramLink(sock, peer, counters, where)
     return ModbusTcpStream(link, counters)
 
 
@@ -187,7 +194,7 @@ async def serve_datagrams(
         except FrameError as error:
             counters.refused += 1
             _log.log(
-                _level(counters.refused),
+                log_level(counters.refused),
                 "Modbus UDP: refused a datagram from %s: %s",
                 format_tcp_url(source[0], source[1], MODBUS_UDP_SCHEME),
                 error,

@@ -13,6 +13,7 @@ The machine follows the master diagram of the serial line spec:
                                                    -- ours, misshapen -->     PROCESSING_ERROR
     PROCESSING_ERROR    retry, give up, or go on   -- retry, give up -->      IDLE
                         waiting                    -- a frame error noted --> WAITING_REPLY
+                                                   -- stale bad bytes -->     WAITING_REPLY
 
 `TRANSITIONS` is that diagram as data: `(state, event) ->
 (next state, action)`. A pair missing from it is a bug and raises
@@ -34,7 +35,11 @@ sleeps until [`MasterMachine.deadline`][aiortu.core.machines.MasterMachine.deadl
   request's function code that does not decode or does not answer the request (a byte
   count or an echo that differs) fails the attempt at once with
   [`MalformedPDU`][aiortu.errors.MalformedPDU]: nobody else on the line sends it, and the
-  unit will not send a better one for this attempt.
+  unit will not send a better one for this attempt. Except the late reply: a frame that
+  answers the request of this unit's last attempt that timed out (its shape: function code,
+  byte count or echo) is that request's reply come too late, skipped
+  ([`SkipReason.LATE`][aiortu.core.machines.SkipReason]) while the wait goes on.
+  The machine remembers one such request per unit, until the unit answers.
 * Bytes that fail the CRC or the framing are noted; the wait goes on for a short grace
   (a good frame may follow in the same burst), and if nothing answers, the attempt fails
   with that frame error rather than a plain timeout.
@@ -46,7 +51,9 @@ sleeps until [`MasterMachine.deadline`][aiortu.core.machines.MasterMachine.deadl
   ([`MasterMachine.usual_exchange`][aiortu.core.machines.MasterMachine.usual_exchange]; the
   async master's driver of that is [`aiortu.master`][aiortu.master]).
 
-Time comes in as arguments; the machine never reads a clock.
+Every event goes through the table, each frame and each piece of bad bytes included: there is
+no shortcut around it and no filter before it. Time comes in as arguments; the machine never
+reads a clock.
 """
 
 from __future__ import annotations
@@ -135,6 +142,8 @@ class MasterEvent(enum.Enum):
     """The line under the master failed."""
     ERROR_NOTED = "error noted"
     """A frame error is remembered and the wait goes on."""
+    ERROR_IGNORED = "error ignored"
+    """The bad bytes ended before a reply could begin: not the reply, the wait goes on."""
     RETRY = "retry"
     """The request is sent again."""
     GIVE_UP = "give up"
@@ -211,6 +220,9 @@ TRANSITIONS: Final[dict[tuple[MasterState, MasterEvent], tuple[MasterState, str]
     (_S.IDLE, _E.CONNECTION_LOST): (_S.PROCESSING_ERROR, "note_connection_lost"),
     (_S.WAITING_TURNAROUND, _E.TURNAROUND_EXPIRED): (_S.IDLE, "finish_without_reply"),
     (_S.WAITING_TURNAROUND, _E.CONNECTION_LOST): (_S.PROCESSING_ERROR, "note_connection_lost"),
+    # Nobody answers a broadcast: whatever arrives meanwhile is another conversation.
+    (_S.WAITING_TURNAROUND, _E.REPLY_RECEIVED): (_S.WAITING_TURNAROUND, "skip_other_conversation"),
+    (_S.WAITING_TURNAROUND, _E.FRAME_ERROR): (_S.WAITING_TURNAROUND, "ignore_bad_bytes"),
     (_S.WAITING_REPLY, _E.REPLY_RECEIVED): (_S.PROCESSING_REPLY, "examine_frame"),
     (_S.WAITING_REPLY, _E.FRAME_ERROR): (_S.PROCESSING_ERROR, "note_frame_error"),
     (_S.WAITING_REPLY, _E.TIMEOUT): (_S.PROCESSING_ERROR, "note_attempt_failed"),
@@ -220,18 +232,11 @@ TRANSITIONS: Final[dict[tuple[MasterState, MasterEvent], tuple[MasterState, str]
     (_S.PROCESSING_REPLY, _E.REPLY_EXCEPTION): (_S.PROCESSING_ERROR, "note_exception"),
     (_S.PROCESSING_REPLY, _E.REPLY_MALFORMED): (_S.PROCESSING_ERROR, "note_malformed_reply"),
     (_S.PROCESSING_ERROR, _E.ERROR_NOTED): (_S.WAITING_REPLY, "shorten_wait"),
+    (_S.PROCESSING_ERROR, _E.ERROR_IGNORED): (_S.WAITING_REPLY, "ignore_bad_bytes"),
     (_S.PROCESSING_ERROR, _E.RETRY): (_S.IDLE, "prepare_retry"),
     (_S.PROCESSING_ERROR, _E.GIVE_UP): (_S.IDLE, "finish_with_failure"),
 }
 """The master's transitions: `(state, event) -> (next state, action name)`."""
-
-_UNICAST_SENT_TARGET: Final = TRANSITIONS[_S.IDLE, _E.SEND_UNICAST][0]
-"""Where sending a unicast request leaves the machine (the deadline: the response timeout)."""
-
-_USUAL_REPLY_TARGET: Final = TRANSITIONS[
-    TRANSITIONS[_S.WAITING_REPLY, _E.REPLY_RECEIVED][0], _E.REPLY_OK
-][0]
-"""Where the usual reply leaves the machine: WAITING_REPLY, then the two transitions."""
 
 
 def next_state(state: MasterState, event: MasterEvent) -> MasterState:
@@ -274,6 +279,7 @@ class MasterMachine:
         "_actions",
         "_entry",
         "_frames",
+        "_late",
         "_on_transition",
         "_outcome",
         "deadline",
@@ -303,6 +309,9 @@ class MasterMachine:
         self._frames: dict[tuple[int, int], KnownRequest] = {}
         self._entry: KnownRequest | None = None
         """What is remembered of the transaction in progress, once looked up."""
+        self._late: dict[int, Request] = {}
+        """By unit: the request of its last attempt that timed out, whose reply may still
+        come, until the unit answers."""
         self._actions: dict[
             tuple[MasterState, MasterEvent], tuple[MasterState, Callable[[object], None]]
         ] = {
@@ -369,11 +378,14 @@ class MasterMachine:
         and goes on the usual way: the machine then knows everything it would have known.
 
         This applies where the machine is IDLE, has no transition observer (which must
-        see every transition), and the request has a usual reply (a register read's).
+        see every transition), awaits no late reply from `unit` (the table recognises it:
+        see the module docstring), and the request has a usual reply (a register read's).
         """
-        if self.state is not _S.IDLE or self._on_transition is not None:
+        if self.state is not _S.IDLE or self._on_transition is not None or unit in self._late:
             return None
-        known = self._remember(unit, request)
+        known = self._frames.get((unit, id(request)))
+        if known is None or known.request is not request:
+            known = self._remember(unit, request)
         return known if known.reply_shape is not None else None
 
     @staticmethod
@@ -415,11 +427,6 @@ class MasterMachine:
         transaction.earliest_reply = start if delay is None else end + delay
         transaction.frame_error = None
         if transaction.expects_reply:
-            if self.state is _S.IDLE and self._on_transition is None:
-                # What SEND_UNICAST does from IDLE (see TRANSITIONS), without the lookup.
-                self.state = _UNICAST_SENT_TARGET
-                deadline = self.deadline = end + transaction.timeout
-                return deadline
             self._fire(_E.SEND_UNICAST, None)
         else:
             self._fire(_E.SEND_BROADCAST, None)
@@ -431,26 +438,10 @@ class MasterMachine:
         transaction = self.transaction
         if transaction is not None and transaction.reply_delay is None:
             start = end  # no real wire times: only the end is sure to follow the request
-        if self.state is MasterState.WAITING_REPLY and self._on_transition is None:
-            # The usual reply to a register read takes the table's two transitions
-            # (REPLY_RECEIVED, then REPLY_OK) in one step; anything else, and every frame
-            # with an observer, is examined the general way (_examine_frame), one
-            # transition at a time. The tests hold both ways equal.
-            response = self._usual_reply(unit, pdu, start)
-            if response is not None:
-                self.state = _USUAL_REPLY_TARGET
-                self.deadline = None
-                return Outcome(OutcomeKind.DONE, response=response)
-        if self.state is MasterState.WAITING_TURNAROUND:
-            # Nobody answers a broadcast; whatever arrives is another conversation.
-            return Outcome(OutcomeKind.WAIT, skipped=SkipReason.OTHER_UNIT)
         return self._fire(_E.REPLY_RECEIVED, _ArrivedFrame(unit, pdu, start))
 
     def frame_error(self, error: FrameError, end: float) -> Outcome:
         """Bytes that ended at `end` made no valid frame; `error` says why."""
-        # Bytes that ended before a reply could begin are not the reply.
-        if self.state is MasterState.WAITING_TURNAROUND or end < self._current.earliest_reply:
-            return _WAIT
         return self._fire(_E.FRAME_ERROR, _BadBytes(error, end))
 
     def expired(self, now: float) -> Outcome:
@@ -507,6 +498,11 @@ class MasterMachine:
         unit, pdu, start = argument.unit, argument.pdu, argument.start
         transaction = self.transaction
         assert transaction is not None
+        # The usual reply to a register read is built without the general checks.
+        usual = self._usual_reply(unit, pdu, start)
+        if usual is not None:
+            self._fire(_E.REPLY_OK, usual)
+            return
         request = transaction.request
         reason: SkipReason | None = None
         response: Response | ExceptionPDU | None = None
@@ -527,8 +523,11 @@ class MasterMachine:
                 if not isinstance(response, ExceptionPDU):
                     request.check_response(response)
             except MalformedPDU as error:
-                self._fire(_E.REPLY_MALFORMED, error)
-                return
+                if self._is_late_reply(unit, pdu):
+                    reason = SkipReason.LATE
+                else:
+                    self._fire(_E.REPLY_MALFORMED, error)
+                    return
         if reason is not None:
             self._fire(_E.REPLY_UNEXPECTED, reason)
         elif isinstance(response, ExceptionPDU):
@@ -556,17 +555,42 @@ class MasterMachine:
             return _register_reply(request, pdu, 2)
         return None
 
+    def _is_late_reply(self, unit: int, pdu: bytes) -> bool:
+        """Whether `pdu`, which does not answer the request in progress, answers the
+        request of `unit`'s last attempt that timed out: its reply come too late (then it
+        is not awaited any more)."""
+        late = self._late.get(unit)
+        if late is None:
+            return False
+        try:
+            response = decode_response(pdu)
+            if isinstance(response, ExceptionPDU):
+                return False
+            late.check_response(response)
+        except MalformedPDU:
+            return False
+        del self._late[unit]
+        return True
+
     def _skip_frame(self, reason: object) -> None:
         assert isinstance(reason, SkipReason)
         self._outcome = Outcome(OutcomeKind.WAIT, skipped=reason)
 
+    def _skip_other_conversation(self, argument: object) -> None:
+        self._outcome = Outcome(OutcomeKind.WAIT, skipped=SkipReason.OTHER_UNIT)
+
+    def _ignore_bad_bytes(self, _: object) -> None:
+        pass  # the state says it all: the wait goes on
+
     def _finish_with_reply(self, response: object) -> None:
         assert isinstance(response, Response)
         self.deadline = None
+        self._late.pop(self._current.unit, None)  # the unit answered: it is in step again
         self._outcome = Outcome(OutcomeKind.DONE, response=response)
 
     def _note_exception(self, response: object) -> None:
         assert isinstance(response, ExceptionPDU)
+        self._late.pop(self._current.unit, None)
         if self._may_retry(response.exception_code):
             self._fire(_E.RETRY, None)
         else:
@@ -574,7 +598,12 @@ class MasterMachine:
 
     def _note_frame_error(self, argument: object) -> None:
         assert isinstance(argument, _BadBytes)
-        self._current.frame_error = argument.error
+        transaction = self._current
+        if argument.end < transaction.earliest_reply:
+            # Bytes that ended before a reply could begin are not the reply.
+            self._fire(_E.ERROR_IGNORED, None)
+            return
+        transaction.frame_error = argument.error
         self._fire(_E.ERROR_NOTED, argument.end)
 
     def _shorten_wait(self, end: object) -> None:
@@ -592,6 +621,8 @@ class MasterMachine:
         transaction = self._current
         failure = Failure.TIMEOUT if transaction.frame_error is None else Failure.FRAME_ERROR
         transaction.failures.append(failure)
+        if failure is Failure.TIMEOUT and transaction.unit != BROADCAST_UNIT:
+            self._late[transaction.unit] = transaction.request  # its reply may still come
         if self._may_retry(failure):
             self._fire(_E.RETRY, None)
             return

@@ -141,6 +141,9 @@ class SkipReason(enum.StrEnum):
     """It comes from another unit."""
     OTHER_FUNCTION = "other function"
     """Its function code is neither the request's nor its exception form."""
+    LATE = "late"
+    """It does not answer the request, but it answers the unit's last request that timed
+    out: that request's reply, come too late."""
 
 
 class OutcomeKind(enum.Enum):
@@ -175,7 +178,10 @@ class Transaction:
     """One request to one unit, and what happened to it so far.
 
     `expects_reply` is false for broadcasts and for requests a device never answers (diagnostics 04,
-    force listen-only mode); those wait `turnaround` seconds instead. Set
+    force listen-only mode); those wait `turnaround` seconds instead. `priority`, then
+    `order`, place the transaction in its line's queue: lower runs first, equal keys in order
+    of arrival (a caller's priority; a line server's listener priority and its fairness turn
+    between connections). Set
     [`abandoned`][aiortu.core.machines.Transaction] when the caller is gone: the attempt
     in flight finishes (so that its reply cannot reach a later request) but is not retried.
     """
@@ -186,6 +192,8 @@ class Transaction:
     policy: RetryPolicy = field(default_factory=RetryPolicy)
     expects_reply: bool = True
     turnaround: float = 0.0
+    priority: int = 0
+    order: int = 0
     abandoned: bool = False
     attempts: int = 0
     """Attempts sent so far."""

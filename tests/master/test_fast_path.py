@@ -1,10 +1,10 @@
-"""The usual exchange: a register read on an idle serial line runs without the master
-machine while its reply comes as usual, and the machine takes the attempt over on anything
-else (LineEngine.submit_request, MasterMachine.usual_exchange).
+"""The fast path: a register read on an idle serial line runs without the master machine
+while its reply comes as usual, and the machine takes the attempt over on anything else
+(FastPath in aiortu/master/_fast_path.py, MasterMachine.usual_exchange).
 
 Every scenario runs twice over a pty, once that way and once with every transaction
-through the machine (``usual_exchanges = False``); the results, the statistics and the
-requests on the wire must be the same.
+through the machine (``fast_path=False``); the results, the statistics and the requests
+on the wire must be the same.
 """
 
 from __future__ import annotations
@@ -18,12 +18,21 @@ import anyio
 import pytest
 
 import aiortu
-from aiortu.core.machines import KnownRequest, MasterMachine, MasterState, Transaction
+from aiortu.core.machines import (
+    KnownRequest,
+    MasterMachine,
+    MasterState,
+    OutcomeKind,
+    RetryPolicy,
+    Transaction,
+)
 from aiortu.core.pdu import ReadHoldingRegistersRequest, WriteSingleRegisterRequest
 from aiortu.core.rtu import crc16
 from aiortu.errors import ConnectionLost
+from aiortu.master import MasterConfig
+from aiortu.master._attempt import NO_GUARD
 from aiortu.master._client import Master
-from aiortu.master._usual_exchange import usual_exchange_for
+from aiortu.master._engine import LineEngine
 from aiortu.transport._serial import open_serial
 from tests.transport.ptys import LINE, Pty, open_pty, read_master
 
@@ -87,9 +96,10 @@ async def _read_once(
 ) -> tuple[object, dict[str, object], list[bytes], int]:
     with open_pty() as pty:
         stream = await open_serial(pty.path, LINE)
-        async with Master(stream, LINE, timeout=TIMEOUT, retries=1, frame_gap=0) as master:
+        async with Master(
+            stream, LINE, timeout=TIMEOUT, retries=1, frame_gap=0, fast_path=usual_exchanges
+        ) as master:
             engine = master.engine
-            engine.usual_exchanges = usual_exchanges
             await anyio.sleep(0.05)  # past INIT
             result: object = None
             seen: list[bytes] = []
@@ -123,8 +133,9 @@ async def test_the_usual_reply_leaves_the_machine_untouched() -> None:
     for usual_exchanges, begun in ((True, False), (False, True)):
         with open_pty() as pty:
             stream = await open_serial(pty.path, LINE)
-            async with Master(stream, LINE, timeout=TIMEOUT, frame_gap=0) as master:
-                master.engine.usual_exchanges = usual_exchanges
+            async with Master(
+                stream, LINE, timeout=TIMEOUT, frame_gap=0, fast_path=usual_exchanges
+            ) as master:
                 await anyio.sleep(0.05)
                 async with anyio.create_task_group() as tg:
                     tg.start_soon(_play, pty, [[REPLY]])
@@ -230,7 +241,7 @@ async def test_closing_the_master_fails_a_usual_exchange_in_flight() -> None:
 
                 tg.start_soon(read)
                 assert await read_master(pty, len(REQUEST)) == REQUEST
-                assert master.engine._usual is not None  # the usual exchange waits
+                assert master.engine.fast.on_wire  # the usual exchange waits
             with anyio.fail_after(0.5):  # not the 5 s timeout
                 await ended.wait()
         assert isinstance(outcome[0], ConnectionLost)
@@ -250,7 +261,7 @@ async def _read_on_the_wire(master: Master, pty: Pty) -> asyncio.Task[list[int]]
     """A read of registers 0..1 of unit 1, started as a task, its request on the wire."""
     read = asyncio.create_task(master.read_holding_registers(1, 0, 2))
     assert await read_master(pty, len(REQUEST)) == REQUEST
-    assert master.engine._usual is not None  # its usual exchange waits
+    assert master.engine.fast.on_wire  # its usual exchange waits
     return read
 
 
@@ -268,7 +279,7 @@ async def test_a_caller_cancelled_once_its_reply_came_leaves_it_counted() -> Non
     async with _master_on_a_pty(response_timeout=1.0) as (master, pty):
         read = await _read_on_the_wire(master, pty)
         pty.write(REPLY)
-        await _in_the_same_pass(lambda: master.engine._usual is None)
+        await _in_the_same_pass(lambda: not master.engine.fast.on_wire)
         read.cancel()
         with pytest.raises(asyncio.CancelledError):
             await read
@@ -286,7 +297,7 @@ async def test_closing_the_master_fails_a_read_the_machine_took_over() -> None:
     async with _master_on_a_pty(response_timeout=5.0) as (master, pty):
         read = await _read_on_the_wire(master, pty)
         pty.write(OTHER_UNIT)
-        await _in_the_same_pass(lambda: master.engine._for_line_task is not None)
+        await _in_the_same_pass(lambda: master.engine.line_task.job is not None)
     with anyio.fail_after(1), pytest.raises(ConnectionLost):
         await read
 
@@ -296,32 +307,37 @@ async def test_closing_the_engine_fails_a_read_taken_over_and_not_finished() -> 
     # timer may fire while the link closes) has nobody left to run it: close() fails it.
     async with _master_on_a_pty(response_timeout=5.0) as (master, pty):
         read = await _read_on_the_wire(master, pty)
-        master.engine._take_over()
+        master.engine.fast.take_over()
         master.engine.close(ConnectionLost("closed"))
         with anyio.fail_after(1), pytest.raises(ConnectionLost, match="closed"):
             await read
 
 
+class _Link:
+    loop = object()  # a push stream's link has one
+
+
+def _engine(**changes: object) -> LineEngine:
+    """An engine whose fast path may run, but for *changes* to it (`link`, `open`,
+    `busy`, `guard_until`, `health`, `machine`, `enabled`)."""
+    config = MasterConfig(fast_path=bool(changes.pop("enabled", True)))
+    engine = LineEngine(_Link(), config)  # type: ignore[arg-type]
+    engine.open = bool(changes.pop("open", True))
+    engine.queue.busy = bool(changes.pop("busy", False))
+    engine.attempts.guard_until = changes.pop("guard_until", NO_GUARD)  # type: ignore[assignment]
+    for name, value in changes.items():
+        setattr(engine, name, value)
+    return engine
+
+
 def _predicate_case(
-    unit: int = 1, request: object = None, **changes: object
+    unit: int = 1, request: object = None, handed: bool = False, **changes: object
 ) -> KnownRequest | None:
-    """usual_exchange_for where every condition holds, but for *changes*."""
-
-    class _Link:
-        loop = object()  # a push stream's link has one
-
-    conditions: dict[str, object] = {
-        "enabled": True,
-        "line_free": True,
-        "guard_pending": False,
-        "fail_fast_offline": False,
-        "link": _Link(),
-        "machine": MasterMachine(),
-    }
-    conditions.update(changes)
+    """FastPath.may_run where every condition holds, but for *changes*."""
     if request is None:
         request = ReadHoldingRegistersRequest(0, 2)
-    return usual_exchange_for(unit, request, **conditions)  # type: ignore[arg-type]
+    transaction = Transaction(unit, request, 1.0)  # type: ignore[arg-type]
+    return _engine(**changes).fast.may_run(transaction, handed)
 
 
 class _NoLoop:
@@ -335,37 +351,54 @@ def _busy_machine() -> MasterMachine:
     return machine
 
 
+def _late_reply_awaited() -> MasterMachine:
+    machine = MasterMachine()
+    machine.begin(Transaction(1, ReadHoldingRegistersRequest(0, 3), 1.0, RetryPolicy(0)))
+    machine.sent(0.0, 0.004)
+    assert machine.expired(2.0).kind is OutcomeKind.FAILED  # timed out: its reply may come
+    return machine
+
+
 VETOES: dict[str, dict[str, object]] = {
     "switched off": {"enabled": False},
     "no read callback": {"link": _NoLoop()},
-    "line held or waited for": {"line_free": False},
-    "late-reply guard pending": {"guard_pending": True},
-    "fail fast on offline units": {"fail_fast_offline": True},
+    "the line task does not serve": {"open": False},
+    "line held or waited for": {"busy": True},
+    "late-reply guard pending": {"guard_until": 12.0},
+    "fail fast, the unit offline": {
+        "health": aiortu.HealthPolicy(fail_fast_offline=True),
+        "stats": {1: aiortu.UnitStats(online=False)},
+    },
     "machine not idle": {"machine": _busy_machine()},
     "machine observed": {"machine": MasterMachine(on_transition=lambda *step: None)},
+    "a late reply awaited from the unit": {"machine": _late_reply_awaited()},
     "not a register read": {"request": WriteSingleRegisterRequest(0, 1)},
     "a broadcast": {"unit": 0},
 }
 
 
-def test_the_usual_exchange_runs_where_every_condition_holds() -> None:
+def test_the_fast_path_runs_where_every_condition_holds() -> None:
     known = _predicate_case()
     assert isinstance(known, KnownRequest)
     assert known.reply_shape == (bytes((1, 3, 4)), 9)
 
 
 @pytest.mark.parametrize("change", VETOES.values(), ids=VETOES.keys())
-def test_each_condition_of_the_usual_exchange_alone_keeps_it_off(
-    change: dict[str, object],
-) -> None:
+def test_each_condition_of_the_fast_path_alone_keeps_it_off(change: dict[str, object]) -> None:
     assert _predicate_case(**change) is None
 
 
-def test_the_line_handed_to_a_queued_caller_lets_the_usual_exchange_run() -> None:
+def test_fail_fast_lets_the_fast_path_run_for_a_unit_not_offline() -> None:
+    fail_fast = aiortu.HealthPolicy(fail_fast_offline=True)
+    assert _predicate_case(health=fail_fast) is not None
+    assert _predicate_case(health=fail_fast, stats={1: aiortu.UnitStats()}) is not None
+
+
+def test_the_line_handed_to_a_queued_caller_lets_the_fast_path_run() -> None:
     # The line is not free (others wait for it), but the queue has just handed it to
     # this caller: the same shortcut as on a free line.
-    assert _predicate_case(line_free=False, handed_line=True) is not None
-    assert _predicate_case(line_free=False, handed_line=True, guard_pending=True) is None
+    assert _predicate_case(busy=True, handed=True) is not None
+    assert _predicate_case(busy=True, handed=True, guard_until=12.0) is None
 
 
 async def test_queued_register_reads_run_their_usual_exchanges_without_the_machine(
@@ -410,7 +443,7 @@ async def test_a_queued_caller_cancelled_after_the_hand_over_leaves_its_reply_co
         pty.write(REPLY)
         assert await read_master(pty, len(REQUEST)) == REQUEST  # B's, from the hand-over
         assert await first == [7, 8]
-        assert master.engine._usual is not None  # B's usual exchange waits
+        assert master.engine.fast.on_wire  # B's usual exchange waits
         queued.cancel()
         with pytest.raises(asyncio.CancelledError):
             await queued

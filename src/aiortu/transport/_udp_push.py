@@ -1,0 +1,232 @@
+"""Modbus UDP for a master, pushed: each reply datagram handed over from the event loop's
+callback.
+
+Where the event loop is asyncio, [`open_modbus_udp`][aiortu.transport.open_modbus_udp] returns
+this stream rather than a [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over a datagram
+socket read by a task: an `asyncio.DatagramProtocol` takes each datagram in the loop's read
+callback, and the stream implements the push extension
+([`PushStream`][aiortu.transport.PushStream]), so the [`Link`][aiortu.line.Link] gets each reply
+without a task wake-up and writes each request without a yield, and the master's usual exchange
+runs over UDP as it does on a serial port.
+
+It checks every datagram as the general path does, with the same functions: a datagram from
+another address is dropped and counted in `strangers`, one that is not exactly one well-formed
+ADU in `refused` ([`check_datagram`][aiortu.transport.check_datagram]), and a reply whose
+transaction id is not the one outstanding in `dropped` (`reply_frame`, shared with
+[`ModbusTcpStream`][aiortu.transport.ModbusTcpStream]). `push_datagrams` is the one predicate
+that picks this path; the differential tests run the same exchanges through both.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import anyio
+import anyio.abc
+import anyio.lowlevel
+
+from aiortu._log import get_logger
+from aiortu.core.mbap import Adu
+from aiortu.errors import FrameError
+from aiortu.transport._mbap_stream import (
+    NONE_OUTSTANDING,
+    ModbusTcpCounters,
+    reply_frame,
+    request_adu,
+)
+from aiortu.transport._url import MODBUS_UDP_SCHEME, format_tcp_url
+
+__all__ = ("PushDatagramStream", "log_level", "open_push_datagrams", "push_datagrams")
+
+_log = get_logger(__name__)
+
+_Address = tuple[str, int]
+
+
+def push_datagrams() -> bool:
+    """Whether a master's Modbus UDP stream is pushed: where the running loop is asyncio."""
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        return False
+    return True
+
+
+def log_level(count: int) -> int:
+    """Log the first of a kind as a warning and the rest at debug level: a flood of bad
+    datagrams costs counts, not log lines."""
+    return logging.WARNING if count == 1 else logging.DEBUG
+
+
+class _Protocol(asyncio.DatagramProtocol):
+    def __init__(self, stream: PushDatagramStream) -> None:
+        self.stream = stream
+
+    def datagram_received(self, data: bytes, addr: Any) -> None:
+        self.stream.datagram(data, addr)
+
+    def error_received(self, exc: Exception) -> None:
+        # An ICMP error (port unreachable): the request is lost, as a datagram may be; the
+        # response timeout and the retries deal with it.
+        _log.debug("%s: %s", self.stream.where, exc)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.stream.lost(exc)
+
+
+class PushDatagramStream(anyio.abc.ByteStream):
+    """RTU frames over Modbus UDP to `peer`, pushed (see the module docstring). Made by
+    [`open_modbus_udp`][aiortu.transport.open_modbus_udp] on asyncio."""
+
+    def __init__(
+        self,
+        peer: _Address,
+        counters: ModbusTcpCounters,
+        where: str,
+        check: Callable[[bytes], Adu],
+    ) -> None:
+        self.peer = peer
+        self._check = check
+        self.counters = counters
+        """Requests, replies and dropped, refused and strangers' datagrams."""
+        self.where = where
+        self.transport: asyncio.DatagramTransport | None = None
+        self._outstanding = NONE_OUTSTANDING
+        self._receiver: Callable[[bytes], None] | None = None
+        self._on_lost: Callable[[], None] | None = None
+        self._kept: deque[bytes] = deque()
+        self._waiter: asyncio.Future[None] | None = None
+        self._error: BaseException | None = None
+
+    @property
+    def whole_frames(self) -> bool:
+        """True: each frame handed over is one whole RTU frame."""
+        return True
+
+    @property
+    def extra_attributes(self) -> Any:
+        return {anyio.abc.SocketAttribute.remote_address: lambda: self.peer}
+
+    # -- receiving -------------------------------------------------------------------
+
+    def datagram(self, data: bytes, source: Any) -> None:
+        """The protocol's callback: check `data`, and hand on the reply it carries."""
+        counters = self.counters
+        if (source[0], source[1]) != self.peer:
+            counters.strangers += 1
+            _log.log(
+                log_level(counters.strangers),
+                "%s: dropped a datagram from %s, which is not the server (counted in "
+                "strangers; logged at debug level after the first)",
+                self.where,
+                format_tcp_url(source[0], source[1], MODBUS_UDP_SCHEME),
+            )
+            return
+        try:
+            adu = self._check(data)
+        except FrameError as error:
+            counters.refused += 1
+            _log.log(log_level(counters.refused), "%s: refused a datagram: %s", self.where, error)
+            return
+        frame = reply_frame(counters, self._outstanding, adu)
+        if frame is None:
+            return
+        self._outstanding = NONE_OUTSTANDING  # one reply per request
+        if self._receiver is not None:
+            self._receiver(frame)
+            return
+        self._kept.append(frame)
+        self._wake()
+
+    def lost(self, exc: BaseException | None) -> None:
+        """The transport closed (by `aclose`, or failed)."""
+        if self._error is None:
+            self._error = (
+                anyio.BrokenResourceError(str(exc)) if exc else anyio.ClosedResourceError()
+            )
+        self._wake()
+        if self._on_lost is not None:
+            on_lost, self._on_lost = self._on_lost, None
+            on_lost()
+
+    def _wake(self) -> None:
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+    def set_receiver(
+        self,
+        receiver: Callable[[bytes], None] | None,
+        on_lost: Callable[[], None] | None = None,
+    ) -> None:
+        """The push extension: hand each reply to `receiver` (None: keep them for
+        `receive()`)."""
+        self._receiver = receiver
+        self._on_lost = on_lost if receiver is not None else None
+        if receiver is None:
+            return
+        while self._kept:
+            receiver(self._kept.popleft())
+        if self._error is not None:
+            self.lost(None)
+
+    async def receive(self, max_bytes: int = 65536) -> bytes:
+        """The next reply to the request outstanding, as an RTU frame."""
+        await anyio.lowlevel.checkpoint()
+        while not self._kept:
+            if self._error is not None:
+                raise self._error
+            self._waiter = asyncio.get_running_loop().create_future()
+            try:
+                await self._waiter
+            finally:
+                self._waiter = None
+        return self._kept.popleft()
+
+    # -- sending ---------------------------------------------------------------------
+
+    def send_nowait(self, item: bytes) -> bool:
+        """The push extension: send the RTU frame `item` as one datagram now."""
+        transport = self.transport
+        if transport is None or self._error is not None:
+            return False
+        transaction_id, adu = request_adu(self.counters, item)
+        self._outstanding = transaction_id
+        self._kept.clear()  # a new request: nothing that came before answers it
+        transport.sendto(adu, self.peer)
+        return True
+
+    async def send(self, item: bytes) -> None:
+        """Send the RTU frame `item` as one datagram with the next transaction id."""
+        await anyio.lowlevel.checkpoint()
+        if not self.send_nowait(item):
+            raise self._error or anyio.ClosedResourceError()
+
+    async def send_eof(self) -> None:
+        pass  # datagrams have no end of stream
+
+    async def aclose(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+        self.lost(None)
+        await anyio.lowlevel.checkpoint()
+
+
+async def open_push_datagrams(
+    family: int,
+    peer: _Address,
+    counters: ModbusTcpCounters,
+    where: str,
+    check: Callable[[bytes], Adu],
+) -> PushDatagramStream:
+    """A [`PushDatagramStream`][aiortu.transport.PushDatagramStream] to `peer` on a new socket
+    of `family`, each datagram checked by `check` (on asyncio only; see `push_datagrams`)."""
+    stream = PushDatagramStream(peer, counters, where, check)
+    loop = asyncio.get_running_loop()
+    transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(stream), family=family)
+    stream.transport = transport
+    return stream
