@@ -19,9 +19,8 @@ TCP or ASCII over TCP (the server framings, one home for all).
 
 from __future__ import annotations
 
-from typing import Final, Protocol
-
 import time
+from typing import Final, Protocol
 
 from aiortu.core.ascii import (
     DEFAULT_ASCII_TIMEOUT,
