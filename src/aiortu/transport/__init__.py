@@ -51,7 +51,13 @@ from aiortu.transport._mbap_stream import (
     open_modbus_tcp,
 )
 from aiortu.transport._push import PushStream
-from aiortu.transport._server_framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
+from aiortu.transport._server_framing import (
+    RTU_SILENCE,
+    AsciiFraming,
+    Framing,
+    MbapFraming,
+    RtuFraming,
+)
 from aiortu.transport._tcp import open_rtu_over_tcp
 from aiortu.transport._tls import (
     ROLE_OID,
@@ -110,6 +116,7 @@ __all__ = (
     "DatagramListener",
     "FileDescriptorStream",
     "FramedStream",
+    "AsciiFraming",
     "Framing",
     "ListenAddress",
     "LocalEchoFilter",
