@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import re
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 
 
 def aiortu_command(*args: str) -> list[str]:
@@ -32,3 +36,17 @@ def stop(process: subprocess.Popen[str], how: signal.Signals = signal.SIGTERM) -
     out, err = process.communicate(timeout=10)
     assert process.returncode == 0, err
     return out, err
+
+
+@contextlib.contextmanager
+def serving_tcp(config: str | os.PathLike[str], *options: str) -> Iterator[str]:
+    """``aiortu serve tcp://127.0.0.1:0 --config CONFIG OPTIONS`` running; its URL."""
+    process = start_aiortu("serve", "tcp://127.0.0.1:0", "--config", os.fspath(config), *options)
+    try:
+        assert process.stderr is not None
+        line = process.stderr.readline()
+        found = re.search(r"\(port (\d+)\)", line)
+        assert found is not None, line + process.stderr.read()
+        yield f"tcp://127.0.0.1:{found.group(1)}"
+    finally:
+        stop(process)

@@ -59,7 +59,7 @@ def test_read_the_other_tables(port: str) -> None:
         "unit": 1, "table": "coils", "address": 3, "values": COILS[3:8],
     }  # fmt: skip
     inputs = run_aiortu("read", port, "--unit", "1", "--ref", "30003", "--count", "2", *LINE)
-    assert inputs.stdout == f"2 {INPUT_REGISTERS[2]}\n3 {INPUT_REGISTERS[3]}\n"
+    assert inputs.stdout == f"30003 {INPUT_REGISTERS[2]}\n30004 {INPUT_REGISTERS[3]}\n"
     discrete = run_aiortu("read", port, "--unit", "1", "--table", "discrete", "--address", "0",
                       "--count", "3", *LINE)  # fmt: skip
     assert discrete.stdout == "0 0\n1 1\n2 0\n"
@@ -74,12 +74,12 @@ def test_write_then_read_back(port: str) -> None:
         == '{"unit": 1, "table": "holding", "address": 35, "values": [1, 16, 65535]}\n'
     )
     back = run_aiortu("read", port, "--unit", "1", "--ref", "40036", "--count", "3", *LINE)
-    assert back.stdout == "35 1\n36 16\n37 65535\n"
+    assert back.stdout == "40036 1\n40037 16\n40038 65535\n"
     coils = run_aiortu("write", port, "--unit", "1", "--table", "coils", "--address", "30",
                    "--values", "on,off,true,0", *LINE)  # fmt: skip
     assert (coils.returncode, coils.stdout) == (0, "30 1\n31 0\n32 1\n33 0\n")
     single = run_aiortu("write", port, "--unit", "1", "--ref", "00040", "--values", "1", *LINE)
-    assert (single.returncode, single.stdout) == (0, "39 1\n")
+    assert (single.returncode, single.stdout) == (0, "00040 1\n")
     bits = run_aiortu("read", port, "--unit", "1", "--table", "coils", "--address", "30",
                   "--count", "4", "--json", *LINE)  # fmt: skip
     assert json.loads(bits.stdout)["values"] == [True, False, True, False]
@@ -126,7 +126,7 @@ def test_poll_json_with_named_typed_points(port: str) -> None:
         (["read", "--unit", "1", "--table", "holding"], 2,
          "aiortu read: error: read needs --table and --address, or --ref"),
         (["read", "--unit", "1", "--table", "holding", "--address", "0", "--count", "126"], 2,
-         "aiortu read: error: --count must be 1..125, not 126"),
+         "aiortu read: error: at most 125 registers can be read at once, not 126"),
         (["write", "--unit", "1", "--table", "coils", "--address", "0", "--values", "maybe"], 2,
          "aiortu write: error: --values must be 1, 0, true, false, on or off, not maybe"),
         (["write", "--unit", "1", "--ref", "30001", "--values", "1"], 2,
@@ -183,7 +183,7 @@ def test_read_write_and_poll_over_modbus_tcp(tcp_url: str) -> None:
                   "--count", "3")  # fmt: skip
     assert (text.returncode, text.stdout, text.stderr) == (0, "0 4660\n1 43981\n2 7\n", "")
     written = run_aiortu("write", tcp_url, "--unit", "1", "--ref", "40021", "--values", "5,6")
-    assert (written.returncode, written.stdout, written.stderr) == (0, "20 5\n21 6\n", "")
+    assert (written.returncode, written.stdout, written.stderr) == (0, "40021 5\n40022 6\n", "")
     polled = run_aiortu("poll", tcp_url, "--unit", "1", "--ref", "40021", "--count", "2",
                     "--cycles", "1")  # fmt: skip
     assert polled.returncode == 0, polled.stderr

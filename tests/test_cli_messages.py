@@ -174,7 +174,8 @@ def test_unit_0_and_unit_minus_1_say_the_same_kind_of_thing(
     assert messages == [
         "aiortu read: error: argument --unit: must be a unit address 1..247, not 0 "
         "(0 is the broadcast address, which gets no reply)\n",
-        "aiortu read: error: argument --unit: must be a unit address 1..247, not -1\n",
+        "aiortu read: error: argument --unit: must be a unit address 1..247 (0..255 over "
+        "tcp://, udp://, tls://), not -1\n",
         "aiortu read: error: argument --unit: must be a unit address 1..247, not 248\n",
     ]
 

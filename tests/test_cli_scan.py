@@ -16,6 +16,7 @@ import pytest
 from aiortu import MemoryStore, Slave
 from aiortu.cli import main
 from aiortu.cli._scan import (
+    Answer,
     SettingResult,
     _Progress,
     parse_units,
@@ -245,3 +246,37 @@ def test_help_has_examples_and_mbpoll_flags(capsys):
     assert "examples:" in out
     assert "mbpoll -b 9600" in out
     assert "exit codes:" in out
+
+
+def test_a_pty_ignores_baud_rates_so_it_is_probed_once(bus_with_slaves):
+    result = run_scan(bus_with_slaves, "--units", "1-8", "--timeout", "0.05")
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.splitlines()[:2] == [
+        f"aiortu scan: {bus_with_slaves} is a pseudo-terminal, which ignores the baud rate: "
+        "probing once, at 19200",
+        f"aiortu scan: 8 units at 1 line setting on {bus_with_slaves}; at most 1 s",
+    ]
+    assert result.stdout.splitlines()[-1] == "found 2 units (3, 6) at 19200 8N2"
+    assert [line.split()[0] for line in result.stdout.splitlines()[1:-1]] == ["3", "6"]
+
+
+def test_a_missing_port_says_so_first_and_only():
+    result = run_scan("/dev/no-such-port")
+    assert (result.returncode, result.stdout) == (1, "")
+    assert result.stderr == (
+        "aiortu scan: cannot open the port: /dev/no-such-port: no such serial device\n"
+    )
+
+
+def test_line_settings_are_listed_by_baud_rate_as_a_number():
+    results = []
+    for rate in (115200, 19200, 38400, 9600):
+        setting = LineSettings(rate, parity="N", stopbits=2)
+        result = SettingResult(setting)
+        result.answers.append(Answer(1, setting, "holding register 0 (40001) = 1", 0.01))
+        results.append(result)
+    out = io.StringIO()
+    report(results, out)
+    lines = out.getvalue().splitlines()
+    assert lines[-1] == "found 1 unit (1) at 9600 8N2, 19200 8N2, 38400 8N2, 115200 8N2"
+    assert [line.split()[1] for line in lines[1:-1]] == ["9600", "19200", "38400", "115200"]

@@ -95,9 +95,9 @@ def served_bus() -> Iterator[str]:
 
 
 def test_an_interrupted_scan_reports_the_units_found_and_exits_130(served_bus: str) -> None:
+    # The units served answer within milliseconds; the 148 after them take 0.1 s each.
     scan = subprocess.Popen(
-        aiortu_command("scan", served_bus, "--baudrates", "19200,9600",
-                       "--units", "1-40", "--timeout", "0.1"),
+        aiortu_command("scan", served_bus, "--units", "5,6,17,100-247", "--timeout", "0.1"),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -105,10 +105,11 @@ def test_an_interrupted_scan_reports_the_units_found_and_exits_130(served_bus: s
     assert scan.stderr is not None
     deadline = time.monotonic() + 30
     line = ""
-    while "units answering" not in line and time.monotonic() < deadline:
+    while "probing at" not in line and time.monotonic() < deadline:
         line = scan.stderr.readline()
-    assert line.startswith("aiortu scan: 19200 8N2: units answering: 5, 6, 17"), line
-    # The second setting is under way (40 units at 0.1 s): interrupt it.
+    assert line == "aiortu scan: probing at 19200 8N2\n", line
+    # The setting is under way, its answering units probed: interrupt it.
+    time.sleep(1.0)
     scan.send_signal(signal.SIGINT)
     out, err = scan.communicate(timeout=10)
     assert scan.returncode == 130
@@ -135,3 +136,17 @@ def test_ctrl_c_during_a_read_exits_130_quietly() -> None:
         read.send_signal(signal.SIGINT)
         out, err = read.communicate(timeout=10)
     assert (read.returncode, out, err) == (130, "", "")
+
+
+def test_the_master_and_the_transports_load_pyserial_and_the_poller_on_first_use() -> None:
+    script = "\n".join([
+        "import sys",
+        "import aiortu.master, aiortu.transport",
+        "print(sorted(n for n in sys.modules if n == 'serial' or n.endswith('_poller')))",
+        "aiortu.master.Poller, aiortu.transport.RS485Options",
+        "print(sorted(n for n in sys.modules if n == 'serial' or n.endswith('_poller')))",
+    ])  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=30, check=True
+    )
+    assert result.stdout.splitlines() == ["[]", "['aiortu.master._poller', 'serial']"]

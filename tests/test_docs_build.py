@@ -134,3 +134,28 @@ def test_no_page_shows_the_markers_of_the_code_tests(site: Path) -> None:
     assert len(pages) > 10
     for page in pages:
         assert "<!-- test:" not in shown_text(page.read_text(encoding="utf-8")), page
+
+
+def test_the_state_diagrams_show_without_a_script(site: Path) -> None:
+    page = (site / "protocol" / "index.html").read_text(encoding="utf-8")
+    drawn = (ROOT / "docs" / "protocol.md").read_text(encoding="utf-8").count("```mermaid")
+    assert drawn >= 3
+    assert page.count('<svg class="state-diagram"') == drawn
+    # No Mermaid block is left, so the theme loads no Mermaid script from a CDN.
+    assert "mermaid" not in page
+    assert "stateDiagram-v2" not in shown_text(page)
+
+
+def test_the_benchmarks_page_has_one_title(site: Path) -> None:
+    page = (site / "benchmarks" / "index.html").read_text(encoding="utf-8")
+    article = page[page.find("<article") : page.rfind("</article>")]
+    titles = re.findall(r"<h[12][^>]*>(.*?)</h[12]>", article, re.S)
+    shown = [html.unescape(re.sub(r"<[^>]+>", "", title)).strip(" ¶") for title in titles]
+    assert shown.count("Benchmarks") == 1
+
+
+def test_the_home_page_links_the_newcomers_pages(site: Path) -> None:
+    page = (site / "index.html").read_text(encoding="utf-8")
+    article = page[page.find("<article") : page.rfind("</article>")]
+    for target in ("getting-started/", "cli/", "gateway/"):
+        assert f'href="{target}"' in article, target

@@ -72,8 +72,9 @@ async def test_unit_health_is_each_device_s_availability(mosquitto: Mosquitto) -
             _served() as (served, tasks),
             Bridge(parse_config(_config(mosquitto.url, served.port, "home-assistant"))),
         ):
-            await until(lambda: subscriber.on("aiortu/hp-3/availability")[-1:] == [b"offline"])
-            assert subscriber.on("aiortu/hp-3/health")[-1] == b"offline"
+            # Availability starts offline; health says when the unit has been found silent.
+            await until(lambda: subscriber.on("aiortu/hp-3/health")[-1:] == [b"offline"])
+            assert subscriber.on("aiortu/hp-3/availability")[-1] == b"offline"
             assert subscriber.on("aiortu/hp-1/availability")[-1] == b"online"
             assert subscriber.on("aiortu/hp-1/power") == [b"1800.0"]
             served.stop()

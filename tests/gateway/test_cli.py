@@ -22,9 +22,12 @@ def test_help_has_examples_exit_codes_and_mbpoll(capsys: pytest.CaptureFixture[s
 @pytest.mark.parametrize(
     ("listen", "message"),
     [
-        ("tcp://127.0.0.1:0,prio=1", "only ',priority=N' (an integer) is allowed"),
+        ("tcp://127.0.0.1:0,prio=1", "only ',priority=N' (an integer) and ',rules=FILE'"),
+        ("tcp://127.0.0.1:0,rules=", "only ',priority=N' (an integer) and ',rules=FILE'"),
         ("ftp://127.0.0.1:0", "a server listens on a tcp://, udp://"),
         ("/dev/ttyUSB1", "a server listens on a tcp://, udp://"),
+        ("tcp://127.0.0.1:0,rules=/no/such/rules.toml", "/no/such/rules.toml: (file): cannot"),
+        ("tls://127.0.0.1:0", "cafile is missing"),
     ],
 )
 def test_a_bad_listen_url_is_one_line_and_exit_2(

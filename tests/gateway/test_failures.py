@@ -127,6 +127,8 @@ async def test_0a_at_once_while_the_port_is_reopened_then_served_again() -> None
 async def test_a_request_that_may_not_be_broadcast_is_not_sent_to_unit_0() -> None:
     async with line() as bench, client(bench.gateway) as tcp:
         await tcp.send("03 0000 0001", unit=0, transaction_id=1)
-        assert await tcp.receive(wait=0.3) is None
+        reply = await tcp.receive(wait=0.3)
+        assert reply is not None  # at once, not a wait
+        assert reply.pdu.hex(" ") == "83 01"
         assert bench.gateway.counters.broadcasts == 0
         assert not [entry for entry in bench.bus.trace if entry.sender == 0]

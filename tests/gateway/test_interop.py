@@ -95,6 +95,27 @@ async def test_mbpoll_through_the_gateway_command() -> None:
             assert b"[110]: \t5678" in result.stdout
 
 
+@pytest.mark.skipif(MBPOLL is None, reason="mbpoll is not installed")
+async def test_mbpoll_gets_0b_for_a_missing_unit_within_its_default_timeout() -> None:
+    # The gateway's defaults answer a unit that does not answer within mbpoll's 1 s: mbpoll
+    # prints the exception, not "Connection timed out".
+    assert MBPOLL is not None
+    with PtyBus(2).running_in_thread() as bus:
+        async with (
+            _command("serve", bus.paths[1], "--config", "examples/devices.toml") as slave,
+            _command("gateway", bus.paths[0], "--listen", "tcp://127.0.0.1:0") as gateway,
+        ):
+            assert slave.stderr is not None
+            assert gateway.stderr is not None
+            await _line_from(slave.stderr, rb"Ctrl-C")
+            port = (await _line_from(gateway.stderr, rb"127\.0\.0\.1:(\d+);"))[1].decode()
+            poll = [MBPOLL, "-m", "tcp", "-a", "50", "-p", port, "-1", "-r", "1", "127.0.0.1"]
+            result = await anyio.run_process(poll, check=False)
+            output = result.stdout + result.stderr
+            assert b"Target device failed to respond" in output, output  # libmodbus: 0B
+            assert b"timed out" not in output
+
+
 async def test_aiortu_modbus_tcp_master_through_the_gateway() -> None:
     # aiortu's own master over Modbus TCP, as a network client of the line server: the
     # same Master API end to end, transaction ids matched by the master, 0B for a unit the

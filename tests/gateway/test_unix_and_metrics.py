@@ -114,7 +114,7 @@ def test_the_summary_has_a_line_per_line_unit_and_client() -> None:
     assert list(stats.summary()) == [
         "line /dev/ttyUSB0: transactions=5 coalesced=0 cache_hits=0 broadcasts=0",
         "line /dev/ttyUSB0 unit 3: requests=0 replies=0 exceptions=0 no_response=1 no_path=0",
-        "client 10.0.0.2: connections=0 requests=7 replies=0",
+        "client 10.0.0.2: connections=0 requests=7 replies=0 refused=0",
     ]
 
 

@@ -95,3 +95,22 @@ async def test_a_refused_attempt_is_retried_without_the_guard() -> None:
     async with line(script={0: busy}, **options) as (master, _, _):
         with anyio.fail_after(2):  # not the 5 s guard
             assert await master.read_holding_registers(1, 0, 2) == [1000, 1001]
+
+
+async def test_a_unit_answered_only_on_retries_goes_offline() -> None:
+    # Every first attempt times out and its retry is answered: three such transactions in a
+    # row are three failures for the unit's health, although each got its reply.
+    late_only = dict.fromkeys(range(0, 6, 2), silent)
+    options = {"timeout": TIMEOUT, "retries": 1, "late_reply_guard": 0.001, "offline_after": 3}
+    async with line(script=late_only, default=answer, **options) as (master, _, _):
+        for _ in range(2):
+            assert await master.read_holding_registers(1, 0, 2) == [1000, 1001]
+            assert master.unit_stats(1).online
+        assert await master.read_holding_registers(1, 0, 2) == [1000, 1001]
+        stats = master.unit_stats(1)
+        assert not stats.online
+        assert (stats.successes, stats.late_successes, stats.failures) == (3, 3, 0)
+        # A reply to a first attempt brings it back.
+        assert await master.read_holding_registers(1, 0, 2) == [1000, 1001]
+        assert master.unit_stats(1).online
+        assert master.unit_stats(1).consecutive_failures == 0

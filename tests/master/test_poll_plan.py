@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import random
 
 import pytest
 from hypothesis import given
@@ -115,3 +116,30 @@ def test_bad_points_and_limits_are_refused() -> None:
         plan_reads([Point.of("x", 1, "40001")], max_registers=126)
     with pytest.raises(InvalidValue):
         plan_reads([Point.of("x", 1, "40001", "float64")], max_registers=3)
+
+
+@given(points(), st.integers(0, 40), st.randoms(use_true_random=False))
+def test_a_split_read_serves_each_point_once_with_the_same_value(
+    found: list[Point], max_gap: int, rng: random.Random
+) -> None:
+    for read in plan_reads(found, max_gap=max_gap, max_bit_gap=max_gap):
+        elements: list[int | bool] = [
+            bool(rng.getrandbits(1)) if read.table.is_bit else rng.getrandbits(16)
+            for _ in range(read.count)
+        ]
+        merged = read.decode(elements)
+        parts = read.split()
+        starts = sorted({s.point.address for s in read.slices})
+        # One read per address a point starts at, in order, each within the merged read.
+        assert [part.address for part in parts] == starts
+        split: list[tuple[Point, bool | int | float]] = []
+        for part in parts:
+            assert (part.unit, part.table) == (read.unit, read.table)
+            assert part.count == max(s.width for s in part.slices)
+            assert all(s.offset == 0 for s in part.slices)
+            offset = part.address - read.address
+            split += part.decode(elements[offset : offset + part.count])
+        # Compared by repr: a float32 or float64 NaN is never equal to itself.
+        assert sorted(map(repr, split)) == sorted(map(repr, merged))
+        if len(starts) == 1:
+            assert parts == [read]

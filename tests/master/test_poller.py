@@ -329,3 +329,55 @@ async def test_one_crc_error_costs_one_sample_not_seconds() -> None:
     # The next cycle reads the unit again, and it is online once it answers.
     assert [s.ok for s in samples] == [False, True, True, True, True]
     assert suspect[1].state is UnitState.ONLINE
+
+
+async def test_a_hole_in_a_merged_read_splits_it_once_and_fails_only_the_missing_point() -> None:
+    # The device has holding registers 107..109 and 111..112, not 110: a read across 110
+    # is refused whole with exception 02, as real devices do.
+    hole = 110
+
+    async def with_a_hole(slave: FakeSlave, unit: int, request: Request) -> None:
+        _, address, count = wire(request)
+        if address <= hole < address + count:
+            await slave.reply(unit, bytes((0x83, 0x02)))
+        else:
+            await answer(slave, unit, request)
+
+    points = [
+        Point.of("a", 17, "40108"),
+        Point.of("b", 17, "40112", "int32"),
+        Point.of("missing", 17, "40111"),
+        Point.of("also_a", 17, "40108", "int32"),
+    ]
+    async with line(default=with_a_hole) as (master, slave, _):
+        poller = Poller(master, points, max_gap=10)
+        assert [(r.address, r.count) for r in poller.reads] == [(107, 6)]
+        first = {s.name: s for s in await poller.poll_once()}
+        second = {s.name: s for s in await poller.poll_once()}
+        requests = [wire(seen.request)[1:] for seen in slave.seen]
+    # The merged read once, then each address alone, in both cycles.
+    assert requests == [(107, 6), (107, 2), (110, 1), (111, 2), (107, 2), (110, 1), (111, 2)]
+    assert poller.split_reads == 1
+    assert [(r.address, r.count) for r in poller.reads] == [(107, 2), (110, 1), (111, 2)]
+    for samples in (first, second):
+        assert samples["a"].value == register_value(17, 107)
+        assert samples["also_a"].ok
+        assert samples["b"].value == decode_value(
+            [register_value(17, 111), register_value(17, 112)], ValueType.INT32
+        )
+        error = samples["missing"].error
+        assert isinstance(error, aiortu.ExceptionResponse)
+        assert error.code == 2
+
+
+async def test_a_read_of_one_address_refused_is_not_split_again() -> None:
+    async def refuse(slave: FakeSlave, unit: int, request: Request) -> None:
+        await slave.reply(unit, bytes((0x83, 0x02)))
+
+    points = [Point.of("a", 17, "40108"), Point.of("a32", 17, "40108", "int32")]
+    async with line(default=refuse) as (master, slave, _):
+        poller = Poller(master, points)
+        samples = await poller.poll_once()
+        assert len(slave.seen) == 1
+    assert poller.split_reads == 0
+    assert all(isinstance(s.error, aiortu.ExceptionResponse) for s in samples)

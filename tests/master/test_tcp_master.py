@@ -272,3 +272,47 @@ async def test_many_callers_share_one_connection() -> None:
                 group.start_soon(read, master, address)
         assert counters(master).requests == 20
     assert results == {address: [100 + address, 101 + address] for address in range(0, 60, 3)}
+
+
+async def test_unit_ids_255_and_0_are_unicasts_over_modbus_tcp() -> None:
+    # The MBAP header carries the unit id as given: 255 for a device reached by its IP
+    # address, 0 an ordinary id whose reply is awaited; the server maps both to its unit.
+    async with (
+        tcp_server() as server,
+        aiortu.open_master(url(server.port), **FAST) as master,
+    ):
+        assert master.unit_range == range(256)
+        assert await master.read_holding_registers(255, 0, 2) == [0x1234, 0xABCD]
+        assert await master.read_holding_registers(0, 0, 2) == [0x1234, 0xABCD]
+        assert await master.slave(255).read_input_registers(1, 1) == [22]
+        assert master.unit_stats(255).successes == 2
+        with pytest.raises(aiortu.InvalidRequest):
+            await master.read_holding_registers(256, 0, 1)
+        # A broadcast asked for is still one: sent, and no reply awaited.
+        await master.broadcast.write_register(3, 9)
+
+
+async def test_a_serial_line_master_keeps_units_1_to_247() -> None:
+    from aiortu.testing import PtyBus
+
+    async with (
+        PtyBus() as bus,
+        aiortu.open_master(bus.paths[0], parity="N", stopbits=2, timeout=0.1) as master,
+    ):
+        assert master.unit_range == range(1, 248)
+        for unit in (0, 248, 255):
+            with pytest.raises(aiortu.InvalidRequest):
+                await master.read_holding_registers(unit, 0, 1)
+
+
+async def test_modbus_ascii_keeps_units_1_to_247_though_its_frames_come_whole() -> None:
+    from aiortu.testing import PtyBus
+
+    async with (
+        PtyBus() as bus,
+        aiortu.open_master(
+            bus.paths[0], parity="N", stopbits=2, timeout=0.1, framing="ascii"
+        ) as master,
+    ):
+        assert master.link.whole_frames
+        assert master.unit_range == range(1, 248)

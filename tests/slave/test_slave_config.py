@@ -182,7 +182,7 @@ def test_serve_with_a_missing_file_exits_2(tmp_path: Path) -> None:
     )
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1
-    assert "cannot read it" in result.stderr
+    assert result.stderr == f"aiortu serve: error: --config {tmp_path / 'no'} does not exist\n"
 
 
 def test_read_only_ranges_may_span_adjacent_blocks_and_aliases() -> None:
@@ -206,3 +206,32 @@ def test_a_memory_store_refuses_an_exception_code_the_spec_lacks() -> None:
         MemoryStore(read_only_exception=99)  # type: ignore[arg-type]
     assert str(caught.value).startswith("read_only_exception must be ")
     assert str(caught.value).endswith(", not 99")
+
+
+def test_the_modbus_tcp_table_gives_the_servers_settings() -> None:
+    head = "[[slave]]\nunit = 17\n[[slave]]\nunit = 5\n"
+    assert parse_config(head).modbus_tcp == {}
+    config = parse_config(
+        head + '[modbus_tcp]\nserial_line_codes = true\nunit_aliases = { "255" = 17, "0x00" = 5 }\n'
+    )
+    assert config.modbus_tcp == {"serial_line_codes": True, "unit_aliases": {255: 17, 0: 5}}
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ('serial_line_codes = "yes"',
+         "modbus_tcp.serial_line_codes: must be true or false, not yes"),
+        ('unit_aliases = { "256" = 17 }',
+         "modbus_tcp.unit_aliases.256: must be a unit id 0..255, not 256"),
+        ('unit_aliases = { "x" = 17 }',
+         "modbus_tcp.unit_aliases.x: must be a unit id 0..255, not x"),
+        ('unit_aliases = { "255" = 9 }',
+         "modbus_tcp.unit_aliases.255: unit 9 is not described (units: 17)"),
+        ("max_connections = 3", "modbus_tcp.max_connections: unknown key"),
+    ],
+)  # fmt: skip
+def test_a_bad_modbus_tcp_table_is_one_line(table: str, message: str) -> None:
+    with pytest.raises(ConfigError) as failure:
+        parse_config(f"[[slave]]\nunit = 17\n[modbus_tcp]\n{table}\n", "d.toml")
+    assert str(failure.value).startswith(f"d.toml: {message}")

@@ -380,3 +380,27 @@ async def test_rtu_over_tcp_logs_a_burst_of_refused_lines_once(
                                 await refused.receive()
             assert server.counters.connections_refused == 20
     assert sum("the most allowed" in record.getMessage() for record in caplog.records) == 1
+
+
+async def test_rtu_over_tcp_connections_share_one_device() -> None:
+    # Listen-only mode and the counters are the device's: set from one connection, seen
+    # from another, as masters sharing a serial device server's line see one device.
+    from aiortu.core.rtu import decode_frame, encode_frame
+
+    async def ask(stream: anyio.abc.ByteStream, pdu: str) -> bytes | None:
+        await stream.send(encode_frame(UNIT, bytes.fromhex(pdu)))
+        with anyio.move_on_after(0.3):
+            return decode_frame(await stream.receive()).pdu
+        return None
+
+    async with (
+        serve("rtu+tcp://127.0.0.1:0", {UNIT: device()}) as server,
+        await anyio.connect_tcp("127.0.0.1", server.port) as first,
+        await anyio.connect_tcp("127.0.0.1", server.port) as second,
+    ):
+        assert await ask(first, "03 0000 0001") is not None
+        assert await ask(second, "08 000B 0000") == bytes.fromhex("08 000B 0002")
+        assert await ask(first, "08 0004 0000") is None  # listen-only: no reply
+        assert await ask(second, "03 0000 0001") is None  # the device is silent for all
+        assert await ask(second, "08 0001 0000") is None  # restarted, from listen-only
+        assert await ask(first, "03 0000 0001") is not None

@@ -25,6 +25,7 @@ rules = st.builds(
     units=st.none() | st.frozensets(st.integers(0, 255), max_size=5),
     addresses=st.none() | st.lists(spans, max_size=3).map(tuple),
     read_only=st.booleans(),
+    broadcast=st.none() | st.booleans(),
 )
 
 
@@ -62,20 +63,28 @@ def _near(request: PDU) -> st.SearchStrategy[tuple[tuple[int, int], ...]]:
 
 
 @settings(max_examples=400)
-@given(rules, requests, st.integers(0, 255), st.data())
+@given(rules, requests, st.integers(0, 255) | st.just(0), st.data())
 def test_a_rule_allows_exactly_what_it_grants(
     rule: AccessRule, request: PDU, unit: int, data: st.DataObject
 ) -> None:
     if rule.addresses is not None and data.draw(st.booleans()):
         # Ranges that end around the request's own: inside, just short, just over.
         rule = AccessRule(
-            rule.function_codes, rule.units, data.draw(_near(request)), rule.read_only
+            rule.function_codes,
+            rule.units,
+            data.draw(_near(request)),
+            rule.read_only,
+            rule.broadcast,
         )
     code = request.function_code
+    if unit == 0 and rule.broadcast is not None:
+        unit_allowed = rule.broadcast
+    else:
+        unit_allowed = rule.units is None or unit in rule.units
     expected = (
         code in rule.function_codes
         and not (rule.read_only and code in WRITE_FUNCTION_CODES)
-        and (rule.units is None or unit in rule.units)
+        and unit_allowed
         and (
             rule.addresses is None
             or all(
@@ -98,3 +107,13 @@ def test_default_deny(request: PDU, unit: int) -> None:
     everything = AccessRule(frozenset(range(1, 128)))
     assert RoleRules({"x": everything}).refusal(None, unit, pdu) is not None
     assert RoleRules({"x": everything}, default_role="x").refusal(None, unit, pdu) is None
+
+
+def test_broadcast_alone_decides_unit_0() -> None:
+    read = bytes.fromhex("0300000001")
+    units = frozenset({0, 1})
+    assert AccessRule(frozenset({3}), units, broadcast=False).refusal(0, read) is not None
+    assert AccessRule(frozenset({3}), units, broadcast=False).refusal(1, read) is None
+    assert AccessRule(frozenset({3}), frozenset({1}), broadcast=True).refusal(0, read) is None
+    assert AccessRule(frozenset({3}), frozenset({1})).refusal(0, read) is not None
+    assert AccessRule(frozenset({3})).refusal(0, read) is None

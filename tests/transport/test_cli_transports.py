@@ -103,7 +103,7 @@ def test_a_rule_file_with_an_unknown_key_is_one_line(files: dict[str, Any]) -> N
     assert done.returncode == 1
     assert done.stderr.strip() == (
         f"aiortu serve: error: {rules}: roles.viewer.readonly: unknown key "
-        "(expected addresses, function_codes, read_only, units)"
+        "(expected addresses, broadcast, function_codes, read_only, units)"
     )
 
 

@@ -61,7 +61,7 @@ def test_parse_valid(text: str, expected: PortAddress) -> None:
         ("tcp://::1:502", "tcp://[::1]:5020"),
         ("socket://host:502", "unknown scheme"),
         ("rtu+udp://host:502", "unknown scheme"),
-        ("rtu+tcp://host", "port is missing"),
+        ("rtu+tcp://host", "port number is missing"),
         ("rtu+tcp://host:", "port is missing"),
         ("rtu+tcp://:502", "host is missing"),
         ("rtu+tcp://host:0", "outside 1..65535"),
@@ -72,7 +72,7 @@ def test_parse_valid(text: str, expected: PortAddress) -> None:
         ("rtu+tcp://host:502?x=1", "no path, query"),
         ("rtu+tcp://user@host:502", "no user name"),
         ("rtu+tcp://::1:5020", "IPv6 address in brackets"),
-        ("rtu+tcp://[::1]", "port is missing"),
+        ("rtu+tcp://[::1]", "port number is missing"),
         ("rtu+tcp://[::1:5020", "closing ']'"),
         ("rtu+tcp://[not-v6]:5020", "not an IPv6 address"),
         ("rtu+tcp://[::1]5020", "expected ':port'"),
@@ -103,7 +103,7 @@ def test_parse_listen_url(text: str, expected: ListenAddress) -> None:
     [
         ("/dev/ttyUSB0", "listens on a tcp:// or rtu+tcp:// URL"),
         ("udp://0.0.0.0:502", "listens on a tcp:// or rtu+tcp:// URL"),
-        ("tcp://0.0.0.0", "port is missing (tcp://host:port)"),
+        ("tcp://0.0.0.0", "port number is missing: tcp://host:port"),
         ("tcp://0.0.0.0:65536", "outside 0..65535"),
     ],
 )
@@ -206,7 +206,7 @@ async def test_open_stream_refused_tcp() -> None:
 
 
 async def test_open_stream_rejects_bad_urls_before_any_io() -> None:
-    with pytest.raises(InvalidValue, match="port is missing"):
+    with pytest.raises(InvalidValue, match="port number is missing"):
         await open_stream("rtu+tcp://127.0.0.1")
     with pytest.raises(InvalidValue, match="unknown scheme"):
         await open_stream("modbus://127.0.0.1:502")

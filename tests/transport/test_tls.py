@@ -366,8 +366,10 @@ def test_a_rule_file_loads(tmp_path: Path) -> None:
     ("text", "message"),
     [
         ("[roles.viewer]\nfunction_codes = [3]\nreadonly = true\n",
-         "roles.viewer.readonly: unknown key (expected addresses, function_codes, read_only, "
-         "units)"),
+         "roles.viewer.readonly: unknown key (expected addresses, broadcast, function_codes, "
+         "read_only, units)"),
+        ("[roles.viewer]\nfunction_codes = [3]\nbroadcast = 1\n",
+         "roles.viewer.broadcast: must be true or false"),
         ("defaults = 1\n", "defaults: unknown key (expected default_role, roles)"),
         ("[roles.viewer]\nunits = [1]\n", "roles.viewer.function_codes: is required"),
         ("[roles.viewer]\nfunction_codes = [300]\n", "300 is not a number in 1..127"),

@@ -165,7 +165,8 @@ class BlockingMaster(_Blocking):
         """The writes that may go to every unit at once (unit 0); no reply is awaited."""
 
     def slave(self, unit: int) -> BlockingUnitHandle:
-        """A handle on `unit` (1..247): the master's methods without the unit, typed values."""
+        """A handle on `unit` (1..247; 0..255 over Modbus TCP): the master's methods without
+        the unit, typed values."""
         return BlockingUnitHandle(self, unit)
 
     @property

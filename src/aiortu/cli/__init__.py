@@ -30,6 +30,7 @@ SUMMARIES: dict[str, str] = {
     "bridge": "publish the devices of lines to an MQTT broker (Home Assistant, Sparkplug B)",
     "demo": "watch three simulated devices being polled on a virtual bus (no hardware)",
     "gateway": "share one serial line with many Modbus TCP clients (the line server)",
+    "identify": "read what a device says it is: identification objects and server id",
     "monitor": "watch a bus: print every frame with its meaning, never send",
     "poll": "poll points on one or more units and show them as a live table",
     "profile": "check device profiles; read and write a device's points by name",

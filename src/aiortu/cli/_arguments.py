@@ -16,6 +16,7 @@ __all__ = (
     "add_timing",
     "address",
     "is_pty",
+    "number",
     "parity",
     "plural",
     "positive_int",
@@ -24,6 +25,7 @@ __all__ = (
     "seconds",
     "seconds_or_zero",
     "unit",
+    "unit_id",
 )
 
 PTY_LINE = "--parity N --stopbits 2"
@@ -63,6 +65,17 @@ def unit(text: str) -> int:
     return value
 
 
+def unit_id(text: str) -> int:
+    """A unit id 0..255: what a Modbus TCP request may carry (a serial line takes 1..247;
+    `aiortu.cli._master.check_unit_for_port` checks that once the port is known)."""
+    value = _integer(text)
+    if not 0 <= value <= 255:
+        raise argparse.ArgumentTypeError(
+            f"must be a unit address 1..247 (0..255 over tcp://, udp://, tls://), not {text}"
+        )
+    return value
+
+
 def _integer(text: str) -> int:
     try:
         return int(text, 16) if text.lower().lstrip("+-").startswith("0x") else int(text, 10)
@@ -84,6 +97,17 @@ def seconds_or_zero(text: str) -> float:
     value = _number_of_seconds(text)
     if not 0 <= value < float("inf"):
         raise argparse.ArgumentTypeError(f"must be a number of seconds, 0 or more, not {text}")
+    return value
+
+
+def number(text: str) -> float:
+    """A finite number, such as a scale factor: `0.1`, `-2`, `1e3`."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number")
     return value
 
 

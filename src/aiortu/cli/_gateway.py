@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import signal
+import ssl
 import sys
 from typing import Any
 
@@ -27,8 +28,16 @@ from aiortu.cli._arguments import (
     unit,
 )
 from aiortu.cli._messages import library_warnings_on_stderr, port_failure
-from aiortu.errors import InvalidValue, PortError
-from aiortu.gateway import Gateway, GatewayLine, Listen, gateway
+from aiortu.errors import ConfigError, InvalidValue, PortError
+from aiortu.gateway import (
+    DEFAULT_RETRIES,
+    DEFAULT_TIMEOUT,
+    Gateway,
+    GatewayLine,
+    Listen,
+    gateway,
+)
+from aiortu.transport import server_tls_context
 
 __all__ = ("register", "run")
 
@@ -47,6 +56,13 @@ examples:
       local clients (the SCADA) go before those of the other listener
   aiortu gateway /dev/ttyUSB0 --listen 'unix:/run/aiortu-ttyUSB0.sock?mode=0660&group=modbus'
       Modbus TCP framing on a Unix socket, for programs of group modbus on this machine
+  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:1502,rules=viewer.toml \
+                              --listen tcp://127.0.0.1:1503
+      clients of port 1502 may do what viewer.toml allows (exception 01 otherwise);
+      see "Exposing a line safely" in docs/gateway.md
+  aiortu gateway /dev/ttyUSB0 --listen tls://0.0.0.0:802,rules=roles.toml \
+                 --certfile gw.crt --keyfile gw.key --cafile clients.pem
+      Modbus/TCP Security: each client certificate's role gets its rule
   aiortu gateway --line /dev/ttyUSB0:1-20 --line /dev/ttyUSB1:21-40 \\
                  --listen tcp://0.0.0.0:502
       two lines, each with its own master; units 41..247 get exception 0A
@@ -65,11 +81,14 @@ two programs sharing one virtual line:
   aiortu virtual-bus --ports 2                      # prints /dev/pts/5 and /dev/pts/6
   aiortu serve /dev/pts/6 --config examples/devices.toml
   aiortu gateway /dev/pts/5 --listen tcp://127.0.0.1:1502
-  mbpoll -m tcp -p 1502 -a 17 -t 4 -r 1 -c 3 127.0.0.1     # from any number of programs
+  mbpoll -m tcp -p 1502 -a 17 -t 4 -r 108 -c 3 -1 127.0.0.1   # from any number of programs
 
 a client whose unit does not answer gets exception 0B (gateway target device failed to
-respond), at once while the unit is offline; 0A (gateway path unavailable) while the port
-is gone. Unit 0 is a broadcast: executed, never answered.
+respond) within 1 s with the defaults (--timeout 0.3 --retries 1), at once while the unit is
+offline; 0A (gateway path unavailable) while the port is gone. A write to unit 0 is a
+broadcast: executed, never answered; a read to unit 0 gets exception 01 at once. 08/04
+(force listen-only) is answered at once with its echo; the unit then gets 0B at once until
+an 08/01 brings it back.
 
 as a service, one instance per serial device: examples/aiortu-gateway@.service
 
@@ -108,14 +127,20 @@ def register(subparsers: Subparsers) -> None:
         "--listen",
         action="append",
         required=True,
-        metavar="URL[,priority=N]",
+        metavar="URL[,priority=N][,rules=FILE]",
         help=(
             "tcp://host:port (Modbus TCP), udp://host:port (Modbus UDP), rtu+tcp://host:port "
-            "(RTU frames) or "
-            "unix:PATH[?mode=0660&group=NAME] (Modbus TCP on a Unix socket, with its file "
-            "mode and group) to listen on; repeat for several; lower priorities go first (0)"
+            "(RTU frames), tls://host:port (Modbus/TCP Security: --certfile, --keyfile, "
+            "--cafile and rules) or unix:PATH[?mode=0660&group=NAME] (Modbus TCP on a Unix "
+            "socket, with its file mode and group) to listen on; repeat for several; lower "
+            "priorities go first (0); rules=FILE: what the listener's clients may do (a rule "
+            "file, as for tls://; a refused request gets exception 01)"
         ),
     )
+    tls = parser.add_argument_group("tls:// listeners")
+    tls.add_argument("--certfile", metavar="PEM", help="the gateway's certificate")
+    tls.add_argument("--keyfile", metavar="PEM", help="the gateway's private key")
+    tls.add_argument("--cafile", metavar="PEM", help="the CAs of the trusted clients")
     line = parser.add_argument_group("line settings")
     add_line_settings(line)
     add_frame_gap(line, before="request")
@@ -127,8 +152,16 @@ def register(subparsers: Subparsers) -> None:
         "per line as --line PORT:1-20,framing=ascii (rtu)",
     )
     master = parser.add_argument_group("the master on the line")
-    master.add_argument("--timeout", type=seconds, default=1.0, help="response timeout (1.0)")
-    master.add_argument("--retries", type=int, default=2, help="extra attempts of a read (2)")
+    master.add_argument(
+        "--timeout", type=seconds, default=DEFAULT_TIMEOUT,
+        help=f"response timeout ({DEFAULT_TIMEOUT}; with --retries, a unit that does not "
+        "answer gets 0B within 1 s; give a slow line more, as --timeout 1 --retries 2)",
+    )  # fmt: skip
+    master.add_argument(
+        "--retries", type=int, default=DEFAULT_RETRIES,
+        help=f"extra attempts of a read (01-04, 07, 0B, 0C, 11, 14, 18, 2B) after a timeout or "
+        f"a bad frame; writes and diagnostics are sent once ({DEFAULT_RETRIES})",
+    )  # fmt: skip
     master.add_argument(
         "--offline-after",
         type=positive_int,
@@ -211,17 +244,23 @@ def _listens(texts: list[str]) -> list[Listen] | str:
     """The `--listen` values as [`Listen`][aiortu.gateway.Listen]s, or what is wrong with one."""
     listens = []
     for text in texts:
-        url, _, option = text.partition(",")
-        priority = 0
-        if option:
+        url, *options = text.split(",")
+        priority, rules = 0, None
+        for option in options:
             name, _, value = option.partition("=")
             try:
-                if name != "priority":
+                if name == "priority":
+                    priority = int(value)
+                elif name == "rules" and value:
+                    rules = value
+                else:
                     raise ValueError(name)
-                priority = int(value)
             except ValueError:
-                return f"--listen {text}: after the URL only ',priority=N' (an integer) is allowed"
-        listens.append(Listen(url, priority))
+                return (
+                    f"--listen {text}: after the URL only ',priority=N' (an integer) and "
+                    "',rules=FILE' are allowed"
+                )
+        listens.append(Listen(url, priority, rules))
     return listens
 
 
@@ -312,6 +351,7 @@ async def _serve(
                 cache_ms=args.cache_ms,
                 metrics=args.metrics,
                 client_statistics=args.stats_clients,
+                tls=_tls_context(args, listens),
                 baudrate=args.baudrate,
                 parity=args.parity,
                 stopbits=args.stopbits,
@@ -330,13 +370,20 @@ async def _serve(
                     tasks.cancel_scope.cancel()
         except PortError as error:
             failure = CommandFailed(port_failure(error))
-        except InvalidValue as error:
+        except (InvalidValue, ConfigError) as error:
             print(f"aiortu gateway: error: {error}", file=sys.stderr)
             return 2
     # Raised out here, not from inside the gateway's task group.
     if failure is not None:
         raise failure
     return 0
+
+
+def _tls_context(args: argparse.Namespace, listens: list[Listen]) -> ssl.SSLContext | None:
+    """The server context of the tls:// listeners (None when there is none)."""
+    if not any(item.url.lower().startswith("tls://") for item in listens):
+        return None
+    return server_tls_context(args.certfile, args.keyfile, args.cafile)
 
 
 def _shared_what(args: argparse.Namespace, server: Gateway) -> str:

@@ -27,7 +27,9 @@ from aiortu.cli._arguments import (
     positive_int,
     resolve_line_settings,
     seconds,
+    seconds_or_zero,
     unit,
+    unit_id,
 )
 from aiortu.cli._messages import invalid_value, port_failure
 from aiortu.cli._transport_options import add_transport_options, transport_options
@@ -50,6 +52,8 @@ __all__ = (
     "LINE_FLAGS_HELP",
     "TABLES",
     "add_line_options",
+    "add_rs485_options",
+    "rs485_options",
     "address",
     "open_from_args",
     "positive_int",
@@ -57,6 +61,9 @@ __all__ = (
     "run_master",
     "seconds",
     "unit",
+    "unit_id",
+    "check_span",
+    "check_unit_for_port",
 )
 
 EXIT_CODES_HELP = """\
@@ -110,6 +117,69 @@ def add_line_options(parser: argparse.ArgumentParser) -> None:
     line.add_argument(
         "--retries", type=address, default=0, help="extra attempts after a timeout (0)"
     )
+    add_rs485_options(parser)
+
+
+def add_rs485_options(parser: argparse.ArgumentParser) -> None:
+    """Add the kernel RS-485 mode's options (`RS485Options`); any of them turns it on."""
+    rs485 = parser.add_argument_group(
+        "RS-485 (the driver switches the transceiver with RTS; needs a UART that supports it)"
+    )
+    rs485.add_argument(
+        "--rs485",
+        action="store_true",
+        help="RTS high while sending, low while receiving (mbpoll -R)",
+    )
+    rs485.add_argument(
+        "--rs485-rts-low",
+        action="store_true",
+        help="RTS low while sending, high while receiving, for inverted adapters (mbpoll -F)",
+    )
+    rs485.add_argument(
+        "--rs485-delay-before-tx",
+        type=seconds_or_zero,
+        default=None,
+        metavar="S",
+        help="seconds between raising RTS and the first bit (the driver's own)",
+    )
+    rs485.add_argument(
+        "--rs485-delay-before-rx",
+        type=seconds_or_zero,
+        default=None,
+        metavar="S",
+        help="seconds between the last bit and releasing RTS (the driver's own)",
+    )
+    rs485.add_argument(
+        "--rs485-receive-during-tx",
+        action="store_true",
+        help="keep the receiver on while sending; the echo of each request is dropped",
+    )
+
+
+def rs485_options(args: argparse.Namespace) -> dict[str, object]:
+    """The transport options of `args`' RS-485 flags: none unless one is given."""
+    wanted = (
+        args.rs485
+        or args.rs485_rts_low
+        or args.rs485_receive_during_tx
+        or args.rs485_delay_before_tx is not None
+        or args.rs485_delay_before_rx is not None
+    )
+    if not wanted:
+        return {}
+    if "://" in args.port:
+        raise UsageError("the --rs485 options are for a serial port, not a URL")
+    from aiortu.transport import RS485Options
+
+    options = RS485Options(
+        rts_level_for_tx=not args.rs485_rts_low,
+        rts_level_for_rx=args.rs485_rts_low,
+        delay_before_tx=args.rs485_delay_before_tx,
+        delay_before_rx=args.rs485_delay_before_rx,
+        receive_during_tx=args.rs485_receive_during_tx,
+    )
+    # A receiver kept on hears our own requests: drop them.
+    return {"rs485": options, "local_echo": args.rs485_receive_during_tx}
 
 
 def reference(text: str) -> Reference:
@@ -125,6 +195,50 @@ def reference(text: str) -> Reference:
     return parse_reference(text)
 
 
+_AT_ONCE: dict[tuple[Table, str], int] = {
+    (Table.COILS, "read"): 2000,
+    (Table.DISCRETE_INPUTS, "read"): 2000,
+    (Table.INPUT_REGISTERS, "read"): 125,
+    (Table.HOLDING_REGISTERS, "read"): 125,
+    (Table.COILS, "written"): 1968,
+    (Table.HOLDING_REGISTERS, "written"): 123,
+}
+"""The most elements one request may read or write, as the spec allows."""
+
+_ELEMENTS = {
+    Table.COILS: "coils",
+    Table.DISCRETE_INPUTS: "discrete inputs",
+    Table.INPUT_REGISTERS: "input registers",
+    Table.HOLDING_REGISTERS: "registers",
+}
+
+
+def check_span(table: Table, start: int, count: int, verb: str) -> None:
+    """Refuse, in words, a read or write (`verb` "read" or "written") of `count` elements
+    from `start` that one request cannot carry, before the port is opened."""
+    noun = _ELEMENTS[table]
+    most = _AT_ONCE[table, verb]
+    if count > most:
+        raise UsageError(f"at most {most} {noun} can be {verb} at once, not {count}")
+    last = start + count - 1
+    if last > 0xFFFF:
+        raise UsageError(
+            f"the {noun} {verb} must end at address 65535 or before, not {last} "
+            f"({start} + {count} {noun})"
+        )
+
+
+def check_unit_for_port(port: str, unit_address: int) -> None:
+    """Refuse a unit id the port's framing cannot take: a serial line (or RTU or ASCII over
+    TCP) takes 1..247, Modbus TCP, UDP and TLS any id 0..255, as given in their header."""
+    if port.strip().lower().startswith(("tcp://", "udp://", "tls://")):
+        return
+    try:
+        unit(str(unit_address))
+    except argparse.ArgumentTypeError as error:
+        raise UsageError(f"argument --unit: {error}") from None
+
+
 @asynccontextmanager
 async def open_from_args(
     args: argparse.Namespace, *, reconnect: bool = False, **options: object
@@ -136,7 +250,10 @@ async def open_from_args(
     # Imported here, not above: ``--help`` and bad arguments need none of the master.
     from aiortu.master import open_master
 
+    if getattr(args, "unit", None) is not None and isinstance(args.unit, int):
+        check_unit_for_port(args.port, args.unit)
     resolve_line_settings(args)
+    options = {**rs485_options(args), **options}
     async with open_master(
         args.port,
         baudrate=args.baudrate,

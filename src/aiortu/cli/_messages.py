@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import re
 import sys
 from collections.abc import Iterator
 
 from aiortu.cli._arguments import PTY_LINE, is_pty
-from aiortu.errors import InvalidValue, PortError, UnsupportedSettings
+from aiortu.errors import InvalidValue, PortError, PortNotFound, UnsupportedSettings
 
 __all__ = ("invalid_value", "library_warnings_on_stderr", "port_failure")
 
@@ -54,11 +55,18 @@ def _plain(value: object) -> str | None:
 
 
 def port_failure(error: PortError) -> str:
-    """A port that could not be opened; on a pty refusing a parity, which flags to use."""
+    """A port that could not be opened; on a pty refusing a parity, which flags to use; for
+    a missing device named like `host:port`, the Modbus TCP URL meant most likely."""
     message = str(error)
     if isinstance(error, UnsupportedSettings) and is_pty(error.port):
-        message += f"; a pseudo-terminal keeps no parity: use {PTY_LINE}, or leave both out"
+        message += f"; on the command line: {PTY_LINE}, or leave both out"
+    elif isinstance(error, PortNotFound) and _HOST_PORT.fullmatch(error.port):
+        message += f"; for Modbus TCP write tcp://{error.port} (RTU over TCP: rtu+tcp://)"
     return message
+
+
+_HOST_PORT = re.compile(r"(\[[0-9A-Fa-f:.]+\]|[\w.-]+):\d{1,5}")
+"""A port given as `host:port` without a scheme."""
 
 
 class _OneLine(logging.Formatter):

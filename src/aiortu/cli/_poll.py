@@ -20,13 +20,13 @@ from enum import Enum
 from typing import TextIO
 
 from aiortu.cli import SUMMARIES, Subparsers
-from aiortu.cli._arguments import add_no_reconnect, add_timing, plural
+from aiortu.cli._arguments import add_no_reconnect, add_timing, number, plural
 from aiortu.cli._arguments import unit as unit_address
 from aiortu.cli._master import (
-    EXIT_CODES_HELP,
     LINE_FLAGS_HELP,
     UsageError,
     add_line_options,
+    address,
     open_from_args,
     positive_int,
     reference,
@@ -49,6 +49,14 @@ from aiortu.master import CycleReport, Poller, Sample, UnitHealth, UnitState
 
 __all__ = ("TablePrinter", "parse_point", "points_from_args", "register", "run")
 
+POLL_EXIT_CODES_HELP = """\
+exit codes:
+  0  ran its --cycles or --duration, or stopped by Ctrl-C or SIGTERM; a point or a
+     unit that fails (no reply, an exception) is shown in the table, not an exit code
+  1  the port could not be opened, or was lost with --no-reconnect
+  2  bad arguments (one line on stderr)
+"""
+
 _EXAMPLES = f"""\
 examples:
   aiortu poll /dev/ttyUSB0 --unit 1 --ref 40001 --count 4
@@ -68,9 +76,10 @@ the same with mbpoll (which polls one unit and one range):
   aiortu poll ... --type int32 --layout CDAB         mbpoll -t 4:int
   aiortu poll ... --interval 0.5                     mbpoll -l 500
   aiortu poll ... --cycles 1                         mbpoll -1
+  aiortu poll ... --hex                              mbpoll -t 4:hex
 
 {LINE_FLAGS_HELP}
-{EXIT_CODES_HELP}"""
+{POLL_EXIT_CODES_HELP}"""
 
 
 def register(subparsers: Subparsers) -> None:
@@ -80,7 +89,9 @@ def register(subparsers: Subparsers) -> None:
         help=SUMMARIES["poll"],
         description=(
             "Poll points at an interval and show their values with each unit's health. "
-            "Neighbouring points of a unit are read together. The table refreshes in place "
+            "Neighbouring points of a unit are read together (--max-gap); a device that "
+            "refuses such a read for a hole in its map gets the points' own reads instead, "
+            "from then on. The table refreshes in place "
             "on a terminal; piped, each cycle is printed as plain lines."
         ),
         epilog=_EXAMPLES,
@@ -107,7 +118,17 @@ def register(subparsers: Subparsers) -> None:
         default=Layout.ABCD.value,
         help="word and byte order of wider values (ABCD: big-endian)",
     )
-    what.add_argument("--scale", type=float, default=None, help="multiply values by this")
+    what.add_argument("--scale", type=number, default=None, help="multiply values by this")
+    what.add_argument(
+        "--max-gap",
+        type=address,
+        default=10,
+        metavar="N",
+        help=(
+            "read neighbouring points of a unit together when at most N unused registers "
+            "(16 N bits) lie between them; 0 reads only adjacent points together (10)"
+        ),
+    )
     what.add_argument(
         "--point",
         action="append",
@@ -126,6 +147,9 @@ def register(subparsers: Subparsers) -> None:
         help="seconds between probes of an offline unit (5.0)",
     )
     parser.add_argument("--json", action="store_true", help="one JSON object per sample")
+    parser.add_argument(
+        "--hex", action="store_true", help="whole numbers in hex in the table (mbpoll :hex)"
+    )
     add_no_reconnect(parser)
     parser.set_defaults(run=run)
 
@@ -213,7 +237,9 @@ def _failure(error: Exception) -> str:
     return "failed"
 
 
-def _format_value(sample: Sample) -> str:
+def _format_value(sample: Sample, *, hex_digits: bool = False) -> str:
+    """A sample's value as the table shows it; whole numbers in hex with `hex_digits`,
+    as wide as the point (0x002A for one register, 0x0000002A for two)."""
     if sample.error is not None:
         return f"-- {_failure(sample.error)}"
     value = sample.value
@@ -221,16 +247,23 @@ def _format_value(sample: Sample) -> str:
         return "1" if value else "0"
     if isinstance(value, float):
         return f"{value:.6g}"
+    if hex_digits and value is not None:
+        digits = 4 * sample.point.width
+        # A negative number as its two's complement, as it sits in the registers.
+        return f"0x{value & ((1 << (4 * digits)) - 1):0{digits}X}"
     return str(value)
 
 
 class TablePrinter:
     """Prints cycles to `out`: redrawn in place with `ansi`, else as plain blocks."""
 
-    def __init__(self, out: TextIO, poller: Poller, *, ansi: bool) -> None:
+    def __init__(
+        self, out: TextIO, poller: Poller, *, ansi: bool, hex_digits: bool = False
+    ) -> None:
         self.out = out
         self.poller = poller
         self.ansi = ansi
+        self.hex_digits = hex_digits
         self._latest: dict[str, Sample] = {}
         self._shown = 0
 
@@ -246,7 +279,9 @@ class TablePrinter:
         ]
         for point in self.poller.points:
             latest = self._latest.get(point.name)
-            shown = _format_value(latest) if latest is not None else "--"
+            shown = "--"
+            if latest is not None:
+                shown = _format_value(latest, hex_digits=self.hex_digits)
             lines.append(f"{point.name:<16}{point.unit:>5}  {shown}")
         if self.poller.master.connected:
             now = self.poller.master.link.clock()
@@ -316,12 +351,15 @@ def run(args: argparse.Namespace) -> int:
                 master,
                 points,
                 interval=args.interval,
+                max_gap=args.max_gap,
                 offline_probe_interval=args.probe_interval,
             )
             if args.json:
                 poller.on_sample(lambda s: print(_json_sample(s), flush=True))
             else:
-                printer = TablePrinter(sys.stdout, poller, ansi=sys.stdout.isatty())
+                printer = TablePrinter(
+                    sys.stdout, poller, ansi=sys.stdout.isatty(), hex_digits=args.hex
+                )
                 poller.on_cycle(printer.show)
             if not args.reconnect:
                 poller.on_cycle(_fail_on_lost_line)

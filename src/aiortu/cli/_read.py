@@ -20,13 +20,14 @@ from aiortu.cli._master import (
     UsageError,
     add_line_options,
     address,
+    check_span,
     open_from_args,
     positive_int,
     reference,
     run_master,
-    unit,
+    unit_id,
 )
-from aiortu.core.model import Table
+from aiortu.core.model import Reference, Table, format_reference
 
 __all__ = ("print_values", "register", "run", "target")
 
@@ -35,7 +36,7 @@ examples:
   aiortu read /dev/ttyUSB0 --unit 17 --table holding --address 0x6B --count 3
       holding registers 107..109 of unit 17 at 19200 8E1
   aiortu read /dev/ttyUSB0 --unit 17 --ref 40108 --count 3
-      the same, by reference (40108 = holding register 107)
+      the same, by reference (40108 = holding register 107), printed as 40108 ...
   aiortu read /dev/ttyUSB0 --unit 1 --table coils --address 0 --count 16 --json
       16 coils as one JSON object
   aiortu read rtu+tcp://10.0.0.5:4001 --unit 2 --table input --address 0 --count 4
@@ -50,6 +51,8 @@ the same reads with mbpoll:
   aiortu read ... --table holding    mbpoll -t 4
   aiortu read ... --address 107      mbpoll -r 108 (mbpoll counts from 1)
   aiortu read ... --count 3          mbpoll -c 3
+  aiortu read ... --hex              mbpoll -t 4:hex
+  aiortu read ... --rs485            mbpoll -R (--rs485-rts-low: mbpoll -F)
 
 {LINE_FLAGS_HELP}
 {EXIT_CODES_HELP}"""
@@ -71,12 +74,21 @@ def register(subparsers: Subparsers) -> None:
     )
     add_line_options(parser)
     what = parser.add_argument_group("what to read")
-    what.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    what.add_argument(
+        "--unit",
+        type=unit_id,
+        required=True,
+        help="unit address 1..247 (0..255 over tcp://, udp://, tls://)",
+    )
     what.add_argument("--table", choices=tuple(TABLES), help="the table (with --address)")
     what.add_argument("--address", type=address, help="the first protocol address (0-based)")
     what.add_argument("--ref", help="a 5- or 6-digit reference instead, e.g. 40108 or 100001")
     what.add_argument("--count", type=positive_int, default=1, help="how many elements (1)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    shown = parser.add_argument_group("output")
+    shown.add_argument("--json", action="store_true", help="print one JSON object")
+    shown.add_argument(
+        "--hex", action="store_true", help="registers in hex, 0xAE41 (text output; mbpoll :hex)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -97,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
 
     async def body() -> int:
         table, start = target(args, "read")
+        check_span(table, start, args.count, "read")
         async with open_from_args(args) as master:
             unit, count = args.unit, args.count
             values: list[bool] | list[int]
@@ -108,19 +121,33 @@ def run(args: argparse.Namespace) -> int:
                 values = await master.read_input_registers(unit, start, count)
             else:
                 values = await master.read_holding_registers(unit, start, count)
-        print_values(args.json, unit, table, start, values)
+        print_values(args, unit, table, start, values)
         return 0
 
     return run_master(args, body)
 
 
 def print_values(
-    as_json: bool, unit: int, table: Table, start: int, values: list[bool] | list[int]
+    args: argparse.Namespace, unit: int, table: Table, start: int, values: list[bool] | list[int]
 ) -> None:
-    """Print `values` read or written at `start`: one JSON object, or a line each."""
-    if as_json:
+    """Print `values` read or written at `start`: one JSON object, or a line each, the
+    address in the notation given (a reference after `--ref`, else the protocol address)
+    and registers in hex with `--hex`."""
+    if args.json:
         document = {"unit": unit, "table": TABLE_NAMES[table], "address": start}
         print(json.dumps({**document, "values": values}), flush=True)
         return
-    shown = [int(v) if isinstance(v, bool) else v for v in values]
-    print("\n".join(f"{start + i} {value}" for i, value in enumerate(shown)), flush=True)
+    digits = 6 if args.ref is not None and len(args.ref.strip()) == 6 else 5
+    lines = []
+    for index, value in enumerate(values):
+        address = start + index
+        if args.ref is not None:
+            where = format_reference(Reference(table, address), 6 if address >= 9999 else digits)
+        else:
+            where = str(address)
+        if isinstance(value, bool):
+            shown = str(int(value))
+        else:
+            shown = f"0x{value:04X}" if getattr(args, "hex", False) else str(value)
+        lines.append(f"{where} {shown}")
+    print("\n".join(lines), flush=True)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import signal
 import sys
 from collections.abc import AsyncIterator, Callable, Iterable, Sequence
@@ -43,7 +44,13 @@ from aiortu.core.pdu import (
 )
 from aiortu.core.rtu import FrameReceived, Role, encode_frame
 from aiortu.core.serial import LineSettings, Parity
-from aiortu.errors import ConnectionLost, ModbusError, PortError, UnsupportedSettings
+from aiortu.errors import (
+    ConnectionLost,
+    ModbusError,
+    PortError,
+    PortNotFound,
+    UnsupportedSettings,
+)
 from aiortu.line import Link
 from aiortu.transport import open_stream
 
@@ -230,7 +237,10 @@ def register(subparsers: Subparsers) -> None:
         type=_baudrates,
         default=list(DEFAULT_BAUDRATES),
         metavar="B,B,...",
-        help="baud rates to try (19200,9600,38400,57600,115200)",
+        help=(
+            "baud rates to try (19200,9600,38400,57600,115200; only the first on a "
+            "pseudo-terminal, which ignores the baud rate)"
+        ),
     )
     parser.add_argument(
         "--parities",
@@ -456,12 +466,17 @@ class _Progress:
         self.err.flush()
 
 
+def _order(settings: LineSettings) -> tuple[int, str, float]:
+    """Line settings in the order people read them: by baud rate as a number."""
+    return settings.baudrate, str(settings.parity), settings.stopbits
+
+
 def report(results: Sequence[SettingResult], out: TextIO) -> bool:
     """Write what `results` found to `out`; return whether any unit answered."""
     answers = [answer for result in results for answer in result.answers]
     if answers:
         out.write(f"{'unit':>4}  {'settings':<11} {'reply':>8}  answer\n")
-        for answer in sorted(answers, key=lambda a: (a.unit, a.settings.baudrate)):
+        for answer in sorted(answers, key=lambda a: (a.unit, _order(a.settings))):
             latency = "late" if answer.latency is None else f"{answer.latency * 1000:.1f} ms"
             out.write(f"{answer.unit:>4}  {answer.settings!s:<11} {latency:>8}  {answer.answer}\n")
     garbled = [r for r in results if r.garbled and not r.answers]
@@ -472,7 +487,7 @@ def report(results: Sequence[SettingResult], out: TextIO) -> bool:
         )
     units = sorted({answer.unit for answer in answers})
     if units:
-        where = ", ".join(sorted({str(answer.settings) for answer in answers}))
+        where = ", ".join(str(s) for s in sorted({a.settings for a in answers}, key=_order))
         found = plural(len(units), "unit")
         out.write(f"found {found} ({', '.join(map(str, units))}) at {where}\n")
     else:
@@ -488,11 +503,23 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _scan(args: argparse.Namespace) -> int:
+    _check_port_exists(args.port)
+    pty = is_pty(args.port)
     parities = args.parities
     if parities is None:
         # A pty keeps no parity bit: E and O would only be refused.
-        parities = [Parity.NONE] if is_pty(args.port) else list(DEFAULT_PARITIES)
-    settings = settings_to_try(args.baudrates, parities, args.stopbits)
+        parities = [Parity.NONE] if pty else list(DEFAULT_PARITIES)
+    baudrates: list[int] = args.baudrates
+    if pty and len(baudrates) > 1:
+        # A pty carries bytes at once whatever its baud rate: every rate would find the
+        # same units again.
+        baudrates = baudrates[:1]
+        if not args.quiet:
+            sys.stderr.write(
+                f"aiortu scan: {args.port} is a pseudo-terminal, which ignores the baud rate:"
+                f" probing once, at {baudrates[0]}\n"
+            )
+    settings = settings_to_try(baudrates, parities, args.stopbits)
     units: list[int] = args.units
     progress = _Progress(sys.stderr, len(settings) * len(units), quiet=args.quiet)
     if not args.quiet:
@@ -552,6 +579,15 @@ async def _scan(args: argparse.Namespace) -> int:
             args.port, found, args.profiles or [], response_timeout=1.0, out=sys.stdout
         )
     return 0
+
+
+def _check_port_exists(port: str) -> None:
+    """A device path that does not exist fails the scan at once, before any promise of
+    how long it will take."""
+    if "://" in port or os.path.exists(port):
+        return
+    missing = PortNotFound(port, "no such serial device")
+    raise CommandFailed(f"cannot open the port: {port_failure(missing)}")
 
 
 async def _cancel_on_signal(

@@ -16,6 +16,7 @@ import signal
 import sys
 import time
 from collections.abc import Mapping
+from typing import Any
 
 import anyio
 
@@ -46,6 +47,10 @@ examples:
       behind a serial device server, no silence kept before replies
   aiortu serve tcp://0.0.0.0:1502 --config devices.toml
       Modbus TCP on every interface, many clients at once
+  aiortu serve tcp://0.0.0.0:1502 --config devices.toml --serial-line-codes \
+                                  --unit-alias 255=17 --unit-alias 0=17
+      the same, answering the server id (11) and the other serial-line codes, and
+      unit ids 255 and 0 as unit 17
   aiortu serve rtu+tcp://0.0.0.0:5020 --config devices.toml
       RTU framing over TCP, listening (a wildcard host listens, any other connects)
   aiortu serve ascii+tcp://0.0.0.0:5021 --config devices.toml
@@ -103,6 +108,27 @@ def register(subparsers: Subparsers) -> None:
     add_line_settings(line)
     add_frame_gap(line, before="reply")
     add_timing(line)
+    tcp = parser.add_argument_group("Modbus TCP (tcp://, udp:// and tls:// only)")
+    tcp.add_argument(
+        "--serial-line-codes",
+        action="store_true",
+        help=(
+            "answer the serial-line-only codes 07, 08, 0B, 0C and 11 (server id) as a serial "
+            "device would; without it they get exception 01, as the spec marks them (also "
+            "serial_line_codes in the file's [modbus_tcp] table)"
+        ),
+    )
+    tcp.add_argument(
+        "--unit-alias",
+        type=unit_alias,
+        action="append",
+        default=[],
+        metavar="ID=UNIT",
+        help=(
+            "answer unit id ID (0..255) as the served UNIT; repeat for several, added to "
+            "the file's [modbus_tcp] unit_aliases (default, with one unit: 0 and 255 are it)"
+        ),
+    )
     parser.add_argument(
         "--trace", action="store_true", help="log every frame on stderr, in hex, with its meaning"
     )
@@ -120,13 +146,33 @@ def run(args: argparse.Namespace) -> int:
 
         return serve_profile(args, _serve)
     if not os.path.isfile(args.config):
-        print(f"aiortu serve: error: {args.config}: cannot read it: no such file", file=sys.stderr)
+        problem = (
+            "is a directory, not a TOML file" if os.path.isdir(args.config) else "does not exist"
+        )
+        print(f"aiortu serve: error: --config {args.config} {problem}", file=sys.stderr)
         return 2
     try:
         config = load_config(args.config)
     except ConfigError as error:
         print(f"aiortu serve: error: {error}", file=sys.stderr)
         return 2
+    if _tcp_options(args) and not _mbap(args.port):
+        given = "--serial-line-codes" if args.serial_line_codes else "--unit-alias"
+        print(
+            f"aiortu serve: error: {given} is for a Modbus TCP server (tcp://, udp://, tls://): "
+            "a serial line serves every code and has no unit ids but its units",
+            file=sys.stderr,
+        )
+        return 2
+    unknown = sorted({unit for _, unit in args.unit_alias} - set(config.units))
+    if unknown:
+        print(
+            f"aiortu serve: error: --unit-alias names unit {unknown[0]}, which {args.config} "
+            f"does not describe (it has {', '.join(map(str, sorted(config.units)))})",
+            file=sys.stderr,
+        )
+        return 2
+    args.modbus_tcp = config.modbus_tcp
     resolve_line_settings(args)
     with library_warnings_on_stderr("serve"):
         return anyio.run(_serve, args, config.units)
@@ -225,6 +271,7 @@ async def _serve_once(
         timing=args.timing,
         trace=tracer,
         **transport_options(args),
+        **_modbus_tcp_settings(args),
     ) as slave:
         listing = ", ".join(str(unit) for unit in sorted(units))
         which = "unit" if len(units) == 1 else "units"
@@ -240,6 +287,47 @@ async def _serve_once(
         return error
     # A listener that stopped: say why in the same terms as a line that failed.
     return ConnectionLost("the line closed" if error is None else str(error))
+
+
+def unit_alias(text: str) -> tuple[int, int]:
+    """`ID=UNIT`: a unit id 0..255 answered as the served unit UNIT (1..247)."""
+    alias, equals, unit = text.partition("=")
+    try:
+        pair = int(alias, 0), int(unit, 0)
+    except ValueError:
+        pair = (-1, -1)
+    if not equals or pair[0] not in range(256) or pair[1] not in range(1, 248):
+        raise argparse.ArgumentTypeError(
+            f"must be ID=UNIT, a unit id 0..255 and a served unit 1..247 (255=17), not {text}"
+        )
+    return pair
+
+
+def _mbap(port: str) -> bool:
+    """Whether `port` is served by a Modbus TCP server (MBAP framing: TCP, UDP or TLS)."""
+    return port.strip().lower().startswith(("tcp://", "udp://", "tls://"))
+
+
+def _tcp_options(args: argparse.Namespace) -> dict[str, Any]:
+    """What `--serial-line-codes` and `--unit-alias` ask of the Modbus TCP server."""
+    options: dict[str, Any] = {}
+    if args.serial_line_codes:
+        options["serial_line_codes"] = True
+    if args.unit_alias:
+        options["unit_aliases"] = dict(args.unit_alias)
+    return options
+
+
+def _modbus_tcp_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """The Modbus TCP server's settings: the file's `[modbus_tcp]` table, then the flags
+    (a flag wins, and `--unit-alias` adds to the file's aliases); none for another port."""
+    if not _mbap(args.port):
+        return {}
+    settings = dict(getattr(args, "modbus_tcp", {}))
+    flags = _tcp_options(args)
+    if "unit_aliases" in flags:
+        flags["unit_aliases"] = {**settings.get("unit_aliases", {}), **flags["unit_aliases"]}
+    return {**settings, **flags}
 
 
 def _say(message: str) -> None:

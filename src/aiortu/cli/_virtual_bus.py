@@ -15,6 +15,7 @@ import anyio
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import PTY_LINE, parity, positive_int, probability, seconds_or_zero
 from aiortu.core.serial import LineSettings
+from aiortu.errors import PortError
 from aiortu.testing import FaultPlan, PtyBus
 
 __all__ = ("register", "run")
@@ -33,11 +34,11 @@ examples:
 ptys keep no parity bit, so the bus is 8N2 (the same 11 bits a character as the spec's
 8E1), and aiortu's commands use 8N2 on a pty by default; other programs need it said:
   aiortu serve /dev/pts/6 --config examples/devices.toml
-  aiortu read /dev/pts/5 --unit 1 --ref 40001 --count 3
-  mbpoll -m rtu -a 1 -b 19200 -P none -s 2 -t 4 -r 1 -c 3 -1 /dev/pts/5
+  aiortu read /dev/pts/5 --unit 17 --ref 40108 --count 3
+  mbpoll -m rtu -a 17 -b 19200 -P none -s 2 -t 4 -r 108 -c 3 -1 /dev/pts/5
 
-exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the ptys cannot be created;
-2 bad arguments
+exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the ptys cannot be created, or
+another virtual bus keeps its links in --link-dir; 2 bad arguments
 """
 
 
@@ -93,7 +94,10 @@ def register(subparsers: Subparsers) -> None:
     faults.add_argument("--gap", type=seconds_or_zero, default=0.0, metavar="S", help="gap length")
     faults.add_argument("--seed", type=int, default=0, help="seed of the fault generator (0)")
     parser.add_argument(
-        "--link-dir", default=None, metavar="DIR", help="make links DIR/port0, DIR/port1, ..."
+        "--link-dir",
+        default=None,
+        metavar="DIR",
+        help="make links DIR/port0, DIR/port1, ... (refused while another bus has DIR)",
     )
     parser.set_defaults(run=run)
 
@@ -127,6 +131,8 @@ def run(args: argparse.Namespace) -> int:
     )
     try:
         return anyio.run(_relay, bus)
+    except PortError as exc:
+        raise CommandFailed(str(exc)) from exc
     except OSError as exc:
         raise CommandFailed(f"cannot create the bus: {exc}") from exc
 

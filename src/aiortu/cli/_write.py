@@ -18,9 +18,10 @@ from aiortu.cli._master import (
     UsageError,
     add_line_options,
     address,
+    check_span,
     open_from_args,
     run_master,
-    unit,
+    unit_id,
 )
 from aiortu.cli._read import print_values, target
 from aiortu.core.model import Table
@@ -63,7 +64,12 @@ def register(subparsers: Subparsers) -> None:
     )
     add_line_options(parser)
     what = parser.add_argument_group("what to write")
-    what.add_argument("--unit", type=unit, required=True, help="unit address 1..247")
+    what.add_argument(
+        "--unit",
+        type=unit_id,
+        required=True,
+        help="unit address 1..247 (0..255 over tcp://, udp://, tls://)",
+    )
     what.add_argument("--table", choices=("coils", "holding"), help="the table (with --address)")
     what.add_argument("--address", type=address, help="the first protocol address (0-based)")
     what.add_argument("--ref", help="a 5- or 6-digit reference instead, e.g. 40017 or 00001")
@@ -113,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
             kind = table.value.replace("_", " ")
             raise UsageError(f"cannot write {kind}: only coils and holding registers are writable")
         values = parse_values(args.values, table)
+        check_span(table, start, len(values), "written")
         async with open_from_args(args) as master:
             unit = args.unit
             single = len(values) == 1 and not args.multiple
@@ -128,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
                     await master.write_register(unit, start, registers[0])
                 else:
                     await master.write_registers(unit, start, registers)
-        print_values(args.json, unit, table, start, values)
+        print_values(args, unit, table, start, values)
         return 0
 
     return run_master(args, body)

@@ -3,11 +3,11 @@
 [`gateway`][aiortu.gateway.gateway] opens a line (or takes a running
 [`Master`][aiortu.master.Master]), or several lines routed by unit ranges
 ([`GatewayLine`][aiortu.gateway.GatewayLine]), listens on `tcp://` (Modbus TCP), `rtu+tcp://`
-(RTU frames over TCP) and `unix:PATH` URLs and serves every client through the one engine of
-its unit's line; [`Gateway`][aiortu.gateway.Gateway] is the server itself. Requests
-are forwarded at frame level: a function code aiortu knows is sent as its request class, so the
-engine checks the reply against the request; any other code (user-defined ones included) goes
-out byte for byte. See `docs/gateway.md`.
+(RTU frames over TCP), `tls://` (Modbus/TCP Security) and `unix:PATH` URLs and serves every
+client through the one engine of its unit's line; [`Gateway`][aiortu.gateway.Gateway] is the
+server itself. Requests are forwarded at frame level: a function code aiortu knows is sent as
+its request class, so the engine checks the reply against the request; any other code
+(user-defined ones included) goes out byte for byte. See `docs/gateway.md`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,13 @@ import types
 from typing import Any
 
 from aiortu.gateway._lines import GatewayLine
-from aiortu.gateway._open import Listen, gateway
+from aiortu.gateway._open import (
+    DEFAULT_RETRIES,
+    DEFAULT_TIMEOUT,
+    REPEATED_CODES,
+    Listen,
+    gateway,
+)
 from aiortu.gateway._server import (
     DEFAULT_IDLE_TIMEOUT,
     DEFAULT_MAX_CONNECTIONS,
@@ -37,10 +43,13 @@ from aiortu.gateway._stats import (
 __all__ = (
     "DEFAULT_CLIENT_STATISTICS",
     "OTHER_CLIENTS",
+    "REPEATED_CODES",
     "ClientStatistics",
     "DEFAULT_IDLE_TIMEOUT",
     "DEFAULT_MAX_CONNECTIONS",
     "DEFAULT_MAX_IN_FLIGHT",
+    "DEFAULT_RETRIES",
+    "DEFAULT_TIMEOUT",
     "Gateway",
     "GatewayCounters",
     "GatewayLine",

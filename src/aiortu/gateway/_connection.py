@@ -21,7 +21,7 @@ import anyio
 import anyio.abc
 
 from aiortu.core.mbap import Adu
-from aiortu.transport import Framing, write_now
+from aiortu.transport import Framing, RoleRules, write_now
 
 __all__ = ("GONE", "Connection", "Turns")
 
@@ -50,6 +50,8 @@ class Connection:
         window: int,
         idle_timeout: float,
         client: str,
+        rules: RoleRules | None = None,
+        role: str | None = None,
     ) -> None:
         self.stream = stream
         self.priority = priority
@@ -57,6 +59,12 @@ class Connection:
         self.framing = framing
         self.idle_timeout = idle_timeout
         self.client = client
+        self.rules = rules
+        """The listener's access rules (None: every request is allowed)."""
+        self.role = role
+        """The role of the client's certificate (None: the rules' default role)."""
+        self.warned = False
+        """Whether a refused request of this connection was logged as a warning."""
         self.in_flight = 0
         """Requests started and not answered yet."""
         self.heard = time.monotonic()

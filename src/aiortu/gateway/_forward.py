@@ -4,16 +4,29 @@ A request PDU of a function code aiortu knows is sent as that code's class, so t
 the reply against it (byte count, echoed address and values) before it is returned. A PDU aiortu
 has no class for (a user-defined code), or one that does not decode (a quantity outside the
 spec's range: the device, not the gateway, says what it makes of it), goes out as it came, and
-any reply with its function code (or the exception form) answers it.
+any reply with its function code (or the exception form) answers it. Frames go out bit for bit:
+a request whose class would encode it differently (FC 0F with padding bits set) goes out as it
+came, its reply checked on its function code only.
+
+Two requests get no reply by the spec: diagnostics 08/04 (force listen-only mode), and 08/01
+(restart communications) to a unit in listen-only mode. They are sent without a wait for a
+reply (then the turnaround delay) and answered with the echo of the request, the reply a
+listening device gives to diagnostics (see `forward_unanswered`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Awaitable
 from dataclasses import dataclass
+from typing import ClassVar
 
 from aiortu._log import get_logger
-from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
+from aiortu.core.codes import (
+    BROADCAST_UNIT,
+    DiagnosticSubFunction,
+    ExceptionCode,
+    FunctionCode,
+)
 from aiortu.core.machines import RetryPolicy, Transaction
 from aiortu.core.pdu import (
     ExceptionPDU,
@@ -28,9 +41,12 @@ from aiortu.master import Master
 
 __all__ = (
     "COALESCED_CODES",
+    "FORCE_LISTEN_ONLY",
+    "RESTART",
     "exception_reply",
     "forward",
     "forward_broadcast",
+    "forward_unanswered",
     "on_the_line",
     "request_of",
 )
@@ -60,6 +76,21 @@ class _AsReceived(RawPDU):
             raise MalformedPDU("reply function code differs from the request's")
 
 
+@dataclass(frozen=True, slots=True)
+class _CoilsAsReceived(_AsReceived):
+    """An FC 0F write with padding bits set, forwarded as it came: still a write to broadcast."""
+
+    broadcastable: ClassVar[bool] = True
+
+
+_PADDED = FunctionCode.WRITE_MULTIPLE_COILS  # the one code whose encoding has free bits
+_DIAGNOSTICS = FunctionCode.DIAGNOSTICS
+FORCE_LISTEN_ONLY = bytes((_DIAGNOSTICS, 0x00, DiagnosticSubFunction.FORCE_LISTEN_ONLY_MODE))
+"""The first bytes of a diagnostics 08/04 request (force listen-only mode)."""
+RESTART = bytes((_DIAGNOSTICS, 0x00, DiagnosticSubFunction.RESTART_COMMUNICATIONS))
+"""The first bytes of a diagnostics 08/01 request (restart communications)."""
+
+
 def exception_reply(pdu: bytes, code: ExceptionCode) -> bytes:
     """The exception reply PDU to request `pdu` with `code`."""
     return encode_exception(pdu[0], code)
@@ -68,9 +99,12 @@ def exception_reply(pdu: bytes, code: ExceptionCode) -> bytes:
 def request_of(pdu: bytes) -> Request:
     """The request to send for the client's `pdu` (see the module docstring)."""
     try:
-        return decode_request(pdu)
+        request = decode_request(pdu)
     except MalformedPDU:
         return _AsReceived(pdu[0], pdu[1:])
+    if pdu[0] == _PADDED and request.encode() != pdu:
+        return _CoilsAsReceived(pdu[0], pdu[1:])
+    return request
 
 
 async def forward(master: Master, unit: int, pdu: bytes, priority: int, order: int) -> bytes:
@@ -116,6 +150,29 @@ async def forward_broadcast(master: Master, pdu: bytes, priority: int, order: in
         _log.debug("gateway: broadcast of function code %d not sent: %s", pdu[0], error)
         return False
     return True
+
+
+async def forward_unanswered(
+    master: Master, unit: int, pdu: bytes, priority: int, order: int
+) -> bytes:
+    """Send `pdu` (08/04, or 08/01 to a unit in listen-only mode) to `unit` without a wait for a
+    reply, and return the echo of the request (0A when the line is down): the spec says the
+    device never answers it, so a wait would cost the timeout and the client's next exchange.
+    Sent even while the unit is offline: it is how a unit silenced by 08/04 comes back."""
+    transaction = Transaction(
+        unit,
+        request_of(pdu),
+        master.timeout,
+        RetryPolicy(0),
+        expects_reply=False,
+        turnaround=master.turnaround_delay,
+    )
+    try:
+        await on_the_line(master, transaction, priority, order)
+    except ModbusError as error:
+        _log.debug("gateway: unit %d: diagnostics not sent: %s", unit, error)
+        return exception_reply(pdu, _NO_PATH)
+    return pdu
 
 
 def on_the_line(

@@ -26,6 +26,12 @@ each to the engine of its line at once, with a key that keeps the line fair. Wha
   never gets a reply read before it.
 - **Cache.** With `cache_ms`, a read of a block answered at most that long ago is answered
   again without the line; a write drops the blocks it touches.
+- **Access rules.** A listener may have [`RoleRules`][aiortu.transport.RoleRules]: a request
+  they refuse (a write on a read-only listener, a function code or unit not allowed, a
+  broadcast) is answered with exception 01 at once, never sent, and counted
+  (`refused_by_rules`, and per client host); the first refusal of a connection is logged as a
+  warning. A `tcp://`, `rtu+tcp://` or `unix:` client gets the default role's rule; a `tls://`
+  client the rule of its certificate's role.
 - **Statistics.** Per line, unit and client host, in `statistics`.
 - **Framing.** A connection speaks Modbus TCP, or RTU frames over TCP (see
   [`serve_connection`][aiortu.gateway.Gateway.serve_connection]).
@@ -42,6 +48,7 @@ each to the engine of its line at once, with a key that keeps the line fair. Wha
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -49,6 +56,7 @@ from typing import Final
 
 import anyio
 import anyio.abc
+from anyio.streams.tls import TLSAttribute
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
@@ -56,16 +64,28 @@ from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.errors import InvalidValue
 from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._connection import GONE, Connection, Turns
-from aiortu.gateway._forward import COALESCED_CODES, exception_reply, forward, forward_broadcast
+from aiortu.gateway._forward import (
+    COALESCED_CODES,
+    FORCE_LISTEN_ONLY,
+    RESTART,
+    exception_reply,
+    forward,
+    forward_broadcast,
+    forward_unanswered,
+    request_of,
+)
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS, GatewayStatistics, LineStatistics
 from aiortu.master import Master
 from aiortu.transport import (
     RTU_SILENCE,
+    CertificateError,
     ConnectionLimit,
     Framing,
     MbapFraming,
+    RoleRules,
     RtuFraming,
+    certificate_role,
     peer_address,
     serve_listener,
 )
@@ -95,6 +115,7 @@ _UNIT_RANGE = range(1, 248)
 _ALL_UNITS = 0xFF
 _NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
 _NO_PATH = ExceptionCode.GATEWAY_PATH_UNAVAILABLE
+_REFUSED = ExceptionCode.ILLEGAL_FUNCTION
 
 
 @dataclass(slots=True)
@@ -119,10 +140,13 @@ class GatewayCounters:
     broadcasts: int = 0
     """Requests to unit 0 sent on the line."""
     refused_units: int = 0
-    """Requests answered with exception 0B at once for their unit id (248..254, or 255 with no
-    default unit), or 0A for a unit no line serves."""
+    """Requests answered with an exception at once for their unit id: 0B for 248..254, 255
+    with no default unit, or a unit in listen-only mode; 0A for a unit no line serves; 01 for a
+    read (any request that may not be broadcast) to unit 0."""
     cache_hits: int = 0
     """Reads answered from the read cache: no transaction of their own."""
+    refused_by_rules: int = 0
+    """Requests the listener's access rules refused (answered with exception 01)."""
 
 
 class _Line(Turns):
@@ -140,6 +164,8 @@ class _Line(Turns):
         self.shared: dict[tuple[int, bytes], _Shared] = {}
         self.cache = cache
         self.stats = stats
+        self.listen_only: set[int] = set()
+        """Units the gateway put in listen-only mode (08/04), until an 08/01 to them."""
 
 
 @dataclass(slots=True)
@@ -266,10 +292,12 @@ class Gateway:
         *,
         priority: int = 0,
         rtu_framing: bool = False,
+        rules: RoleRules | None = None,
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
         """Accept connections from `listener` and serve each with `priority` (lower values go
-        first), until cancelled: Modbus TCP, or RTU frames with `rtu_framing` (see
+        first) and the access `rules` (None: everything allowed), until cancelled: Modbus TCP,
+        or RTU frames with `rtu_framing` (see
         [`serve_connection`][aiortu.gateway.Gateway.serve_connection]). Reports started once its
         address is in [`local_addresses`][aiortu.gateway.Gateway.local_addresses]."""
         address = listener.extra(anyio.abc.SocketAttribute.local_address, None)
@@ -283,12 +311,17 @@ class Gateway:
             client = _host(stream)
             if client is not None:
                 self.statistics.client(client).connections += 1
-            await self.serve_connection(stream, priority, rtu_framing=rtu_framing)
+            await self.serve_connection(stream, priority, rtu_framing=rtu_framing, rules=rules)
 
         await serve_listener(listener, accepted, self._limit)
 
     async def serve_connection(
-        self, stream: anyio.abc.ByteStream, priority: int = 0, *, rtu_framing: bool = False
+        self,
+        stream: anyio.abc.ByteStream,
+        priority: int = 0,
+        *,
+        rtu_framing: bool = False,
+        rules: RoleRules | None = None,
     ) -> None:
         """Serve one connection until the client closes it (the replies to the requests it sent
         before are sent first), stays idle for
@@ -298,7 +331,9 @@ class Gateway:
         The connection speaks Modbus TCP, or with `rtu_framing` RTU frames (unit, PDU, CRC) as
         a serial device server does: a frame whose length its function code does not tell ends
         after 20 ms of silence, a frame with a bad CRC is dropped, and as RTU frames carry no
-        transaction id the connection has one request on the line at a time.
+        transaction id the connection has one request on the line at a time. With `rules`, each
+        request is checked first (see the module docstring); a TLS stream's client has the role
+        its certificate carries.
         """
         framing: Framing = RtuFraming() if rtu_framing else MbapFraming()
         connection = Connection(
@@ -308,6 +343,8 @@ class Gateway:
             window=1 if framing.in_order else self.max_in_flight,
             idle_timeout=self.idle_timeout,
             client=_host(stream) or "local",
+            rules=rules,
+            role=certificate_role_of(stream) if rules is not None else None,
         )
         try:
             async with anyio.create_task_group() as tasks:
@@ -388,12 +425,16 @@ class Gateway:
         unit = adu.unit
         if unit == _ALL_UNITS and self.default_unit is not None:
             unit = self.default_unit
+        if connection.rules is not None and self._refused(connection, unit, adu.pdu):
+            await self._answer(connection, adu, exception_reply(adu.pdu, _REFUSED))
+            return
         line = self._route(unit)
-        if line is None:
+        code = self._refused_unit(line, unit, adu.pdu)
+        if code is not None:
             self.counters.refused_units += 1
-            code = _NO_PATH if unit in _UNIT_RANGE else _NO_RESPONSE
             await self._answer(connection, adu, exception_reply(adu.pdu, code))
             return
+        assert line is not None
         self.statistics.unit(line.name, unit).requests += 1
         cached = self._cached(line, unit, adu.pdu)
         if cached is not None:
@@ -405,6 +446,39 @@ class Gateway:
         connection.tasks.start_soon(
             self._request, _Request(connection, adu, unit, line), name=_REQUEST_TASK
         )
+
+    @staticmethod
+    def _refused_unit(line: _Line | None, unit: int, pdu: bytes) -> ExceptionCode | None:
+        """The exception that answers `pdu` to `unit` at once, or None to forward it: 0A for a
+        unit no line serves, 0B for a unit id that names no unit or a unit in listen-only mode
+        (it answers nothing but 08/01), 01 for a request to unit 0 that may not be broadcast
+        (a read: no device answers a broadcast, and the client would wait for nothing)."""
+        if line is None:
+            return _NO_PATH if unit in _UNIT_RANGE else _NO_RESPONSE
+        if unit == BROADCAST_UNIT:
+            return None if request_of(pdu).broadcastable else _REFUSED
+        if line.listen_only and unit in line.listen_only and not pdu.startswith(RESTART):
+            return _NO_RESPONSE
+        return None
+
+    def _refused(self, connection: Connection, unit: int, pdu: bytes) -> bool:
+        """Whether the connection's rules refuse `pdu` to `unit`; a refusal is counted, and
+        logged as a warning the first time on each connection."""
+        assert connection.rules is not None
+        refusal = connection.rules.refusal(connection.role, unit, pdu)
+        if refusal is None:
+            return False
+        self.counters.refused_by_rules += 1
+        self.statistics.client(connection.client).refused += 1
+        _log.log(
+            logging.DEBUG if connection.warned else logging.WARNING,
+            "gateway: refused a request of %s to unit %d: %s",
+            peer_address(connection.stream),
+            unit,
+            refusal,
+        )
+        connection.warned = True
+        return True
 
     async def _answer(self, connection: Connection, adu: Adu, reply: bytes) -> None:
         self.statistics.client(connection.client).replies += 1
@@ -464,6 +538,10 @@ class Gateway:
                 if line.cache is not None:
                     line.cache.invalidate(unit, pdu)
                 self._count_transaction(line)
+                if pdu.startswith(FORCE_LISTEN_ONLY) or (
+                    unit in line.listen_only and pdu.startswith(RESTART)
+                ):
+                    return await self._unanswered(line, unit, pdu, priority, turn)
                 return await forward(line.master, unit, pdu, priority, turn)
             cache = line.cache if line.cache is not None and line.cache.cacheable(pdu) else None
             generation = cache.generation(unit) if cache is not None else (0, 0)
@@ -473,6 +551,18 @@ class Gateway:
             return reply
         finally:
             line.now = max(line.now, turn)
+
+    @staticmethod
+    async def _unanswered(line: _Line, unit: int, pdu: bytes, priority: int, turn: int) -> bytes:
+        """Send 08/04, or 08/01 to a unit in listen-only mode, which no reply follows; note the
+        unit's mode once sent."""
+        reply = await forward_unanswered(line.master, unit, pdu, priority, turn)
+        if reply is pdu:
+            if pdu.startswith(FORCE_LISTEN_ONLY):
+                line.listen_only.add(unit)
+            else:
+                line.listen_only.discard(unit)
+        return reply
 
     async def _broadcast(self, pdu: bytes, priority: int, turn: int) -> None:
         """Send `pdu` to every unit of every line: a broadcast may write anything."""
@@ -543,6 +633,18 @@ def _check_options(
         raise InvalidValue("idle_timeout", idle_timeout, "a positive number of seconds")
     if default_unit is not None and default_unit not in _UNIT_RANGE:
         raise InvalidValue("default_unit", default_unit, _UNIT_RANGE)
+
+
+def certificate_role_of(stream: anyio.abc.ByteStream) -> str | None:
+    """The role in the client certificate of a TLS `stream` (None: not TLS, no certificate, or
+    no readable role: the rules' default role applies)."""
+    der = stream.extra(TLSAttribute.peer_certificate_binary, None)
+    if der is None:
+        return None
+    try:
+        return certificate_role(der)
+    except CertificateError:
+        return None
 
 
 def _host(stream: anyio.abc.ByteStream) -> str | None:

@@ -59,6 +59,8 @@ class ClientStatistics:
     """Requests received from the host."""
     replies: int = 0
     """Replies sent to it (exceptions included; broadcasts have none)."""
+    refused: int = 0
+    """Requests of the host the listener's access rules refused (exception 01)."""
 
 
 DEFAULT_CLIENT_STATISTICS = 256

@@ -20,6 +20,7 @@ from aiortu.core.pdu import REGISTER_RANGE
 
 __all__ = (
     "UNIT_RANGE",
+    "MBAP_UNIT_RANGE",
     "check_at_least",
     "check_bool",
     "check_coil",
@@ -38,7 +39,12 @@ __all__ = (
 )
 
 UNIT_RANGE: Final = range(1, 248)
-"""The unit addresses a unicast request may go to."""
+"""The unit addresses a unicast request may go to on a serial line."""
+
+MBAP_UNIT_RANGE: Final = range(256)
+"""The unit ids a request may carry in an MBAP header (Modbus TCP, UDP and TLS): the byte as
+given (a device reached by its IP address is often 255 or 0, and 0 is then a unicast whose
+reply is awaited)."""
 
 _TEXT_TYPES: Final = (str, bytes, bytearray, memoryview)
 """Iterables that are never a sequence of values: text, and bytes (each byte an int)."""
@@ -59,13 +65,14 @@ def check_int(name: str, value: object, allowed: range, error: type[InvalidValue
     return value
 
 
-def check_unit(unit: object) -> int:
-    """Return `unit` if a unicast may go to it, else raise InvalidRequest."""
-    if type(unit) is int and unit in UNIT_RANGE:
+def check_unit(unit: object, allowed: range = UNIT_RANGE) -> int:
+    """Return `unit` if a unicast may go to it (`allowed`: the framing's unit ids), else
+    raise InvalidRequest."""
+    if type(unit) is int and unit in allowed:
         return unit
     if is_int(unit) and unit == BROADCAST_UNIT:
-        raise InvalidRequest("unit", unit, UNIT_RANGE, "use master.broadcast for unit 0")
-    return check_int("unit", unit, UNIT_RANGE, InvalidRequest)
+        raise InvalidRequest("unit", unit, allowed, "use master.broadcast for unit 0")
+    return check_int("unit", unit, allowed, InvalidRequest)
 
 
 def check_priority(priority: object) -> int:

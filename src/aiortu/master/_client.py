@@ -51,6 +51,7 @@ from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidRequest, InvalidValue, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
+    MBAP_UNIT_RANGE,
     UNIT_RANGE,
     check_at_least,
     check_int,
@@ -74,6 +75,14 @@ _SEND_ONCE = RetryPolicy(0)
 
 _STATS_UNITS = range(248)
 """The units a master keeps statistics of: unit 0 counts the broadcasts."""
+
+
+def _unit_range(stream: object) -> range:
+    """The unit ids `stream`'s framing carries: any byte in an MBAP header, else (a serial
+    line, or a seam given in its place) 1..247."""
+    from aiortu.transport import ModbusTcpStream
+
+    return MBAP_UNIT_RANGE if isinstance(stream, ModbusTcpStream) else UNIT_RANGE
 
 
 def _known_form(pdu: object) -> Request:
@@ -192,6 +201,11 @@ class Master(Operations):
             engine = self.seam = self._engine = LineEngine(link, config, can_reconnect=reconnect)
             self._connection = LineConnection(engine, link, make_link, opener, config.reconnection)
         """Keeps the line up: reconnect counters, the current link."""
+        self.unit_range = _unit_range(stream)
+        """The unit ids a request may go to: 1..247 on a serial line (RTU or ASCII); over
+        Modbus TCP, UDP or TLS, whose MBAP header carries any byte, 0..255 as given (0 then
+        awaits a reply like any other id; [`broadcast`][aiortu.master.Master] is the
+        broadcast)."""
         self.broadcast = BroadcastHandle(self)
         """The writes that may go to every unit at once (unit 0); no reply is awaited."""
         self._exit_stack: contextlib.AsyncExitStack | None = None
@@ -274,15 +288,17 @@ class Master(Operations):
         device's documented turnaround; a spec-abiding device keeps at least t3.5 of
         silence. Too large a value drops the device's genuine replies.
         """
-        check_unit(unit)
+        check_unit(unit, self.unit_range)
         if self._engine is not None:
             self._engine.set_unit_turnaround(
                 unit, None if seconds is None else check_turnaround(seconds)
             )
 
     def unit_stats(self, unit: int) -> UnitStats:
-        """The statistics and health of `unit` (0..247: 0 counts the broadcasts)."""
-        return self.seam.unit_stats(check_int("unit", unit, _STATS_UNITS, InvalidRequest))
+        """The statistics and health of `unit` (0..247, and up to 255 over Modbus TCP; on a
+        serial line unit 0 counts the broadcasts)."""
+        counted = range(max(self.unit_range.stop, _STATS_UNITS.stop))
+        return self.seam.unit_stats(check_int("unit", unit, counted, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:
         """False once `unit` failed `offline_after` times in a row, until a success."""
@@ -290,7 +306,7 @@ class Master(Operations):
 
     def slave(self, unit: int) -> UnitHandle:
         """A handle on one unit: the same methods without the unit, plus typed values."""
-        return UnitHandle(self, check_unit(unit))
+        return UnitHandle(self, check_unit(unit, self.unit_range))
 
     # -- the core of every call ------------------------------------------------------
 
@@ -304,7 +320,7 @@ class Master(Operations):
         its reply checked as such (a malformed one raises InvalidRequest). A request is
         sent again after a failure only if its code is in the master's *repeatable*.
         """
-        check_unit(unit)
+        check_unit(unit, self.unit_range)
         pdu = _known_form(pdu)
         policy = self.policy.for_function(pdu.function_code)
         transaction = Transaction(
@@ -326,7 +342,7 @@ class Master(Operations):
                     "unit", unit, UNIT_RANGE, f"{type(pdu).__name__} may not be broadcast"
                 )
         else:
-            check_unit(unit)
+            check_unit(unit, self.unit_range)
         transaction = Transaction(
             unit,
             pdu,
@@ -379,8 +395,8 @@ class Master(Operations):
         that goes out at once is then one coroutine (the caller's) waiting on the
         engine's future."""
         # The commonest call (a unicast unit, the master's timeout) makes no further call.
-        if type(unit) is not int or unit not in UNIT_RANGE:
-            check_unit(unit)  # raises, saying why
+        if type(unit) is not int or unit not in self.unit_range:
+            check_unit(unit, self.unit_range)  # raises, saying why
         if type(priority) is not int:
             priority = check_priority(priority)
         response_timeout = self.timeout if timeout is None else check_timeout(timeout)

@@ -123,7 +123,9 @@ class LineEngine(LineState):
             raise ConnectionLost(str(self._failed))
         if not self._connected.is_set():
             await self._wait_connected(transaction.timeout)
-        if self.health.fail_fast_offline:
+        if self.health.fail_fast_offline and transaction.expects_reply:
+            # A request that gets no reply is sent all the same: 08/01 to a unit in
+            # listen-only mode is how it comes back.
             self._check_offline(transaction.unit)
         transaction.reply_delay = self.reply_delay(transaction.unit)
         queue = self.queue

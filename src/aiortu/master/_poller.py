@@ -12,7 +12,11 @@
 The points are planned once
 ([`aiortu.core.model.plan_reads`][aiortu.core.model.plan_reads]): neighbours on the same
 unit and table share one read when the gap between them is at most `max_gap` elements, within the
-spec's limits. Points with their own `interval` are polled on their own schedule; each interval has
+spec's limits. A device whose map has a hole inside a merged read refuses the whole block with
+exception 02 (illegal data address): the poller then splits that read into the reads of its
+points alone ([`PlannedRead.split`][aiortu.core.model.PlannedRead.split]), at once and for
+good, so the hole costs one request once and only a point that is really missing shows the
+exception. Points with their own `interval` are polled on their own schedule; each interval has
 its own cycle.
 
 A cycle runs its reads one after the other (the line carries one transaction at a time anyway) and
@@ -48,6 +52,7 @@ from typing import TypeVar
 import anyio
 import anyio.abc
 
+from aiortu.core.codes import ExceptionCode
 from aiortu.core.model import (
     MAX_READ_BITS,
     MAX_READ_REGISTERS,
@@ -278,6 +283,9 @@ class Poller(BackgroundPoll[Sample]):
         self._open_stream(max_pending)
         self.dropped = 0
         """Samples dropped because the iterating consumer fell behind."""
+        self.split_reads = 0
+        """Merged reads a device refused with exception 02 (a hole in its map), each
+        replaced by the reads of its points alone (see [`reads`][aiortu.master.Poller])."""
 
     # -- what is polled, and how it goes ----------------------------------------------
 
@@ -374,7 +382,9 @@ class Poller(BackgroundPoll[Sample]):
         samples: list[Sample] = []
         skip: dict[int, Exception] = {}
         self._probe_slots = self._units_to_probe(group, start)
-        for read in group.reads:
+        pending = list(group.reads)
+        while pending:
+            read = pending.pop(0)
             error = skip.get(read.unit) or self._gate(read.unit)
             if error is not None:
                 skip[read.unit] = error
@@ -387,6 +397,15 @@ class Poller(BackgroundPoll[Sample]):
                 # would stall the cycle for every other unit.
                 elements = await self._read(read, 0 if self._failing(read.unit) else None)
             except ModbusError as failure:
+                parts = _split_for(read, failure)
+                if parts:
+                    # A hole in the device's map: read the points alone, now and from now
+                    # on, so that the hole costs one request once, not every point.
+                    position = group.reads.index(read)
+                    group.reads[position : position + 1] = parts
+                    pending[:0] = parts
+                    self.split_reads += 1
+                    continue
                 samples += await self._deliver_error(read, failure, index)
                 if isinstance(failure, ConnectionLost):
                     # The line is down: every other unit would fail the same way.
@@ -459,6 +478,17 @@ class Poller(BackgroundPoll[Sample]):
         for callback in list(self._sample_callbacks):
             await _call(callback, sample)
         self._publish(sample)
+
+
+def _split_for(read: PlannedRead, failure: ModbusError) -> list[PlannedRead]:
+    """The reads to make instead of `read` that `failure` refused as a block: its points
+    alone when the device said "illegal data address" to a read of several; else none."""
+    hole = ExceptionCode.ILLEGAL_DATA_ADDRESS
+    if isinstance(failure, ExceptionResponse) and failure.code == hole:
+        parts = read.split()
+        if len(parts) > 1:
+            return parts
+    return []
 
 
 _READS: dict[Table, tuple[type[ReadCoilsRequest | ReadHoldingRegistersRequest], type[Response]]] = {

@@ -44,6 +44,10 @@ The format (every key but `unit` is optional):
     run = true
     data = "simulated"
 
+    [modbus_tcp]                       # only when served as a Modbus TCP server
+    serial_line_codes = true           # answer 07, 08, 0B, 0C and 11 (default false)
+    unit_aliases = { "255" = 1, "0" = 1 }   # unit id -> a unit described above
+
 [`load_config`][aiortu.slave.load_config] reads a file and returns the units; any problem raises
 [`ConfigError`][aiortu.errors.ConfigError], whose message is one line naming the file, the key path
 (`slave[0].coils[1].count`) and the problem.
@@ -53,7 +57,7 @@ from __future__ import annotations
 
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -95,9 +99,13 @@ _OBJECT_NAMES = {
 
 @dataclass(frozen=True, slots=True)
 class DeviceConfig:
-    """What a description file holds: the store of each unit."""
+    """What a description file holds: the store of each unit, and the settings of its
+    `[modbus_tcp]` table for a [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]."""
 
     units: Mapping[int, MemoryStore]
+    modbus_tcp: Mapping[str, Any] = field(default_factory=dict)
+    """`serial_line_codes` and `unit_aliases` as the file gives them, the server's keyword
+    arguments (empty without a `[modbus_tcp]` table)."""
 
 
 class _Reader(TomlReader):
@@ -147,7 +155,7 @@ def parse_config(text: str, source: str = "<string>") -> DeviceConfig:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(source, "(syntax)", str(error)) from None
-    reader.known(document, frozenset({"slave"}), "(top)")
+    reader.known(document, frozenset({"slave", "modbus_tcp"}), "(top)")
     if "slave" not in document:
         raise reader.fail("slave", "missing: describe at least one [[slave]]")
     units: dict[int, MemoryStore] = {}
@@ -158,7 +166,35 @@ def parse_config(text: str, source: str = "<string>") -> DeviceConfig:
             if unit in units:
                 raise reader.fail(f"{key}.unit", f"unit {unit} is described twice")
             units[unit] = store
-    return DeviceConfig(units)
+    return DeviceConfig(units, _modbus_tcp(reader, document.get("modbus_tcp", {}), units))
+
+
+def _modbus_tcp(reader: _Reader, value: object, units: Mapping[int, MemoryStore]) -> dict[str, Any]:
+    """The Modbus TCP server's settings of the `[modbus_tcp]` table."""
+    found = reader.table(value, "modbus_tcp")
+    reader.known(found, frozenset({"serial_line_codes", "unit_aliases"}), "modbus_tcp")
+    settings: dict[str, Any] = {}
+    if "serial_line_codes" in found:
+        codes = found["serial_line_codes"]
+        if not isinstance(codes, bool):
+            raise reader.fail("modbus_tcp.serial_line_codes", f"must be true or false, not {codes}")
+        settings["serial_line_codes"] = codes
+    if "unit_aliases" in found:
+        aliases: dict[int, int] = {}
+        for alias, unit in reader.table(found["unit_aliases"], "modbus_tcp.unit_aliases").items():
+            key = f"modbus_tcp.unit_aliases.{alias}"
+            try:
+                unit_id = int(alias, 0)
+            except ValueError:
+                unit_id = -1
+            if unit_id not in range(256):
+                raise reader.fail(key, f"must be a unit id 0..255, not {alias}")
+            aliases[unit_id] = reader.int_value(unit, key, range(1, 248))
+            if aliases[unit_id] not in units:
+                described = ", ".join(map(str, sorted(units)))
+                raise reader.fail(key, f"unit {unit} is not described (units: {described})")
+        settings["unit_aliases"] = aliases
+    return settings
 
 
 def _units(reader: _Reader, entry: dict[str, Any], key: str) -> list[int]:

@@ -1,56 +1,49 @@
-"""RTU framing over TCP, listening: each connection a line of its own, served by its own
-[`Slave`][aiortu.slave.Slave], for serial device servers that connect in."""
+"""RTU (or ASCII) framing over TCP, listening: one device for every connection, for serial
+device servers that connect in.
+
+[`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] is the
+[`ModbusTcpServer`][aiortu.slave.ModbusTcpServer] with a server framing the gateway uses
+([`RtuFraming`][aiortu.transport.RtuFraming], or
+[`AsciiFraming`][aiortu.transport.AsciiFraming]) and a serial device's rules: every connection
+reaches the same device (one state machine, its counters, its listen-only mode), a unit it
+does not serve is silent, unit 0 is a broadcast, and the serial-line codes (07, 08, 0B, 0C, 11)
+are served. There is no idle timeout: a line is quiet whenever no master polls.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import functools
+import math
+from collections.abc import Mapping
 
-import anyio
-import anyio.abc
-
-from aiortu._log import get_logger
 from aiortu.core.ascii import DEFAULT_ASCII_TIMEOUT
-from aiortu.core.model import AsyncDataStore, DataStore, Table
+from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.rtu import TimingMode
 from aiortu.core.serial import LineSettings
-from aiortu.errors import ConnectionLost, InvalidValue
-from aiortu.slave._dispatch import AfterHook, BeforeHook
+from aiortu.errors import InvalidValue
 from aiortu.slave._handlers import Handler
-from aiortu.slave._routes import RangeHandler
-from aiortu.slave._slave import Slave, TraceCallback
-from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS
-from aiortu.transport import (
-    AcceptCounters,
-    AsciiStream,
-    ConnectionLimit,
-    listening_address,
-    serve_listener,
-)
+from aiortu.slave._slave import TraceCallback
+from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS, ModbusTcpServer
+from aiortu.transport import AsciiFraming, RtuFraming
 
 __all__ = ("RtuOverTcpServer",)
 
-_log = get_logger(__name__)
 
-_UNIT_RANGE = range(1, 248)
-_FUNCTION_CODE_RANGE = range(1, 128)
+class RtuOverTcpServer(ModbusTcpServer):
+    """RTU frames over TCP, listening (see the module docstring): the connections share one
+    device, as a serial device server's masters share its line.
 
-
-class RtuOverTcpServer:
-    """RTU framing over TCP, listening: each connection is a line served by its own
-    [`Slave`][aiortu.slave.Slave] (`frame_gap` 0, its own machine and counters), all on the same
-    `units`' stores. For serial device servers that connect in.
-
-    [`set_handler`][aiortu.slave.RtuOverTcpServer.set_handler],
-    [`route`][aiortu.slave.RtuOverTcpServer.route],
-    [`before_request`][aiortu.slave.RtuOverTcpServer.before_request] and
-    [`after_request`][aiortu.slave.RtuOverTcpServer.after_request] apply to the lines connected now
-    and to every later one. At most `max_connections` lines at once; more are closed at once. There
-    is no idle timeout: a line is quiet whenever no master polls.
-
-    With `framing` `"ascii"` each line speaks Modbus ASCII
-    ([`AsciiStream`][aiortu.transport.AsciiStream], `ascii_timeout` its inter-character timeout,
-    1 s by default) instead of RTU.
+    A frame's length comes from its function code; a frame of a code whose length it does not
+    tell ends after 20 ms of silence; after noise (a bad CRC) the framing finds the next valid
+    frame in what it holds, and it never holds more than 256 bytes between reads. With
+    `framing` `"ascii"` the connections speak Modbus ASCII instead (`ascii_timeout` the longest
+    gap inside a frame, 1 s by default). `settings` and `timing` are accepted for the serial
+    line the frames came from, and do not change what is answered (a TCP connection has no
+    character timing). `trace` sees `("received", frame)` and `("sent", frame)`, in the
+    connection's framing. At most `max_connections` at once; more are closed at once.
     """
+
+    _name = "RTU over TCP"
 
     def __init__(
         self,
@@ -64,135 +57,28 @@ class RtuOverTcpServer:
         framing: str = "rtu",
         ascii_timeout: float | None = None,
     ) -> None:
-        if type(max_connections) is not int or max_connections < 1:
-            raise InvalidValue("max_connections", max_connections, "an int of at least 1")
         if framing not in ("rtu", "ascii"):
             raise InvalidValue("framing", framing, "'rtu' or 'ascii'")
         if ascii_timeout is not None and framing != "ascii":
             raise InvalidValue("ascii_timeout", ascii_timeout, "given with framing='ascii' only")
+        if framing == "ascii":
+            timeout = DEFAULT_ASCII_TIMEOUT if ascii_timeout is None else ascii_timeout
+            self._new_framing = functools.partial(AsciiFraming, timeout)
+        else:
+            self._new_framing = RtuFraming
         self.framing = framing
-        """`rtu` or `ascii`: the framing each line speaks."""
-        self._ascii_timeout = DEFAULT_ASCII_TIMEOUT if ascii_timeout is None else ascii_timeout
-        self.units: dict[int, DataStore | AsyncDataStore] = dict(units)
-        """The data store of each unit served."""
-        self.slaves: set[Slave] = set()
-        """The slave of each line connected now."""
-        self.counters = AcceptCounters()
-        """The lines accepted, and those closed at once for the limit."""
-        self._limit = ConnectionLimit("RTU over TCP", max_connections, self.counters)
-        self.local_address: tuple[str, int] | None = None
-        """The host and port [`serve`][aiortu.slave.RtuOverTcpServer.serve] listens on, once it
-        does."""
-        self.connection_error: Exception | None = None
-        """Why [`serve`][aiortu.slave.RtuOverTcpServer.serve] stopped, when the listener failed."""
-        self._settings = settings
-        self._timing = timing
-        self._trace = trace
-        self._setup: list[Callable[[Slave], object]] = []
-        self._stopped = anyio.Event()
-        for unit in self.units:
-            if unit not in _UNIT_RANGE:
-                raise InvalidValue("unit", unit, _UNIT_RANGE)
-        for function_code, handler in (handlers or {}).items():
-            if function_code not in _FUNCTION_CODE_RANGE:
-                raise InvalidValue("function_code", function_code, _FUNCTION_CODE_RANGE)
-            self.set_handler(function_code, handler)
-
-    @property
-    def max_connections(self) -> int:
-        """Lines served at once; more are closed at once (the refusals of a burst logged
-        once)."""
-        return self._limit.max_connections
-
-    @max_connections.setter
-    def max_connections(self, value: int) -> None:
-        self._limit.max_connections = value
-
-    @property
-    def port(self) -> int:
-        """The port [`serve`][aiortu.slave.RtuOverTcpServer.serve] listens on (useful after asking
-        for port 0)."""
-        if self.local_address is None:
-            raise RuntimeError("the server is not listening yet")
-        return self.local_address[1]
-
-    def _apply(self, call: Callable[[Slave], object]) -> None:
-        self._setup.append(call)
-        for slave in self.slaves:
-            call(slave)
-
-    def set_handler(self, function_code: int, handler: Handler | None) -> None:
-        """As [`Slave.set_handler`][aiortu.slave.Slave.set_handler], on every line."""
-        self._apply(lambda slave: slave.set_handler(function_code, handler))
-
-    def route(self, table: Table | str, addresses: range, handler: RangeHandler) -> None:
-        """As [`Slave.route`][aiortu.slave.Slave.route] (every unit), on every line."""
-        self._apply(lambda slave: slave.route(table, addresses, handler))
-
-    def before_request(self, hook: BeforeHook) -> Callable[[], None]:
-        """As [`Slave.before_request`][aiortu.slave.Slave.before_request], on every line; returns
-        the remover."""
-        return self._hook(lambda slave: slave.before_request(hook))
-
-    def after_request(self, hook: AfterHook) -> Callable[[], None]:
-        """As [`Slave.after_request`][aiortu.slave.Slave.after_request], on every line; returns the
-        remover."""
-        return self._hook(lambda slave: slave.after_request(hook))
-
-    def _hook(self, add: Callable[[Slave], Callable[[], None]]) -> Callable[[], None]:
-        removers: list[Callable[[], None]] = []
-
-        def add_to(slave: Slave) -> None:
-            removers.append(add(slave))
-
-        def remove() -> None:
-            if add_to in self._setup:
-                self._setup.remove(add_to)
-            for remover in removers:
-                remover()
-
-        self._apply(add_to)
-        return remove
-
-    async def wait_stopped(self) -> None:
-        """Wait until [`serve`][aiortu.slave.RtuOverTcpServer.serve] has ended (the listener failed
-        or closed)."""
-        await self._stopped.wait()
-
-    async def serve(
-        self,
-        listener: anyio.abc.Listener[anyio.abc.ByteStream],
-        *,
-        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
-    ) -> None:
-        """Accept lines from `listener` and serve each, until cancelled."""
-        try:
-            self.local_address = listening_address(listener)
-            task_status.started()
-            await serve_listener(listener, self.serve_connection, self._limit)
-        except Exception as error:
-            self.connection_error = error
-            _log.error("RTU over TCP: the listener failed: %s", error)
-        finally:
-            self._stopped.set()
-
-    async def serve_connection(self, stream: anyio.abc.ByteStream) -> None:
-        """Serve one line until it closes."""
-        if self.framing == "ascii":
-            stream = AsciiStream(stream, self._settings, timeout=self._ascii_timeout)
-        slave = Slave(
-            stream, self.units, self._settings, frame_gap=0, timing=self._timing, trace=self._trace
+        """`rtu` or `ascii`: the framing the connections speak."""
+        super().__init__(
+            units,
+            handlers=handlers,
+            unit_aliases={},
+            answer_unknown_units=False,
+            serial_line_codes=True,
+            max_connections=max_connections,
+            idle_timeout=math.inf,
+            trace=trace,
         )
-        for call in self._setup:
-            call(slave)
-        self.slaves.add(slave)
-        try:
-            await slave.serve()
-        except ConnectionLost:
-            pass
-        except Exception:
-            # One line's failure never ends the others, nor the server.
-            _log.exception("RTU over TCP: a line failed; it is closed")
-        finally:
-            self.slaves.discard(slave)
-            await stream.aclose()
+        self.settings = settings
+        """The line settings given (they change nothing on TCP)."""
+        self.timing = TimingMode(timing)
+        """The timing mode given (it changes nothing on TCP)."""

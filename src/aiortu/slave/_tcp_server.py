@@ -49,13 +49,21 @@ import anyio.abc
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
 from aiortu.core.machines import SlaveMachine
-from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
+from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.pdu import encode_exception
 from aiortu.errors import InvalidValue
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
-from aiortu.transport import ConnectionLimit, listening_address, peer_address, serve_listener
+from aiortu.transport import (
+    RTU_SILENCE,
+    ConnectionLimit,
+    Framing,
+    MbapFraming,
+    listening_address,
+    peer_address,
+    serve_listener,
+)
 
 __all__ = (
     "DEFAULT_IDLE_TIMEOUT",
@@ -136,6 +144,10 @@ class ModbusTcpServer(Dispatcher):
     positive.
     """
 
+    _new_framing: Callable[[], Framing] = MbapFraming
+    """How a connection's bytes become requests and its replies bytes (one per connection)."""
+    _name = "Modbus TCP"
+
     def __init__(
         self,
         units: Mapping[int, DataStore | AsyncDataStore],
@@ -181,7 +193,8 @@ class ModbusTcpServer(Dispatcher):
         self.connection_error: Exception | None = None
         """Why [`serve`][aiortu.slave.ModbusTcpServer.serve] stopped, when the listener failed."""
         self._served = frozenset((*stores, *self.unit_aliases, BROADCAST_UNIT))
-        self._limit = ConnectionLimit("Modbus TCP", max_connections, self.counters)
+        self._limit = ConnectionLimit(self._name, max_connections, self.counters)
+        self._replies = self._new_framing()  # encodes replies: the same for every connection
         self._lock = anyio.Lock(fast_acquire=True)
         self._stopped = anyio.Event()
 
@@ -231,7 +244,7 @@ class ModbusTcpServer(Dispatcher):
             await serve_listener(listener, self.serve_connection, self._limit)
         except Exception as error:
             self.connection_error = error
-            _log.error("Modbus TCP: the listener failed: %s", error)
+            _log.error("%s: the listener failed: %s", self._name, error)
         finally:
             self._stopped.set()
 
@@ -239,33 +252,40 @@ class ModbusTcpServer(Dispatcher):
         """Serve one connection until the client closes it, it stays silent for
         [`idle_timeout`][aiortu.slave.ModbusTcpServer.idle_timeout], or it sends a malformed header;
         then close it."""
-        decoder = AduDecoder()
+        framing = self._new_framing()
         try:
-            while True:
-                with anyio.move_on_after(self.idle_timeout) as idle:
-                    data = await stream.receive(READ_SIZE)
-                if idle.cancelled_caught:
-                    self.counters.connections_idle += 1
-                    _log.info(
-                        "Modbus TCP: %s idle for %g s, closed",
-                        peer_address(stream),
-                        self.idle_timeout,
-                    )
-                    return
-                try:
-                    adus = decoder.feed(data)
-                except MalformedHeader as error:
-                    self.counters.connections_malformed += 1
-                    _log.warning(
-                        "Modbus TCP: %s sent %s; connection closed", peer_address(stream), error
-                    )
-                    return
+            while (adus := await self._next_requests(stream, framing)) is not None:
                 if adus:
                     await self._answer_all(stream, adus)
         except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
             return
         finally:
             await stream.aclose()
+
+    async def _next_requests(
+        self, stream: anyio.abc.ByteStream, framing: Framing
+    ) -> list[Adu] | None:
+        """The requests the connection's next bytes (or a silence, for a frame of unknown
+        length) complete; None when the connection is to close (idle, malformed)."""
+        quiet = RTU_SILENCE if framing.waiting_for_silence() else self.idle_timeout
+        with anyio.move_on_after(quiet) as idle:
+            data = await stream.receive(READ_SIZE)
+        if idle.cancelled_caught:
+            if framing.waiting_for_silence():
+                return framing.silence()
+            self.counters.connections_idle += 1
+            _log.info(
+                "%s: %s idle for %g s, closed", self._name, peer_address(stream), self.idle_timeout
+            )
+            return None
+        try:
+            return framing.feed(data)
+        except MalformedHeader as error:
+            self.counters.connections_malformed += 1
+            _log.warning(
+                "%s: %s sent %s; connection closed", self._name, peer_address(stream), error
+            )
+            return None
 
     async def _answer_all(self, stream: anyio.abc.ByteStream, adus: list[Adu]) -> None:
         """Answer `adus` in order; replies that need no wait go out in one write."""
@@ -289,7 +309,7 @@ class ModbusTcpServer(Dispatcher):
         """The reply to one request, through the machine, the handler and the hooks."""
         self.counters.requests += 1
         if self.trace is not None:
-            self._traced("received", adu.encode())
+            self._traced("received", self._replies.encode(adu, adu.pdu))
         unit = self.unit_aliases.get(adu.unit, adu.unit)
         pdu = adu.pdu
         if unit not in self._served:
@@ -320,7 +340,9 @@ class ModbusTcpServer(Dispatcher):
     def _sent(
         self, request: Adu, pdu: bytes, unit_id: int | None = None, delay: float = 0.0
     ) -> _Outgoing:
-        adu = encode_adu(request.transaction_id, request.unit if unit_id is None else unit_id, pdu)
+        if unit_id is not None and unit_id != request.unit:
+            request = Adu(request.transaction_id, unit_id, b"")
+        adu = self._replies.encode(request, pdu)
         if self.trace is not None:
             self._traced("sent", adu)
         return _Outgoing(adu, delay)

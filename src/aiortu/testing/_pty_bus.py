@@ -50,6 +50,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import ctypes
+import fcntl
 import os
 import select
 import struct
@@ -62,9 +63,13 @@ import anyio.abc
 import anyio.from_thread
 
 from aiortu.core.serial import LineSettings
+from aiortu.errors import PortBusy
 from aiortu.testing._faults import FaultPlan
 from aiortu.testing._virtual_bus import TraceEntry, VirtualBus
 from aiortu.transport import FileDescriptorStream
+
+_LINK_LOCK = ".virtual-bus.lock"
+"""The file in a bus's `link_dir` that it holds locked while it runs."""
 
 __all__ = ("PtyBus", "make_raw")
 
@@ -212,6 +217,9 @@ class PtyBus:
     The options are [`VirtualBus`][aiortu.testing.VirtualBus]'s; `link_dir`, when given, gets
     symbolic links `port0`, `port1`, ... to the devices, so that scripts can use stable
     names (stale links from an earlier run are replaced; the links are removed on close).
+    A bus holds a lock on its `link_dir` (the file `.virtual-bus.lock` there) while it runs:
+    a second bus given the same directory raises [`PortBusy`][aiortu.errors.PortBusy] instead of
+    taking the first one's links away.
 
     Use it as `async with PtyBus(ports=2) as bus:` (the relay runs in a task group of the
     calling task) or, from synchronous code and test fixtures, as
@@ -250,6 +258,7 @@ class PtyBus:
         self._watch: _OpenWatch | None = None
         self._entered = False
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._link_lock: int | None = None
 
     @property
     def paths(self) -> tuple[str, ...]:
@@ -342,7 +351,36 @@ class PtyBus:
         ):
             yield bus
 
+    def _lock_link_dir(self) -> None:
+        """Hold `link_dir`'s lock, or raise PortBusy naming the bus that holds it."""
+        assert self.link_dir is not None
+        os.makedirs(self.link_dir, exist_ok=True)
+        path = os.path.join(self.link_dir, _LINK_LOCK)
+        while True:
+            lock = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.read(lock, 32).decode(errors="replace").strip()
+                os.close(lock)
+                by = f" (process {holder})" if holder.isdigit() else ""
+                raise PortBusy(
+                    self.link_dir,
+                    f"another virtual bus{by} keeps its links here: stop it, or give another "
+                    "directory",
+                ) from None
+            # A bus that was closing may have removed the file we locked: lock the new one.
+            with contextlib.suppress(FileNotFoundError):
+                if os.stat(path).st_ino == os.fstat(lock).st_ino:
+                    break
+            os.close(lock)
+        os.ftruncate(lock, 0)
+        os.write(lock, f"{os.getpid()}\n".encode())
+        self._link_lock = lock
+
     def _open_ports(self) -> None:
+        if self.link_dir is not None:
+            self._lock_link_dir()
         baudrate = self.bus.settings.baudrate if self.bus.settings is not None else None
         for index in range(len(self.bus)):
             master, slave = os.openpty()
@@ -387,6 +425,12 @@ class PtyBus:
                 with contextlib.suppress(OSError):
                     if os.readlink(port.link) == port.path:
                         os.unlink(port.link)
+        lock, self._link_lock = self._link_lock, None
+        if lock is not None and self.link_dir is not None:
+            # Removed while still held: a bus waiting on this file then locks a new one.
+            with contextlib.suppress(OSError):
+                os.unlink(os.path.join(self.link_dir, _LINK_LOCK))
+            os.close(lock)
 
     # --- the direct relay (unpaced, no adapter model, no faults, asyncio) -----------------
 

@@ -12,7 +12,8 @@ subclasses naming the port; see `docs/transports.md` for what each means and wha
 
 from __future__ import annotations
 
-from typing import Any
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from anyio.abc import ByteStream
 
@@ -50,8 +51,13 @@ from aiortu.transport._mbap_stream import (
     open_modbus_tcp,
 )
 from aiortu.transport._push import PushStream
-from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
-from aiortu.transport._server_framing import RTU_SILENCE, Framing, MbapFraming, RtuFraming
+from aiortu.transport._server_framing import (
+    RTU_SILENCE,
+    AsciiFraming,
+    Framing,
+    MbapFraming,
+    RtuFraming,
+)
 from aiortu.transport._tcp import open_rtu_over_tcp
 from aiortu.transport._tls import (
     ROLE_OID,
@@ -86,6 +92,9 @@ from aiortu.transport._url import (
     parse_port_url,
 )
 
+if TYPE_CHECKING:
+    from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
+
 __all__ = (
     "ASCII_BYTESIZE",
     "ASCII_TCP_SCHEME",
@@ -107,6 +116,7 @@ __all__ = (
     "DatagramListener",
     "FileDescriptorStream",
     "FramedStream",
+    "AsciiFraming",
     "Framing",
     "ListenAddress",
     "LocalEchoFilter",
@@ -153,6 +163,19 @@ __all__ = (
     "server_tls_context",
     "write_now",
 )
+
+_SERIAL_NAMES = frozenset({"RS485Options", "SerialAttribute", "SerialStream", "open_serial"})
+"""Imported on first use: pyserial is loaded only by what opens a serial port, not by a
+command that talks Modbus TCP."""
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _SERIAL_NAMES:
+        raise AttributeError(f"module 'aiortu.transport' has no attribute {name!r}")
+    value = getattr(importlib.import_module("aiortu.transport._serial"), name)
+    globals()[name] = value
+    return value
+
 
 _SERIAL_OPTIONS = frozenset({"exclusive", "rs485", "local_echo", "framing", "ascii_timeout"})
 _TCP_OPTIONS = frozenset({"connect_timeout", "framing", "ascii_timeout"})
@@ -226,6 +249,8 @@ async def _open(address: PortAddress, settings: LineSettings, options: Any) -> B
         return await open_modbus_tcp(address.host, address.port, **options)
     if isinstance(address, TcpAddress):
         return await open_rtu_over_tcp(address.host, address.port, **options)
+    from aiortu.transport._serial import open_serial
+
     return await open_serial(address.path, settings, **options)
 
 

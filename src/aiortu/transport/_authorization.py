@@ -19,7 +19,14 @@ read_only = true
 function_codes = [1, 2, 3, 4, 5, 6, 15, 16]
 units = [1, 17]                # optional: every unit when left out
 addresses = [[0, 99], [200, 299]]   # optional, inclusive: every address when left out
+broadcast = false              # optional: unit 0 (a broadcast on a serial line)
 ```
+
+A listener without client certificates (the gateway's `tcp://`, `rtu+tcp://` and `unix:`
+listeners) gives no client a role: its clients get the rule of `default_role`.
+
+`broadcast` decides unit 0 alone when it is given (true: allowed, false: refused, whatever
+`units` says); left out, unit 0 is allowed when `units` is left out or lists 0.
 
 An unknown key, a value of the wrong type or out of range is a one-line
 [`ConfigError`][aiortu.errors.ConfigError]: `FILE: KEY: PROBLEM`.
@@ -83,13 +90,15 @@ class AccessRule:
     address; `addresses`, when given, are inclusive `(first, last)` ranges every data-table address
     of a request must fall in (codes without one, such as 2B, pass on their function code alone);
     `read_only` refuses [`WRITE_FUNCTION_CODES`][aiortu.transport.WRITE_FUNCTION_CODES] even when
-    listed.
+    listed; `broadcast`, when given, allows or refuses unit 0 whatever `units` says (None: unit 0
+    is one of the units).
     """
 
     function_codes: frozenset[int]
     units: frozenset[int] | None = None
     addresses: tuple[tuple[int, int], ...] | None = None
     read_only: bool = False
+    broadcast: bool | None = None
 
     def refusal(self, unit: int, pdu: bytes) -> str | None:
         """Why this rule refuses the request `pdu` to `unit`, or None when it allows it."""
@@ -98,7 +107,10 @@ class AccessRule:
             return f"function code 0x{code:02X} is not allowed"
         if self.read_only and code in WRITE_FUNCTION_CODES:
             return f"function code 0x{code:02X} writes and the role is read-only"
-        if self.units is not None and unit not in self.units:
+        if unit == 0 and self.broadcast is not None:
+            if not self.broadcast:
+                return "broadcast (unit 0) is not allowed"
+        elif self.units is not None and unit not in self.units:
             return f"unit {unit} is not allowed"
         if self.addresses is not None:
             spans = _spans(pdu)
@@ -131,7 +143,7 @@ class RoleRules:
 
 
 _TOP_KEYS: Final = frozenset({"default_role", "roles"})
-_RULE_KEYS: Final = frozenset({"function_codes", "units", "addresses", "read_only"})
+_RULE_KEYS: Final = frozenset({"function_codes", "units", "addresses", "read_only", "broadcast"})
 
 
 def load_rules(path: str | Path) -> RoleRules:
@@ -188,7 +200,10 @@ def _rule(body: Any, source: str, where: str) -> AccessRule:
     read_only = body.get("read_only", False)
     if not isinstance(read_only, bool):
         raise ConfigError(source, f"{where}.read_only", "must be true or false")
-    return AccessRule(codes, units, ranges, read_only)
+    broadcast = body.get("broadcast")
+    if broadcast is not None and not isinstance(broadcast, bool):
+        raise ConfigError(source, f"{where}.broadcast", "must be true or false")
+    return AccessRule(codes, units, ranges, read_only, broadcast)
 
 
 def _list(value: Any, source: str, key: str) -> list[Any]:

@@ -587,6 +587,8 @@ def _open_error(port: str, exc: BaseException, what: str) -> PortError:
     cause = os.strerror(number) if number is not None else str(exc)
     if number == errno.ENOTTY:
         return PortNotFound(port, f"not a serial device ({cause})")
+    if number == errno.EISDIR:
+        return PortNotFound(port, "a directory, not a device file")
     if number in _NOT_FOUND:
         return PortNotFound(port, f"no such serial device ({cause})")
     if number in _BUSY:
@@ -660,10 +662,18 @@ def _open(port: str, instance: Any, settings: LineSettings, what: str) -> None:
         instance.close()
         raise _open_error(port, exc, what) from exc
     if applied is not None and applied != _expected_format(settings):
+        hint = _PTY_HINT if _is_pseudo_terminal(instance.fileno()) else ""
         instance.close()
         raise UnsupportedSettings(
-            port, f"the driver kept {applied} instead of {_expected_format(settings)}"
+            port, f"the driver kept {applied} instead of {_expected_format(settings)}{hint}"
         )
+
+
+_PTY_HINT = (
+    "; a pseudo-terminal keeps no parity bit: open it with parity N and 2 stop bits (8N2, "
+    "the same character time as 8E1)"
+)
+"""Why a pty refuses a parity, and what to open it with instead."""
 
 
 def _running_loop() -> asyncio.AbstractEventLoop:

@@ -158,14 +158,14 @@ def _parse_host_port(
         except ValueError:
             raise bad(f"{host!r} in brackets is not an IPv6 address") from None
         if not after:
-            raise bad(f"the port is missing ({scheme}://[host]:port)")
+            raise bad(f"the port number is missing: {scheme}://[host]:port")
         if not after.startswith(":"):
             raise bad("expected ':port' after the IPv6 address")
         port_text = after[1:]
     else:
         host, colon, port_text = netloc.rpartition(":")
         if not colon:
-            raise bad(f"the port is missing ({scheme}://host:port)")
+            raise bad(f"the port number is missing: {scheme}://host:port")
         if ":" in host:
             raise bad(f"write an IPv6 address in brackets: {scheme}://[::1]:5020")
     if not host:

@@ -508,7 +508,9 @@ class MasterMachine:
         response: Response | ExceptionPDU | None = None
         if start < transaction.earliest_reply:
             reason = SkipReason.STALE
-        elif unit != transaction.unit or unit == BROADCAST_UNIT:
+        elif unit != transaction.unit:
+            # A broadcast awaits no reply; a request to unit 0 that does (over Modbus TCP,
+            # where 0 is an ordinary id) takes unit 0's.
             reason = SkipReason.OTHER_UNIT
         elif not pdu or pdu[0] & ~EXCEPTION_BIT != request.function_code:
             reason = SkipReason.OTHER_FUNCTION

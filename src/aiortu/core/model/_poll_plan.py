@@ -9,7 +9,9 @@ address and merges neighbours into one read when the unused elements between the
 `max_gap` (`max_bit_gap` for coils and discrete inputs) and the merged read stays within the spec's
 limits (125 registers, 2000 bits) or smaller ones the caller gives. Each
 [`PlannedRead`][aiortu.core.model.PlannedRead] knows which slice of its reply belongs to which
-point; [`PlannedRead.decode`][aiortu.core.model.PlannedRead.decode] turns a reply into values.
+point; [`PlannedRead.decode`][aiortu.core.model.PlannedRead.decode] turns a reply into values,
+and [`PlannedRead.split`][aiortu.core.model.PlannedRead.split] gives the reads of its points
+alone, for a device that refuses a merged block across a hole in its map.
 
     >>> points = [Point.of("a", 1, "40001"), Point.of("b", 1, "40003", "float32")]
     >>> [(r.address, r.count) for r in plan_reads(points, max_gap=2)]
@@ -164,6 +166,23 @@ class PlannedRead:
     def points(self) -> tuple[Point, ...]:
         """The points this read serves."""
         return tuple(s.point for s in self.slices)
+
+    def split(self) -> list[PlannedRead]:
+        """This read as one read per address the points start at (points at the same
+        address share one, as wide as the widest), in address order: what to read instead
+        when the device refuses the merged block because of a hole in it (exception 02).
+        A read of one such address is returned as it is, alone."""
+        by_start: dict[int, list[PointSlice]] = {}
+        for piece in self.slices:
+            by_start.setdefault(piece.offset, []).append(piece)
+        if len(by_start) == 1:
+            return [self]
+        parts: list[PlannedRead] = []
+        for offset, pieces in sorted(by_start.items()):
+            width = max(piece.width for piece in pieces)
+            slices = tuple(PointSlice(piece.point, 0, piece.width) for piece in pieces)
+            parts.append(PlannedRead(self.unit, self.table, self.address + offset, width, slices))
+        return parts
 
     def decode(self, elements: Sequence[int | bool]) -> list[tuple[Point, bool | int | float]]:
         """Each point of this read with its value, from the reply's `elements`.

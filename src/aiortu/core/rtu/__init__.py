@@ -26,6 +26,7 @@ from aiortu.core.rtu._frame import (
     expected_request_length,
     expected_response_length,
 )
+from aiortu.core.rtu._frame_search import FrameSearch
 from aiortu.core.rtu._receiver import (
     TOLERANT_FRAME_SILENCE,
     DiscardReason,
@@ -51,6 +52,7 @@ __all__ = (
     "Frame",
     "FrameDiscarded",
     "FrameReceived",
+    "FrameSearch",
     "MAX_FRAME_LENGTH",
     "MIN_FRAME_LENGTH",
     "NEED_MORE",
