@@ -13,8 +13,7 @@ from aiortu.cli._demo import PlainRenderer, TableRenderer, header_lines
 from aiortu.cli._demo_devices import EnergyMeter, Reading, TemperatureController
 from aiortu.cli._demo_system import Demo
 from aiortu.core.model import Layout, Table, decode_value
-
-from .cli_helpers import run_aiortu, start_aiortu
+from tests.cli.cli_helpers import run_aiortu, start_aiortu
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 
 from aiortu.core.model import parse_profile, schema_reference
-from tests.cli_helpers import run_aiortu, start_aiortu, stop
+from tests.cli.cli_helpers import run_aiortu, start_aiortu, stop
 from tests.peers.venvs import PYSUNSPEC2, peer_python, sunspec_models
 
-ROOT = Path(__file__).parents[1]
+ROOT = Path(__file__).parents[2]
 
 
 def free_port() -> int:

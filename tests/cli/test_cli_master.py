@@ -11,10 +11,9 @@ import pytest
 
 from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
-
-from . import pymodbus_server
-from .cli_helpers import run_aiortu
-from .pymodbus_server import COILS, HOLDING_REGISTERS, INPUT_REGISTERS
+from tests import pymodbus_server
+from tests.cli.cli_helpers import run_aiortu
+from tests.pymodbus_server import COILS, HOLDING_REGISTERS, INPUT_REGISTERS
 
 pytestmark = [pytest.mark.interop, pytest.mark.timeout(90)]
 

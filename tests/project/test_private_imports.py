@@ -1,15 +1,12 @@
 """A private module is private to its package: no other package imports it.
 
 Each package (`aiortu.line`, `aiortu.master`, ...) exports what others may use from its
-`__init__`; its `_modules` are its own business. The forwarding modules left where old
-modules used to be are the one exception, as they exist to reach the new homes.
+`__init__`; its `_modules` are its own business.
 """
 
 from __future__ import annotations
 
 import grimp
-
-from tests.test_public_api import DEPRECATED_MODULES
 
 
 def _owner_of_private(module: str) -> str | None:
@@ -25,11 +22,9 @@ def test_no_package_imports_another_packages_private_modules() -> None:
     graph = grimp.build_graph("aiortu", exclude_type_checking_imports=False)
     crossings = []
     for importer in sorted(graph.modules):
-        if importer in DEPRECATED_MODULES or importer == "aiortu._moved":
-            continue
         for imported in sorted(graph.find_modules_directly_imported_by(importer)):
             owner = _owner_of_private(imported)
-            if owner is None or owner == "aiortu":  # aiortu._log, aiortu._moved: shared
+            if owner is None or owner == "aiortu":  # aiortu._log, aiortu._public: shared
                 continue
             if importer != owner and not importer.startswith(owner + "."):
                 crossings.append(f"{importer} -> {imported}")

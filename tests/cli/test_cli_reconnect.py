@@ -18,14 +18,13 @@ import aiortu
 from aiortu.core.serial import LineSettings
 from aiortu.testing._pty_bus import make_raw
 from aiortu.transport._fd import FileDescriptorStream
-
-from .cli_helpers import aiortu_command
-from .master.fakes import register_value
-from .master.test_reconnect import Device
+from tests.cli.cli_helpers import aiortu_command
+from tests.master.fakes import register_value
+from tests.master.test_reconnect import Device
 
 pytestmark = pytest.mark.timeout(60)
 
-DEVICES = str(Path(__file__).parent.parent / "examples" / "devices.toml")
+DEVICES = str(Path(__file__).parents[2] / "examples" / "devices.toml")
 
 
 class Output:

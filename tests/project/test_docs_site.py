@@ -14,7 +14,7 @@ import griffe
 import pytest
 import yaml
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "docs_hooks"))
 
 from griffe_summaries import FirstParagraphSummaries, first_paragraph_on_one_line  # noqa: E402

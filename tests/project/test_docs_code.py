@@ -56,7 +56,7 @@ import aiortu
 from aiortu.slave import ServerId
 from aiortu.testing import VirtualBus
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 # A block may be indented (inside a tab or an admonition); its marker then is too.
 BLOCK = re.compile(

@@ -15,12 +15,11 @@ from aiortu.cli._master import rs485_options
 from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
 from aiortu.transport import RS485Options
-
-from .cli_helpers import run_aiortu, serving_tcp, start_aiortu, stop
+from tests.cli.cli_helpers import run_aiortu, serving_tcp, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(60)
 
-DEVICES = str(Path(__file__).parent.parent / "examples" / "devices.toml")
+DEVICES = str(Path(__file__).parents[2] / "examples" / "devices.toml")
 
 
 @pytest.fixture(scope="module")

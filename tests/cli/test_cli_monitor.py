@@ -12,8 +12,7 @@ import serial
 
 from aiortu.cli import main
 from aiortu.core.serial import LineSettings
-
-from .cli_helpers import run_aiortu, start_aiortu, stop
+from tests.cli.cli_helpers import run_aiortu, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(30)
 

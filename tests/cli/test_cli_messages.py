@@ -120,7 +120,7 @@ def _fill(argv: list[str], port: str, tmp_path: Path) -> list[str]:
         "{port}": port,
         "{missing}": str(tmp_path / "missing.toml"),
         "{overlap}": str(tmp_path / "overlap.toml"),
-        "{devices}": str(Path(__file__).parent.parent / "examples" / "devices.toml"),
+        "{devices}": str(Path(__file__).parents[2] / "examples" / "devices.toml"),
     }
     return [places.get(word, word) for word in argv]
 

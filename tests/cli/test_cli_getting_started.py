@@ -15,7 +15,7 @@ from aiortu.testing import PtyBus
 
 pytestmark = pytest.mark.timeout(60)
 
-HERE = Path(__file__).parent.parent / "examples" / "getting_started"
+HERE = Path(__file__).parents[2] / "examples" / "getting_started"
 
 
 def test_the_slave_serves_the_master_and_stops_on_ctrl_c() -> None:

@@ -10,8 +10,7 @@ import pytest
 import serial
 
 from aiortu.cli import main
-
-from .cli_helpers import run_aiortu, start_aiortu
+from tests.cli.cli_helpers import run_aiortu, start_aiortu
 
 pytestmark = pytest.mark.timeout(30)
 

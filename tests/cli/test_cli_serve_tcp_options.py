@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from .cli_helpers import run_aiortu, serving_tcp
+from tests.cli.cli_helpers import run_aiortu, serving_tcp
 
 pytestmark = pytest.mark.timeout(60)
 
-DEVICES = str(Path(__file__).parent.parent / "examples" / "devices.toml")
+DEVICES = str(Path(__file__).parents[2] / "examples" / "devices.toml")
 
 
 def test_serial_line_codes_and_aliases_on_the_command_line() -> None:

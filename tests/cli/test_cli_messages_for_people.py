@@ -12,8 +12,7 @@ import pytest
 import aiortu
 from aiortu.errors import UnsupportedSettings
 from aiortu.testing import PtyBus
-
-from .cli_helpers import run_aiortu
+from tests.cli.cli_helpers import run_aiortu
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -9,10 +9,8 @@ module itself.
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import inspect
 import pkgutil
-from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -24,19 +22,8 @@ import aiortu
 ALL_MODULES = [info.name for info in pkgutil.walk_packages(aiortu.__path__, prefix="aiortu.")]
 
 
-def _forwards(name: str) -> bool:
-    """Whether *name* is a module left behind by a move (see test_deprecated_modules.py)."""
-    spec = importlib.util.find_spec(name)
-    assert spec is not None
-    assert spec.origin is not None
-    return "from aiortu._moved import " in Path(spec.origin).read_text(encoding="utf-8")
-
-
-DEPRECATED_MODULES = sorted(name for name in ALL_MODULES if _forwards(name))
 PUBLIC_MODULES = sorted(
-    name
-    for name in ALL_MODULES
-    if not any(part.startswith("_") for part in name.split(".")) and name not in DEPRECATED_MODULES
+    name for name in ALL_MODULES if not any(part.startswith("_") for part in name.split("."))
 )
 
 

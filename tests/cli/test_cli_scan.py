@@ -27,12 +27,11 @@ from aiortu.cli._scan import (
 from aiortu.core.serial import LineSettings, Parity
 from aiortu.slave._handlers import BUILTIN_HANDLERS
 from aiortu.testing import VirtualBus
-
-from .cli_helpers import run_aiortu, start_aiortu
+from tests.cli.cli_helpers import run_aiortu, start_aiortu
 
 pytestmark = pytest.mark.timeout(60)
 
-SLAVE_SCRIPT = Path(__file__).with_name("serve_units.py")
+SLAVE_SCRIPT = Path(__file__).parents[1] / "serve_units.py"
 SETTINGS = LineSettings(19200, parity="N", stopbits=2)
 
 

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from .cli_helpers import aiortu_command, run_aiortu, start_aiortu
+from tests.cli.cli_helpers import aiortu_command, run_aiortu, start_aiortu
 
 pytestmark = pytest.mark.timeout(90)
 
-ROOT = Path(__file__).parent.parent
+ROOT = Path(__file__).parents[2]
 PAGE = (ROOT / "docs" / "getting-started.md").read_text()
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from .cli_helpers import run_aiortu, serving_tcp, start_aiortu, stop
+from tests.cli.cli_helpers import run_aiortu, serving_tcp, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(60)
 

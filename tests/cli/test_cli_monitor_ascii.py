@@ -14,8 +14,7 @@ from aiortu.cli._monitor_ascii import AsciiBusDecoder
 from aiortu.core.ascii import encode_ascii_frame
 from aiortu.core.rtu import CrcStatus
 from aiortu.core.serial import LineSettings
-
-from .cli_helpers import start_aiortu, stop
+from tests.cli.cli_helpers import start_aiortu, stop
 
 SETTINGS = LineSettings(19200, parity="N", stopbits=2)
 

@@ -23,7 +23,7 @@ import pytest
 
 import aiortu
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 API = ROOT / "docs" / "api"
 RAW_ROLE = re.compile(r":(?:py:)?(?:class|func|meth|attr|mod|data|exc|obj|const):`?")
 PRIVATE = re.compile(r"\baiortu(?:\.\w+)*\._[A-Za-z]\w*")

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from .cli_helpers import run_aiortu, start_aiortu, stop
+from tests.cli.cli_helpers import run_aiortu, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(60)
 
-DEVICES = str(Path(__file__).parent.parent / "examples" / "devices.toml")
+DEVICES = str(Path(__file__).parents[2] / "examples" / "devices.toml")
 
 
 @pytest.fixture(scope="module")

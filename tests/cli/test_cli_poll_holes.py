@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from .cli_helpers import run_aiortu, serving_tcp
+from tests.cli.cli_helpers import run_aiortu, serving_tcp
 
 pytestmark = pytest.mark.timeout(60)
 
-ROOT = Path(__file__).parent.parent
+ROOT = Path(__file__).parents[2]
 
 
 @pytest.fixture(scope="module")

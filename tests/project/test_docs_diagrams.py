@@ -14,7 +14,7 @@ from aiortu.core.machines import _slave_machine as slave_machine
 from aiortu.core.machines import state_diagram
 from aiortu.core.rtu import _receiver as receiver
 
-DOCS = Path(__file__).resolve().parent.parent / "docs"
+DOCS = Path(__file__).resolve().parents[2] / "docs"
 
 MACHINES: dict[str, tuple[Mapping[tuple[enum.Enum, enum.Enum], object], enum.Enum]] = {
     "receiver": (receiver.TRANSITIONS, receiver.ReceiverState.INIT),

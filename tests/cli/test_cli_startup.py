@@ -18,12 +18,11 @@ import aiortu.cli
 from aiortu.cli import SUMMARIES, build_parser, main
 from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
-
-from .cli_helpers import aiortu_command
+from tests.cli.cli_helpers import aiortu_command
 
 pytestmark = pytest.mark.timeout(60)
 
-DEVICES = str(Path(__file__).parent.parent / "examples" / "devices.toml")
+DEVICES = str(Path(__file__).parents[2] / "examples" / "devices.toml")
 
 
 def modules_after(*code: str) -> set[str]:

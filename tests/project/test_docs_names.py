@@ -20,7 +20,7 @@ import pytest
 
 import aiortu
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 # The architecture page is for the people who work on aiortu: it names the insides.
 GUIDES = [
     ROOT / "README.md",
