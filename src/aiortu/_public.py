@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import inspect
 import pkgutil
+import sys
 from collections.abc import Iterable, Mapping
 from functools import cache
-
-import aiortu
+from types import ModuleType
 
 
 def _home_of(module: str) -> str:
@@ -23,10 +23,15 @@ def _home_of(module: str) -> str:
     return module
 
 
+def _top() -> ModuleType:
+    # Looked up, not imported: the top-level package imports every package for type checks.
+    return sys.modules[__package__]
+
+
 @cache
 def _subpackages() -> frozenset[str]:
     # `aiortu.gateway` is the package once imported, so the function `gateway` keeps its own.
-    return frozenset(info.name for info in pkgutil.iter_modules(aiortu.__path__))
+    return frozenset(info.name for info in pkgutil.iter_modules(_top().__path__))
 
 
 def publish(package: str, names: Iterable[str], namespace: Mapping[str, object]) -> None:
@@ -44,7 +49,7 @@ def publish(package: str, names: Iterable[str], namespace: Mapping[str, object])
         if inspect.isfunction(value) and namespace.get(value.__qualname__) is not value:
             value.__name__ = value.__qualname__ = name  # made by a factory: named as exported
         home = _home_of(value.__module__)
-        if aiortu._LAZY.get(name) in (package, home) and name not in _subpackages():
+        if _top()._LAZY.get(name) in (package, home) and name not in _subpackages():
             value.__module__ = "aiortu"
         elif home == package:
             value.__module__ = package
