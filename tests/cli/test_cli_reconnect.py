@@ -16,8 +16,8 @@ import pytest
 
 import aiortu
 from aiortu.core.serial import LineSettings
-from aiortu.testing._pty_bus import make_raw
-from aiortu.transport._fd import FileDescriptorStream
+from aiortu.testing import make_raw
+from aiortu.transport import FileDescriptorStream
 from tests.cli.cli_helpers import aiortu_command
 from tests.master.fakes import register_value
 from tests.master.test_reconnect import Device

@@ -25,7 +25,7 @@ from aiortu.cli._scan import (
     settings_to_try,
 )
 from aiortu.core.serial import LineSettings, Parity
-from aiortu.slave._handlers import BUILTIN_HANDLERS
+from aiortu.slave import BUILTIN_HANDLERS
 from aiortu.testing import VirtualBus
 from tests.cli.cli_helpers import run_aiortu, start_aiortu
 

@@ -24,7 +24,7 @@ from aiortu.errors import (
     UnitOffline,
     UnitSkipped,
 )
-from aiortu.master._poller import Sample
+from aiortu.master import Sample
 
 STAMP = r"\d\d:\d\d:\d\d\.\d{3}"
 

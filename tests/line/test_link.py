@@ -8,7 +8,7 @@ import pytest
 from aiortu.core.rtu import DiscardReason, FrameDiscarded, FrameReceived, Role, encode_frame
 from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost
-from aiortu.line._link import Link
+from aiortu.line import Link
 from aiortu.testing import virtual_pair
 
 H = bytes.fromhex

@@ -8,7 +8,7 @@ import pytest
 
 from aiortu.errors import ConnectionLost
 from aiortu.line import Link
-from aiortu.transport._serial import open_serial
+from aiortu.transport import open_serial
 from tests.transport.ptys import LINE, open_pty
 
 

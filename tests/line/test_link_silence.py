@@ -13,8 +13,8 @@ import pytest
 import aiortu.line._sender
 from aiortu.core.rtu import FrameReceived, encode_frame
 from aiortu.core.serial import LineSettings
-from aiortu.line._link import Link
-from aiortu.line._wake_timer import WakeTimer, _timerfd_libc
+from aiortu.line import Link, WakeTimer
+from aiortu.line._wake_timer import _timerfd_libc
 from aiortu.testing import virtual_pair
 
 REPLY = encode_frame(0x11, bytes.fromhex("03 06 AE 41 56 52 43 40"))

@@ -10,8 +10,8 @@ import time
 import anyio
 import pytest
 
+from aiortu.line import WakeTimer, create_wake_timer
 from aiortu.line import _wake_timer as wake_timer
-from aiortu.line._wake_timer import WakeTimer, create_wake_timer
 
 
 class _Owner:

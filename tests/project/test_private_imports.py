@@ -1,10 +1,16 @@
 """A private module is private to its package: no other package imports it.
 
 Each package (`aiortu.line`, `aiortu.master`, ...) exports what others may use from its
-`__init__`; its `_modules` are its own business.
+`__init__`; its `_modules` are its own business. The tests hold to the same where they
+can: a name a package exports is imported from the package, not from the module it is
+written in (a private name with no public home is still imported from its module).
 """
 
 from __future__ import annotations
+
+import ast
+import importlib
+from pathlib import Path
 
 import grimp
 
@@ -29,3 +35,37 @@ def test_no_package_imports_another_packages_private_modules() -> None:
             if importer != owner and not importer.startswith(owner + "."):
                 crossings.append(f"{importer} -> {imported}")
     assert crossings == []
+
+
+TESTS = Path(__file__).resolve().parents[1]
+
+
+def _public_twins(module: str, names: list[str]) -> list[str]:
+    """The *names* imported from private *module* that its owner package exports as well."""
+    owner = _owner_of_private(module)
+    if owner is None:
+        return []
+    package, source = importlib.import_module(owner), importlib.import_module(module)
+    exported = getattr(package, "__all__", ())
+    return [
+        name
+        for name in names
+        if name in exported and getattr(package, name) is getattr(source, name, None)
+    ]
+
+
+def test_tests_import_public_names_from_their_public_home() -> None:
+    offenders = []
+    for path in sorted(TESTS.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom) or not (node.module or "").startswith("aiortu"):
+                continue
+            assert node.module is not None
+            twins = _public_twins(node.module, [alias.name for alias in node.names])
+            offenders += [f"{path.relative_to(TESTS)}: {node.module}.{name}" for name in twins]
+    assert offenders == []
+
+
+def test_the_check_sees_a_private_import_of_a_public_name() -> None:
+    assert _public_twins("aiortu.master._client", ["Master"]) == ["Master"]
+    assert _public_twins("aiortu.master", ["Master"]) == []

@@ -29,8 +29,7 @@ from anyio.abc import SocketAttribute, SocketStream
 import aiortu
 from aiortu.core.model import Table
 from aiortu.core.serial import LineSettings
-from aiortu.testing import VirtualBus, virtual_pair
-from aiortu.testing._pty_bus import make_raw
+from aiortu.testing import VirtualBus, make_raw, virtual_pair
 from aiortu.transport import FileDescriptorStream, open_serial
 from tests.master.fakes import line, register_value, silent
 from tests.transport.ptys import open_pty
