@@ -83,6 +83,7 @@ from aiortu.core.model._sunspec import (
     model_points,
     sunspec_layout,
 )
+from aiortu.core.model._toml_reader import TomlReader
 from aiortu.core.model._values import (
     Layout,
     ValueType,
@@ -152,6 +153,7 @@ __all__ = (
     "SupportsFileRecords",
     "SupportsServerId",
     "Table",
+    "TomlReader",
     "Value",
     "ValueType",
     "answer_device_identification",
