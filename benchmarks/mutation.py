@@ -64,7 +64,7 @@ PACKAGES = {
             "tests/master/**/test_poll_plan.py",
             "tests/slave/**/test_slave_machine.py",
             "tests/slave/**/test_serial_line_codes.py",
-            "tests/test_errors.py",
+            "tests/project/test_errors.py",
         ),
     ),
     "gateway": Package(
@@ -92,7 +92,7 @@ PACKAGES = {
             "tests/master/**/test_fast_path_differential.py",
             "tests/faults/**/test_stale_replies.py",
             "tests/faults/**/test_master_misbehaving.py",
-            "tests/test_trio.py",  # the engine's routes without an event loop
+            "tests/project/test_trio.py",  # the engine's routes without an event loop
         ),
     ),
     "slave servers": Package(

@@ -1,8 +1,9 @@
 """Draw the pages' state diagrams as SVG when the site is built, so that they show offline.
 
 The pages keep each machine's ```mermaid `stateDiagram-v2` block as the code's transition
-table draws it (`python -m aiortu.core.machines._diagrams`, checked by tests/test_docs_diagrams.py):
-readable as text, and diffable. Drawn in the browser, those blocks need the Mermaid script
+table draws it (`python -m aiortu.core.machines._diagrams`, checked by
+tests/project/test_docs_diagrams.py): readable as text, and diffable. Drawn in the browser,
+those blocks need the Mermaid script
 from a CDN, and a reader offline sees the raw text. This hook replaces each block with an
 inline SVG drawn here, with no script and no download: the states on an ellipse, the initial
 one at the top, one arrow per pair of states (its events and actions one line each), a loop

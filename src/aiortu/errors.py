@@ -35,6 +35,7 @@ users import them from.
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core.errors import (
     ConfigError,
     ConnectionLost,
@@ -76,3 +77,5 @@ __all__ = (
     "UnitSkipped",
     "UnsupportedSettings",
 )
+
+publish(__name__, __all__, globals())

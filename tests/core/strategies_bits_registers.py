@@ -191,7 +191,7 @@ RESPONSE_STRATEGIES: dict[type, SearchStrategy[Response]] = dict(_RESPONSES)
 def _of_module(
     strategies: dict[type, SearchStrategy[_T]], module: ModuleType
 ) -> dict[type, SearchStrategy[_T]]:
-    return {cls: s for cls, s in strategies.items() if cls.__module__ == module.__name__}
+    return {cls: s for cls, s in strategies.items() if vars(module).get(cls.__name__) is cls}
 
 
 BITS_REQUEST_STRATEGIES = _of_module(REQUEST_STRATEGIES, pdu_bits)

@@ -22,8 +22,8 @@ import aiortu
 from aiortu.core.pdu import Request
 from aiortu.core.rtu import encode_frame
 from aiortu.core.serial import LineSettings
-from aiortu.master._client import Master
-from aiortu.testing._virtual_bus import VirtualBus
+from aiortu.master import Master
+from aiortu.testing import VirtualBus
 from tests.master.fakes import FakeSlave, coil_value, register_value, standard_reply, until_idle
 
 __all__ = ("FAULTS", "MasterRig", "master_rig")

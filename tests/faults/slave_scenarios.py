@@ -17,9 +17,8 @@ from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
 from aiortu.core.errors import ModbusError
 from aiortu.core.pdu import Response, decode_request, decode_response
 from aiortu.core.rtu import crc16, encode_frame
-from aiortu.slave import Slave
-from aiortu.slave._store import Block, MemoryStore, ServerId
-from aiortu.testing._virtual_bus import virtual_pair
+from aiortu.slave import Block, MemoryStore, ServerId, Slave
+from aiortu.testing import virtual_pair
 from tests.slave.helpers import RawMaster
 
 __all__ = (

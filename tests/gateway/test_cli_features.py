@@ -17,7 +17,7 @@ import anyio.abc
 import pytest
 
 from aiortu.testing import PtyBus
-from tests.cli_helpers import aiortu_command
+from tests.cli.cli_helpers import aiortu_command
 from tests.gateway.helpers import TcpClient
 
 pytestmark = pytest.mark.timeout(60)

@@ -16,7 +16,7 @@ import anyio.abc
 import pytest
 
 from aiortu.testing import PtyBus
-from tests.cli_helpers import aiortu_command
+from tests.cli.cli_helpers import aiortu_command
 from tests.gateway.helpers import UNIT, device, line
 from tests.slave.test_tcp_interop import UNIT_ID, _data_codes, _ok
 

@@ -61,9 +61,9 @@ from aiortu.core.pdu import (
 from aiortu.core.rtu import FrameReceived, ReceiverState, Role, encode_frame
 from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost
-from aiortu.line._link import Link
-from aiortu.master._client import Master
-from aiortu.testing._virtual_bus import VirtualBus
+from aiortu.line import Link
+from aiortu.master import Master
+from aiortu.testing import VirtualBus
 
 __all__ = (
     "FakeSlave",

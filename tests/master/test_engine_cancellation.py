@@ -12,8 +12,8 @@ from aiortu.core.machines import MasterState
 from aiortu.core.pdu import ReadHoldingRegistersRequest, Request
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import ConnectionLost
-from aiortu.master._client import Master
-from aiortu.transport._serial import open_serial
+from aiortu.master import Master
+from aiortu.transport import open_serial
 from tests.master.fakes import FakeSlave, answer, line, silent
 from tests.transport.ptys import LINE, open_pty, read_master
 from tests.virtual_clock import on_virtual_clock

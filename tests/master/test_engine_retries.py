@@ -13,8 +13,8 @@ import pytest
 from aiortu.core.pdu import Request
 from aiortu.core.rtu import crc16
 from aiortu.errors import ResponseTimeout
+from aiortu.master import Master
 from aiortu.master._attempt import guard_ends
-from aiortu.master._client import Master
 from tests.master.fakes import FakeSlave, answer, line, silent
 from tests.virtual_clock import on_virtual_clock
 

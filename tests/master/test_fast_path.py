@@ -29,11 +29,10 @@ from aiortu.core.machines import (
 from aiortu.core.pdu import ReadHoldingRegistersRequest, WriteSingleRegisterRequest
 from aiortu.core.rtu import crc16
 from aiortu.errors import ConnectionLost
-from aiortu.master import MasterConfig
+from aiortu.master import Master, MasterConfig
 from aiortu.master._attempt import NO_GUARD
-from aiortu.master._client import Master
 from aiortu.master._engine import LineEngine
-from aiortu.transport._serial import open_serial
+from aiortu.transport import open_serial
 from tests.transport.ptys import LINE, Pty, open_pty, read_master
 
 TIMEOUT = 0.15

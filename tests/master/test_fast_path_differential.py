@@ -25,9 +25,9 @@ from aiortu.core.pdu import decode_request
 from aiortu.core.rtu import encode_frame
 from aiortu.core.serial import LineSettings
 from aiortu.errors import ModbusError
-from aiortu.master._client import Master
+from aiortu.master import Master
 from aiortu.testing import VirtualBus
-from aiortu.transport._serial import open_serial
+from aiortu.transport import open_serial
 from tests.master.fakes import standard_reply
 from tests.transport.ptys import LINE, Pty, open_pty, read_master
 

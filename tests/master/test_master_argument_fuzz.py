@@ -17,10 +17,8 @@ from hypothesis import strategies as st
 from aiortu.core.pdu import RawPDU, ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
 from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue, ModbusError, ResponseTimeout
-from aiortu.master._client import Master
-from aiortu.master._handles import BroadcastHandle, UnitHandle
-from aiortu.slave import Slave
-from aiortu.slave._store import Block, MemoryStore
+from aiortu.master import BroadcastHandle, Master, UnitHandle
+from aiortu.slave import Block, MemoryStore, Slave
 from aiortu.testing import VirtualBus
 
 UNIT = 17

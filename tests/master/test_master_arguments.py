@@ -15,7 +15,7 @@ from aiortu.core.machines import SAFE_TO_REPEAT, Failure
 from aiortu.core.pdu import RawPDU, Request, Response, WriteSingleRegisterResponse
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import InvalidRequest, InvalidValue, ModbusError
-from aiortu.master._client import Master
+from aiortu.master import Master
 from aiortu.testing import VirtualBus
 from tests.virtual_clock import on_virtual_clock
 

@@ -202,7 +202,7 @@ async def test_many_callers_share_one_line() -> None:
 
 @on_virtual_clock
 async def test_cancelled_callers_never_desynchronise_the_line() -> None:
-    # Also run under trio by tests/test_trio.py: anyio's task list, not asyncio's.
+    # Also run under trio by tests/project/test_trio.py: anyio's task list, not asyncio's.
     generator = random.Random(4)
     tasks_before = len(anyio.get_running_tasks())
 

@@ -9,19 +9,16 @@ from hypothesis import strategies as st
 from aiortu.core.errors import CRCError, FrameError, MalformedPDU, ResponseTimeout
 from aiortu.core.machines import (
     Failure,
+    MasterEvent,
+    MasterMachine,
+    MasterMachineError,
+    MasterState,
     OutcomeKind,
     RetryPolicy,
     SkipReason,
     Transaction,
 )
-from aiortu.core.machines._master_machine import (
-    TRANSITIONS,
-    MasterEvent,
-    MasterMachine,
-    MasterMachineError,
-    MasterState,
-    next_state,
-)
+from aiortu.core.machines._master_machine import TRANSITIONS, next_state
 from aiortu.core.pdu import (
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,

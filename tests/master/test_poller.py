@@ -21,8 +21,7 @@ from aiortu.core.pdu import (
     Request,
 )
 from aiortu.core.rtu import encode_frame
-from aiortu.master._poller import CycleReport, Sample, UnitHealth, UnitSkipped
-from aiortu.master._stats import UnitState
+from aiortu.master import CycleReport, Sample, UnitHealth, UnitSkipped, UnitState
 from aiortu.testing import VirtualBus
 from tests.virtual_clock import on_virtual_clock
 

@@ -14,8 +14,8 @@ import pytest
 
 import aiortu
 from aiortu.core.pdu import Request
-from aiortu.testing._pty_bus import make_raw
-from aiortu.transport._fd import FileDescriptorStream
+from aiortu.testing import make_raw
+from aiortu.transport import FileDescriptorStream
 
 from .fakes import FakeSlave, answer, register_value
 

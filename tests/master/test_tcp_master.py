@@ -16,8 +16,7 @@ from aiortu.core.mbap import Adu, AduDecoder, encode_adu
 from aiortu.core.pdu import ExceptionPDU, RawPDU
 from aiortu.errors import ExceptionResponse, PortNotFound, ResponseTimeout
 from aiortu.line import Link
-from aiortu.slave._handlers import RequestContext
-from aiortu.slave._store import Table
+from aiortu.slave import RequestContext, Table
 from aiortu.transport import ModbusTcpCounters, ModbusTcpStream
 from tests.slave.tcp_helpers import UNIT, device, tcp_server
 

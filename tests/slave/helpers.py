@@ -10,9 +10,8 @@ import anyio
 
 from aiortu.core.model import DataStore
 from aiortu.core.rtu import CANNOT_KNOW, decode_frame, encode_frame, expected_response_length
-from aiortu.slave import Slave
-from aiortu.slave._store import Block, MemoryStore
-from aiortu.testing._virtual_bus import VirtualEndpoint, virtual_pair
+from aiortu.slave import Block, MemoryStore, Slave
+from aiortu.testing import VirtualEndpoint, virtual_pair
 
 __all__ = ("UNIT", "RawMaster", "example_store", "slave_line")
 

@@ -11,8 +11,7 @@ import anyio
 import anyio.abc
 
 from aiortu.core.mbap import Adu, AduDecoder, encode_adu
-from aiortu.slave._store import MemoryStore, ServerId
-from aiortu.slave._tcp_server import ModbusTcpServer
+from aiortu.slave import MemoryStore, ModbusTcpServer, ServerId
 
 __all__ = ("UNIT", "TcpClient", "connect", "device", "tcp_server")
 

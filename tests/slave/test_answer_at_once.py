@@ -23,10 +23,9 @@ import aiortu
 from aiortu.core.machines import SlaveState
 from aiortu.core.pdu import RawPDU, ReadHoldingRegistersResponse
 from aiortu.core.rtu import CANNOT_KNOW, FrameReceived, encode_frame, expected_response_length
-from aiortu.slave import Slave
+from aiortu.slave import Slave, Table
 from aiortu.slave._answer_at_once import FAST_PATHS, Taken
-from aiortu.slave._store import Table
-from aiortu.testing._virtual_bus import virtual_pair
+from aiortu.testing import virtual_pair
 
 from .helpers import UNIT, RawMaster, example_store, slave_line
 

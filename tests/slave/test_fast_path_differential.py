@@ -28,9 +28,8 @@ import pytest
 from aiortu.core.machines import SlaveState
 from aiortu.core.rtu import CANNOT_KNOW, ReceiverState, encode_frame, expected_response_length
 from aiortu.core.serial import LineSettings
-from aiortu.slave import Slave
-from aiortu.slave._store import Block, MemoryStore, Table
-from aiortu.testing._virtual_bus import virtual_pair
+from aiortu.slave import Block, MemoryStore, Slave, Table
+from aiortu.testing import virtual_pair
 from aiortu.transport import open_stream
 
 FAST = 17

@@ -6,8 +6,8 @@ import random
 
 from aiortu.core.codes import FunctionCode
 from aiortu.core.rtu import encode_frame
+from aiortu.slave import Block, MemoryStore, Table
 from aiortu.slave._answer_at_once import FAST_PATHS
-from aiortu.slave._store import Block, MemoryStore, Table
 
 from .helpers import UNIT, slave_line
 

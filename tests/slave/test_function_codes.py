@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from aiortu.slave._store import MemoryStore, Table
+from aiortu.slave import MemoryStore, Table
 
 from .helpers import UNIT, example_store, slave_line
 

@@ -16,8 +16,7 @@ import anyio.lowlevel
 import pytest
 
 from aiortu.core.pdu import ExceptionPDU, RawPDU
-from aiortu.slave._handlers import Reply
-from aiortu.slave._store import Change, MemoryStore, Table
+from aiortu.slave import Change, MemoryStore, Reply, Table
 
 from .helpers import UNIT, example_store, slave_line
 

@@ -13,11 +13,16 @@ import aiortu
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.pdu import ReadHoldingRegistersResponse
 from aiortu.errors import ExceptionResponse, ResponseTimeout
-from aiortu.slave import Slave
-from aiortu.slave._handlers import Reply, RequestContext
-from aiortu.slave._routes import RangeAccess
-from aiortu.slave._store import AsyncDataStore, MemoryStore, Table
-from aiortu.testing._virtual_bus import virtual_pair
+from aiortu.slave import (
+    AsyncDataStore,
+    MemoryStore,
+    RangeAccess,
+    Reply,
+    RequestContext,
+    Slave,
+    Table,
+)
+from aiortu.testing import virtual_pair
 
 from .helpers import UNIT, example_store, slave_line
 

@@ -12,9 +12,8 @@ import anyio
 import pytest
 
 from aiortu.core.serial import LineSettings
-from aiortu.slave import Slave
-from aiortu.slave._store import MemoryStore, ServerId, Table
-from aiortu.transport._fd import FileDescriptorStream
+from aiortu.slave import MemoryStore, ServerId, Slave, Table
+from aiortu.transport import FileDescriptorStream
 
 pymodbus_client = pytest.importorskip("pymodbus.client")
 file_message = pytest.importorskip("pymodbus.pdu.file_message")

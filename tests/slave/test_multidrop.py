@@ -16,7 +16,7 @@ import pytest
 import aiortu
 from aiortu.core.pdu import pack_registers, unpack_registers
 from aiortu.core.rtu import encode_frame
-from aiortu.slave._store import MemoryStore, Table
+from aiortu.slave import MemoryStore, Table
 
 from .helpers import slave_line
 

@@ -9,8 +9,7 @@ from pathlib import Path
 import pytest
 
 from aiortu.errors import ExceptionResponse, InvalidValue
-from aiortu.slave._config import ConfigError, load_config, parse_config
-from aiortu.slave._store import MemoryStore, Table
+from aiortu.slave import ConfigError, MemoryStore, Table, load_config, parse_config
 
 EXAMPLE = Path(__file__).parents[2] / "examples" / "devices.toml"
 

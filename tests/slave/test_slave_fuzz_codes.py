@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from aiortu.core.rtu import crc16, decode_frame, encode_frame
-from aiortu.slave._store import MemoryStore, ServerId
+from aiortu.slave import MemoryStore, ServerId
 
 from .helpers import UNIT, slave_line
 

@@ -12,9 +12,8 @@ import pytest
 import aiortu
 from aiortu.core.rtu import encode_frame
 from aiortu.core.serial import LineSettings
-from aiortu.slave import Slave
-from aiortu.slave._store import MemoryStore, Table
-from aiortu.transport._fd import FileDescriptorStream
+from aiortu.slave import MemoryStore, Slave, Table
+from aiortu.transport import FileDescriptorStream
 
 pymodbus_client = pytest.importorskip("pymodbus.client")
 

@@ -10,10 +10,8 @@ import pytest
 from aiortu.core.pdu import RawPDU, ReadHoldingRegistersRequest
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import ConnectionLost, ExceptionResponse, InvalidValue
-from aiortu.slave import Slave
-from aiortu.slave._handlers import RequestContext
-from aiortu.slave._store import Change, MemoryStore, Table
-from aiortu.testing._virtual_bus import virtual_pair
+from aiortu.slave import Change, MemoryStore, RequestContext, Slave, Table
+from aiortu.testing import virtual_pair
 
 from .helpers import UNIT, example_store, slave_line
 

@@ -8,14 +8,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.core.machines._slave_machine import (
-    TRANSITIONS,
+from aiortu.core.machines import (
     SerialLineCounters,
     SlaveEvent,
     SlaveMachine,
     SlaveMachineError,
     SlaveState,
 )
+from aiortu.core.machines._slave_machine import TRANSITIONS
 
 
 @given(st.sampled_from(SlaveState), st.sampled_from(SlaveEvent))

@@ -7,7 +7,7 @@ import pytest
 
 from aiortu.core.codes import ExceptionCode
 from aiortu.errors import ExceptionResponse, InvalidValue
-from aiortu.slave._store import Block, Change, DataStore, MemoryStore, Table
+from aiortu.slave import Block, Change, DataStore, MemoryStore, Table
 
 HR = Table.HOLDING_REGISTERS
 

@@ -8,7 +8,7 @@ from typing import Any
 import anyio
 import pytest
 
-from aiortu.slave._store import MemoryStore, Table
+from aiortu.slave import MemoryStore, Table
 from tests.slave.tcp_helpers import UNIT, device, tcp_server
 
 pymodbus_client = pytest.importorskip("pymodbus.client")

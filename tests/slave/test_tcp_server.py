@@ -13,10 +13,15 @@ import pytest
 
 from aiortu.core.pdu import RawPDU
 from aiortu.errors import InvalidValue
-from aiortu.slave import RtuOverTcpServer, serve
-from aiortu.slave._handlers import Reply, RequestContext
-from aiortu.slave._store import MemoryStore, Table
-from aiortu.slave._tcp_server import ModbusTcpServer
+from aiortu.slave import (
+    MemoryStore,
+    ModbusTcpServer,
+    Reply,
+    RequestContext,
+    RtuOverTcpServer,
+    Table,
+    serve,
+)
 from tests.slave.helpers import slave_line
 from tests.slave.tcp_helpers import UNIT, connect, device, tcp_server
 

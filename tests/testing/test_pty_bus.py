@@ -11,7 +11,7 @@ import serial
 
 from aiortu.core.serial import LineSettings
 from aiortu.testing import PtyBus
-from aiortu.transport._fd import FileDescriptorStream
+from aiortu.transport import FileDescriptorStream
 
 pytestmark = pytest.mark.timeout(20)
 

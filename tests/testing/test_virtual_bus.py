@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
-from aiortu.line._wake_timer import WakeTimer
+from aiortu.line import WakeTimer
 from aiortu.testing import FaultPlan, VirtualBus, virtual_pair
 
 pytestmark = pytest.mark.timeout(30)

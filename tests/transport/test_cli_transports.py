@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from aiortu.testing import PtyBus
-from tests.cli_helpers import run_aiortu, start_aiortu, stop
+from tests.cli.cli_helpers import run_aiortu, start_aiortu, stop
 from tests.transport.certificates import Authority
 
 pytestmark = pytest.mark.timeout(60)

@@ -7,7 +7,7 @@ import itertools
 from hypothesis import given
 from hypothesis import strategies as st
 
-from aiortu.transport._echo import LocalEchoFilter
+from aiortu.transport import LocalEchoFilter
 
 
 def split(data: bytes, cuts: list[int]) -> list[bytes]:

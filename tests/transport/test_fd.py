@@ -7,8 +7,8 @@ import os
 import anyio
 import pytest
 
-from aiortu.testing._pty_bus import make_raw
-from aiortu.transport._fd import FileDescriptorStream
+from aiortu.testing import make_raw
+from aiortu.transport import FileDescriptorStream
 
 pytestmark = pytest.mark.timeout(10)
 

@@ -17,7 +17,7 @@ from aiortu.errors import (
     PortPermissionDenied,
     UnsupportedSettings,
 )
-from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
+from aiortu.transport import RS485Options, SerialAttribute, SerialStream, open_serial
 from tests.transport.ptys import LINE, Pty, open_pty, pty_keeps_even_parity, read_master
 
 REQUEST = bytes.fromhex("1103006b00037687")

@@ -8,10 +8,9 @@ import pytest
 import aiortu
 from aiortu.core.rtu import DiscardReason, FrameDiscarded, FrameReceived, Role, crc16
 from aiortu.errors import ConnectionLost, ResponseTimeout
-from aiortu.line import ReplyTap
-from aiortu.line._link import Link
-from aiortu.master._client import Master
-from aiortu.transport._serial import open_serial
+from aiortu.line import Link, ReplyTap
+from aiortu.master import Master
+from aiortu.transport import open_serial
 from tests.transport.ptys import LINE, open_pty, read_master
 
 REPLY = bytes.fromhex("1103060ae10000000000")  # unit 17, FC 03, 3 registers, no CRC yet

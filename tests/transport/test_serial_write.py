@@ -10,7 +10,7 @@ from typing import Any
 
 import anyio
 
-from aiortu.transport._serial import SerialStream, open_serial
+from aiortu.transport import SerialStream, open_serial
 from tests.transport.ptys import LINE, Pty, open_pty
 
 _FILL_LIMIT = 16 * 1024 * 1024

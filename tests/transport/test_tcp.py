@@ -11,7 +11,8 @@ import pytest
 from anyio.abc import SocketAttribute, SocketListener, SocketStream
 
 from aiortu.errors import InvalidValue, PortNotFound
-from aiortu.transport._tcp import format_tcp_url, open_rtu_over_tcp
+from aiortu.transport import open_rtu_over_tcp
+from aiortu.transport._tcp import format_tcp_url
 
 REQUEST = bytes.fromhex("1103006b00037687")
 REPLY = bytes.fromhex("1103060ae10000000000")

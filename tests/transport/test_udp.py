@@ -25,7 +25,7 @@ from aiortu.transport import (
     parse_listen_url,
     parse_port_url,
 )
-from tests.cli_helpers import run_aiortu, start_aiortu, stop
+from tests.cli.cli_helpers import run_aiortu, start_aiortu, stop
 
 pytestmark = pytest.mark.timeout(30)
 

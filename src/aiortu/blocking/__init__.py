@@ -17,6 +17,7 @@ in the calling thread (Jupyter, IPython, `python -m asyncio`). See `docs/blockin
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.blocking._master import (
     BlockingBroadcastHandle,
     BlockingMaster,
@@ -82,3 +83,5 @@ pty_bus = running(
     device `paths`), with its arguments.""",
     "Running[PtyBus]",
 )
+
+publish(__name__, __all__, globals())

@@ -10,6 +10,7 @@ Sparkplug B's protobuf payloads itself: it needs no package beyond aiortu's. See
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.bridge._bridge import Bridge, BridgeStats, run
 from aiortu.bridge._broker import Broker, BrokerError, parse_broker_url
 from aiortu.bridge._config import (
@@ -67,3 +68,5 @@ __all__ = (
     "run",
     "shipped_profiles",
 )
+
+publish(__name__, __all__, globals())

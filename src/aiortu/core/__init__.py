@@ -11,6 +11,7 @@ re-exports the names most programs need.
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core import machines, mbap, model, pdu, rtu, serial
 from aiortu.core.codes import (
     DeviceIdObject,
@@ -43,3 +44,5 @@ __all__ = (
     "rtu",
     "serial",
 )
+
+publish(__name__, __all__, globals())

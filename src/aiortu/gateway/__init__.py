@@ -16,6 +16,7 @@ import sys
 import types
 from typing import Any
 
+from aiortu._public import publish
 from aiortu.gateway._lines import GatewayLine
 from aiortu.gateway._open import (
     DEFAULT_RETRIES,
@@ -70,3 +71,5 @@ class _CallableModule(types.ModuleType):
 
 
 sys.modules[__name__].__class__ = _CallableModule
+
+publish(__name__, __all__, globals())

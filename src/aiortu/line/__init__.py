@@ -9,6 +9,7 @@ callbacks (the asyncio loop's own, anyio's elsewhere).
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.line._link import Link, LinkEvent, LinkListener
 from aiortu.line._native import NativeWaits, Waiter, native_waits
 from aiortu.line._push_reader import ReplyTap
@@ -25,3 +26,5 @@ __all__ = (
     "create_wake_timer",
     "native_waits",
 )
+
+publish(__name__, __all__, globals())

@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from aiortu._public import publish
 from aiortu.errors import UnitOffline, UnitSkipped
 from aiortu.master._client import Master, open_master
 from aiortu.master._config import MasterConfig, ReconnectPolicy, TimingPolicy
@@ -81,4 +82,8 @@ def __getattr__(name: str) -> Any:
         raise AttributeError(f"module 'aiortu.master' has no attribute {name!r}")
     value = getattr(importlib.import_module(module), name)
     globals()[name] = value
+    publish(__name__, (name,), globals())
     return value
+
+
+publish(__name__, __all__, globals())

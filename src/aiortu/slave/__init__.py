@@ -9,6 +9,7 @@ a port or a URL first, or listens on a `tcp://` (Modbus TCP,
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.slave._config import ConfigError, DeviceConfig, load_config, parse_config
 from aiortu.slave._handlers import (
     BUILTIN_HANDLERS,
@@ -82,3 +83,5 @@ __all__ = (
     "parse_config",
     "serve",
 )
+
+publish(__name__, __all__, globals())

@@ -17,6 +17,7 @@ See `docs/testing.md`.
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.testing._faults import FaultedChunk, FaultInjector, FaultPlan, FaultStats
 from aiortu.testing._mock_line import MockHandler, MockLine
 from aiortu.testing._pty_bus import PtyBus, make_raw
@@ -36,3 +37,5 @@ __all__ = (
     "make_raw",
     "virtual_pair",
 )
+
+publish(__name__, __all__, globals())

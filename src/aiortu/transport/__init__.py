@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from anyio.abc import ByteStream
 
+from aiortu._public import publish
 from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.transport._ascii_stream import ASCII_BYTESIZE, AsciiStream, check_ascii_settings
@@ -174,6 +175,7 @@ def __getattr__(name: str) -> Any:
         raise AttributeError(f"module 'aiortu.transport' has no attribute {name!r}")
     value = getattr(importlib.import_module("aiortu.transport._serial"), name)
     globals()[name] = value
+    publish(__name__, (name,), globals())
     return value
 
 
@@ -272,3 +274,6 @@ def _ascii_framing(
             raise InvalidValue("ascii_timeout", timeout, "given with framing='ascii' only")
         return None
     return {} if timeout is None else {"timeout": timeout}
+
+
+publish(__name__, __all__, globals())

@@ -34,8 +34,8 @@ from tests.core.strategies_serial_files_devid import (
     mutations,
 )
 
-REQUESTS = [cls for cls in REQUEST_STRATEGIES if cls.__module__ == sl.__name__]
-RESPONSES = [cls for cls in RESPONSE_STRATEGIES if cls.__module__ == sl.__name__]
+REQUESTS = [cls for cls in REQUEST_STRATEGIES if vars(sl).get(cls.__name__) is cls]
+RESPONSES = [cls for cls in RESPONSE_STRATEGIES if vars(sl).get(cls.__name__) is cls]
 CODES = (0x07, 0x08, 0x0B, 0x0C, 0x11)
 D = DiagnosticSubFunction
 

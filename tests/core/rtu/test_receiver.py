@@ -19,25 +19,22 @@ from aiortu.core.pdu import (
 from aiortu.core.rtu import (
     MAX_FRAME_LENGTH,
     MIN_FRAME_LENGTH,
-    crc16,
-    encode_frame,
-    expected_request_length,
-    expected_response_length,
-)
-from aiortu.core.rtu._receiver import (
     TOLERANT_FRAME_SILENCE,
-    TRANSITIONS,
     DiscardReason,
     FrameDiscarded,
     FrameReceived,
     Receiver,
     ReceiverError,
     ReceiverEvent,
-    ReceiverOutput,
     ReceiverState,
     Role,
     TimingMode,
+    crc16,
+    encode_frame,
+    expected_request_length,
+    expected_response_length,
 )
+from aiortu.core.rtu._receiver import TRANSITIONS, ReceiverOutput
 from aiortu.core.serial import LineSettings
 from tests.core.frame_strategies import Sample, customs, has_accidental_prefix, requests, responses
 

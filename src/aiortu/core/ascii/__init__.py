@@ -14,6 +14,7 @@ library alone and takes time as an argument.
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core.ascii._frame import (
     ASCII_START,
     CR,
@@ -57,3 +58,5 @@ __all__ = (
     "encode_ascii_frame",
     "lrc",
 )
+
+publish(__name__, __all__, globals())

@@ -3,6 +3,7 @@ event log, with the drawing of their tables."""
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core.machines._comm_events import (
     EVENT_ENTERED_LISTEN_ONLY,
     EVENT_RESTART,
@@ -76,3 +77,5 @@ __all__ = (
     "send_event",
     "state_diagram",
 )
+
+publish(__name__, __all__, globals())

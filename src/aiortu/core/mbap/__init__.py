@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core.mbap._adu import (
     HEADER_LENGTH,
     MAX_ADU_LENGTH,
@@ -23,3 +24,5 @@ __all__ = (
     "decode_adu",
     "encode_adu",
 )
+
+publish(__name__, __all__, globals())

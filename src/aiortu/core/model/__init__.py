@@ -12,6 +12,7 @@ values. Nothing here does I/O but reading the files it is asked to read.
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core.model._addressing import (
     ADDRESS_RANGE,
     NUMBER_RANGE,
@@ -205,3 +206,5 @@ __all__ = (
     "uint32_to_registers",
     "uint64_to_registers",
 )
+
+publish(__name__, __all__, globals())

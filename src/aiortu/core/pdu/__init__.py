@@ -23,6 +23,7 @@ boundary. Function codes without a class (the user-defined ones, vendor extensio
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core.pdu._base import (
     ADDRESS_RANGE,
     BYTE_RANGE,
@@ -204,3 +205,5 @@ __all__ = (
     "unpack_bits",
     "unpack_registers",
 )
+
+publish(__name__, __all__, globals())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core.rtu._bus_decoder import (
     BusDecoder,
     CrcStatus,
@@ -73,3 +74,5 @@ __all__ = (
     "expected_request_length",
     "expected_response_length",
 )
+
+publish(__name__, __all__, globals())

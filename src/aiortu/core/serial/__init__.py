@@ -3,6 +3,7 @@ the character times (t1.5, t3.5) they give."""
 
 from __future__ import annotations
 
+from aiortu._public import publish
 from aiortu.core.serial._timing import (
     FIXED_T1_5,
     FIXED_T3_5,
@@ -18,3 +19,5 @@ __all__ = (
     "LineSettings",
     "Parity",
 )
+
+publish(__name__, __all__, globals())
