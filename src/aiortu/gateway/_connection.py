@@ -18,7 +18,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import time
 from collections import deque
 from typing import Final, Generic, TypeVar
@@ -82,7 +81,7 @@ class Connection(Generic[R]):
         """The connection's requests (set while it is served)."""
         self.pending: deque[R] = deque()
         """Requests started that no worker has taken yet (see `put`)."""
-        self._parked: list[asyncio.Future[None]] = []
+        self._parked: list[anyio.Event] = []
         self._turns: dict[Turns, int] = {}
         self._freed: anyio.Event | None = None
         self._send_lock = anyio.Lock(fast_acquire=True)
@@ -116,19 +115,16 @@ class Connection(Generic[R]):
         """Queue `request` for the connection's workers and wake one that is parked; False
         when none is (start one: at most one per request in flight is ever needed)."""
         self.pending.append(request)
-        parked = self._parked
-        while parked:
-            worker = parked.pop()
-            if not worker.done():  # not cancelled with the connection
-                worker.set_result(None)
-                return True
-        return False
+        if not self._parked:
+            return False
+        self._parked.pop().set()
+        return True
 
     async def park(self) -> None:
         """Wait, as a worker with nothing to do, until `put` queues a request."""
-        worker = asyncio.get_running_loop().create_future()
+        worker = anyio.Event()
         self._parked.append(worker)
-        await worker
+        await worker.wait()
 
     async def send(self, request: Adu, reply: bytes) -> bool:
         """Send `reply` with `request`'s ids; a client gone leaves (see `leave`). False when
