@@ -18,9 +18,9 @@ import pytest
 import aiortu
 from aiortu.testing import PtyBus
 from aiortu.transport import AsciiStream
+from tests.peers.venvs import minimalmodbus_python, tmodbus_python
 from tests.pymodbus_server import COILS, HOLDING_REGISTERS
 from tests.transport import pymodbus_peers
-from tests.transport.peer_venvs import minimalmodbus_python, tmodbus_python
 from tests.transport.test_interop_tmodbus import tmodbus_server
 
 pymodbus_client = pytest.importorskip("pymodbus.client")

@@ -1,5 +1,5 @@
 """Modbus UDP, Modbus/TCP Security and Modbus ASCII against tmodbus 1.1.0, both ways, its side
-in a process of its own, from a venv of its own (see tests/transport/peer_venvs.py)."""
+in a process of its own, from a venv of its own (see tests/peers/venvs.py)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from typing import Any
 import pytest
 
 import aiortu
+from tests.peers.venvs import tmodbus_python
 from tests.transport.certificates import Authority
-from tests.transport.peer_venvs import tmodbus_python
 
 pytestmark = [pytest.mark.interop, pytest.mark.timeout(120)]
 

@@ -304,6 +304,24 @@ def run_master(args: argparse.Namespace, body: Callable[[], Awaitable[int]]) -> 
     return code
 
 
+async def until_signal(work: Callable[[], Awaitable[object]]) -> None:
+    """Await `work()` until it ends or SIGINT or SIGTERM comes; a signal ends it cleanly."""
+    import signal
+
+    import anyio
+
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async with anyio.create_task_group() as tasks:
+
+            async def stop_on_signal() -> None:
+                async for _ in signals:
+                    tasks.cancel_scope.cancel()
+
+            tasks.start_soon(stop_on_signal)
+            await work()
+            tasks.cancel_scope.cancel()
+
+
 def _first(group: BaseExceptionGroup[BaseException]) -> BaseException:
     error: BaseException = group
     while isinstance(error, BaseExceptionGroup):

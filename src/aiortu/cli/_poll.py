@@ -15,12 +15,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 from enum import Enum
 from typing import TextIO
-
-import anyio
 
 from aiortu.cli import SUMMARIES, Subparsers
 from aiortu.cli._arguments import add_no_reconnect, add_timing, number, plural
@@ -35,6 +32,7 @@ from aiortu.cli._master import (
     reference,
     run_master,
     seconds,
+    until_signal,
 )
 from aiortu.core.model import Layout, Point, Reference, ValueType, format_reference
 from aiortu.errors import (
@@ -365,16 +363,7 @@ def run(args: argparse.Namespace) -> int:
                 poller.on_cycle(printer.show)
             if not args.reconnect:
                 poller.on_cycle(_fail_on_lost_line)
-            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
-                async with anyio.create_task_group() as tasks:
-
-                    async def stop_on_signal() -> None:
-                        async for _ in signals:
-                            tasks.cancel_scope.cancel()
-
-                    tasks.start_soon(stop_on_signal)
-                    await poller.run(cycles=args.cycles, duration=args.duration)
-                    tasks.cancel_scope.cancel()
+            await until_signal(lambda: poller.run(cycles=args.cycles, duration=args.duration))
         return 0
 
     return run_master(args, body)

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import random
-import signal
 import sys
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
@@ -31,6 +30,7 @@ from aiortu.cli._master import (
     open_from_args,
     run_master,
     unit,
+    until_signal,
 )
 from aiortu.core.model import (
     Profile,
@@ -313,16 +313,7 @@ def run_poll(args: argparse.Namespace) -> int:
         async with open_from_args(args, reconnect=args.reconnect) as master:
             devices = [Device(master, u, profile) for u in units]
             poller = ProfilePoller(devices, on_reading=show)
-            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
-                async with anyio.create_task_group() as tasks:
-
-                    async def stop_on_signal() -> None:
-                        async for _ in signals:
-                            tasks.cancel_scope.cancel()
-
-                    tasks.start_soon(stop_on_signal)
-                    await poller.run(cycles=args.cycles, duration=args.duration)
-                    tasks.cancel_scope.cancel()
+            await until_signal(lambda: poller.run(cycles=args.cycles, duration=args.duration))
         return 0
 
     return run_master(args, body)

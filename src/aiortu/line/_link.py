@@ -268,8 +268,10 @@ class Link:
         else:
             self.backend_clock = self.clock == backend.current_time
         now = self.clock()
-        if not getattr(self.stream, "starts_between_frames", False):
+        if not (self.whole_frames or getattr(self.stream, "starts_between_frames", False)):
             # A wire may be mid-frame when the port opens: wait for silence first (INIT).
+            # A stream of whole frames (Modbus TCP, UDP) never is: its first reply may come
+            # sooner than a t3.5 after the open, and is a reply, not noise.
             self.receiver.reset(now)
         # A port just opened has heard nothing: someone may be mid-frame (a master whose
         # port came back after an unplug), so the first frame waits frame_gap too.

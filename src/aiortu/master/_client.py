@@ -80,9 +80,10 @@ _STATS_UNITS = range(248)
 def _unit_range(stream: object) -> range:
     """The unit ids `stream`'s framing carries: any byte in an MBAP header, else (a serial
     line, or a seam given in its place) 1..247."""
-    from aiortu.transport import ModbusTcpStream
+    from aiortu.transport import ModbusTcpStream, PushDatagramStream
 
-    return MBAP_UNIT_RANGE if isinstance(stream, ModbusTcpStream) else UNIT_RANGE
+    mbap = isinstance(stream, ModbusTcpStream | PushDatagramStream)
+    return MBAP_UNIT_RANGE if mbap else UNIT_RANGE
 
 
 def _known_form(pdu: object) -> Request:

@@ -45,14 +45,12 @@ from __future__ import annotations
 
 import inspect
 import math
-from collections.abc import AsyncIterator, Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from types import TracebackType
-from typing import Self, TypeVar
+from typing import TypeVar
 
 import anyio
 import anyio.abc
-from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
 from aiortu.core.codes import ExceptionCode
 from aiortu.core.model import (
@@ -81,6 +79,7 @@ from aiortu.errors import (
     ModbusError,
     UnitSkipped,
 )
+from aiortu.master._background import BackgroundPoll
 from aiortu.master._client import Master
 from aiortu.master._stats import UnitState, UnitStats
 
@@ -223,7 +222,7 @@ def _planned_groups(
     ]
 
 
-class Poller:
+class Poller(BackgroundPoll[Sample]):
     """Polls `points` through `master` (see the module docstring); an async context manager.
 
     `interval` is the default seconds from the start of one cycle to the start of the
@@ -235,6 +234,8 @@ class Poller:
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for an empty point list, duplicate names
     or limits outside the spec.
     """
+
+    _task_name = "aiortu poller"
 
     def __init__(
         self,
@@ -279,10 +280,7 @@ class Poller:
         self._last_probe: dict[int, float] = {}
         self._probe_slots: set[int] | None = None
         self._skipped: dict[int, int] = {}
-        self._send: MemoryObjectSendStream[Sample]
-        self._receive: MemoryObjectReceiveStream[Sample]
-        self._send, self._receive = anyio.create_memory_object_stream[Sample](max_pending)
-        self._task_group: anyio.abc.TaskGroup | None = None
+        self._open_stream(max_pending)
         self.dropped = 0
         """Samples dropped because the iterating consumer fell behind."""
         self.split_reads = 0
@@ -361,33 +359,6 @@ class Poller:
         for group in self._groups:
             samples.extend(await self._cycle(group))
         return samples
-
-    async def __aenter__(self) -> Self:
-        self._task_group = anyio.create_task_group()
-        await self._task_group.__aenter__()
-        self._task_group.start_soon(self.run, name="aiortu poller")
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> bool | None:
-        task_group, self._task_group = self._task_group, None
-        if task_group is None:
-            return None
-        task_group.cancel_scope.cancel()
-        return await task_group.__aexit__(exc_type, exc, traceback)
-
-    def __aiter__(self) -> AsyncIterator[Sample]:
-        return self
-
-    async def __anext__(self) -> Sample:
-        try:
-            return await self._receive.receive()
-        except (anyio.EndOfStream, anyio.ClosedResourceError):
-            raise StopAsyncIteration from None
 
     # -- the cycles ------------------------------------------------------------------
 
@@ -506,15 +477,7 @@ class Poller:
     async def _deliver(self, sample: Sample) -> None:
         for callback in list(self._sample_callbacks):
             await _call(callback, sample)
-        try:
-            self._send.send_nowait(sample)
-        except anyio.WouldBlock:
-            # Drop the oldest: a consumer that catches up wants the newest values.
-            self._receive.receive_nowait()
-            self.dropped += 1
-            self._send.send_nowait(sample)
-        except anyio.ClosedResourceError:
-            pass
+        self._publish(sample)
 
 
 def _split_for(read: PlannedRead, failure: ModbusError) -> list[PlannedRead]:

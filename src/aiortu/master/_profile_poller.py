@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import inspect
 import math
-from collections.abc import AsyncIterator, Callable, Iterable
-from types import TracebackType
-from typing import Self
+from collections.abc import Callable, Iterable
 
 import anyio
 import anyio.abc
 
 from aiortu.errors import InvalidValue
+from aiortu.master._background import BackgroundPoll
 from aiortu.master._device import Device, Reading
 
 __all__ = ("ProfilePoller",)
@@ -33,9 +32,11 @@ ReadingCallback = Callable[[Reading], object]
 """Called with every reading (a plain or an async function)."""
 
 
-class ProfilePoller:
+class ProfilePoller(BackgroundPoll[Reading]):
     """Polls `devices` by their profiles' poll classes (see the module docstring); an async
     context manager and an async iterator of readings."""
+
+    _task_name = "aiortu profile poller"
 
     def __init__(
         self,
@@ -56,8 +57,7 @@ class ProfilePoller:
         self._callbacks: list[ReadingCallback] = (
             [on_reading] if callable(on_reading) else list(on_reading or ())
         )
-        self._send, self._receive = anyio.create_memory_object_stream[Reading](max_pending)
-        self._task_group: anyio.abc.TaskGroup | None = None
+        self._open_stream(max_pending)
         self.cycles = 0
         """Cycles run, every interval counted."""
         self.dropped = 0
@@ -115,38 +115,4 @@ class ProfilePoller:
             result = callback(reading)
             if inspect.isawaitable(result):
                 await result
-        try:
-            self._send.send_nowait(reading)
-        except anyio.WouldBlock:
-            self._receive.receive_nowait()  # the newest values matter most
-            self.dropped += 1
-            self._send.send_nowait(reading)
-        except anyio.ClosedResourceError:
-            pass
-
-    async def __aenter__(self) -> Self:
-        self._task_group = anyio.create_task_group()
-        await self._task_group.__aenter__()
-        self._task_group.start_soon(self.run, name="aiortu profile poller")
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> bool | None:
-        task_group, self._task_group = self._task_group, None
-        if task_group is None:
-            return None
-        task_group.cancel_scope.cancel()
-        return await task_group.__aexit__(exc_type, exc, traceback)
-
-    def __aiter__(self) -> AsyncIterator[Reading]:
-        return self
-
-    async def __anext__(self) -> Reading:
-        try:
-            return await self._receive.receive()
-        except (anyio.EndOfStream, anyio.ClosedResourceError):
-            raise StopAsyncIteration from None
+        self._publish(reading)

@@ -62,7 +62,7 @@ from pathlib import Path
 from typing import Any
 
 from aiortu.core.codes import DeviceIdObject, ExceptionCode
-from aiortu.core.model import ServerId, Table
+from aiortu.core.model import ServerId, Table, TomlReader
 from aiortu.errors import ConfigError, InvalidValue
 from aiortu.slave._store import Block, MemoryStore
 
@@ -108,31 +108,8 @@ class DeviceConfig:
     arguments (empty without a `[modbus_tcp]` table)."""
 
 
-class _Reader:
+class _Reader(TomlReader):
     """Walks the parsed TOML, raising ConfigError with the key path."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def fail(self, key: str, problem: str) -> ConfigError:
-        return ConfigError(self.source, key, problem)
-
-    def table(self, value: object, key: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.fail(key, f"must be a table, not {_kind(value)}")
-        return value
-
-    def tables(self, value: object, key: str) -> list[dict[str, Any]]:
-        if not isinstance(value, list):
-            raise self.fail(key, f"must be an array of tables ([[{key}]]), not {_kind(value)}")
-        return [self.table(item, f"{key}[{index}]") for index, item in enumerate(value)]
-
-    def known(self, found: Mapping[str, object], allowed: frozenset[str], key: str) -> None:
-        for name in found:
-            if name not in allowed:
-                raise self.fail(
-                    f"{key}.{name}", f"unknown key (known: {', '.join(sorted(allowed))})"
-                )
 
     def integer(self, found: Mapping[str, object], name: str, key: str, allowed: range) -> int:
         if name not in found:
@@ -157,10 +134,7 @@ class _Reader:
         return bytes(self.ints(value, key, range(0x100)))
 
 
-def _kind(value: object) -> str:
-    names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
-    names.update({list: "an array", dict: "a table"})
-    return names.get(type(value), type(value).__name__)
+_kind = TomlReader.kind
 
 
 def load_config(path: str | Path) -> DeviceConfig:

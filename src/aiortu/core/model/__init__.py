@@ -82,6 +82,7 @@ from aiortu.core.model._sunspec import (
     model_points,
     sunspec_layout,
 )
+from aiortu.core.model._toml_reader import TomlReader
 from aiortu.core.model._values import (
     Layout,
     ValueType,
@@ -151,6 +152,7 @@ __all__ = (
     "SupportsFileRecords",
     "SupportsServerId",
     "Table",
+    "TomlReader",
     "Value",
     "ValueType",
     "answer_device_identification",

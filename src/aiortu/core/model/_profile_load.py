@@ -31,6 +31,7 @@ from aiortu.core.model._profile import (
     Profile,
     ProfilePoint,
 )
+from aiortu.core.model._toml_reader import TomlReader
 from aiortu.core.model._values import Layout
 
 __all__ = ("load_profile", "parse_profile")
@@ -120,24 +121,17 @@ def _span(table: Table, start: int, stop: int) -> str:
     return f"{table} {start}..{stop - 1}"
 
 
-def _kind(value: object) -> str:
-    names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
-    names |= {list: "an array", dict: "a table"}
-    return names.get(type(value), type(value).__name__)
+_kind = TomlReader.kind
 
 
-class _Loader:
+class _Loader(TomlReader):
     """Walks the parsed TOML; each error names the file, the line and the key path."""
 
     def __init__(self, source: str, text: str) -> None:
-        self.source = source
-        self.lines = text.splitlines()
-        self.where = ""  # the line of the entry being read, when found
+        super().__init__(source)
+        self.lines = text.splitlines()  # `where` is the line of the entry being read, when found
 
     # -- errors and plain values ----------------------------------------------------
-
-    def fail(self, key: str, problem: str) -> ConfigError:
-        return ConfigError(f"{self.source}{self.where}", key, problem)
 
     def line_of(self, header: str, name: str | None) -> str:
         """`:LINE` of the `name = "..."` of an entry (or of its first `[[header]]`)."""
@@ -148,22 +142,6 @@ class _Loader:
             if re.match(pattern, line):
                 return f":{number}"
         return ""
-
-    def table(self, value: object, key: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.fail(key, f"must be a table, not {_kind(value)}")
-        return value
-
-    def tables(self, value: object, key: str) -> list[dict[str, Any]]:
-        if not isinstance(value, list):
-            raise self.fail(key, f"must be an array of tables ([[{key}]]), not {_kind(value)}")
-        return [self.table(item, f"{key}[{i}]") for i, item in enumerate(value)]
-
-    def known(self, found: Mapping[str, object], allowed: frozenset[str], key: str) -> None:
-        for name in found:
-            if name not in allowed:
-                where = f"{key}.{name}" if key else name
-                raise self.fail(where, f"unknown key (known: {', '.join(sorted(allowed))})")
 
     def text(self, found: Mapping[str, object], name: str, key: str, default: str | None) -> str:
         value = found.get(name, default)
