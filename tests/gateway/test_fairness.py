@@ -4,13 +4,14 @@ Latency is asserted as the number of transactions on the wire, never as time."""
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable
 from contextlib import AsyncExitStack
 
 import anyio
 import pytest
 
-from aiortu.gateway import Listen
+from aiortu.gateway import Gateway, Listen
 from aiortu.slave import RequestContext
 from tests.gateway.helpers import UNIT, Line, TcpClient, client, line
 
@@ -142,6 +143,31 @@ async def test_pipelining_is_bounded_per_connection() -> None:
             gate.opened.set()
             replies = [await tcp.receive() for _ in range(5)]
             assert [reply.transaction_id for reply in replies if reply] == [0, 1, 2, 3, 4]
+
+
+async def test_a_connection_runs_its_requests_on_at_most_max_in_flight_tasks(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    tasks: set[asyncio.Task[object] | None] = set()
+    request = Gateway._request
+
+    async def spied(self: Gateway, *args: object) -> None:
+        tasks.add(asyncio.current_task())
+        await request(self, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Gateway, "_request", spied)
+    async with line(max_in_flight=3) as bench:
+        async with client(bench.gateway) as tcp:
+            for transaction_id in range(10):
+                assert await tcp.request("03 0000 0001", UNIT, transaction_id)
+            assert len(tasks) == 1  # one after the other: one worker
+            for _ in range(5):
+                for transaction_id in range(6):
+                    await tcp.send("03 0000 0001", UNIT, transaction_id)
+                replies = [await tcp.receive() for _ in range(6)]
+                assert [reply.transaction_id for reply in replies if reply] == list(range(6))
+            assert len(tasks) <= 3
+        assert bench.gateway.counters.requests == 40
 
 
 async def test_a_listener_with_a_lower_priority_value_goes_first() -> None:

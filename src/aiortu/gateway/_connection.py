@@ -8,6 +8,10 @@
   connections interleave round-robin and a newcomer waits for one request of each.
 - **Leaving.** `leave` cancels the connection's requests: those still queued are dropped
   before they reach the line, one on the wire completes there (the engine finishes it).
+- **Workers.** The connection's requests run on its own tasks, at most one per request in
+  flight: one that has answered its request takes the next queued (`put`), or waits for it
+  (`park`), so a request costs no task of its own. (The engine runs a queued transaction on
+  its caller's task, so a request needs one to wait on.)
 - **Stalls.** A reply that cannot be written (the client reads nothing) for `idle_timeout`
   seconds makes the connection idle: `send` says so, and the gateway closes it.
 """
@@ -15,7 +19,8 @@
 from __future__ import annotations
 
 import time
-from typing import Final
+from collections import deque
+from typing import Final, Generic, TypeVar
 
 import anyio
 import anyio.abc
@@ -24,6 +29,8 @@ from aiortu.core.mbap import Adu
 from aiortu.transport import Framing, RoleRules, write_now
 
 __all__ = ("GONE", "Connection", "Turns")
+
+R = TypeVar("R")
 
 GONE: Final = (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError)
 """What a stream raises once its client has gone."""
@@ -38,8 +45,8 @@ class Turns:
         self.now = 0
 
 
-class Connection:
-    """One client (see the module docstring)."""
+class Connection(Generic[R]):
+    """One client, whose requests are `R`s (see the module docstring)."""
 
     def __init__(
         self,
@@ -72,6 +79,9 @@ class Connection:
         self.open = True
         self.tasks: anyio.abc.TaskGroup | None = None
         """The connection's requests (set while it is served)."""
+        self.pending: deque[R] = deque()
+        """Requests started that no worker has taken yet (see `put`)."""
+        self._parked: list[anyio.Event] = []
         self._turns: dict[Turns, int] = {}
         self._freed: anyio.Event | None = None
         self._send_lock = anyio.Lock(fast_acquire=True)
@@ -100,6 +110,21 @@ class Connection:
         if freed is not None:
             self._freed = None
             freed.set()
+
+    def put(self, request: R) -> bool:
+        """Queue `request` for the connection's workers and wake one that is parked; False
+        when none is (start one: at most one per request in flight is ever needed)."""
+        self.pending.append(request)
+        if not self._parked:
+            return False
+        self._parked.pop().set()
+        return True
+
+    async def park(self) -> None:
+        """Wait, as a worker with nothing to do, until `put` queues a request."""
+        worker = anyio.Event()
+        self._parked.append(worker)
+        await worker.wait()
 
     async def send(self, request: Adu, reply: bytes) -> bool:
         """Send `reply` with `request`'s ids; a client gone leaves (see `leave`). False when

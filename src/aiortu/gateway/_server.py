@@ -110,7 +110,7 @@ DEFAULT_IDLE_TIMEOUT: Final = 120.0
 """Seconds a connection with nothing waiting may stay silent, unless told otherwise."""
 
 _READ_SIZE = 4096
-_REQUEST_TASK = "gateway request"  # named here: anyio would work a name out per task
+_WORKER_TASK = "gateway requests"  # named here: anyio would work a name out per task
 _UNIT_RANGE = range(1, 248)
 _ALL_UNITS = 0xFF
 _NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
@@ -170,11 +170,14 @@ class _Line(Turns):
 
 @dataclass(slots=True)
 class _Request:
-    connection: Connection
+    connection: _Client
     adu: Adu
     unit: int
     """The unit on the line (unit 255 mapped)."""
     line: _Line
+
+
+_Client = Connection[_Request]
 
 
 @dataclass(slots=True)
@@ -336,7 +339,7 @@ class Gateway:
         its certificate carries.
         """
         framing: Framing = RtuFraming() if rtu_framing else MbapFraming()
-        connection = Connection(
+        connection: _Client = Connection(
             stream,
             framing,
             priority=priority,
@@ -359,7 +362,7 @@ class Gateway:
             connection.open = False
             await stream.aclose()
 
-    async def _watch_idle(self, connection: Connection) -> None:
+    async def _watch_idle(self, connection: _Client) -> None:
         """Close `connection` once it has been silent for `idle_timeout` with nothing waiting:
         one timer per connection, not a deadline per read (the reader only notes the time)."""
         while True:
@@ -369,7 +372,7 @@ class Gateway:
                 return
             await anyio.sleep(max(self.idle_timeout - quiet, 0.0) or self.idle_timeout)
 
-    async def _read(self, connection: Connection) -> None:
+    async def _read(self, connection: _Client) -> None:
         """Read and start the connection's requests, each once its window has room, until the
         client ends its stream (return) or leaves (the connection's requests cancelled)."""
         while (adus := await self._next_requests(connection)) is not None:
@@ -377,7 +380,7 @@ class Gateway:
                 await connection.room()
                 await self._accept(connection, adu)
 
-    async def _next_requests(self, connection: Connection) -> list[Adu] | None:
+    async def _next_requests(self, connection: _Client) -> list[Adu] | None:
         """The requests the connection's next bytes (or silence) complete; None at the end of
         the client's stream. A connection to close leaves."""
         stream, framing = connection.stream, connection.framing
@@ -405,7 +408,7 @@ class Gateway:
             connection.leave()
             return None
 
-    def _idle(self, connection: Connection, why: str) -> None:
+    def _idle(self, connection: _Client, why: str) -> None:
         if not connection.open:
             return  # closed already
         self.counters.connections_idle += 1
@@ -417,7 +420,7 @@ class Gateway:
         )
         connection.leave()
 
-    async def _accept(self, connection: Connection, adu: Adu) -> None:
+    async def _accept(self, connection: _Client, adu: Adu) -> None:
         """Start `adu` on its line, or answer it at once: from the cache, or with an exception
         when its unit id names no unit (0B) or a unit no line serves (0A)."""
         self.counters.requests += 1
@@ -441,11 +444,10 @@ class Gateway:
             self.statistics.answered(line.name, unit, cached)
             await self._answer(connection, adu, cached)
             return
-        assert connection.tasks is not None
         connection.in_flight += 1
-        connection.tasks.start_soon(
-            self._request, _Request(connection, adu, unit, line), name=_REQUEST_TASK
-        )
+        if not connection.put(_Request(connection, adu, unit, line)):
+            assert connection.tasks is not None
+            connection.tasks.start_soon(self._worker, connection, name=_WORKER_TASK)
 
     @staticmethod
     def _refused_unit(line: _Line | None, unit: int, pdu: bytes) -> ExceptionCode | None:
@@ -461,7 +463,7 @@ class Gateway:
             return _NO_RESPONSE
         return None
 
-    def _refused(self, connection: Connection, unit: int, pdu: bytes) -> bool:
+    def _refused(self, connection: _Client, unit: int, pdu: bytes) -> bool:
         """Whether the connection's rules refuse `pdu` to `unit`; a refusal is counted, and
         logged as a warning the first time on each connection."""
         assert connection.rules is not None
@@ -480,7 +482,7 @@ class Gateway:
         connection.warned = True
         return True
 
-    async def _answer(self, connection: Connection, adu: Adu, reply: bytes) -> None:
+    async def _answer(self, connection: _Client, adu: Adu, reply: bytes) -> None:
         self.statistics.client(connection.client).replies += 1
         if not await connection.send(adu, reply):
             self._idle(connection, "read no reply")
@@ -495,6 +497,15 @@ class Gateway:
         return None
 
     # -- one request on the line ---------------------------------------------------------
+
+    async def _worker(self, connection: _Client) -> None:
+        """Run the connection's requests one after the other, parked between them, until the
+        connection is done: a request costs no task of its own."""
+        pending = connection.pending
+        while True:
+            while pending:
+                await self._request(pending.popleft())
+            await connection.park()
 
     async def _request(self, request: _Request) -> None:
         """Get `request`'s reply from its line and send it; its window place is freed after."""
