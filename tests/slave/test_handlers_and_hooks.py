@@ -99,7 +99,7 @@ async def test_before_hook_answers_or_refuses_and_after_hook_replaces() -> None:
 
     async with master_and_slave() as (master, slave):
         remove = slave.before_request(before)
-        slave.after_request(after)  # type: ignore[arg-type]
+        remove_after = slave.after_request(after)  # type: ignore[arg-type]
         with pytest.raises(ExceptionResponse) as refused:
             await master.read_holding_registers(UNIT, 1, 1)
         assert await master.read_holding_registers(UNIT, 2, 1) == [42]
@@ -107,6 +107,10 @@ async def test_before_hook_answers_or_refuses_and_after_hook_replaces() -> None:
         assert await master.read_holding_registers(UNIT, 0, 1) == [0]
         remove()
         assert await master.read_holding_registers(UNIT, 1, 1) == [0]
+        remove_after()
+        remove_after()  # a second removal is harmless
+        stored = example_store().read(Table.HOLDING_REGISTERS, 3, 1)
+        assert await master.read_holding_registers(UNIT, 3, 1) == stored != [99]
     assert refused.value.code == ExceptionCode.SERVER_DEVICE_BUSY
     assert slave.counters.server_busy_count == 1
     assert seen == [UNIT] * 4
