@@ -210,7 +210,6 @@ class Master(Operations):
         self.broadcast = BroadcastHandle(self)
         """The writes that may go to every unit at once (unit 0); no reply is awaited."""
         self._exit_stack: contextlib.AsyncExitStack | None = None
-        self._reads: dict[tuple[type[Request], int, int], Request] = {}
 
     # -- lifetime --------------------------------------------------------------------
 
