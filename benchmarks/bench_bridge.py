@@ -21,6 +21,7 @@ the time from a register change to its MQTT message (p50, p99).
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -237,10 +238,15 @@ def _run_one(
     subscriber: Subscriber,
     prefix: str,
     seconds: float,
+    env: dict[str, str] | None = None,
 ) -> dict[str, float]:
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    seen = len(subscriber.on(f"{prefix}/meter/f00"))
+    process = subprocess.Popen(
+        command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
+    )
     try:
-        subscriber.wait_for(lambda: len(subscriber.on(f"{prefix}/meter/f00")) >= 2, 30)
+        # Two values of this run (not of an earlier one): its start-up is over.
+        subscriber.wait_for(lambda: len(subscriber.on(f"{prefix}/meter/f00")) >= seen + 2, 30)
         time.sleep(1.0)
         cpu0, requests0 = cpu_exact(process.pid), meter.requests
         with subscriber.lock:
@@ -274,6 +280,9 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
     broker = Mosquitto()
     broker.start()
     results: dict[str, list[dict[str, float]]] = {"aiortu bridge": [], "modbus4mqtt": []}
+    baseline = f"aiortu bridge ({args.baseline})" if args.baseline else None
+    if baseline is not None:
+        results[baseline] = []
     with TemporaryDirectory() as tmp:
         folder = Path(tmp)
         meter = _Meter(_meter_profile(folder / "meter.toml"))
@@ -306,12 +315,25 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
             ],
         }
         prefixes = {"aiortu bridge": "aiortu", "modbus4mqtt": "m4m"}
+        envs: dict[str, dict[str, str] | None] = {"aiortu bridge": None, "modbus4mqtt": None}
+        if baseline is not None:
+            commands[baseline] = commands["aiortu bridge"]
+            prefixes[baseline] = "aiortu"
+            envs[baseline] = {**os.environ, "PYTHONPATH": args.baseline}
         subscriber = Subscriber(broker.port, ["aiortu/#", "m4m/#"], "bench")
         try:
             for _ in range(args.rounds):
                 for name, command in commands.items():
                     results[name].append(
-                        _run_one(name, command, meter, subscriber, prefixes[name], args.seconds)
+                        _run_one(
+                            name,
+                            command,
+                            meter,
+                            subscriber,
+                            prefixes[name],
+                            args.seconds,
+                            envs[name],
+                        )
                     )
         finally:
             subscriber.close()
@@ -334,6 +356,13 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
         for name in results
     ]
     ratio = {k: medians["aiortu bridge"][k] / medians["modbus4mqtt"][k] for k in keys[:2]}
+    cpu = "CPU us per point"
+    others = [
+        f"{name} / modbus4mqtt: CPU per published point "
+        f"{medians[name][cpu] / medians['modbus4mqtt'][cpu]:.2f}x"
+        for name in results
+        if name not in ("aiortu bridge", "modbus4mqtt")
+    ]
     return [
         f"## Against modbus4mqtt ({args.rounds} interleaved rounds of {args.seconds:.0f} s each; "
         f"medians; 1 s poll, values changing every second; aiortu at QoS {args.qos}, "
@@ -344,6 +373,7 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
         f"aiortu / modbus4mqtt: line transactions per published point "
         f"{ratio['transactions per point']:.2f}x, CPU per published point "
         f"{ratio['CPU us per point']:.2f}x",
+        *others,
     ]
 
 
@@ -367,6 +397,11 @@ def main() -> None:
     parser.add_argument("--points", type=int, default=50)
     parser.add_argument(
         "--modbus4mqtt", default="modbus4mqtt", help="the modbus4mqtt command (from its own venv)"
+    )
+    parser.add_argument(
+        "--baseline",
+        metavar="SRC",
+        help="also run the aiortu bridge of this source tree (PYTHONPATH), interleaved",
     )
     run_sections(parser.parse_args(), SECTIONS)
 

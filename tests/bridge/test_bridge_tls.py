@@ -41,6 +41,7 @@ async def test_mqtts_with_the_broker_s_ca(tmp_path: Path) -> None:
     broker = Mosquitto(extra=f"cafile {ca}\ncertfile {cert}\nkeyfile {key}\n"
                              f"listener {plain_port} 127.0.0.1\n")  # fmt: skip
     broker.start()
+    broker.wait_listening(plain_port)  # the listeners open one after the other
     subscriber = Subscriber(plain_port, ["aiortu/#"])
 
     def secured(ca_file: Path) -> BridgeConfig:

@@ -9,7 +9,7 @@ a bounded memory, and a count that tells how much was lost.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import anyio
@@ -70,9 +70,16 @@ class Outbox:
 
     def put(self, message: Message) -> None:
         """Queue `message` last; drop the oldest while over the bound."""
-        self._queue.append(message)
-        self._bytes += message.size
-        self.accepted += 1
+        self.put_all((message,))
+
+    def put_all(self, messages: Sequence[Message]) -> None:
+        """Queue `messages` last, in their order; drop the oldest while over the bound (what
+        stays is what putting them one by one would leave)."""
+        if not messages:
+            return
+        self._queue.extend(messages)
+        self._bytes += sum([m.size for m in messages])
+        self.accepted += len(messages)
         self._trim()
         self._ready.set()
 
@@ -87,12 +94,14 @@ class Outbox:
 
     def take(self, count: int) -> list[Message]:
         """Up to `count` messages from the front."""
-        taken: list[Message] = []
         queue = self._queue
-        while queue and len(taken) < count:
-            message = queue.popleft()
-            self._bytes -= message.size
-            taken.append(message)
+        if count >= len(queue):
+            taken = list(queue)
+            queue.clear()
+            self._bytes = 0
+            return taken
+        taken = [queue.popleft() for _ in range(count)]
+        self._bytes -= sum([m.size for m in taken])
         return taken
 
     async def wait(self) -> None:
