@@ -38,7 +38,12 @@ class Message:
     @property
     def size(self) -> int:
         """The bytes the message holds (its topic and payload)."""
-        return len(self.topic) + len(self.payload)
+        return _size((self,))
+
+
+def _size(messages: Iterable[Message]) -> int:
+    """The bytes `messages` hold (their topics and payloads)."""
+    return sum([len(m.topic) + len(m.payload) for m in messages])
 
 
 class Outbox:
@@ -78,7 +83,7 @@ class Outbox:
         if not messages:
             return
         self._queue.extend(messages)
-        self._bytes += sum([m.size for m in messages])
+        self._bytes += _size(messages)
         self.accepted += len(messages)
         self._trim()
         self._ready.set()
@@ -87,7 +92,7 @@ class Outbox:
         """Queue `messages` (sent but never acknowledged) first, in their order."""
         back = list(messages)
         self._queue.extendleft(reversed(back))
-        self._bytes += sum(m.size for m in back)
+        self._bytes += _size(back)
         self._trim()
         if self._queue:
             self._ready.set()
@@ -101,7 +106,7 @@ class Outbox:
             self._bytes = 0
             return taken
         taken = [queue.popleft() for _ in range(count)]
-        self._bytes -= sum([m.size for m in taken])
+        self._bytes -= _size(taken)
         return taken
 
     async def wait(self) -> None:

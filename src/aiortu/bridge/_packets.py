@@ -18,6 +18,7 @@ __all__ = (
     "PacketReader",
     "PacketType",
     "Publish",
+    "PublishWriter",
     "connect_packet",
     "disconnect_packet",
     "pingreq_packet",
@@ -153,16 +154,45 @@ def publish_packet(
     dup: bool = False,
 ) -> bytes:  # fmt: skip
     """PUBLISH of `payload` on `topic` (`packet_id` for QoS 1)."""
-    # One join, no intermediate bodies: the bridge makes one of these per value it publishes.
+    return _publish(_topic_field(topic), payload, qos, retain, packet_id, dup=dup)
+
+
+def _topic_field(topic: str) -> bytes:
     name = topic.encode()
     if len(name) > 0xFFFF:
         raise ValueError(f"an MQTT topic holds at most 65535 bytes, not {len(name)}")
-    size = len(name) + len(payload) + (4 if qos else 2)
+    return _SHORT(len(name)) + name
+
+
+def _publish(
+    topic: bytes, payload: bytes, qos: int, retain: bool, packet_id: int, *, dup: bool = False
+) -> bytes:
+    # One join, no intermediate body: a bridge makes one of these per value it publishes.
+    size = len(topic) + len(payload) + (2 if qos else 0)
     first = 0x30 | (0x08 if dup else 0) | qos << 1 | (1 if retain else 0)
     head = bytes((first, size)) if size < 0x80 else bytes((first,)) + _length(size)
     if qos:
-        return b"".join((head, _SHORT(len(name)), name, _SHORT(packet_id), payload))
-    return b"".join((head, _SHORT(len(name)), name, payload))
+        return b"".join((head, topic, _SHORT(packet_id), payload))
+    return b"".join((head, topic, payload))
+
+
+class PublishWriter:
+    """PUBLISH packets as [`publish_packet`][aiortu.bridge._packets.publish_packet] makes
+    them, each topic encoded once: a publisher sends the same topics again and again. Up
+    to `max_topics` encodings are kept (a bridge's topics are set by its configuration)."""
+
+    def __init__(self, max_topics: int = 100_000) -> None:
+        self.max_topics = max_topics
+        self._topics: dict[str, bytes] = {}
+
+    def packet(self, topic: str, payload: bytes, qos: int, retain: bool, packet_id: int) -> bytes:
+        """PUBLISH of `payload` on `topic` (`packet_id` for QoS 1)."""
+        field = self._topics.get(topic)
+        if field is None:
+            field = _topic_field(topic)
+            if len(self._topics) < self.max_topics:
+                self._topics[topic] = field
+        return _publish(field, payload, qos, retain, packet_id)
 
 
 def puback_packet(packet_id: int) -> bytes:

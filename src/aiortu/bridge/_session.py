@@ -28,11 +28,11 @@ from aiortu.bridge._packets import (
     PacketReader,
     PacketType,
     Publish,
+    PublishWriter,
     connect_packet,
     disconnect_packet,
     pingreq_packet,
     puback_packet,
-    publish_packet,
     subscribe_packet,
 )
 
@@ -69,9 +69,9 @@ _FATAL = (1, 2, 4, 5)
 class SessionHooks:
     """What the bridge tells the session: the last `will` of each connection (made anew for
     each: Sparkplug's bdSeq counts connections), the `subscriptions`, the messages to send
-    first after connecting (`on_connect`), how to encode a message when it is sent
-    (`prepare`: its Sparkplug sequence number), and where received messages go
-    (`on_publish`, which must not block)."""
+    first after connecting (`on_connect`), how to encode a message that carries `metrics`
+    when it is sent (`prepare`: its Sparkplug sequence number; any other goes as made), and
+    where received messages go (`on_publish`, which must not block)."""
 
     will: Callable[[], Message | None]
     subscriptions: Callable[[], list[str]]
@@ -116,6 +116,7 @@ class BrokerSession:
         self._acked: anyio.Event | None = None
         self._heard = 0
         self._reader = PacketReader()
+        self._writer = PublishWriter()
         self._early: list[Packet] = []
         self._sending = anyio.Lock()
 
@@ -247,18 +248,19 @@ class BrokerSession:
         if not messages:
             return
         packets = []
-        prepare, inflight, packet_id = self.hooks.prepare, self._inflight, self._packet_id
+        prepare, inflight, write = self.hooks.prepare, self._inflight, self._writer.packet
         for message in messages:
             number = 0
             if message.qos:
-                number = packet_id()
+                number = self._next_id % 65535 + 1  # the next id, unless still in flight
+                if number in inflight:
+                    number = self._packet_id()
+                self._next_id = number
                 inflight[number] = message
             else:
                 self.delivered += 1
-            packets.append(publish_packet(
-                message.topic, prepare(message), qos=message.qos, retain=message.retain,
-                packet_id=number,
-            ))  # fmt: skip
+            payload = message.payload if message.metrics is None else prepare(message)
+            packets.append(write(message.topic, payload, message.qos, message.retain, number))
         await self._write(stream, b"".join(packets))
 
     async def _receive(self, stream: anyio.abc.ByteStream, scope: anyio.CancelScope) -> None:
