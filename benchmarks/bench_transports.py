@@ -14,8 +14,8 @@ registers from 0), on loopback or, for ASCII, on a socat pty pair at 19200 8N2.
   CPU time (``process_time``) per request, which moves less with the machine's load than
   wall time.
 - server: aiortu's master sends the same reads to aiortu's server and to pymodbus's, in turns;
-  the figure is the server process's CPU time per request (from /proc, in clock ticks of
-  10 ms: keep `--requests` in the hundreds at least).
+  the figure is the server process's CPU time per request (the nanoseconds of
+  /proc/PID/task/*/schedstat).
 - handshakes: mutual-TLS handshakes per second to aiortu's TLS server (each a connection, a
   handshake and a close), and the CPU per request on an open TLS connection against plain
   Modbus TCP (the master's side).
@@ -156,7 +156,7 @@ def _cpu_per_request(run: Callable[..., Awaitable[float]], count: int, pid: int 
     """Microseconds of CPU per request: this process's, or process `pid`'s."""
 
     def clock() -> float:
-        return time.process_time() if pid is None else benchlib.cpu_seconds(pid)
+        return time.process_time() if pid is None else benchlib.cpu_exact(pid)
 
     return anyio.run(run, count, clock) / count * 1e6
 

@@ -1,6 +1,6 @@
 """Python calls per Modbus UDP read, master and server: figures that do not move with load.
 
-    python benchmarks/calls_udp.py [--src SRC] [--requests 500] [--top 0]
+    python benchmarks/calls_udp.py [--src SRC] [--requests 500] [--top 0] [--opcodes]
 
 aiortu's master and aiortu's server (`serve("udp://127.0.0.1:0")`, unit 1) run in this
 process, each in a thread with an event loop of its own, from `SRC` (the `src` folder of a
@@ -8,7 +8,8 @@ checkout; this one's by default). The master reads 10 holding registers `--reque
 `sys.setprofile`, set in each thread, counts every Python function call and coroutine
 resumption of that thread. The figures are the counts per read, with the share of each part
 (asyncio's event loop, anyio, the packages of aiortu). `--top N` lists the N functions
-called most per read on each side.
+called most per read on each side. `--opcodes` counts the bytecode instructions run instead
+(`sys.settrace` with opcode events), which weighs each function by its work.
 """
 
 from __future__ import annotations
@@ -43,12 +44,28 @@ def _counter(counts: collections.Counter[str]) -> _Profile:
     return profile
 
 
+def _opcode_counter(counts: collections.Counter[str]) -> _Profile:
+    def trace(frame: types.FrameType, event: str, arg: object) -> _Profile:
+        frame.f_trace_opcodes = True
+        frame.f_trace_lines = False
+        if event == "opcode":
+            path = frame.f_code.co_filename
+            name = path.split("/site-packages/")[-1].split("/src/")[-1]
+            counts[f"{name}:{frame.f_code.co_name}"] += 1
+        return trace
+
+    return trace
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--src", default=None, help="the src folder to import aiortu from")
     parser.add_argument("--requests", type=int, default=500)
     parser.add_argument("--top", type=int, default=0)
+    parser.add_argument("--opcodes", action="store_true", help="count bytecode instructions")
     args = parser.parse_args()
+    start: Callable[[_Profile | None], None] = sys.settrace if args.opcodes else sys.setprofile  # type: ignore[assignment]
+    counter = _opcode_counter if args.opcodes else _counter
     if args.src:
         sys.path.insert(0, args.src)
     import anyio
@@ -68,9 +85,9 @@ def main() -> None:
             ready.append(server.port)
             started.set()
             await anyio.to_thread.run_sync(counting.wait)
-            sys.setprofile(_counter(server_counts))
+            start(counter(server_counts))
             await anyio.to_thread.run_sync(done.wait)
-            sys.setprofile(None)
+            start(None)
 
     async def read() -> None:
         await anyio.to_thread.run_sync(started.wait)
@@ -79,26 +96,29 @@ def main() -> None:
                 await master.read_holding_registers(1, 0, 10)
             counting.set()
             await anyio.sleep(0.2)  # the server's thread sets its profile meanwhile
-            sys.setprofile(_counter(master_counts))
+            start(counter(master_counts))
             for _ in range(args.requests):
                 await master.read_holding_registers(1, 0, 10)
-            sys.setprofile(None)
+            start(None)
         done.set()
 
     server = threading.Thread(target=anyio.run, args=(serve,))
     server.start()
     anyio.run(read)
     server.join()
-    _report("master", master_counts, args.requests, args.top)
-    _report("server", server_counts, args.requests, args.top)
+    unit = "bytecode instructions" if args.opcodes else "Python calls"
+    _report("master", master_counts, args.requests, args.top, unit)
+    _report("server", server_counts, args.requests, args.top, unit)
 
 
-def _report(side: str, counts: collections.Counter[str], requests: int, top: int) -> None:
+def _report(
+    side: str, counts: collections.Counter[str], requests: int, top: int, unit: str
+) -> None:
     parts: collections.Counter[str] = collections.Counter()
     for name, count in counts.items():
         parts[_part(name)] += count
     total = sum(counts.values())
-    print(f"{side}: {requests} reads; Python calls per read: {total / requests:.1f}")
+    print(f"{side}: {requests} reads; {unit} per read: {total / requests:.1f}")
     for part, count in parts.most_common():
         print(f"  {count / requests:6.1f}  {part}")
     for name, count in counts.most_common(top):

@@ -288,5 +288,5 @@ async def test_requests_over_the_backlog_are_refused_and_counted(
     assert (counters.received, counters.refused, counters.replies) == (7, 3, 4)
     refusals = [r for r in caplog.records if "fill the backlog" in r.getMessage()]
     assert [r.levelno for r in refusals] == [logging.WARNING, logging.DEBUG, logging.DEBUG]
-    assert server.transport is not None
-    assert server.transport.is_closing()
+    assert server.socket is not None
+    assert server.socket.closed

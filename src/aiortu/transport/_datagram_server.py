@@ -2,10 +2,10 @@
 can be, the rest queued, within a bound, for one task.
 
 Where the event loop is asyncio ([`push_datagrams`][aiortu.transport.push_datagrams]), a server
-serves Modbus UDP through [`DatagramServer`][aiortu.transport.DatagramServer], an
-`asyncio.DatagramProtocol`, rather than through
+serves Modbus UDP through [`DatagramServer`][aiortu.transport.DatagramServer], whose socket the
+loop's reader callback reads (`DatagramSocket`), rather than through
 [`serve_datagrams`][aiortu.transport.serve_datagrams] on a socket read by a task. Each datagram
-is checked in the loop's read callback as `serve_datagrams` checks it, with the same function
+is checked in the loop's reader callback as `serve_datagrams` checks it, with the same function
 ([`check_datagram`][aiortu.transport.check_datagram]), the same counts
 ([`DatagramCounters`][aiortu.transport.DatagramCounters]) and the same log lines (the first of
 a kind a warning, the rest at debug level). Then:
@@ -28,11 +28,14 @@ import asyncio
 import socket
 from collections import deque
 from collections.abc import Awaitable, Callable
-from typing import Any, Final, cast
+from typing import Any, Final
+
+import anyio
 
 from aiortu._log import get_logger
 from aiortu.core.mbap import Adu
 from aiortu.errors import FrameError, PortNotFound
+from aiortu.transport._datagram_socket import DatagramSocket
 from aiortu.transport._listen import _tcp_error as listen_error  # a socket's bind errors
 from aiortu.transport._udp import DatagramCounters, check_datagram
 from aiortu.transport._udp_push import log_level
@@ -50,16 +53,15 @@ DatagramSource = tuple[Any, ...]
 """A datagram's source address, as the socket gives it (host and port first)."""
 
 
-class DatagramServer(asyncio.DatagramProtocol):
+class DatagramServer:
     """Modbus UDP for a server on asyncio (see the module docstring).
 
     `answer` gives the reply ADU to a request ADU (None: no reply), in the server's task;
-    `at_once(adu, source)` answers a request in the read callback if it can (True) with
+    `at_once(adu, source)` answers a request in the reader callback if it can (True) with
     [`reply`][aiortu.transport.DatagramServer.reply], or leaves it (False); `counters` counts
     what was received, refused and answered; `url` names the server in errors; `pending` is the
     deque that holds the requests waiting (one that `at_once` sees, say; a new one by
-    default). Bind it with
-    [`bind`][aiortu.transport.DatagramServer.bind], then run
+    default). Bind it with [`bind`][aiortu.transport.DatagramServer.bind], then run
     [`serve`][aiortu.transport.DatagramServer.serve] until cancelled.
     """
 
@@ -82,9 +84,9 @@ class DatagramServer(asyncio.DatagramProtocol):
         self.pending = deque() if pending is None else pending
         """The requests waiting for the task, first the one it answers (if any): `pending`,
         or a new deque."""
-        self.transport: asyncio.DatagramTransport | None = None
+        self.socket: DatagramSocket | None = None
+        """The socket, once bound."""
         self._waiter: asyncio.Future[None] | None = None
-        self._lost: asyncio.Future[None] | None = None
 
     async def bind(self, host: str, port: int) -> tuple[str, int]:
         """Bind a datagram socket to `host`:`port` (0: a free port) for this server, and return
@@ -95,54 +97,41 @@ class DatagramServer(asyncio.DatagramProtocol):
         [`PortNotFound`][aiortu.errors.PortNotFound], as
         [`listen_udp`][aiortu.transport.listen_udp] does.
         """
-        loop = asyncio.get_running_loop()
         try:
-            transport, _ = await loop.create_datagram_endpoint(
-                lambda: self, local_addr=(host, port)
-            )
+            found = await anyio.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
         except socket.gaierror as exc:
             raise PortNotFound(self.url, f"unknown host {host!r} ({exc.strerror})") from exc
+        family, _, _, _, address = found[0]
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.bind(address)
         except OSError as exc:
+            sock.close()
             raise listen_error(self.url, exc) from exc
-        local = transport.get_extra_info("sockname")
-        return str(local[0]), int(local[1])
+        self.socket = DatagramSocket(sock, self.datagram_received, self._wake, self.url)
+        return self.socket.local_address
 
-    # -- the protocol: the event loop's callbacks ----------------------------------------
+    # -- the reader callback -------------------------------------------------------------
 
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        self.transport = cast(asyncio.DatagramTransport, transport)
-        self._lost = asyncio.get_running_loop().create_future()
-
-    def datagram_received(self, data: bytes, addr: DatagramSource) -> None:
+    def datagram_received(self, data: bytes, source: DatagramSource) -> None:
+        """Check, count and answer (or queue) the datagram `data` from `source`."""
         self.counters.received += 1
         try:
             adu = check_datagram(data)
         except FrameError as error:
-            self._refuse(addr, str(error))
+            self._refuse(source, str(error))
             return
         at_once = self._at_once
-        if at_once is not None and at_once(adu, addr):
+        if at_once is not None and at_once(adu, source):
             return
         pending = self.pending
         if len(pending) >= self.backlog:
-            self._refuse(addr, "the requests waiting to be answered fill the backlog")
+            self._refuse(source, "the requests waiting to be answered fill the backlog")
             return
-        pending.append((adu, addr))
-        waiter = self._waiter
-        if waiter is not None and not waiter.done():
-            waiter.set_result(None)
+        pending.append((adu, source))
+        self._wake()
 
-    def error_received(self, exc: Exception) -> None:
-        # An ICMP error (a client's port gone): its reply is lost, as a datagram may be.
-        _log.debug("%s: %s", self.url, exc)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        lost = self._lost
-        if lost is not None and not lost.done():
-            if exc is None:
-                lost.set_result(None)
-            else:
-                lost.set_exception(exc)
+    def _wake(self) -> None:
         waiter = self._waiter
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
@@ -159,25 +148,30 @@ class DatagramServer(asyncio.DatagramProtocol):
     # -- replies and the task ------------------------------------------------------------
 
     def reply(self, adu: bytes, destination: DatagramSource) -> None:
-        """Send the reply ADU `adu` to `destination` now, and count it."""
-        transport = self.transport
-        if transport is None or transport.is_closing():
-            return  # closed: the reply is lost, as a datagram may be
-        self.counters.replies += 1
-        transport.sendto(adu, destination)
+        """Send the reply ADU `adu` to `destination` now, and count it; one the socket cannot
+        take now (its send buffer full, or closed) is lost, as a datagram may be, and counted
+        in `unsent`."""
+        sock = self.socket
+        if sock is not None and sock.sendto(adu, destination):
+            self.counters.replies += 1
+            return
+        self.counters.unsent += 1
+        _log.log(
+            log_level(self.counters.unsent),
+            "Modbus UDP: a reply to %s was lost: the socket could not take it (counted in "
+            "unsent; logged at debug level after the first)",
+            format_tcp_url(destination[0], destination[1], MODBUS_UDP_SCHEME),
+        )
 
     async def serve(self) -> None:
-        """Answer the waiting requests, one at a time and in order, until cancelled (the socket
-        is closed then) or the socket fails (raised here)."""
-        lost = self._lost
-        assert lost is not None, "bind first"
+        """Answer the waiting requests, one at a time and in order, until cancelled or the
+        socket is closed; the socket is closed on the way out."""
+        sock = self.socket
+        assert sock is not None, "bind first"
         loop = asyncio.get_running_loop()
         pending = self.pending
         try:
-            while True:
-                if lost.done():
-                    lost.result()  # the socket's failure, if any
-                    return
+            while not sock.closed:
                 if not pending:
                     self._waiter = loop.create_future()
                     await self._waiter
@@ -192,5 +186,4 @@ class DatagramServer(asyncio.DatagramProtocol):
                     self.reply(reply, source)
         finally:
             self._waiter = None
-            if self.transport is not None:
-                self.transport.close()
+            sock.close()
