@@ -27,9 +27,8 @@ import aiortu
 from aiortu.core.codes import FunctionCode
 from aiortu.core.mbap import Adu, decode_adu, encode_adu
 from aiortu.core.pdu import RawPDU
-from aiortu.slave import MemoryStore, ModbusUdpServer, Reply, Table
+from aiortu.slave import BUILTIN_HANDLERS, MemoryStore, ModbusUdpServer, Reply, Table
 from aiortu.slave import _udp_server as udp_server_module
-from aiortu.slave._handlers import BUILTIN_HANDLERS
 from aiortu.transport import DatagramCounters, DatagramServer
 from tests.slave.test_fast_path_differential import SEEDS, _pdu, _SlowStore, _store
 

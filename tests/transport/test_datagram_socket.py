@@ -14,10 +14,14 @@ import pytest
 import aiortu
 from aiortu.core.mbap import Adu, decode_adu, encode_adu
 from aiortu.errors import PortBusy
-from aiortu.transport import DatagramCounters, DatagramServer, ModbusTcpCounters
+from aiortu.transport import (
+    DatagramCounters,
+    DatagramServer,
+    ModbusTcpCounters,
+    PushDatagramStream,
+    check_datagram,
+)
 from aiortu.transport._datagram_socket import DatagramSocket
-from aiortu.transport._udp import check_datagram
-from aiortu.transport._udp_push import PushDatagramStream
 
 pytestmark = pytest.mark.timeout(30)
 
