@@ -53,7 +53,9 @@ _Address = tuple[str, int]
 
 
 def push_datagrams() -> bool:
-    """Whether a master's Modbus UDP stream is pushed: where the running loop is asyncio."""
+    """Whether Modbus UDP reads its socket from the event loop's reader callback (a master's
+    [`PushDatagramStream`][aiortu.transport.PushDatagramStream], a server's
+    [`DatagramServer`][aiortu.transport.DatagramServer]): where the running loop is asyncio."""
     try:
         asyncio.get_running_loop()
     except RuntimeError:
