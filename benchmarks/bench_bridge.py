@@ -1,8 +1,10 @@
-"""The MQTT bridge: a fleet on one machine, and aiortu's bridge against modbus4mqtt.
+"""The MQTT bridge: a fleet on one machine, aiortu's bridge against modbus4mqtt, and the floor
+under a poll.
 
-    python benchmarks/bench_bridge.py                       # both sections
+    python benchmarks/bench_bridge.py                       # every section
     python benchmarks/bench_bridge.py --section fleet --seconds 20
     python benchmarks/bench_bridge.py --section modbus4mqtt --modbus4mqtt /tmp/m4m/bin/modbus4mqtt
+    python benchmarks/bench_bridge.py --section floor --seconds 15
 
 **fleet**: 8 `aiortu bridge` processes, each on its own virtual line of 10 simulated units of
 50 points (every point published every poll, 1 s), into one mosquitto started here; one
@@ -15,7 +17,11 @@ every second, changing every second; 10 counters and settings in a 60 s poll cla
 profiles describe them), bridged by `aiortu bridge` and by modbus4mqtt (PyPI; run from its own
 venv as a separate process, `--modbus4mqtt PATH`), one at a time, interleaved, into the same
 broker. Reported: line transactions per published point, bridge CPU per published point, and
-the time from a register change to its MQTT message (p50, p99).
+the time from a register change to its MQTT message (p50, p99). `--baseline SRC` runs the
+aiortu bridge of another source tree as a third, interleaved (`--baseline /work/main/src`).
+
+**floor**: what a 1 s poll of the meter costs before any MQTT (the loop's wake, the master's
+read, the poller's `Device.read`): the part of the bridge's CPU no MQTT code can remove.
 """
 
 from __future__ import annotations
@@ -365,7 +371,53 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
     ]
 
 
-SECTIONS = {"fleet": fleet, "modbus4mqtt": versus_modbus4mqtt}
+def floor(args: argparse.Namespace) -> list[str]:
+    """What a 1 s poll costs before any MQTT: the event loop woken once a second, then with
+    one read of the meter's 40 measurements by the master, then by `Device.read` (what the
+    bridge's poller does). CPU of the polling thread (`time.thread_time`), the meter served by
+    another thread; alone on the machine, not interleaved (each a floor under the bridge)."""
+    from aiortu.core.model import load_profile
+    from aiortu.master import Device, open_master
+
+    rows: list[list[str]] = []
+    with TemporaryDirectory() as tmp:
+        meter = _Meter(_meter_profile(Path(tmp) / "meter.toml"))
+        profile = load_profile(Path(tmp) / "meter.toml")
+
+        async def main() -> None:
+            await anyio.sleep(0.5)  # the meter's listener
+            url = f"tcp://127.0.0.1:{meter.port}"
+            async with open_master(url, fail_fast_offline=True) as master:
+                device = Device(master, 1, profile)
+                polls = {
+                    "the loop woken once a second": None,
+                    "+ master.read_input_registers(1, 0, 40)": (
+                        lambda: master.read_input_registers(1, 0, 40)
+                    ),
+                    "+ Device.read (the poller's read)": lambda: device.read("normal"),
+                }
+                for name, poll in polls.items():
+                    await device.read("normal")
+                    start, cycles = time.thread_time(), max(3, round(args.seconds))
+                    for _ in range(cycles):
+                        if poll is not None:
+                            await poll()
+                        await anyio.sleep(1.0)
+                    cpu = (time.thread_time() - start) / cycles
+                    rows.append([name, f"{cpu * 1e3:.2f}", f"{cpu / FAST * 1e6:.1f}"])
+
+        try:
+            anyio.run(main)
+        finally:
+            meter.close()
+    return [
+        f"## The floor under a 1 s poll ({max(3, round(args.seconds))} polls each)",
+        "",
+        table(["each second", "CPU ms/s", f"us per point at {FAST} points/s"], rows),
+    ]
+
+
+SECTIONS = {"fleet": fleet, "modbus4mqtt": versus_modbus4mqtt, "floor": floor}
 
 
 def main() -> None:
