@@ -14,7 +14,7 @@ import enum
 import heapq
 import itertools
 from collections.abc import Callable, Generator
-from typing import Any, Final, Protocol
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 import anyio
 import anyio.abc
@@ -22,6 +22,9 @@ import anyio.abc
 from aiortu.core.machines import Transaction
 from aiortu.core.pdu import ExceptionPDU, Response
 from aiortu.errors import ConnectionLost
+
+if TYPE_CHECKING:
+    import asyncio
 
 __all__ = ("NO_FUTURE", "TURN", "EventFuture", "Job", "JobFuture", "JobResult", "LineQueue", "Turn")
 
@@ -43,7 +46,6 @@ class JobFuture(Protocol):
     """What a job's caller awaits: an asyncio future, or an `EventFuture`."""
 
     def done(self) -> bool: ...
-    def cancelled(self) -> bool: ...
     def set_result(self, result: JobResult | Turn, /) -> None: ...
     def set_exception(self, error: BaseException, /) -> None: ...
     def add_done_callback(self, callback: Callable[[Any], object], /) -> None: ...
@@ -66,9 +68,6 @@ class EventFuture:
 
     def done(self) -> bool:
         return self._event.is_set()
-
-    def cancelled(self) -> bool:
-        return False
 
     def set_result(self, result: JobResult | Turn, /) -> None:
         self._result = result
@@ -99,9 +98,6 @@ class _Told:
 
     def done(self) -> bool:
         return True
-
-    def cancelled(self) -> bool:
-        return False
 
     def set_result(self, result: JobResult | Turn, /) -> None:
         raise AssertionError("a job run by its caller is never woken")
@@ -145,9 +141,10 @@ class Job:
         else:
             future.set_exception(error)
 
-    def abandon_if_cancelled(self, future: JobFuture) -> None:
-        """The done callback of a future whose caller awaits it directly: a cancelled
-        caller is gone, and its transaction is finished without retries."""
+    def abandon_if_cancelled(self, future: asyncio.Future[Any]) -> None:
+        """The done callback of an event loop's future whose caller awaits it directly: a
+        cancelled caller is gone, and its transaction is finished without retries. (An
+        `EventFuture` calls no done callback: the engine notices its caller's cancellation.)"""
         if future.cancelled():
             self.transaction.abandoned = True
 
