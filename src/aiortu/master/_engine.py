@@ -131,7 +131,7 @@ class LineEngine(LineState):
         queue = self.queue
         if not queue.busy and self.open:
             queue.busy = True  # an idle line: the transaction runs at once, here
-            return await self._run(Job(transaction, NO_FUTURE, -1))
+            return await self._run(Job(transaction, NO_FUTURE))
         job = self._queue(transaction)
         try:
             result = await job.future

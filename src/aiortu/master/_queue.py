@@ -119,13 +119,12 @@ NO_FUTURE: Final[JobFuture] = _Told()
 class Job:
     """A transaction waiting for the line or on it, and the future its caller awaits."""
 
-    __slots__ = ("future", "granted", "sequence", "transaction", "woken")
+    __slots__ = ("future", "granted", "transaction", "woken")
 
-    def __init__(self, transaction: Transaction, future: JobFuture, sequence: int) -> None:
+    def __init__(self, transaction: Transaction, future: JobFuture) -> None:
         self.transaction = transaction
         self.future = future
         """Completed once: `TURN`, the result, or the error (see the module docstring)."""
-        self.sequence = sequence
         self.granted = False
         """Whether the job was handed the line."""
         self.woken = False
@@ -173,8 +172,9 @@ class LineQueue:
 
     def push(self, transaction: Transaction, future: JobFuture) -> Job:
         """Queue `transaction`, whose caller awaits `future`; return its job."""
-        job = Job(transaction, future, next(self._sequence))
-        heapq.heappush(self.waiting, (transaction.priority, transaction.order, job.sequence, job))
+        job = Job(transaction, future)
+        key = (transaction.priority, transaction.order, next(self._sequence), job)
+        heapq.heappush(self.waiting, key)
         return job
 
     def next_job(self) -> Job | None:
