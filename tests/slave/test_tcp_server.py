@@ -428,3 +428,11 @@ async def test_rtu_over_tcp_connections_share_one_device() -> None:
         assert await ask(second, "03 0000 0001") is None  # the device is silent for all
         assert await ask(second, "08 0001 0000") is None  # restarted, from listen-only
         assert await ask(first, "03 0000 0001") is not None
+
+
+def test_units_1_to_247_are_served_and_others_refused_in_one_sentence() -> None:
+    ModbusTcpServer({1: device(), 247: device()})
+    for unit in (0, 248):
+        with pytest.raises(InvalidValue) as raised:
+            ModbusTcpServer({unit: device()})
+        assert str(raised.value) == f"unit = {unit} is outside the allowed range 1..247"
