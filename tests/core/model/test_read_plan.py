@@ -178,6 +178,15 @@ def test_values_apply_scale_offset_factor_and_sentinel() -> None:
     assert ReadPlan(profile).values(raws)["w"] is None
 
 
+def test_an_empty_string_is_no_value_only_where_its_not_available_value_is_0() -> None:
+    # SunSpec's rule: a string of NULs (or padding only) is "not implemented".
+    unset = ProfilePoint("s", Table.HOLDING_REGISTERS, 0, PointType.STRING, 2, not_available=0)
+    plain = ProfilePoint("s", Table.HOLDING_REGISTERS, 0, PointType.STRING, 2)
+    assert decode_point(unset, [0, 0]) is None
+    assert decode_point(unset, [0x4142, 0x2000]) == "AB"
+    assert decode_point(plain, [0, 0]) == ""
+
+
 @settings(max_examples=300, deadline=None)
 @given(
     kind=st.sampled_from(NUMERIC),
