@@ -273,7 +273,6 @@ class LineEngine(LineState):
         if self._failed is None:
             self._failed = error
         self.open = False
-        self.closed = True
         why = str(self._failed)
         self.queue.fail_all(why)
         fast = self.fast
