@@ -88,5 +88,26 @@ def test_a_framing_whose_replies_carry_no_transaction_id_keeps_them_in_order(
     # A server pipelines a connection's requests only when its replies say which they answer.
     (request,) = framing.feed(request_bytes)
     assert request.pdu == READ
+    assert framing.discarded == 0
     ids = {framing.encode(replace(request, transaction_id=i), b"\x83\x02") for i in (1, 2)}
     assert framing.in_order is (len(ids) == 1)
+
+
+@pytest.mark.parametrize(
+    ("framing", "bad", "good"),
+    [
+        (RtuFraming(), encode_frame(UNIT, READ)[:-1] + b"\x00", encode_frame(UNIT, READ)),
+        (
+            AsciiFraming(),
+            encode_ascii_frame(UNIT, READ)[:-4] + b"00\r\n",
+            encode_ascii_frame(UNIT, READ),
+        ),
+    ],
+    ids=lambda value: type(value).__name__,
+)
+def test_a_framing_counts_each_frame_it_drops_once(
+    framing: Framing, bad: bytes, good: bytes
+) -> None:
+    assert framing.discarded == 0
+    assert [request.pdu for request in framing.feed(bad + good)] == [READ]
+    assert framing.discarded == 1
