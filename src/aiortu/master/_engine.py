@@ -248,16 +248,21 @@ class LineEngine(LineState):
     def _on_link_event(self, event: LinkEvent | None) -> None:
         """The link's listener: the attempt that waits gets `event`; so does the machine,
         taking the fast path's exchange over, if one is on the wire."""
+        fast = self.fast
         if event is None:
             self.open = False
             self.line_task.wake()
-        fast = self.fast
+            if fast.waiting:
+                # Nothing was sent: its caller fails as a queued one does, and the line is
+                # free for the line task to see the link gone.
+                fast.stop_waiting(self.link.connection_lost_error())
+                self.release()
         if fast.on_wire:
             fast.take_over()
         self.attempts.deliver(event)
 
-    def take_over(self, job: Job) -> None:
-        self.line_task.take_over(job)
+    def take_over(self, job: Job, on_the_wire: bool) -> None:
+        self.line_task.take_over(job, on_the_wire)
 
     def adopt(self, job: Job) -> None:
         self.line_task.adopt(job)
@@ -277,6 +282,8 @@ class LineEngine(LineState):
         why = str(self._failed)
         self.queue.fail_all(why)
         fast = self.fast
+        if fast.waiting:
+            fast.stop_waiting(ConnectionLost(why))
         if fast.on_wire:
             # The line task is gone: nobody takes the fast path's exchange over.
             fast.on_wire = False
