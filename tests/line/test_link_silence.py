@@ -236,10 +236,15 @@ async def test_a_cancelled_quiet_call_never_comes_and_leaves_the_timer_disarmed(
     async with Link(near, FAST, frame_gap=GAP) as link:
         await _settle()
         await _receive_a_frame(link, far)
+        await _called_when_quiet(link)  # the timer made
+        await _receive_a_frame(link, far)
         calls: list[float] = []
         link.call_when_quiet(lambda: calls.append(link.clock()))
+        timer = link._silence.timer
+        if timer is not None:
+            assert timer.deadline < math.inf  # the call waits on it
         link.cancel_quiet_call()
+        if timer is not None:
+            assert timer.deadline == math.inf
         await anyio.sleep(GAP * 2)
         assert calls == []
-        timer = link._silence.timer
-        assert timer is None or timer.deadline == math.inf
