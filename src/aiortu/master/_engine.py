@@ -114,9 +114,24 @@ class LineEngine(LineState):
         on the wire when this returns, and the awaitable is a future.
         """
         future = self.fast.start(transaction)
+        if future is None and self.link.loop is not None and self._queues_at_once(transaction):
+            # Behind a busy line on an event loop: the engine runs the transaction when its
+            # turn comes (the fast path, else the line task), and completes the future.
+            transaction.reply_delay = self.reply_delay(transaction.unit)
+            future = self._queue(transaction, caller_runs=False).future
         if future is not None:
             return future  # type: ignore[return-value]  # completed with a result only
         return self._submit(transaction)
+
+    def _queues_at_once(self, transaction: Transaction) -> bool:
+        """Whether `transaction` goes straight into the queue: the line is up and held,
+        and it is not a request that fail-fast may refuse (to a unit known offline)."""
+        if not (self.queue.busy and self.open and self._failed is None):
+            return False
+        if not (self.health.fail_fast_offline and transaction.expects_reply):
+            return True
+        stats = self.stats.get(transaction.unit)
+        return stats is None or stats.online
 
     async def _submit(self, transaction: Transaction) -> JobResult:
         if self._failed is not None:
@@ -150,8 +165,9 @@ class LineEngine(LineState):
             if self.line_task.job is not job:
                 self.release()
 
-    def _queue(self, transaction: Transaction) -> Job:
-        """Queue `transaction`; return its job."""
+    def _queue(self, transaction: Transaction, caller_runs: bool = True) -> Job:
+        """Queue `transaction`; return its job, whose caller runs it when handed the line
+        (`caller_runs`), else the engine does."""
         link = self.link
         loop = link.loop
         if loop is not None:
@@ -159,7 +175,7 @@ class LineEngine(LineState):
         else:
             backend = link.backend
             future = EventFuture(anyio.Event() if backend is None else backend.create_event())
-        job = self.queue.push(transaction, future)
+        job = self.queue.push(transaction, future, caller_runs)
         if not self.queue.busy and self.open:
             self.release()
         return job
@@ -186,8 +202,14 @@ class LineEngine(LineState):
         job = queue.next_job()
         if job is None:
             return
-        if self.fast.start(job.transaction, job) is None:
+        if self.fast.start(job.transaction, job) is not None:
+            return
+        if job.caller_runs:
             job.wake()
+        else:
+            # Nobody runs it but the engine: the line task, through the machine.
+            job.future.add_done_callback(job.abandon_if_cancelled)
+            self.line_task.take_over(job, on_the_wire=False)
 
     # -- a transaction through the machine ----------------------------------------------------
 

@@ -98,7 +98,8 @@ class LineTask:
         """Run the rest of a fast-path exchange the machine took over, for its caller."""
         engine = self._engine
         try:
-            await engine.exchange(job, on_the_wire=self._on_the_wire)
+            if self._on_the_wire or not job.future.done():  # done: cancelled, not begun
+                await engine.exchange(job, on_the_wire=self._on_the_wire)
         except Exception as error:
             job.finish(None, error)  # told already, unless the error is a bug's
         except BaseException:
