@@ -158,16 +158,44 @@ async def test_a_connection_runs_its_requests_on_at_most_max_in_flight_tasks(
     monkeypatch.setattr(Gateway, "_request", spied)
     async with line(max_in_flight=3) as bench:
         async with client(bench.gateway) as tcp:
+            # Writes: a read the engine runs itself is answered from a callback, on no task.
             for transaction_id in range(10):
-                assert await tcp.request("03 0000 0001", UNIT, transaction_id)
+                assert await tcp.request("06 0000 0001", UNIT, transaction_id)
             assert len(tasks) == 1  # one after the other: one worker
             for _ in range(5):
                 for transaction_id in range(6):
-                    await tcp.send("03 0000 0001", UNIT, transaction_id)
+                    await tcp.send("06 0000 0001", UNIT, transaction_id)
                 replies = [await tcp.receive() for _ in range(6)]
                 assert [reply.transaction_id for reply in replies if reply] == list(range(6))
             assert len(tasks) <= 3
         assert bench.gateway.counters.requests == 40
+
+
+async def test_reads_on_a_line_with_an_event_loop_run_on_no_task(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The engine runs each read itself (the fast path, or its line task) and completes a
+    # future: the gateway answers from its done-callback, and no worker is ever started.
+    workers: list[object] = []
+    worker = Gateway._worker
+
+    async def spied(self: Gateway, *args: object) -> None:
+        workers.append(args)
+        await worker(self, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Gateway, "_worker", spied)
+    async with line(max_in_flight=3) as bench:
+        async with client(bench.gateway) as a, client(bench.gateway) as b:
+            for _ in range(5):
+                for transaction_id in range(3):
+                    await a.send(f"03 {transaction_id:04X} 0001", UNIT, transaction_id)
+                    await b.send(f"04 {transaction_id:04X} 0001", UNIT, transaction_id)
+                for tcp in (a, b):
+                    replies = [await tcp.receive() for _ in range(3)]
+                    assert [reply.transaction_id for reply in replies if reply] == [0, 1, 2]
+        assert bench.gateway.counters.requests == 30
+        assert bench.gateway.counters.transactions == 30
+    assert workers == []
 
 
 async def test_a_listener_with_a_lower_priority_value_goes_first() -> None:
