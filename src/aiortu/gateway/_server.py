@@ -601,7 +601,7 @@ class Gateway:
             _log.exception("gateway: forwarding a request failed; answered with exception 0B")
             self._end(request, exception_reply(pdu, _NO_RESPONSE))
             return
-        if isinstance(awaitable, asyncio.Future):
+        if answered_from_callback(awaitable):
             request.connection.on_line.add(awaitable)
             awaitable.add_done_callback(functools.partial(self._read_done, request))
         else:
@@ -709,6 +709,15 @@ class Gateway:
     def _count_transaction(self, line: _Line) -> None:
         self.counters.transactions += 1
         line.stats.transactions += 1
+
+
+def answered_from_callback(awaitable: object) -> bool:
+    """The read shortcut's predicate: the reply comes as an event loop future (the engine runs
+    the read itself: its fast path, or its queue on a line with an event loop), so the future's
+    done-callback answers it, with no task. Elsewhere (trio, a line without an event loop, a
+    read the engine runs on its caller's task) a worker awaits it. Both end in
+    `Gateway._end`."""
+    return isinstance(awaitable, asyncio.Future)
 
 
 def _outcome(future: asyncio.Future[Any]) -> tuple[Any, BaseException | None]:
