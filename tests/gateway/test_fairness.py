@@ -5,10 +5,13 @@ Latency is asserted as the number of transactions on the wire, never as time."""
 from __future__ import annotations
 
 import asyncio
+import socket
+import struct
 from collections.abc import Callable
 from contextlib import AsyncExitStack
 
 import anyio
+import anyio.abc
 import pytest
 
 from aiortu.gateway import Gateway, Listen
@@ -248,3 +251,29 @@ async def test_a_read_sent_after_a_write_never_joins_a_read_from_before_it() -> 
             assert new is not None
             assert (old.pdu.hex(" "), new.pdu.hex(" ")) == ("03 02 12 34", "03 02 00 42")
             assert bench.gateway.counters.coalesced == 0
+
+
+async def test_a_client_that_resets_has_its_queued_reads_dropped_before_the_line() -> None:
+    # A's read holds the line; B's reads queue behind it, answered from callbacks; B resets
+    # its connection: none of them reaches the line, and the line goes on.
+    gate = Gate()
+    async with line(max_in_flight=4, master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as a:
+            gate.close()
+            await a.send("03 0000 0001", UNIT, 1)
+            await _until(lambda: gate.held == 1)
+            stream = await anyio.connect_tcp("127.0.0.1", bench.gateway.port)
+            b = TcpClient(stream)
+            for transaction_id in range(3):
+                await b.send(f"03 {transaction_id + 1:04X} 0001", UNIT, transaction_id)
+            await _until(lambda: bench.master.engine.queued == 3)
+            raw = stream.extra(anyio.abc.SocketAttribute.raw_socket)
+            raw.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            await stream.aclose()  # a reset, not an end of stream
+            await _until(lambda: bench.gateway.connections == 1)
+            gate.opened.set()
+            assert await a.receive() is not None
+            assert await a.request("03 0005 0001", UNIT, 2)
+        assert bench.messages == 2  # A's two reads; none of B's
+        assert not bench.master.engine.busy
