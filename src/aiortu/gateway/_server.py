@@ -54,7 +54,7 @@ import logging
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Final
+from typing import Any, Final, TypeGuard
 
 import anyio
 import anyio.abc
@@ -711,7 +711,7 @@ class Gateway:
         line.stats.transactions += 1
 
 
-def answered_from_callback(awaitable: object) -> bool:
+def answered_from_callback(awaitable: object) -> TypeGuard[asyncio.Future[Any]]:
     """The read shortcut's predicate: the reply comes as an event loop future (the engine runs
     the read itself: its fast path, or its queue on a line with an event loop), so the future's
     done-callback answers it, with no task. Elsewhere (trio, a line without an event loop, a

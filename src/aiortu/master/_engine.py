@@ -12,17 +12,22 @@ method, `LineEngine.submit`, and awaits what it returns. Its parts, one module e
   late-reply guard;
 - the line task (`_line_task.py`): what no caller can run, and a dead link.
 
-The transaction runs in the task of the caller that submitted it: on an idle line the
-caller sends the request and waits for the reply itself, so a read costs no hand-over
-between tasks. When the line is busy, the caller queues and waits for its turn; the
-transaction that ends hands the line to the next one (`LineEngine.release`), running its
-fast path at once where the predicate lets it, so a queue of reads costs what one caller
-costs.
+On an idle line the transaction runs in the task of the caller that submitted it: the
+caller sends the request and waits for the reply itself (or awaits the future of the fast
+path, which sent it), so a read costs no hand-over between tasks. When the line is busy,
+the caller queues; the transaction that ends hands the line to the next one
+(`LineEngine.release`), running its fast path where the predicate lets it, so a queue of
+reads costs what one caller costs. On a line with an event loop the engine runs every
+queued transaction itself (the fast path, else the line task through the machine) and
+completes the caller's future with the result, so a caller may finish from the future's
+done-callback, with no task (the line server does); elsewhere the caller is handed the line
+(`TURN`) and runs it in its own task.
 
 Cancellation never leaves the line half way through an exchange. A caller cancelled while
 queued is dropped; one cancelled before its request began to go out gives the line up at
-once; one cancelled after that leaves its attempt to the line task, which finishes it
-without retries, then hands the line on.
+once (a queued transaction the line task runs for it still goes out once the line task has
+begun it, without retries); one cancelled after that leaves its attempt to the line task,
+which finishes it without retries, then hands the line on.
 
 It keeps [`UnitStats`][aiortu.master.UnitStats] per unit and their health: a unit is offline
 after *offline_after* consecutive failed transactions, and online again after a success. With
