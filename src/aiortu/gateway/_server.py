@@ -624,15 +624,15 @@ class Gateway:
 
     def _end(self, request: _Request, reply: bytes | None) -> None:
         """`request` is over with `reply` (None: a broadcast, or its client left): the cache
-        and the reads that shared it are told, the line's turn moves on, the reply is sent, and
-        its window place is freed once it is."""
+        and the reads that shared it are told, the line's turn moves on, the reply is sent
+        (unless its client has left), and its window place is freed once it is."""
         line = request.line
         if request.generation is not None and reply is not None:
             assert line.cache is not None
             line.cache.put(request.unit, request.adu.pdu, reply, request.generation)
         line.now = max(line.now, request.turn)
         connection = request.connection
-        if reply is None:
+        if reply is None or not connection.open:
             connection.done()
         else:
             self.statistics.answered(line.name, request.unit, reply)
