@@ -277,3 +277,28 @@ async def test_a_client_that_resets_has_its_queued_reads_dropped_before_the_line
             assert await a.request("03 0005 0001", UNIT, 2)
         assert bench.messages == 2  # A's two reads; none of B's
         assert not bench.master.engine.busy
+
+
+async def test_a_read_that_joined_another_is_not_answered_once_its_client_reset() -> None:
+    # A's read holds the line; B's identical read joins it; B resets: A's reply is the only
+    # one counted (and sent).
+    gate = Gate()
+    async with line(master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as a:
+            gate.close()
+            await a.send("03 0000 0001", UNIT, 1)
+            await _until(lambda: gate.held == 1)
+            stream = await anyio.connect_tcp("127.0.0.1", bench.gateway.port)
+            await TcpClient(stream).send("03 0000 0001", UNIT, 7)
+            await _until(lambda: bench.gateway.counters.coalesced == 1)
+            raw = stream.extra(anyio.abc.SocketAttribute.raw_socket)
+            raw.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            await stream.aclose()
+            await _until(lambda: bench.gateway.connections == 1)
+            gate.opened.set()
+            assert await a.receive() is not None
+        statistics = bench.gateway.statistics
+        (unit,) = statistics.units.values()
+        assert (unit.requests, unit.replies) == (2, 1)
+        assert statistics.clients["127.0.0.1"].replies == 1
