@@ -143,12 +143,16 @@ async def test_change_ascii_input_delimiter_is_honoured_at_both_ends_when_pushed
         aiortu.Master(master_stream, timeout=1.0, retries=0) as master,
     ):
         assert await master.diagnostics(17, 0x03, b"!\x00") is not None
+        assert await master.diagnostics(17, 0x03, b"!\x00") is not None
         assert await master.read_holding_registers(17, 0, 2) == [1, 2]
     sent = [(entry.sender, entry.data) for entry in bus.trace]
+    change = bytes.fromhex("08 0003 2100")
     assert sent == [
-        (0, encode_ascii_frame(17, bytes.fromhex("08 0003 2100"))),
-        (1, encode_ascii_frame(17, bytes.fromhex("08 0003 2100"))),
-        # The device now waits for '!'; its own replies still end with LF.
+        (0, encode_ascii_frame(17, change)),
+        (1, encode_ascii_frame(17, change)),
+        # The same request again: the device now waits for '!'; its replies still end with LF.
+        (0, encode_ascii_frame(17, change, delimiter=ord("!"))),
+        (1, encode_ascii_frame(17, change)),
         (0, encode_ascii_frame(17, bytes.fromhex("03 0000 0002"), delimiter=ord("!"))),
         (1, encode_ascii_frame(17, bytes.fromhex("03 04 0001 0002"))),
     ]

@@ -99,6 +99,10 @@ class AsciiStream(anyio.abc.ByteStream):
         """Characters that did not make a frame, counted by reason."""
         self._ready: deque[bytes] = deque()
         self._last_frame = b""
+        # The last RTU frame sent, the delimiter it went with, and its ASCII frame.
+        self._sent_item = b""
+        self._sent_delimiter = LF
+        self._sent_frame = b""
 
     @property
     def whole_frames(self) -> bool:
@@ -119,7 +123,12 @@ class AsciiStream(anyio.abc.ByteStream):
         if len(item) < 4:
             raise InvalidValue("len(item)", len(item), "at least 4 (unit, PDU and CRC)")
         unit = item[0]
-        return encode_ascii_frame(unit, item[1:-2], self.send_delimiters.get(unit, LF))
+        delimiter = self.send_delimiters.get(unit, LF)
+        if item == self._sent_item and delimiter == self._sent_delimiter:
+            return self._sent_frame  # the same frame again: a poll's request, a store's reply
+        frame = encode_ascii_frame(unit, item[1:-2], delimiter)
+        self._sent_item, self._sent_delimiter, self._sent_frame = bytes(item), delimiter, frame
+        return frame
 
     def sent(self, item: bytes) -> None:
         """The RTU frame `item` has gone out: a slave's reply to 08/03 changes the delimiter
