@@ -178,3 +178,19 @@ async def test_a_failing_callback_ends_the_reader_with_its_error() -> None:
         with pytest.raises(RuntimeError) as caught:
             await stream.receive()
         assert caught.value is bug
+
+
+@pytest.mark.parametrize("push", [True, False])
+async def test_a_short_0803_reply_changes_no_delimiter(push: bool) -> None:
+    left, right = virtual_pair()
+    stream = ascii_stream(right) if push else AsciiStream(right)
+    async with left, stream:
+        # 08/03 with no data byte (malformed; the master refuses it), then a full one.
+        await left.send(encode_ascii_frame(17, bytes.fromhex("08 0003")))
+        with anyio.fail_after(2):
+            assert (await stream.receive())[:4] == bytes.fromhex("11 08 0003")
+        assert stream.send_delimiters == {}
+        await left.send(encode_ascii_frame(17, bytes.fromhex("08 0003 2100")))
+        with anyio.fail_after(2):
+            await stream.receive()
+        assert stream.send_delimiters == {17: ord("!")}

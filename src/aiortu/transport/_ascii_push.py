@@ -24,7 +24,6 @@ import asyncio
 import math
 import time
 from collections.abc import Callable
-from typing import Any
 
 import anyio.abc
 
@@ -115,7 +114,8 @@ class PushAsciiStream(AsciiStream, PushStream):
         underneath takes it without a yield."""
         if not self._inner.send_nowait(self.encode(item)):
             return False
-        self.sent(item)
+        if self.answering:  # only a slave's replies change anything (08/03)
+            self.sent(item)
         return True
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
@@ -126,23 +126,16 @@ class PushAsciiStream(AsciiStream, PushStream):
         return await super().receive(max_bytes)
 
     def _on_chunk(self, data: bytes) -> None:
-        """The read callback of the stream underneath."""
-        self._hand_over(self.receiver.feed(data, self._clock()))
-
-    def _on_timer(self) -> None:
-        """The inter-character timeout of the frame under way has come."""
-        self._timer = None
-        self._hand_over(self.receiver.expire(self._clock()))
-
-    def _hand_over(self, outputs: list[Any]) -> None:
+        """The read callback of the stream underneath; with no `data`, the timer's."""
         try:
-            frames = self.frames(outputs) if outputs else ()
-            on_frame = self._on_frame
-            for frame in frames:
-                if on_frame is None:
-                    self._ready.append(frame)
-                else:
-                    on_frame(frame)
+            outputs = self.receiver.feed(data, self._clock())  # no data: expire, if due
+            if outputs:
+                for frame in self.frames(outputs):
+                    on_frame = self._on_frame  # the link may stop taking them meanwhile
+                    if on_frame is None:
+                        self._ready.append(frame)
+                    else:
+                        on_frame(frame)
             if self._timer is not None or self.receiver.state is not AsciiState.IDLE:
                 self._arm_timer()  # a frame under way, or one that just ended
         except BaseException as error:  # a bug: end the link's reader with it
@@ -150,6 +143,11 @@ class PushAsciiStream(AsciiStream, PushStream):
             self._inner.set_receiver(None)
             if self._on_lost is not None:
                 self._on_lost()
+
+    def _on_timer(self) -> None:
+        """The inter-character timeout of the frame under way has come."""
+        self._timer = None
+        self._on_chunk(b"")
 
     def _arm_timer(self) -> None:
         """Keep one loop timer at the receiver's next deadline (none while idle)."""

@@ -98,6 +98,8 @@ class AsciiStream(anyio.abc.ByteStream):
         self.discarded: Counter[AsciiDiscardReason] = Counter()
         """Characters that did not make a frame, counted by reason."""
         self._ready: deque[bytes] = deque()
+        # The last frame received (unit, PDU, LRC) and its RTU frame.
+        self._last_received = b""
         self._last_frame = b""
         # The last RTU frame sent, the delimiter it went with, and its ASCII frame.
         self._sent_item = b""
@@ -166,15 +168,21 @@ class AsciiStream(anyio.abc.ByteStream):
         for out in outputs:
             if type(out) is AsciiFrameReceived:
                 self.frames_received += 1
-                body = out.frame[:-1]  # unit and PDU, without the LRC
-                frame = self._last_frame
-                if body != frame[:-2]:
-                    # Not the last frame again (a poll's unchanged reply): a CRC to compute.
+                received = out.frame  # unit, PDU and LRC
+                if received == self._last_received:
+                    frame = self._last_frame  # a poll's unchanged reply: its CRC is known
+                else:
+                    body = received[:-1]
                     crc = crc16(body)
                     frame = self._last_frame = body + bytes((crc & 0xFF, crc >> 8))
+                    self._last_received = received
                 frames.append(frame)
-                if not self.answering and body[1:4] == _CHANGE_DELIMITER and len(body) >= 5:
-                    self.send_delimiters[body[0]] = body[4]
+                if (
+                    received.startswith(_CHANGE_DELIMITER, 1)
+                    and len(received) >= 6  # the new delimiter, then the LRC
+                    and not self.answering
+                ):
+                    self.send_delimiters[received[0]] = received[4]
             else:
                 self.discarded[out.reason] += 1
                 if _log.isEnabledFor(logging.DEBUG):
