@@ -22,6 +22,10 @@ server: each round, a fresh server process per contender on a pty pair of its ow
 calls: the Python function calls (and coroutine resumptions) per read of each tree's master
     (against pymodbus's server) and of each tree's server (read by pymodbus's client), counted
     with ``sys.setprofile`` over up to 1000 reads: figures the machine's load does not move.
+instructions: the user-space instructions per read of each tree's master and of pymodbus's
+    client against pymodbus's server, counted by callgrind (valgrind): the difference between
+    runs of 100 and 400 reads, over 300. Neither the kernel's work (the pty, epoll) nor the
+    load counts.
 
 Prints the machine, the commits, the load average before and after, and a table per part:
 medians, min..max, and the ratios to AFTER and to pymodbus.
@@ -32,8 +36,10 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
+import re
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -46,17 +52,6 @@ from ab_commits import commit, load, rotated
 LINE = {"baudrate": 19200, "bytesize": 8, "parity": "N", "stopbits": 2}
 PEERS = str(Path(__file__).resolve().parents[1] / "tests" / "transport" / "pymodbus_peers.py")
 PYMODBUS = "pymodbus"
-
-
-def schedstat_seconds(pid: int) -> float:
-    """CPU seconds of process `pid`'s live threads, in nanoseconds' resolution."""
-    total = 0
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            total += int((task / "schedstat").read_text().split()[0])
-        except (OSError, IndexError, ValueError):
-            continue  # a thread that ended meanwhile
-    return total / 1e9
 
 
 class CallCounter:
@@ -242,9 +237,9 @@ def server_round(tree: str | None, requests: int) -> float:
     with benchlib.Children() as children:
         client_port, server_port = children.socat_pair()
         server = start_server(children, tree, server_port)
-        cpu = schedstat_seconds(server.pid)
+        cpu = benchlib.cpu_exact(server.pid)
         asyncio.run(pymodbus_reads(client_port, requests))
-        return (schedstat_seconds(server.pid) - cpu) / requests
+        return (benchlib.cpu_exact(server.pid) - cpu) / requests
 
 
 def part_server(before: str, after: str, rounds: int, requests: int) -> dict[str, list[float]]:
@@ -276,9 +271,53 @@ def part_calls(before: str, after: str, rounds: int, requests: int) -> dict[str,
     return results
 
 
+def instructions(tree: str, kind: str, port: str, requests: int) -> int:
+    """User-space instructions of one client process of *kind* doing *requests* reads after
+    its warm-up, counted by callgrind (valgrind), its own start-up included."""
+    with tempfile.TemporaryDirectory() as directory:
+        out = os.path.join(directory, "callgrind.out")
+        argv = [
+            "valgrind",
+            "--tool=callgrind",
+            f"--callgrind-out-file={out}",
+            sys.executable,
+            os.path.abspath(__file__),
+            "--child",
+            kind,
+            port,
+            str(requests),
+        ]
+        done = subprocess.run(argv, env=_env(tree), capture_output=True, text=True, check=False)
+    found = re.search(r"refs:\s+([\d,]+)", done.stderr)
+    if done.returncode != 0 or found is None:
+        raise RuntimeError(f"callgrind of the {kind} client of {tree} failed:\n{done.stderr}")
+    return int(found.group(1).replace(",", ""))
+
+
+def part_instructions(
+    before: str, after: str, rounds: int, requests: int
+) -> dict[str, list[float]]:
+    """Instructions per read of each tree's master and of pymodbus's client, all against
+    pymodbus's server: the difference between 100 and 400 reads, over 300 (start-up cancels)."""
+    contenders = {
+        "before": (before, "aiortu"),
+        "after": (after, "aiortu"),
+        PYMODBUS: (after, PYMODBUS),
+    }
+    results: dict[str, list[float]] = {}
+    with benchlib.Children() as children:
+        client_port, server_port = children.socat_pair()
+        start_server(children, None, server_port)
+        for name, (tree, kind) in contenders.items():
+            few = instructions(tree, kind, client_port, 100)
+            many = instructions(tree, kind, client_port, 400)
+            results[name] = [(many - few) / 300]
+    return results
+
+
 def report(title: str, results: dict[str, list[float]], unit: str) -> list[str]:
     middle = {name: benchlib.median(values) for name, values in results.items()}
-    if unit == "calls/read":
+    if unit in ("calls/read", "instructions/read"):
         rows = [[name, f"{value:.0f}"] for name, value in middle.items()]
         return [benchlib.table([title, unit], rows)]
     rows = [
@@ -307,6 +346,7 @@ PARTS: dict[str, tuple[str, Callable[..., dict[str, list[float]]], str]] = {
     "master": ("ASCII master (client process CPU)", part_master, "CPU us/read"),
     "server": ("ASCII server (server process CPU, schedstat)", part_server, "CPU us/read"),
     "calls": ("ASCII (Python calls)", part_calls, "calls/read"),
+    "instructions": ("ASCII master (callgrind)", part_instructions, "instructions/read"),
 }
 
 
