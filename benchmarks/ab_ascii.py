@@ -44,6 +44,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import benchlib
@@ -74,12 +75,15 @@ class CallCounter:
 # -- the child processes ------------------------------------------------------------------------
 
 
-async def master_reads(port: str, requests: int, count_calls: bool) -> tuple[str, float]:
+async def master_reads(
+    port: str, requests: int, count_calls: bool, framing: str = "ascii"
+) -> tuple[str, float]:
     """*requests* reads by aiortu's master: where aiortu came from, and CPU s (or calls) a read."""
     import aiortu
 
     counter = CallCounter()
-    async with aiortu.open_master(port, framing="ascii", timeout=1.0, retries=0, **LINE) as master:  # type: ignore[arg-type]
+    options: dict[str, Any] = {"framing": framing} if framing == "ascii" else {"frame_gap": 0}
+    async with aiortu.open_master(port, timeout=1.0, retries=0, **options, **LINE) as master:
         for _ in range(20):
             expected = await master.read_holding_registers(1, 0, 10)
         cpu = time.process_time()
@@ -158,7 +162,8 @@ def child(kind: str, port: str, requests: int) -> None:
     if kind == "pymodbus":
         print(asyncio.run(pymodbus_reads(port, requests)) / requests)
         return
-    path, cost = asyncio.run(master_reads(port, requests, kind == "calls"))
+    framing = "rtu" if kind == "rtu" else "ascii"
+    path, cost = asyncio.run(master_reads(port, requests, kind == "calls", framing))
     print(path)
     print(cost)
 
@@ -298,19 +303,24 @@ def part_instructions(
     before: str, after: str, rounds: int, requests: int
 ) -> dict[str, list[float]]:
     """Instructions per read of each tree's master and of pymodbus's client, all against
-    pymodbus's server: the difference between 100 and 400 reads, over 300 (start-up cancels)."""
+    pymodbus's server: the difference between 100 and 400 reads, over 300 (start-up cancels).
+    The reference: AFTER's master in RTU, against pymodbus's RTU server."""
     contenders = {
         "before": (before, "aiortu"),
         "after": (after, "aiortu"),
         PYMODBUS: (after, PYMODBUS),
+        "after, RTU (reference)": (after, "rtu"),
     }
     results: dict[str, list[float]] = {}
     with benchlib.Children() as children:
-        client_port, server_port = children.socat_pair()
+        ascii_port, server_port = children.socat_pair()
         start_server(children, None, server_port)
+        rtu_port, server_port = children.socat_pair()
+        children.server("pymodbus", server_port)
         for name, (tree, kind) in contenders.items():
-            few = instructions(tree, kind, client_port, 100)
-            many = instructions(tree, kind, client_port, 400)
+            port = rtu_port if kind == "rtu" else ascii_port
+            few = instructions(tree, kind, port, 100)
+            many = instructions(tree, kind, port, 400)
             results[name] = [(many - few) / 300]
     return results
 
