@@ -194,3 +194,22 @@ async def test_a_short_0803_reply_changes_no_delimiter(push: bool) -> None:
         with anyio.fail_after(2):
             await stream.receive()
         assert stream.send_delimiters == {17: ord("!")}
+
+
+async def test_frames_after_the_receiver_stops_are_kept_for_receive() -> None:
+    left, right = virtual_pair()
+    stream = ascii_stream(right)
+    taken: list[bytes] = []
+
+    def take_one(frame: bytes) -> None:
+        taken.append(frame)
+        stream.set_receiver(None)  # as a link's reader does when it stops
+
+    async with left, stream:
+        stream.set_receiver(take_one)
+        await left.send(READ + encode_ascii_frame(2, bytes.fromhex("03 0000 0001")))
+        with anyio.fail_after(2):
+            second = await stream.receive()  # the second frame of the chunk was kept
+    assert [frame[0] for frame in taken] == [1]
+    assert second[0] == 2
+    assert stream.frames_received == 2
