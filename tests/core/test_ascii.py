@@ -364,6 +364,22 @@ def test_a_changed_delimiter_ends_frames_in_place_of_lf() -> None:
     assert _frames(outputs) == [bytes.fromhex("010300000001FB")]
 
 
+@pytest.mark.parametrize("delimiter", [0x00, 0xFF])
+def test_every_byte_but_the_colon_may_be_the_delimiter(delimiter: int) -> None:
+    """08/03 may set any character: the lowest and the highest byte end frames too."""
+    receiver = AsciiReceiver(delimiter=delimiter)
+    frame = encode_ascii_frame(1, bytes.fromhex("03 00 00 00 01"), delimiter=delimiter)
+    assert _frames(receiver.feed(frame, 0.0)) == [bytes.fromhex("010300000001FB")]
+
+
+@pytest.mark.parametrize("delimiter", [-1, 0x100])
+def test_a_delimiter_that_is_not_a_byte_is_refused(delimiter: int) -> None:
+    receiver = AsciiReceiver()
+    with pytest.raises(InvalidValue, match="delimiter"):
+        receiver.delimiter = delimiter
+    assert receiver.delimiter == ord("\n")
+
+
 def test_cr_may_be_the_delimiter() -> None:
     receiver = AsciiReceiver(delimiter=0x0D)
     outputs = receiver.feed(READ[:-1] + b"\r", 0.0)
