@@ -214,3 +214,21 @@ def test_encode_then_decode_gives_the_value_back(
     point = ProfilePoint("p", Table.HOLDING_REGISTERS, 0, kind, WIDTH[kind.value], layout=layout)
     registers = encode_point(point, value)
     assert decode_point(point, registers) == value
+
+
+def test_block_reads_compare_and_show_as_what_they_read() -> None:
+    """Two plans of one profile are equal read by read, and a read shows its table, address,
+    count and points, not the decoders built for it."""
+    profile = make(
+        [
+            ProfilePoint("a", Table.HOLDING_REGISTERS, 0, PointType.F32, 2),
+            ProfilePoint("b", Table.HOLDING_REGISTERS, 2, PointType.U16, 1),
+        ]
+    )
+    first, again = plan_blocks(profile.points, profile), plan_blocks(profile.points, profile)
+    assert first == again
+    assert len(first) == 1
+    assert repr(first[0]) == (
+        f"BlockRead(table={Table.HOLDING_REGISTERS!r}, address=0, count=3, "
+        f"points={profile.points!r})"
+    )
