@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from aiortu.core.codes import (
     USER_DEFINED_FUNCTION_CODES,
+    DeviceIdObject,
     ExceptionCode,
     FunctionCode,
     is_user_defined,
 )
+from aiortu.core.model import OBJECT_IDS
 
 
 def test_user_defined_codes_are_65_to_72_and_100_to_110() -> None:
@@ -55,3 +57,18 @@ def test_exception_codes_are_the_specs() -> None:
         "GATEWAY_PATH_UNAVAILABLE": 0x0A,
         "GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND": 0x0B,
     }
+
+
+def test_device_identification_objects_are_the_specs() -> None:
+    # Modbus Application Protocol V1.1b3, 6.21: the basic and regular objects 0x00..0x06.
+    spec = {
+        "vendor_name": 0x00,
+        "product_code": 0x01,
+        "revision": 0x02,
+        "vendor_url": 0x03,
+        "product_name": 0x04,
+        "model_name": 0x05,
+        "user_application_name": 0x06,
+    }
+    assert [int(member) for member in DeviceIdObject] == list(spec.values())
+    assert dict(OBJECT_IDS) == spec  # the names a profile's [device.identify] may use

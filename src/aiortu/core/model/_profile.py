@@ -10,6 +10,7 @@ import enum
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from aiortu.core.codes import DeviceIdObject
 from aiortu.core.errors import InvalidValue
 from aiortu.core.model._addressing import Table
 from aiortu.core.model._values import Layout
@@ -33,14 +34,14 @@ Value = bool | int | float | str | tuple[str, ...] | None
 flags set (bitfields), or `None` when the device says it has none."""
 
 
-OBJECT_IDS = {
-    "vendor_name": 0x00,
-    "product_code": 0x01,
-    "revision": 0x02,
-    "vendor_url": 0x03,
-    "product_name": 0x04,
-    "model_name": 0x05,
-    "user_application_name": 0x06,
+OBJECT_IDS: Mapping[str, int] = {
+    "vendor_name": DeviceIdObject.VENDOR_NAME,
+    "product_code": DeviceIdObject.PRODUCT_CODE,
+    "revision": DeviceIdObject.MAJOR_MINOR_REVISION,
+    "vendor_url": DeviceIdObject.VENDOR_URL,
+    "product_name": DeviceIdObject.PRODUCT_NAME,
+    "model_name": DeviceIdObject.MODEL_NAME,
+    "user_application_name": DeviceIdObject.USER_APPLICATION_NAME,
 }
 """The device identification objects a profile may name, with their object ids."""
 
@@ -72,6 +73,19 @@ class PointType(enum.StrEnum):
     def is_number(self) -> bool:
         """Whether scale, offset and write limits apply (integers and floats)."""
         return self not in (PointType.STRING, PointType.BOOL, PointType.BITFIELD, PointType.ENUM)
+
+
+FIXED_WIDTHS: Mapping[PointType, int] = {
+    PointType.U16: 1,
+    PointType.I16: 1,
+    PointType.U32: 2,
+    PointType.I32: 2,
+    PointType.U64: 4,
+    PointType.I64: 4,
+    PointType.F32: 2,
+    PointType.F64: 4,
+}
+"""The registers a number of each fixed-width type spans (a profile file gives no size)."""
 
 
 class Access(enum.StrEnum):
