@@ -20,20 +20,27 @@ from typing import Any
 from aiortu.core.errors import ConfigError
 from aiortu.core.model._addressing import Table
 from aiortu.core.model._import_ha import checked
-from aiortu.core.model._profile import DeviceInfo, PointType, Profile, ProfilePoint
+from aiortu.core.model._profile import (
+    FIXED_WIDTHS,
+    DeviceInfo,
+    PointType,
+    Profile,
+    ProfilePoint,
+)
 from aiortu.core.model._values import Layout
 
 __all__ = ("EvccImport", "profile_from_evcc", "render_evcc")
 
-_DECODES: dict[str, tuple[PointType, int, int | None]] = {
-    "int16": (PointType.I16, 1, -0x8000),
-    "uint16": (PointType.U16, 1, 0xFFFF),
-    "int32": (PointType.I32, 2, -0x80000000),
-    "uint32": (PointType.U32, 2, 0xFFFFFFFF),
-    "int64": (PointType.I64, 4, -0x8000000000000000),
-    "uint64": (PointType.U64, 4, 0xFFFFFFFFFFFFFFFF),
-    "float32": (PointType.F32, 2, None),
-    "float64": (PointType.F64, 4, None),
+# Each decode's type, and its not-available value (`...nan`).
+_DECODES: dict[str, tuple[PointType, int | None]] = {
+    "int16": (PointType.I16, -0x8000),
+    "uint16": (PointType.U16, 0xFFFF),
+    "int32": (PointType.I32, -0x80000000),
+    "uint32": (PointType.U32, 0xFFFFFFFF),
+    "int64": (PointType.I64, -0x8000000000000000),
+    "uint64": (PointType.U64, 0xFFFFFFFFFFFFFFFF),
+    "float32": (PointType.F32, None),
+    "float64": (PointType.F64, None),
 }
 _TABLES = {
     "holding": Table.HOLDING_REGISTERS,
@@ -170,14 +177,14 @@ def _point(name: str, key: str, plugin: Mapping[str, Any], source: str) -> Profi
     base = decode.removesuffix("nan").removesuffix("s")
     if base not in _DECODES:
         raise ConfigError(source, f"{key}.register.decode", f"unknown decode {decode!r}")
-    kind, size, missing = _DECODES[base]
+    kind, missing = _DECODES[base]
     swapped = decode.removesuffix("nan").endswith("s")
     return ProfilePoint(
         name,
         table,
         address,
         kind,
-        size,
+        FIXED_WIDTHS[kind],
         layout=Layout.CDAB if swapped else Layout.ABCD,
         scale=None if scale is None else float(scale),
         not_available=missing if decode.endswith("nan") else None,

@@ -19,6 +19,7 @@ from aiortu.core.errors import ConfigError
 from aiortu.core.model._addressing import Table
 from aiortu.core.model._profile import (
     DEFAULT_POLL_CLASS,
+    FIXED_WIDTHS,
     Access,
     DeviceInfo,
     PointType,
@@ -31,18 +32,18 @@ from aiortu.core.model._values import Layout
 
 __all__ = ("checked", "profiles_from_home_assistant")
 
-_DATA_TYPES: dict[str, tuple[PointType, int]] = {
-    "int8": (PointType.I16, 1),
-    "int16": (PointType.I16, 1),
-    "int32": (PointType.I32, 2),
-    "int64": (PointType.I64, 4),
-    "uint8": (PointType.U16, 1),
-    "uint16": (PointType.U16, 1),
-    "uint32": (PointType.U32, 2),
-    "uint64": (PointType.U64, 4),
-    "float32": (PointType.F32, 2),
-    "float64": (PointType.F64, 4),
-    "string": (PointType.STRING, 0),
+_DATA_TYPES: dict[str, PointType] = {
+    "int8": PointType.I16,
+    "int16": PointType.I16,
+    "int32": PointType.I32,
+    "int64": PointType.I64,
+    "uint8": PointType.U16,
+    "uint16": PointType.U16,
+    "uint32": PointType.U32,
+    "uint64": PointType.U64,
+    "float32": PointType.F32,
+    "float64": PointType.F64,
+    "string": PointType.STRING,
 }
 _SWAPS = {"none": Layout.ABCD, "byte": Layout.BADC, "word": Layout.CDAB, "word_byte": Layout.DCBA}
 _REGISTER_TABLES = {"holding": Table.HOLDING_REGISTERS, "input": Table.INPUT_REGISTERS}
@@ -152,9 +153,8 @@ class _Entity:
         if data_type not in _DATA_TYPES:
             known = ", ".join(_DATA_TYPES)
             raise self.fail("data_type", f"{data_type!r} has no profile type (known: {known})")
-        kind, size = _DATA_TYPES[data_type]
-        if kind is PointType.STRING:
-            size = self.integer("count")
+        kind = _DATA_TYPES[data_type]
+        size = self.integer("count") if kind is PointType.STRING else FIXED_WIDTHS[kind]
         layout = self.choice("swap", _SWAPS, "none")
         return kind, size, layout
 

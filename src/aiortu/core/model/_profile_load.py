@@ -21,6 +21,7 @@ from aiortu.core.model._addressing import Table
 from aiortu.core.model._point_codec import check_value, encode_point
 from aiortu.core.model._profile import (
     DEFAULT_POLL_CLASS,
+    FIXED_WIDTHS,
     Access,
     DeviceInfo,
     Hole,
@@ -88,7 +89,6 @@ _ALIASES = {
     "float32": "f32",
     "float64": "f64",
 }
-_WIDTHS = {"u16": 1, "i16": 1, "u32": 2, "i32": 2, "u64": 4, "i64": 4, "f32": 2, "f64": 4}
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.-]*")
 _ADDRESSES = 0x10000
 
@@ -445,10 +445,10 @@ class _PointReader:
 
     def size(self, kind: PointType, table: Table) -> int:
         given = self.entry.get("size")
-        if table.is_bit or kind.value in _WIDTHS or kind is PointType.BOOL:
+        if table.is_bit or kind in FIXED_WIDTHS or kind is PointType.BOOL:
             if given is not None:
                 raise self.fail("size", f"is only for string, bitfield and enum points, not {kind}")
-            return _WIDTHS.get(kind.value, 1)
+            return FIXED_WIDTHS.get(kind, 1)
         if kind is PointType.STRING:
             if given is None:
                 raise self.fail("size", "missing: a string needs its number of registers")
