@@ -234,9 +234,10 @@ def plan_reads(
     end = 0
 
     def close() -> None:
-        start = group[0].address
+        first = group[0]  # every point of a group shares its unit and table
+        start = first.address
         slices = tuple(PointSlice(p, p.address - start, p.width) for p in group)
-        reads.append(PlannedRead(group[0].unit, group[0].table, start, end - start, slices))
+        reads.append(PlannedRead(first.unit, first.table, start, end - start, slices))
 
     for point in ordered:
         limit, gap = (max_bits, bit_gap) if point.table.is_bit else (max_registers, max_gap)
