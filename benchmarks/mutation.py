@@ -355,7 +355,10 @@ def _arguments() -> argparse.Namespace:
     )
     parser.add_argument("--list", action="store_true", help="list the sample; run nothing")
     parser.add_argument(
-        "--only", metavar="TEXT", help="run the sampled mutants whose `file:line` holds TEXT"
+        "--only",
+        metavar="TEXT",
+        action="append",
+        help="run the sampled mutants whose `file:line` holds TEXT (given again: any of them)",
     )
     return parser.parse_args()
 
@@ -374,7 +377,7 @@ def run_package(copy: Path, name: str, args: argparse.Namespace) -> list[Outcome
     package = PACKAGES[name]
     mutants = sample(package, args.sample, args.seed, name, copy)
     if args.only:
-        mutants = [m for m in mutants if args.only in f"{m.path}:{m.line}"]
+        mutants = [m for m in mutants if any(t in f"{m.path}:{m.line}" for t in args.only)]
     if args.list:
         for mutant in mutants:
             print(f"{name}: {mutant.path}:{mutant.line}  {mutant.description}")
