@@ -45,12 +45,7 @@ from aiortu.transport._listen import (
     serve_listener,
     write_now,
 )
-from aiortu.transport._mbap_stream import (
-    FramedStream,
-    ModbusTcpCounters,
-    ModbusTcpStream,
-    open_modbus_tcp,
-)
+from aiortu.transport._mbap_stream import FramedStream, ModbusTcpCounters, ModbusTcpStream
 from aiortu.transport._push import PushStream
 from aiortu.transport._server_framing import (
     RTU_SILENCE,
@@ -60,6 +55,7 @@ from aiortu.transport._server_framing import (
     RtuFraming,
 )
 from aiortu.transport._tcp import open_rtu_over_tcp
+from aiortu.transport._tcp_push import PushConnectionStream, open_modbus_tcp
 from aiortu.transport._tls import (
     ROLE_OID,
     CertificateError,
@@ -126,6 +122,7 @@ __all__ = (
     "ModbusTcpCounters",
     "ModbusTcpStream",
     "PortAddress",
+    "PushConnectionStream",
     "PushDatagramStream",
     "PushStream",
     "RoleRules",

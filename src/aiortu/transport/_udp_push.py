@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -32,12 +31,9 @@ import anyio.lowlevel
 from aiortu._log import get_logger
 from aiortu.core.mbap import Adu
 from aiortu.errors import FrameError
-from aiortu.transport._mbap_stream import (
-    NONE_OUTSTANDING,
-    ModbusTcpCounters,
-    reply_frame,
-    request_adu,
-)
+from aiortu.transport._mbap_push import PushedMbap
+from aiortu.transport._mbap_stream import ModbusTcpCounters
+from aiortu.transport._push import loop_pushes
 from aiortu.transport._url import MODBUS_UDP_SCHEME, format_tcp_url
 
 __all__ = ("PushDatagramStream", "log_level", "open_push_datagrams", "push_datagrams")
@@ -49,11 +45,7 @@ _Address = tuple[str, int]
 
 def push_datagrams() -> bool:
     """Whether a master's Modbus UDP stream is pushed: where the running loop is asyncio."""
-    try:
-        asyncio.get_running_loop()
-    except RuntimeError:
-        return False
-    return True
+    return loop_pushes()
 
 
 def log_level(count: int) -> int:
@@ -75,10 +67,12 @@ class _Protocol(asyncio.DatagramProtocol):
         _log.debug("%s: %s", self.stream.where, exc)
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self.stream.lost(exc)
+        self.stream.lost(
+            anyio.BrokenResourceError(str(exc)) if exc else anyio.ClosedResourceError()
+        )
 
 
-class PushDatagramStream(anyio.abc.ByteStream):
+class PushDatagramStream(PushedMbap):
     """RTU frames over Modbus UDP to `peer`, pushed (see the module docstring). Made by
     [`open_modbus_udp`][aiortu.transport.open_modbus_udp] on asyncio."""
 
@@ -89,29 +83,14 @@ class PushDatagramStream(anyio.abc.ByteStream):
         where: str,
         check: Callable[[bytes], Adu],
     ) -> None:
+        super().__init__(counters, where)
         self.peer = peer
         self._check = check
-        self.counters = counters
-        """Requests, replies and dropped, refused and strangers' datagrams."""
-        self.where = where
         self.transport: asyncio.DatagramTransport | None = None
-        self._outstanding = NONE_OUTSTANDING
-        self._receiver: Callable[[bytes], None] | None = None
-        self._on_lost: Callable[[], None] | None = None
-        self._kept: deque[bytes] = deque()
-        self._waiter: asyncio.Future[None] | None = None
-        self._error: BaseException | None = None
-
-    @property
-    def whole_frames(self) -> bool:
-        """True: each frame handed over is one whole RTU frame."""
-        return True
 
     @property
     def extra_attributes(self) -> Any:
         return {anyio.abc.SocketAttribute.remote_address: lambda: self.peer}
-
-    # -- receiving -------------------------------------------------------------------
 
     def datagram(self, data: bytes, source: Any) -> None:
         """The protocol's callback: check `data`, and hand on the reply it carries."""
@@ -132,79 +111,15 @@ class PushDatagramStream(anyio.abc.ByteStream):
             counters.refused += 1
             _log.log(log_level(counters.refused), "%s: refused a datagram: %s", self.where, error)
             return
-        frame = reply_frame(counters, self._outstanding, adu)
-        if frame is None:
-            return
-        self._outstanding = NONE_OUTSTANDING  # one reply per request
-        if self._receiver is not None:
-            self._receiver(frame)
-            return
-        self._kept.append(frame)
-        self._wake()
-
-    def lost(self, exc: BaseException | None) -> None:
-        """The transport closed (by `aclose`, or failed)."""
-        if self._error is None:
-            self._error = (
-                anyio.BrokenResourceError(str(exc)) if exc else anyio.ClosedResourceError()
-            )
-        self._wake()
-        if self._on_lost is not None:
-            on_lost, self._on_lost = self._on_lost, None
-            on_lost()
-
-    def _wake(self) -> None:
-        waiter = self._waiter
-        if waiter is not None and not waiter.done():
-            waiter.set_result(None)
-
-    def set_receiver(
-        self,
-        receiver: Callable[[bytes], None] | None,
-        on_lost: Callable[[], None] | None = None,
-    ) -> None:
-        """The push extension: hand each reply to `receiver` (None: keep them for
-        `receive()`)."""
-        self._receiver = receiver
-        self._on_lost = on_lost if receiver is not None else None
-        if receiver is None:
-            return
-        while self._kept:
-            receiver(self._kept.popleft())
-        if self._error is not None:
-            self.lost(None)
-
-    async def receive(self, max_bytes: int = 65536) -> bytes:
-        """The next reply to the request outstanding, as an RTU frame."""
-        await anyio.lowlevel.checkpoint()
-        while not self._kept:
-            if self._error is not None:
-                raise self._error
-            self._waiter = asyncio.get_running_loop().create_future()
-            try:
-                await self._waiter
-            finally:
-                self._waiter = None
-        return self._kept.popleft()
-
-    # -- sending ---------------------------------------------------------------------
+        self.hand_on(adu)
 
     def send_nowait(self, item: bytes) -> bool:
         """The push extension: send the RTU frame `item` as one datagram now."""
         transport = self.transport
         if transport is None or self._error is not None:
             return False
-        transaction_id, adu = request_adu(self.counters, item)
-        self._outstanding = transaction_id
-        self._kept.clear()  # a new request: nothing that came before answers it
-        transport.sendto(adu, self.peer)
+        transport.sendto(self.request(item), self.peer)
         return True
-
-    async def send(self, item: bytes) -> None:
-        """Send the RTU frame `item` as one datagram with the next transaction id."""
-        await anyio.lowlevel.checkpoint()
-        if not self.send_nowait(item):
-            raise self._error or anyio.ClosedResourceError()
 
     async def send_eof(self) -> None:
         pass  # datagrams have no end of stream
@@ -212,7 +127,7 @@ class PushDatagramStream(anyio.abc.ByteStream):
     async def aclose(self) -> None:
         if self.transport is not None:
             self.transport.close()
-        self.lost(None)
+        self.lost(anyio.ClosedResourceError())
         await anyio.lowlevel.checkpoint()
 
 
