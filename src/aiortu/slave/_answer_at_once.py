@@ -52,7 +52,7 @@ from aiortu.line import Link, LinkEvent
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler
 from aiortu.slave._store import MemoryStore
 
-__all__ = ("FAST_PATHS", "AnswerAtOnce", "FastPath", "Taken")
+__all__ = ("FAST_PATHS", "AnswerAtOnce", "FastPath", "Taken", "fast_paths_for", "memory_stores")
 
 
 @dataclass(slots=True)
@@ -151,12 +151,8 @@ class AnswerAtOnce:
         """Take the slave's `handlers` (by function code) and `stores` (by unit, routes
         applied): the fast paths that stand in for a built-in handler, the units whose
         store they can serve."""
-        self._fast_paths = {
-            code: fast
-            for code, (handler, fast) in FAST_PATHS.items()
-            if handlers.get(code) is handler
-        }
-        self._stores = {unit: store for unit, store in stores.items() if type(store) is MemoryStore}
+        self._fast_paths = fast_paths_for(handlers)
+        self._stores = memory_stores(stores)
 
     def attach(self) -> None:
         """Have the link hand whole 8-byte requests to `on_whole_request`."""
@@ -278,6 +274,21 @@ def _fast_write_registers(store: MemoryStore, pdu: bytes) -> bytes | None:
         return None
     store.write(Table.HOLDING_REGISTERS, address, _WORDS[count].unpack_from(pdu, 6))
     return pdu[:5]
+
+
+def fast_paths_for(handlers: Mapping[int, Handler]) -> dict[int, FastPath]:
+    """The fast paths that stand in for the built-in handlers among `handlers` (by code)."""
+    return {
+        code: fast for code, (handler, fast) in FAST_PATHS.items() if handlers.get(code) is handler
+    }
+
+
+def memory_stores(
+    stores: Mapping[int, DataStore | AsyncDataStore],
+) -> dict[int, MemoryStore]:
+    """The units of `stores` (routes applied) whose store the fast paths can serve: the
+    built-in `MemoryStore` itself (not routed, not a subclass, not async)."""
+    return {unit: store for unit, store in stores.items() if type(store) is MemoryStore}
 
 
 def _with_builtin(code: FunctionCode, fast: FastPath) -> tuple[Handler, FastPath]:

@@ -55,13 +55,17 @@ from aiortu.core.pdu import encode_exception
 from aiortu.errors import InvalidValue
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
+from aiortu.slave._tcp_at_once import ConnectionTap, Permits, TcpAnswerAtOnce
 from aiortu.transport import (
     RTU_SILENCE,
     ConnectionLimit,
     Framing,
     MbapFraming,
+    PushServerStream,
     listening_address,
     peer_address,
+    push_listener,
+    pushed_listener,
     serve_listener,
 )
 
@@ -173,6 +177,7 @@ class ModbusTcpServer(Dispatcher):
             for code, handler in BUILTIN_HANDLERS.items()
             if serial_line_codes or code not in SERIAL_LINE_ONLY
         }
+        self._at_once: TcpAnswerAtOnce | None = None
         self._init_dispatch(stores, SlaveMachine(stores), builtins)
         self._build_contexts()
         for function_code, handler in (handlers or {}).items():
@@ -197,6 +202,19 @@ class ModbusTcpServer(Dispatcher):
         self._replies = self._new_framing()  # encodes replies: the same for every connection
         self._lock = anyio.Lock(fast_acquire=True)
         self._stopped = anyio.Event()
+        self._at_once = TcpAnswerAtOnce(
+            self, before=self._before, after=self._after, lock=self._lock,
+            encode=self._replies.encode,
+        )  # fmt: skip
+        self._at_once.configure(self._handlers, self._stores())
+
+    def _configured(
+        self,
+        handlers: Mapping[int, Handler],
+        stores: Mapping[int, DataStore | AsyncDataStore],
+    ) -> None:
+        if self._at_once is not None:
+            self._at_once.configure(handlers, stores)
 
     @property
     def connections(self) -> int:
@@ -238,6 +256,8 @@ class ModbusTcpServer(Dispatcher):
         Reports started to `task_status` once
         [`local_address`][aiortu.slave.ModbusTcpServer.local_address] is set.
         """
+        if push_listener(listener):
+            listener = pushed_listener(listener)
         try:
             self.local_address = listening_address(listener)
             task_status.started()
@@ -253,8 +273,12 @@ class ModbusTcpServer(Dispatcher):
         [`idle_timeout`][aiortu.slave.ModbusTcpServer.idle_timeout], or it sends a malformed header;
         then close it."""
         framing = self._new_framing()
+        tap = None
+        if isinstance(stream, PushServerStream) and isinstance(framing, MbapFraming):
+            assert self._at_once is not None
+            tap = stream.tap = self._at_once.tap(stream, framing, self._permits())
         try:
-            while (adus := await self._next_requests(stream, framing)) is not None:
+            while (adus := await self._next_requests(stream, framing, tap)) is not None:
                 if adus:
                     await self._answer_all(stream, adus)
         except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
@@ -262,17 +286,28 @@ class ModbusTcpServer(Dispatcher):
         finally:
             await stream.aclose()
 
+    def _permits(self) -> Permits | None:
+        """Whether the client of the connection being served may send a request (None: any)."""
+        return None
+
     async def _next_requests(
-        self, stream: anyio.abc.ByteStream, framing: Framing
+        self, stream: anyio.abc.ByteStream, framing: Framing, tap: ConnectionTap | None
     ) -> list[Adu] | None:
         """The requests the connection's next bytes (or a silence, for a frame of unknown
-        length) complete; None when the connection is to close (idle, malformed)."""
+        length) complete; None when the connection is to close (idle, malformed). Requests
+        `tap` answered at once meanwhile count as traffic."""
         quiet = RTU_SILENCE if framing.waiting_for_silence() else self.idle_timeout
-        with anyio.move_on_after(quiet) as idle:
-            data = await stream.receive(READ_SIZE)
-        if idle.cancelled_caught:
+        while True:
+            with anyio.move_on_after(quiet) as idle:
+                data = await stream.receive(READ_SIZE)
+            if not idle.cancelled_caught:
+                break
             if framing.waiting_for_silence():
                 return framing.silence()
+            if tap is not None and tap.last_answer >= 0:
+                quiet = tap.last_answer + self.idle_timeout - anyio.current_time()
+                if quiet > 0:
+                    continue  # answered at once meanwhile: not idle
             self.counters.connections_idle += 1
             _log.info(
                 "%s: %s idle for %g s, closed", self._name, peer_address(stream), self.idle_timeout

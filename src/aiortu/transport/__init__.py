@@ -47,6 +47,13 @@ from aiortu.transport._listen import (
 )
 from aiortu.transport._mbap_stream import FramedStream, ModbusTcpCounters, ModbusTcpStream
 from aiortu.transport._push import PushStream
+from aiortu.transport._push_server import (
+    PushListener,
+    PushServerStream,
+    PushTlsListener,
+    push_listener,
+    pushed_listener,
+)
 from aiortu.transport._server_framing import (
     RTU_SILENCE,
     AsciiFraming,
@@ -124,6 +131,9 @@ __all__ = (
     "PortAddress",
     "PushConnectionStream",
     "PushDatagramStream",
+    "PushListener",
+    "PushServerStream",
+    "PushTlsListener",
     "PushStream",
     "RoleRules",
     "RS485Options",
@@ -154,6 +164,8 @@ __all__ = (
     "parse_port_url",
     "parse_rules",
     "parse_unix_url",
+    "push_listener",
+    "pushed_listener",
     "peer_address",
     "remove_socket",
     "serve_datagrams",
