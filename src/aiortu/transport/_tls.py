@@ -36,10 +36,11 @@ from anyio.streams.tls import TLSListener, TLSStream
 
 from aiortu._log import get_logger
 from aiortu.errors import InvalidValue, PortError
+from aiortu.transport import _tcp_push  # its predicate, looked up at each call
 from aiortu.transport._listen import peer_address
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
 from aiortu.transport._tcp import open_tcp_connection
-from aiortu.transport._tcp_push import PushConnectionStream, open_pushed, push_connections
+from aiortu.transport._tcp_push import PushConnectionStream, open_pushed
 from aiortu.transport._url import TLS_SCHEME, format_tcp_url
 
 __all__ = (
@@ -297,7 +298,7 @@ async def open_modbus_tls(
     context = client_tls_context(certfile, keyfile, cafile)
     where = format_tcp_url(host, port, TLS_SCHEME)
     counters = counters if counters is not None else ModbusTcpCounters()
-    if push_connections():
+    if _tcp_push.push_connections():
         pushed = await open_pushed(
             host, port, counters, connect_timeout=connect_timeout, scheme=TLS_SCHEME
         )
