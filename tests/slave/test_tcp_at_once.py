@@ -18,7 +18,8 @@ import anyio.abc
 import pytest
 
 from aiortu.core.mbap import AduDecoder, encode_adu
-from aiortu.slave import MemoryStore, Table
+from aiortu.core.pdu import RawPDU
+from aiortu.slave import MemoryStore, RequestContext, Table
 from aiortu.slave._tcp_server import READ_SIZE
 from tests.slave.tcp_helpers import UNIT, connect, device, tcp_server
 
@@ -162,3 +163,83 @@ async def test_a_client_that_does_not_read_is_held_back_and_loses_no_reply() -> 
                 await sending
         assert ids == [n & 0xFFFF for n in range(count)]
         assert server.counters.requests == count
+
+
+async def test_a_request_whose_tail_looks_like_a_whole_one_is_framed_as_one() -> None:
+    """The first 7 bytes of a request, then its 12 other bytes, which by themselves make a
+    well-formed read: the framing holds the 7, so the 12 are not a request of their own."""
+    tail = encode_adu(0x0300, UNIT, bytes.fromhex("03 0000 0001"))  # starts with 03
+    request = encode_adu(5, UNIT, tail)  # a read of function 03 with 11 bytes too many
+    async with tcp_server() as server, connect(server) as client:
+        await client.stream.send(request[:7])
+        await anyio.sleep(0.05)
+        await client.stream.send(request[7:])
+        reply = await client.receive()
+        assert reply is not None
+        assert (reply.transaction_id, reply.pdu.hex()) == (5, "8303")
+        assert await client.receive(wait=0.2) is None
+        assert server._at_once is not None
+        assert server._at_once.answered == 0
+
+
+async def test_a_request_under_way_on_another_connection_finishes_first() -> None:
+    release = anyio.Event()
+
+    async def slow(request: RawPDU, context: RequestContext) -> RawPDU:
+        await release.wait()
+        return RawPDU(0x41, b"")
+
+    async with (
+        tcp_server(handlers={0x41: slow}) as server,
+        connect(server) as first,
+        connect(server) as second,
+    ):
+        await first.send("41")
+        await anyio.sleep(0.05)  # the handler awaits, the machine is not IDLE
+        await second.send("03 0000 0001", transaction_id=2)
+        assert await second.receive(wait=0.2) is None, "answered while a request was under way"
+        release.set()
+        reply = await second.receive()
+        assert reply is not None
+        assert reply.pdu.hex() == "03021234"
+        assert await first.receive() is not None
+        assert server._at_once is not None
+        assert server._at_once.answered == 0
+        assert await second.request("03 0000 0001") == "03 02 12 34"
+        assert server._at_once.answered == 1
+
+
+async def test_listen_only_mode_answers_nothing() -> None:
+    async with tcp_server(serial_line_codes=True) as server, connect(server) as client:
+        assert await client.request("03 0000 0001") == "03 02 12 34"
+        assert server._at_once is not None
+        assert server._at_once.answered == 1
+        await client.send("08 0004 0000")  # force listen-only mode: no reply
+        with anyio.fail_after(5):
+            while not server.machine.listen_only:  # noqa: ASYNC110 - the machine's own flag
+                await anyio.sleep(0.01)
+        await anyio.sleep(0.02)  # the connection's task waits for bytes again
+        await client.send("03 0000 0001")
+        assert await client.receive(wait=0.2) is None
+        assert server.machine.listen_only
+        await client.send("08 0001 0000")  # restart communications: no reply, listening again
+        assert await client.request("03 0000 0001") == "03 02 12 34"
+        assert not server.machine.listen_only
+
+
+async def test_hooks_see_every_request() -> None:
+    seen: list[tuple[str, int]] = []
+    async with tcp_server() as server, connect(server) as client:
+        assert server._at_once is not None
+        remove_before = server.before_request(
+            lambda request, ctx: seen.append(("before", ctx.unit))
+        )
+        assert await client.request("03 0000 0001") == "03 02 12 34"
+        remove_before()
+        remove_after = server.after_request(lambda request, ctx, answer: seen.append(("after", 1)))
+        assert await client.request("06 0001 0007") == "06 00 01 00 07"
+        remove_after()
+        assert server._at_once.answered == 0
+        assert await client.request("03 0001 0001") == "03 02 00 07"
+        assert server._at_once.answered == 1
+    assert seen == [("before", UNIT), ("after", 1)]

@@ -107,3 +107,48 @@ async def test_reads_the_tap_and_the_end() -> None:
     assert offered == [b"mine", b"0123456789", b"mine", b"late"]
     assert b"".join(seen) == b"0123456789late"
     assert all(len(chunk) <= 4 for chunk in seen)
+
+
+async def test_the_tap_is_offered_a_chunk_only_while_it_may_answer() -> None:
+    """The read callback's conditions one by one, on a connected pair: a receive() waiting,
+    nothing unread, the client reading its replies."""
+    ours, theirs = socket.socketpair()
+    offered: list[bytes] = []
+    stream = PushServerStream(ours)
+    await stream.connect()
+    stream.tap = lambda chunk: offered.append(chunk) is None
+    with theirs:
+        stream.data(b"early")  # no receive() waiting: kept
+        assert offered == []
+        assert await stream.receive() == b"early"
+        async with anyio.create_task_group() as tasks:
+
+            async def read() -> None:
+                assert await stream.receive() == b"kept"
+
+            tasks.start_soon(read)
+            await anyio.sleep(0.01)  # the task waits
+            assert stream.transport is not None
+            stream.transport.get_protocol().pause_writing()  # the client reads nothing
+            stream.data(b"kept")
+            assert offered == []
+        stream.transport.get_protocol().resume_writing()
+
+        async def read_both() -> None:
+            assert await stream.receive() == b"unreadmore"
+
+        async with anyio.create_task_group() as tasks:
+            tasks.start_soon(read_both)
+            await anyio.sleep(0.01)
+            stream._kept += b"unread"  # bytes not read yet
+            stream.data(b"more")
+            assert offered == []
+        async with anyio.create_task_group() as tasks:
+            tasks.start_soon(stream.receive)
+            await anyio.sleep(0.01)
+            stream.data(b"mine")
+            assert offered == [b"mine"]
+            stream.data(b"again")
+            assert offered == [b"mine", b"again"]
+            tasks.cancel_scope.cancel()
+        await stream.aclose()

@@ -12,8 +12,8 @@ condition is a named line there) allows it:
 - the request's unit, function code and store have a fast path of the slave's answer-at-once
   ([`FAST_PATHS`][aiortu.slave._answer_at_once.FAST_PATHS]: register and bit reads, register
   writes, on the built-in `MemoryStore`), and its role may send it (Modbus/TCP Security);
-- nothing else is under way: no request of another connection holds the server, the machine is
-  IDLE and not in listen-only mode, and no trace or hook wants to see it.
+- nothing else is under way: the machine is IDLE (no request of another connection holds the
+  server) and not in listen-only mode, and no trace or hook wants to see it.
 
 A fast path gives up (`None`) before changing anything on anything it does not answer in full;
 the chunk then goes to the task as usual. A normal reply is counted in one step
@@ -65,14 +65,10 @@ class _Server(Protocol):
     def trace(self) -> Callable[[str, bytes], object] | None: ...
 
 
-class _Lock(Protocol):
-    def locked(self) -> bool: ...
-
-
 class TcpAnswerAtOnce:
     """The Modbus TCP server's shortcut (see the module docstring), for every connection of
     `server`: the hook lists `before` and `after` are the server's own objects (the predicate
-    sees every change), `lock` the lock its general route holds, `encode` its reply framing's."""
+    sees every change), and `encode` is its reply framing's."""
 
     def __init__(
         self,
@@ -80,13 +76,11 @@ class TcpAnswerAtOnce:
         *,
         before: Sized,
         after: Sized,
-        lock: _Lock,
         encode: Callable[[Adu, bytes], bytes],
     ) -> None:
         self._server = server
         self._before = before
         self._after = after
-        self._lock = lock
         self._encode = encode
         self._fast_paths: dict[int, FastPath] = {}
         self._stores: dict[int, MemoryStore] = {}
@@ -114,10 +108,10 @@ class TcpAnswerAtOnce:
             self.enabled
             # Part of an earlier request is held: it comes first, through the general route.
             and not framing.buffered
-            # A request of another connection is under way (a handler awaiting).
-            and not self._lock.locked()
-            # The machine is between requests and executes them (not listen-only).
+            # No request is under way (a handler of another connection awaiting): the general
+            # route takes the machine out of IDLE, under its lock, before its first await.
             and machine.state is SlaveState.IDLE
+            # Listen-only mode: requests are monitored, never executed nor answered.
             and not machine.listen_only
             # A trace callback sees every request and reply, from the general route.
             and self._server.trace is None

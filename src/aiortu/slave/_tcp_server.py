@@ -203,9 +203,8 @@ class ModbusTcpServer(Dispatcher):
         self._lock = anyio.Lock(fast_acquire=True)
         self._stopped = anyio.Event()
         self._at_once = TcpAnswerAtOnce(
-            self, before=self._before, after=self._after, lock=self._lock,
-            encode=self._replies.encode,
-        )  # fmt: skip
+            self, before=self._before, after=self._after, encode=self._replies.encode
+        )
         self._at_once.configure(self._handlers, self._stores())
 
     def _configured(
