@@ -10,7 +10,7 @@ condition is a named line there) allows it:
 
 - the chunk is exactly one well-formed MBAP request, nothing of an earlier one held;
 - the request's unit, function code and store have a fast path of the slave's answer-at-once
-  ([`FAST_PATHS`][aiortu.slave._answer_at_once.FAST_PATHS]: register and bit reads, register
+  (`FAST_PATHS` in `_answer_at_once.py`: register and bit reads, register
   writes, on the built-in `MemoryStore`), and its role may send it (Modbus/TCP Security);
 - nothing else is under way: the machine is IDLE (no request of another connection holds the
   server) and not in listen-only mode, and no trace or hook wants to see it.

@@ -14,6 +14,7 @@ receiver (the push extension, [`PushStream`][aiortu.transport.PushStream]) or ke
 from __future__ import annotations
 
 import asyncio
+from abc import abstractmethod
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -123,9 +124,9 @@ class PushedMbap(anyio.abc.ByteStream):
         self._kept.clear()
         return adu
 
+    @abstractmethod
     def send_nowait(self, item: bytes) -> bool:
         """The push extension: send the RTU frame `item` now, if the stream can take it."""
-        raise NotImplementedError
 
     async def send(self, item: bytes) -> None:
         """Send the RTU frame `item` with the next transaction id."""

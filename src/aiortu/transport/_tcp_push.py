@@ -12,7 +12,7 @@ without a yield, and the master's usual exchange runs as it does on a serial por
 
 It decodes and matches replies as the general path does, with the same functions: a reply
 whose transaction id is not the one outstanding is dropped and counted (`reply_frame`, through
-[`PushedMbap`][aiortu.transport._mbap_push.PushedMbap]), and a malformed MBAP header closes the
+`PushedMbap` in `_mbap_push.py`), and a malformed MBAP header closes the
 connection (`receive()` raises `anyio.BrokenResourceError`, which a master takes as a lost
 connection). A server that stops reading holds the master back: a request is written at once
 only while the transport's buffer is below its high-water mark, else `send()` waits for it to
