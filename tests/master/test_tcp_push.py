@@ -16,6 +16,7 @@ import pytest
 
 import aiortu
 from aiortu.core.mbap import Adu
+from aiortu.errors import PortNotFound
 from aiortu.transport import ModbusTcpCounters, ModbusTcpStream, PushConnectionStream
 from aiortu.transport import _tcp_push as tcp_push_module
 from tests.master.test_tcp_master import (
@@ -172,3 +173,32 @@ async def test_a_server_that_stops_reading_holds_the_pushed_writes_back(
         group.cancel_scope.cancel()
     assert bytes(received[:12]).hex() == "000000000006010300000001"
     assert bytes(received[12:24]).hex() == "000100000006010300000001"
+
+
+async def test_every_address_of_a_host_is_tried_and_a_refusal_said_in_one_sentence(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A host with two addresses: the first refuses, the second listens; then both refuse."""
+    monkeypatch.setattr(tcp_push_module, "push_connections", lambda: True)
+    closed = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+    refusing = closed.extra(anyio.abc.SocketAttribute.local_port)
+    await closed.aclose()
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+    listening = listener.extra(anyio.abc.SocketAttribute.local_port)
+    real = anyio.getaddrinfo
+
+    async def two_addresses(host: str, port: int, **options: Any) -> Any:
+        assert host == "plc.test"
+        found = await real("127.0.0.1", refusing, **options)
+        return [*found, *await real("127.0.0.1", port, **options)]
+
+    monkeypatch.setattr(anyio, "getaddrinfo", two_addresses)
+    async with listener:
+        stream = await aiortu.transport.open_modbus_tcp("plc.test", listening)
+        assert isinstance(stream, PushConnectionStream)
+        await stream.aclose()
+        with pytest.raises(PortNotFound) as caught:
+            await aiortu.transport.open_modbus_tcp("plc.test", refusing)
+    assert str(caught.value) == (
+        f"tcp://plc.test:{refusing}: connection refused: nothing listens on that port"
+    )

@@ -89,10 +89,34 @@ async def connect_protocol(
     """Connect `protocol` to `host`:`port` on asyncio's own transport (Nagle's algorithm off,
     as asyncio sets it), with the checks and errors of
     [`open_rtu_over_tcp`][aiortu.transport.open_rtu_over_tcp]; asyncio only."""
-    loop = asyncio.get_running_loop()
     with _connecting(host, port, connect_timeout, scheme):
-        transport, _ = await loop.create_connection(lambda: protocol, host, port)
+        transport = await _first_connection(host, port, protocol)
     return transport
+
+
+async def _first_connection(host: str, port: int, protocol: asyncio.Protocol) -> asyncio.Transport:
+    """`protocol` on a connection to the first of `host`'s addresses that takes one, each tried
+    in turn (anyio's `connect_tcp` races them); when none does, an `OSError` caused by each
+    address's error, as anyio raises it, for `_describe_failure`."""
+    loop = asyncio.get_running_loop()
+    failures: list[OSError] = []
+    for family, kind, proto, _, address in await anyio.getaddrinfo(
+        host, port, type=socket.SOCK_STREAM
+    ):
+        sock = socket.socket(family, kind, proto)
+        try:
+            sock.setblocking(False)
+            await loop.sock_connect(sock, address)
+        except OSError as error:
+            sock.close()
+            failures.append(error)
+            continue
+        except BaseException:
+            sock.close()
+            raise
+        transport, _ = await loop.create_connection(lambda: protocol, sock=sock)
+        return transport
+    raise OSError("all connection attempts failed") from ExceptionGroup("", failures)
 
 
 @contextmanager
