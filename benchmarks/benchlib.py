@@ -108,9 +108,9 @@ def cpu_seconds(pid: int) -> float:
 
 
 def cpu_exact(pid: int) -> float:
-    """CPU seconds of process *pid*'s live threads, in nanoseconds' resolution (schedstat):
-    for figures below the clock ticks of /proc/PID/stat (a bridge's few milliseconds a second,
-    a server's tens of microseconds per request)."""
+    """CPU seconds of process *pid*'s live threads, in nanoseconds' resolution (from
+    /proc/PID/task/*/schedstat): for figures of a few tens of microseconds per request, below
+    the 10 ms clock ticks of :func:`cpu_seconds`."""
     total = 0
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:

@@ -19,7 +19,8 @@ import pytest
 
 from aiortu.core.mbap import AduDecoder, encode_adu
 from aiortu.core.pdu import RawPDU
-from aiortu.slave import MemoryStore, RequestContext, Table
+from aiortu.core.rtu import decode_frame, encode_frame
+from aiortu.slave import MemoryStore, RequestContext, RtuOverTcpServer, Table, serve
 from aiortu.slave._tcp_server import READ_SIZE
 from tests.slave.tcp_helpers import UNIT, connect, device, tcp_server
 
@@ -243,3 +244,18 @@ async def test_hooks_see_every_request() -> None:
         assert await client.request("03 0001 0001") == "03 02 00 07"
         assert server._at_once.answered == 1
     assert seen == [("before", UNIT), ("after", 1)]
+
+
+async def test_rtu_over_tcp_connections_have_no_tap() -> None:
+    """An MBAP request on an RTU-over-TCP connection is noise to its framing, not a request
+    the Modbus TCP shortcut answers."""
+    async with serve("rtu+tcp://127.0.0.1:0", {UNIT: device()}) as server:
+        assert isinstance(server, RtuOverTcpServer)
+        async with await anyio.connect_tcp("127.0.0.1", server.port) as stream:
+            await stream.send(encode_adu(1, UNIT, bytes.fromhex("03 0000 0001")))
+            with anyio.move_on_after(0.3) as silent:
+                await stream.receive()
+            assert silent.cancelled_caught, "an RTU server answered an MBAP request"
+            await stream.send(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
+            assert decode_frame(await stream.receive()).pdu.hex() == "03021234"
+        assert server._at_once.answered == 0

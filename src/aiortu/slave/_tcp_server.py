@@ -39,7 +39,7 @@ to us, and what this server does:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sized
 from dataclasses import dataclass
 from typing import Final
 
@@ -53,9 +53,10 @@ from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.pdu import encode_exception
 from aiortu.errors import InvalidValue
+from aiortu.slave._answer_at_once import AnswerAtOnce
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
-from aiortu.slave._tcp_at_once import ConnectionTap, Permits, TcpAnswerAtOnce
+from aiortu.slave._tcp_at_once import ConnectionTap, Permits
 from aiortu.transport import (
     RTU_SILENCE,
     ConnectionLimit,
@@ -177,7 +178,6 @@ class ModbusTcpServer(Dispatcher):
             for code, handler in BUILTIN_HANDLERS.items()
             if serial_line_codes or code not in SERIAL_LINE_ONLY
         }
-        self._at_once: TcpAnswerAtOnce | None = None
         self._init_dispatch(stores, SlaveMachine(stores), builtins)
         self._build_contexts()
         for function_code, handler in (handlers or {}).items():
@@ -191,7 +191,6 @@ class ModbusTcpServer(Dispatcher):
         self.counters = TcpServerCounters()
         """What happened to the connections and requests."""
         self.trace = trace
-        """Sees every request and reply ADU (see the class docstring)."""
         self.local_address: tuple[str, int] | None = None
         """The host and port [`serve`][aiortu.slave.ModbusTcpServer.serve] listens on, once it
         does."""
@@ -202,18 +201,42 @@ class ModbusTcpServer(Dispatcher):
         self._replies = self._new_framing()  # encodes replies: the same for every connection
         self._lock = anyio.Lock(fast_acquire=True)
         self._stopped = anyio.Event()
-        self._at_once = TcpAnswerAtOnce(
-            self, before=self._before, after=self._after, encode=self._replies.encode
+
+    def _init_dispatch(
+        self,
+        units: dict[int, DataStore | AsyncDataStore],
+        machine: SlaveMachine,
+        handlers: Mapping[int, Handler],
+    ) -> None:
+        super()._init_dispatch(units, machine, handlers)
+        # Made here: the base class configures the handlers and sets the trace next.
+        self._at_once = AnswerAtOnce(
+            machine, self._pending_requests(), before=self._before, after=self._after
         )
-        self._at_once.configure(self._handlers, self._stores())
+
+    def _pending_requests(self) -> Sized:
+        """What waits for the general route, which a request answered at once must not pass.
+        Nothing on a connection: its stream offers the shortcut nothing while its task has
+        bytes to read (a datagram server's backlog is another matter)."""
+        return ()
 
     def _configured(
         self,
         handlers: Mapping[int, Handler],
         stores: Mapping[int, DataStore | AsyncDataStore],
     ) -> None:
-        if self._at_once is not None:
-            self._at_once.configure(handlers, stores)
+        self._at_once.configure(handlers, stores)
+
+    @property
+    def trace(self) -> Callable[[str, bytes], object] | None:
+        """Sees every request and reply ADU, MBAP header included (see the class docstring);
+        one that raises is logged and detached."""
+        return self._trace
+
+    @trace.setter
+    def trace(self, callback: Callable[[str, bytes], object] | None) -> None:
+        self._trace = callback
+        self._at_once.trace_set = callback is not None
 
     @property
     def connections(self) -> int:
@@ -274,8 +297,7 @@ class ModbusTcpServer(Dispatcher):
         framing = self._new_framing()
         tap = None
         if isinstance(stream, PushServerStream) and isinstance(framing, MbapFraming):
-            assert self._at_once is not None
-            tap = stream.tap = self._at_once.tap(stream, framing, self._permits())
+            tap = stream.tap = ConnectionTap(self._at_once, self, stream, framing, self._permits())
         try:
             while (adus := await self._next_requests(stream, framing, tap)) is not None:
                 if adus:

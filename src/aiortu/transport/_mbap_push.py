@@ -61,8 +61,11 @@ class PushedMbap(anyio.abc.ByteStream):
         """Hand on the RTU frame of `adu` if it answers the request outstanding; drop it
         (counted) if not."""
         frame = reply_frame(self.counters, self._outstanding, adu)
-        if frame is None:
-            return
+        if frame is not None:
+            self.deliver(frame)
+
+    def deliver(self, frame: bytes) -> None:
+        """Hand on `frame`, the RTU frame of the reply to the request outstanding."""
         self._outstanding = NONE_OUTSTANDING  # one reply per request
         if self._receiver is not None:
             self._receiver(frame)
