@@ -410,9 +410,10 @@ def test_modbus_tls_runs_on_both_backends(pki: dict[str, Any], backend: str) -> 
 
 
 @contextlib.contextmanager
-def _alerting_server(pki: dict[str, Any]) -> Any:
-    """A bare TLS 1.3 server on a thread that refuses a bad client certificate with the
-    alert saying why (the blocking ssl module sends it); yields its port."""
+def _alerting_server(pki: dict[str, Any], replies: int = 0) -> Any:
+    """A bare TLS 1.3 server on a thread for one connection: it refuses a bad client
+    certificate with the alert saying why (the blocking ssl module sends it), or answers
+    `replies` reads with [7] and closes; yields its port."""
     import socket
     import threading
 
@@ -429,6 +430,9 @@ def _alerting_server(pki: dict[str, Any]) -> Any:
             with tls:
                 with contextlib.suppress(ssl.SSLError):
                     tls.do_handshake()
+                    for _ in range(replies):
+                        transaction = decode_adu(tls.recv(260)).transaction_id
+                        tls.sendall(encode_adu(transaction, 1, bytes.fromhex("03 02 0007")))
                 # Read the client's request before closing: no reset overtakes the alert.
                 tls.shutdown(socket.SHUT_WR)
                 while tls.recv(4096):
@@ -517,5 +521,39 @@ def test_an_error_in_a_masters_body_comes_out_unwrapped(pki: dict[str, Any], bac
             with pytest.raises(aiortu.ExceptionResponse):
                 async with tls_master(pki, server, "viewer") as master:
                     await master.write_register(1, 0, 5)
+
+    anyio.run(scenario, backend=backend)
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_a_server_that_goes_away_after_replying_is_no_refusal(
+    pki: dict[str, Any], backend: str
+) -> None:
+    async def scenario() -> str:
+        with anyio.fail_after(10), _alerting_server(pki, replies=1) as port:
+            async with aiortu.open_master(
+                f"tls://127.0.0.1:{port}", timeout=2.0, retries=0,
+                **_client_options(pki, "operator"),
+            ) as master:  # fmt: skip
+                assert await master.read_holding_registers(1, 0, 1) == [7]
+                with pytest.raises(aiortu.ConnectionLost) as caught:
+                    await master.read_holding_registers(1, 0, 1)
+                return str(caught.value)
+
+    message = anyio.run(scenario, backend=backend)
+    assert "certificate" not in message, message
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_a_stream_closed_by_the_master_is_no_refusal(pki: dict[str, Any], backend: str) -> None:
+    async def scenario() -> None:
+        with anyio.fail_after(10):
+            async with tls_server(pki) as server:
+                stream = await aiortu.transport.open_stream(
+                    f"tls://127.0.0.1:{server.port}", **_client_options(pki, "operator")
+                )
+                await stream.aclose()
+                with pytest.raises(anyio.ClosedResourceError):
+                    await stream.receive()
 
     anyio.run(scenario, backend=backend)
