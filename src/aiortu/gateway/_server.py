@@ -49,7 +49,6 @@ each to the engine of its line at once, with a key that keeps the line fair. Wha
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Final
@@ -202,7 +201,8 @@ class Gateway:
     id, and a unit no line serves gets exception 0A (gateway path unavailable: the spec's code
     for a gateway with no path to the target, as a misconfiguration). With `cache_ms`, a read
     (01 to 04) of the same unit and block as one answered at most that many milliseconds ago is
-    answered again without the line; `clock` gives the cache's time in seconds.
+    answered again without the line; `clock` gives the cache's time in seconds (the event loop's by
+    default).
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a `max_in_flight`,
     `max_connections` or `client_statistics` below 1, an `idle_timeout` that is not positive, a
@@ -219,7 +219,7 @@ class Gateway:
         default_unit: int | None = None,
         coalesce: bool = True,
         cache_ms: float = 0,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = anyio.current_time,
         client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     ) -> None:
         lines = [GatewayLine(master)] if isinstance(master, Master) else list(master)
@@ -366,7 +366,7 @@ class Gateway:
         """Close `connection` once it has been silent for `idle_timeout` with nothing waiting:
         one timer per connection, not a deadline per read (the reader only notes the time)."""
         while True:
-            quiet = time.monotonic() - connection.heard
+            quiet = connection.clock() - connection.heard
             if quiet >= self.idle_timeout and not connection.in_flight:
                 self._idle(connection, "idle")
                 return
@@ -388,11 +388,11 @@ class Gateway:
             if framing.waiting_for_silence():
                 with anyio.move_on_after(RTU_SILENCE):
                     data = await stream.receive(_READ_SIZE)
-                    connection.heard = time.monotonic()
+                    connection.heard = connection.clock()
                     return framing.feed(data)
                 return framing.silence()
             data = await stream.receive(_READ_SIZE)
-            connection.heard = time.monotonic()
+            connection.heard = connection.clock()
         except anyio.EndOfStream:
             return None
         except GONE:
