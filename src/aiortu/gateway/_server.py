@@ -366,11 +366,16 @@ class Gateway:
         """Close `connection` once it has been silent for `idle_timeout` with nothing waiting:
         one timer per connection, not a deadline per read (the reader only notes the time)."""
         while True:
-            quiet = connection.clock() - connection.heard
-            if quiet >= self.idle_timeout and not connection.in_flight:
+            heard = connection.heard
+            # Until a time, not for a time left: a remainder below the clock's resolution
+            # (a virtual clock's) would never pass.
+            await anyio.sleep_until(heard + self.idle_timeout)
+            if connection.heard != heard:
+                continue  # heard from meanwhile: silent since then
+            if not connection.in_flight:
                 self._idle(connection, "idle")
                 return
-            await anyio.sleep(max(self.idle_timeout - quiet, 0.0) or self.idle_timeout)
+            await anyio.sleep(self.idle_timeout)  # a request waits for the line
 
     async def _read(self, connection: _Client) -> None:
         """Read and start the connection's requests, each once its window has room, until the
