@@ -1,4 +1,8 @@
-"""A virtual line with aiortu slaves, a master on it, and a gateway in front of the master."""
+"""A virtual line with aiortu slaves, a master on it, and a gateway in front of the master.
+
+Its clients connect over TCP on 127.0.0.1 (`client`), or over an in-memory stream straight to
+the gateway's `serve_connection` (`memory_client`, with `line(listen=())`): no socket, so that
+the test runs on a virtual clock (`tests/virtual_clock.py`)."""
 
 from __future__ import annotations
 
@@ -13,10 +17,10 @@ from aiortu.core.serial import LineSettings
 from aiortu.gateway import Gateway, Listen, gateway
 from aiortu.master import Master
 from aiortu.slave import MemoryStore, Slave
-from aiortu.testing import VirtualBus
+from aiortu.testing import VirtualBus, virtual_pair
 from tests.slave.tcp_helpers import UNIT, TcpClient, device
 
-__all__ = ("UNIT", "Line", "TcpClient", "client", "device", "line")
+__all__ = ("UNIT", "Line", "TcpClient", "client", "device", "line", "memory_client")
 
 
 @dataclass
@@ -62,3 +66,15 @@ async def client(server: Gateway) -> AsyncIterator[TcpClient]:
     stream = await anyio.connect_tcp("127.0.0.1", server.port)
     async with stream:
         yield TcpClient(stream)
+
+
+@asynccontextmanager
+async def memory_client(server: Gateway) -> AsyncIterator[TcpClient]:
+    """A Modbus TCP client of `server` over an in-memory stream (the gateway serves its far end
+    as it serves an accepted socket)."""
+    near, far = virtual_pair()
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(server.serve_connection, far)
+        async with near:
+            yield TcpClient(near)
+        tasks.cancel_scope.cancel()
