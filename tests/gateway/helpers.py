@@ -6,6 +6,7 @@ the test runs on a virtual clock (`tests/virtual_clock.py`)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import AsyncIterator, Mapping
 from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass
@@ -17,10 +18,19 @@ from aiortu.core.serial import LineSettings
 from aiortu.gateway import Gateway, Listen, gateway
 from aiortu.master import Master
 from aiortu.slave import MemoryStore, Slave
-from aiortu.testing import VirtualBus, virtual_pair
+from aiortu.testing import VirtualBus, VirtualEndpoint, virtual_pair
 from tests.slave.tcp_helpers import UNIT, TcpClient, device
 
-__all__ = ("UNIT", "Line", "TcpClient", "client", "device", "line", "memory_client")
+__all__ = (
+    "UNIT",
+    "Line",
+    "TcpClient",
+    "client",
+    "device",
+    "line",
+    "memory_client",
+    "memory_stream",
+)
 
 
 @dataclass
@@ -69,12 +79,19 @@ async def client(server: Gateway) -> AsyncIterator[TcpClient]:
 
 
 @asynccontextmanager
-async def memory_client(server: Gateway) -> AsyncIterator[TcpClient]:
-    """A Modbus TCP client of `server` over an in-memory stream (the gateway serves its far end
-    as it serves an accepted socket)."""
+async def memory_stream(server: Gateway, **serve_options: Any) -> AsyncIterator[VirtualEndpoint]:
+    """A client's end of an in-memory stream whose far end `server` serves as it serves an
+    accepted socket (`serve_options` are `serve_connection`'s: `rtu_framing=True`, ...)."""
     near, far = virtual_pair()
     async with anyio.create_task_group() as tasks:
-        tasks.start_soon(server.serve_connection, far)
+        tasks.start_soon(functools.partial(server.serve_connection, far, **serve_options))
         async with near:
-            yield TcpClient(near)
+            yield near
         tasks.cancel_scope.cancel()
+
+
+@asynccontextmanager
+async def memory_client(server: Gateway) -> AsyncIterator[TcpClient]:
+    """A Modbus TCP client of `server` over an in-memory stream (see `memory_stream`)."""
+    async with memory_stream(server) as stream:
+        yield TcpClient(stream)
