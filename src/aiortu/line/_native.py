@@ -1,4 +1,4 @@
-"""The waits the line layer needs, in the running backend's cheapest form.
+"""The waits and the clock the line layer needs, in the running backend's cheapest form.
 
 A wake-up that a callback sets and a task awaits, a callback soon, and, where the event loop
 has them, callbacks at a time. Under asyncio they are the event loop's own (a future,
