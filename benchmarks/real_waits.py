@@ -3,13 +3,15 @@
 Run from the repository root::
 
     python -m pytest -p benchmarks.real_waits tests/gateway tests/master [-q]
+        [--real-waits-report waits.tsv]
 
 A real wait is a call from a file under `tests/` of `anyio.sleep`, `asyncio.sleep`,
 `trio.sleep` or `time.sleep` with a delay above zero, or a scope of `anyio.move_on_after`,
 `move_on_at`, `fail_after` or `fail_at` that ran out, made while the event loop tells the
 real time (not on `tests/virtual_clock.py`'s `VirtualTimeLoop` or trio's `MockClock`). At
 the end it prints the count, the real seconds they took (a sleep as measured, a scope that
-ran out its own length), and the tests that waited longest. Waits that the library makes on
+ran out its own length), and the tests that waited longest; `--real-waits-report` writes
+every test's count and seconds to a file (tab-separated). Waits that the library makes on
 a test's behalf (a response timeout run out inside the master) are not counted: the tests'
 durations show them.
 """
@@ -95,6 +97,14 @@ def _scoping(make: Callable[..., Any], absolute: bool) -> Callable[..., Any]:
     return scoped
 
 
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--real-waits-report",
+        metavar="PATH",
+        help="write each test's real waits and their seconds to PATH (tab-separated)",
+    )
+
+
 def pytest_configure(config: pytest.Config) -> None:
     for module, name in ((anyio, "sleep"), (asyncio, "sleep"), (trio, "sleep"), (time, "sleep")):
         setattr(module, name, _sleeping(getattr(module, name)))
@@ -111,7 +121,12 @@ def pytest_runtest_logstart(nodeid: str) -> None:
     _current[0] = nodeid
 
 
-def pytest_terminal_summary(terminalreporter: Any) -> None:
+def pytest_terminal_summary(terminalreporter: Any, config: pytest.Config) -> None:
+    report = config.getoption("--real-waits-report")
+    if report:
+        with open(report, "w") as file:
+            for nodeid in sorted(_count):
+                file.write(f"{nodeid}\t{_count[nodeid]}\t{_seconds[nodeid]:.4f}\n")
     write = terminalreporter.write_line
     write(
         f"real waits in test code: {sum(_count.values())} in {len(_count)} tests,"
