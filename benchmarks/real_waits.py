@@ -14,10 +14,17 @@ ran out its own length), and the tests that waited longest; `--real-waits-report
 every test's count and seconds to a file (tab-separated). Waits that the library makes on
 a test's behalf (a response timeout run out inside the master) are not counted: the tests'
 durations show them.
+
+Run as a script, it counts the sleeps in the test files instead, without running them: calls
+of those four sleeps with a nonzero number as the delay, split by whether the test or helper
+they are in runs on the virtual clock (an `on_virtual_clock` test)::
+
+    python benchmarks/real_waits.py [tests]
 """
 
 from __future__ import annotations
 
+import ast
 import asyncio
 import contextlib
 import sys
@@ -134,3 +141,42 @@ def pytest_terminal_summary(terminalreporter: Any, config: pytest.Config) -> Non
     )
     for nodeid, seconds in _seconds.most_common(30):
         write(f"  {_count[nodeid]:3d} waits {seconds:7.2f} s  {nodeid}")
+
+
+_SLEEPS = {"anyio", "asyncio", "trio", "time"}
+
+
+def _literal_sleeps(node: ast.AST) -> int:
+    """The calls in `node` of `MODULE.sleep(N)`, MODULE one of `_SLEEPS` and N a number > 0."""
+    count = 0
+    for call in ast.walk(node):
+        if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Attribute)):
+            continue
+        owner, args = call.func.value, call.args
+        if not (call.func.attr == "sleep" and isinstance(owner, ast.Name)):
+            continue
+        if owner.id in _SLEEPS and args and isinstance(args[0], ast.Constant):
+            count += isinstance(args[0].value, int | float) and args[0].value > 0
+    return count
+
+
+def static_count(root: Path) -> tuple[int, int]:
+    """The literal sleeps under `root`: (in tests on the virtual clock, anywhere else)."""
+    virtual = other = 0
+    for path in sorted(root.rglob("*.py")):
+        for node in ast.parse(path.read_text()).body:
+            count = _literal_sleeps(node)
+            decorators = getattr(node, "decorator_list", [])
+            if any(isinstance(d, ast.Name) and d.id == "on_virtual_clock" for d in decorators):
+                virtual += count
+            else:
+                other += count
+    return virtual, other
+
+
+if __name__ == "__main__":
+    virtual, other = static_count(Path(sys.argv[1] if len(sys.argv) > 1 else "tests"))
+    print(
+        f"sleeps with a nonzero literal delay: {virtual + other}; in tests on the virtual"
+        f" clock {virtual}, elsewhere (real time, or helpers of both) {other}"
+    )
