@@ -75,7 +75,7 @@ class Connection(Generic[R]):
         self.in_flight = 0
         """Requests started and not answered yet."""
         self.clock = loop_clock()
-        """The event loop's time, in seconds (made in the loop: a connection is)."""
+        """Reads the event loop's time in seconds (a connection is made in the loop)."""
         self.heard = self.clock()
         """When the client last sent bytes or was answered (on `clock`)."""
         self.open = True
