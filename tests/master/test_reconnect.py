@@ -43,13 +43,12 @@ async def hold(fake: FakeSlave, unit: int, request: Request) -> None:
 
 class Port:
     """A serial port that the test plugs in and out: each plug is a new virtual line with a
-    fake slave on its far end; [`open`][] is the master's opener, and notes when it was
-    called."""
+    fake slave on its far end; `open` is the master's opener, and notes when it was called."""
 
     def __init__(self, tasks: anyio.abc.TaskGroup) -> None:
         self.tasks = tasks
         self.opened: list[float] = []
-        """When the master tried to open the port."""
+        """When the port was opened or tried (first by the test, then by the master)."""
         self.fake: FakeSlave | None = None
         self._near: VirtualEndpoint | None = None
         self._scope = anyio.CancelScope()
