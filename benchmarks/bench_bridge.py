@@ -32,23 +32,11 @@ from tempfile import TemporaryDirectory
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import anyio
-from benchmarks.benchlib import add_section_argument, rss_kib, run_sections, table
+from benchmarks.benchlib import add_section_argument, cpu_exact, rss_kib, run_sections, table
 from tests.bridge.fleet import BridgeProcess, write_config, write_profile
 from tests.bridge.mosquitto import Mosquitto, Subscriber, free_port
 
 FAST, SLOW = 40, 10
-
-
-def cpu_exact(pid: int) -> float:
-    """CPU seconds of process `pid`'s live threads, in nanoseconds' resolution (schedstat):
-    a bridge uses a few milliseconds a second, below the clock ticks of /proc/PID/stat."""
-    total = 0
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            total += int((task / "schedstat").read_text().split()[0])
-        except (OSError, IndexError, ValueError):
-            continue  # a thread that ended meanwhile
-    return total / 1e9
 
 
 def _sys_counter(subscriber: Subscriber, name: str) -> int:

@@ -13,9 +13,14 @@ registers from 0), on loopback or, for ASCII, on a socat pty pair at 19200 8N2.
   `--requests` reads of 10 holding registers to aiortu's server; the figure is this process's
   CPU time (``process_time``) per request, which moves less with the machine's load than
   wall time.
+- master, each client in a process of its own (UDP): the same, but each round starts a process
+  per client, which reads and reports its own CPU time. One process alternating between two
+  clients shares its memory allocator between them: asyncio's datagram transport (pymodbus's)
+  takes a 256 KiB buffer per datagram, whose cost depends on what else the process allocated,
+  and moved pymodbus's figure between about 60 and 110 us from one run to the next.
 - server: aiortu's master sends the same reads to aiortu's server and to pymodbus's, in turns;
-  the figure is the server process's CPU time per request (from /proc, in clock ticks of
-  10 ms: keep `--requests` in the hundreds at least).
+  the figure is the server process's CPU time per request (the nanoseconds of
+  /proc/PID/task/*/schedstat).
 - handshakes: mutual-TLS handshakes per second to aiortu's TLS server (each a connection, a
   handshake and a close), and the CPU per request on an open TLS connection against plain
   Modbus TCP (the master's side).
@@ -156,7 +161,7 @@ def _cpu_per_request(run: Callable[..., Awaitable[float]], count: int, pid: int 
     """Microseconds of CPU per request: this process's, or process `pid`'s."""
 
     def clock() -> float:
-        return time.process_time() if pid is None else benchlib.cpu_seconds(pid)
+        return time.process_time() if pid is None else benchlib.cpu_exact(pid)
 
     return anyio.run(run, count, clock) / count * 1e6
 
@@ -214,17 +219,41 @@ def _section(
     return [*master_rows, *server_rows]
 
 
-def section_udp(args: argparse.Namespace) -> list[str]:
+def _udp_client(port: int) -> Any:
     import pymodbus.client as pm
 
-    return _section(
-        args,
-        "UDP",
-        lambda port: f"udp://127.0.0.1:{port}",
-        lambda port: pm.AsyncModbusUdpClient("127.0.0.1", port=port, timeout=2, retries=0),
-        ["udp"],
-        {},
-    )
+    return pm.AsyncModbusUdpClient("127.0.0.1", port=port, timeout=2, retries=0)
+
+
+def section_udp(args: argparse.Namespace) -> list[str]:
+    rows = _section(args, "UDP", lambda port: f"udp://127.0.0.1:{port}", _udp_client, ["udp"], {})
+    with benchlib.Children() as children:
+        _, port = _start(children, [sys.executable, __file__, "--serve-aiortu", "udp"])
+        samples: dict[str, list[float]] = {"aiortu": [], "pymodbus": []}
+        for _ in range(args.rounds):
+            for client, values in samples.items():
+                argv = [__file__, "--read-udp", client, str(port), str(args.requests)]
+                done = subprocess.run(
+                    [sys.executable, "-W", "ignore", *argv], capture_output=True, check=True
+                )
+                values.append(float(done.stdout.split()[-1]))
+    solo = [
+        f"| UDP: master, a process per client | {name} | {statistics.median(values):.0f} |"
+        for name, values in samples.items()
+    ]
+    return [*rows, *solo]
+
+
+def _read_udp(argv: list[str]) -> None:
+    """`--read-udp aiortu|pymodbus PORT COUNT`: this process's CPU us per read, printed."""
+    client, port, count = argv[0], int(argv[1]), int(argv[2])
+    if client == "aiortu":
+        seconds = anyio.run(
+            _aiortu_run, aiortu_reads(f"udp://127.0.0.1:{port}"), count, time.process_time
+        )
+    else:
+        seconds = anyio.run(_pymodbus_run, lambda: _udp_client(port), count, time.process_time)
+    print(f"{seconds / count * 1e6:.1f}")
 
 
 def section_tls(args: argparse.Namespace) -> list[str]:
@@ -350,6 +379,9 @@ SECTIONS: dict[str, Callable[[argparse.Namespace], list[str]]] = {
 def main() -> None:
     if sys.argv[1:2] == ["--serve-aiortu"]:
         _serve_aiortu(sys.argv[2:])
+        return
+    if sys.argv[1:2] == ["--read-udp"]:
+        _read_udp(sys.argv[2:])
         return
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rounds", type=int, default=5)

@@ -21,6 +21,7 @@ import sys
 import termios
 import time
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SERVERS = os.path.join(HERE, "bench_servers.py")
@@ -104,6 +105,19 @@ def cpu_seconds(pid: int) -> float:
         fields = stat.read().rsplit(")", 1)[1].split()
     # After the command name: state is field 3, utime 14 and stime 15 (1-based).
     return (int(fields[11]) + int(fields[12])) / _TICKS
+
+
+def cpu_exact(pid: int) -> float:
+    """CPU seconds of process *pid*'s live threads, in nanoseconds' resolution (from
+    /proc/PID/task/*/schedstat): for figures of a few tens of microseconds per request, below
+    the 10 ms clock ticks of :func:`cpu_seconds`."""
+    total = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            total += int((task / "schedstat").read_text().split()[0])
+        except (OSError, IndexError, ValueError):
+            continue  # a thread that ended meanwhile
+    return total / 1e9
 
 
 def rss_kib(pid: int) -> int:

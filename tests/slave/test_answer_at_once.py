@@ -312,9 +312,9 @@ REFUSALS: dict[str, Any] = {
 @pytest.mark.parametrize("refusal", sorted(REFUSALS))
 def test_each_condition_of_the_predicate_refuses_on_its_own(refusal: str) -> None:
     slave = _fresh_slave()
-    assert slave._at_once.may_answer(READ)
+    assert slave._at_once.may_answer(READ[0], READ[1])
     REFUSALS[refusal](slave)
-    assert not slave._at_once.may_answer(READ)
+    assert not slave._at_once.may_answer(READ[0], READ[1])
 
 
 @pytest.mark.parametrize(
@@ -327,7 +327,7 @@ def test_each_condition_of_the_predicate_refuses_on_its_own(refusal: str) -> Non
     ],
 )
 def test_the_predicate_refuses_other_stores_units_and_codes(frame: bytes) -> None:
-    assert not _fresh_slave()._at_once.may_answer(frame)
+    assert not _fresh_slave()._at_once.may_answer(frame[0], frame[1])
 
 
 async def test_a_request_arriving_while_a_handler_awaits_is_answered_after_it() -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import random
 
 from aiortu.core.codes import FunctionCode
-from aiortu.core.rtu import encode_frame
 from aiortu.slave import Block, MemoryStore, Table
 from aiortu.slave._answer_at_once import FAST_PATHS
 
@@ -69,7 +68,7 @@ async def test_fast_paths_answer_as_the_handlers_do() -> None:
         slave_line({UNIT: slow_store}) as (slow, slow_slave),
     ):
         slow_slave.before_request(lambda request, context: None)  # no fast path with a hook
-        assert fast_slave._at_once.may_answer(encode_frame(UNIT, bytes.fromhex("03 00 00 00 01")))
+        assert fast_slave._at_once.may_answer(UNIT, 0x03)
         for pdu in requests:
             expected = await slow.request(UNIT, pdu.hex())
             assert await fast.request(UNIT, pdu.hex()) == expected, pdu.hex(" ")

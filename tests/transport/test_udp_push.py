@@ -1,7 +1,7 @@
 """Modbus UDP's pushed master stream against the general path: the master-side tests of
 test_udp.py run again with the general path forced, and one scripted exchange (a lost request,
-a late reply, a stranger, a malformed datagram, good replies) gives the same results, counters
-and requests on the wire through both."""
+a late reply, a stranger, a malformed datagram, a duplicated reply, good replies) gives the same
+results, counters and requests on the wire through both."""
 
 from __future__ import annotations
 
@@ -66,6 +66,8 @@ async def _scripted(seed: int) -> tuple[list[Any], dict[str, int], list[int]]:
         if turn == 3:
             await sock.sendto(reply[:-1], *source)
         await sock.sendto(reply, *source)
+        if turn == 4 and rng.random() < 0.5:
+            await sock.sendto(reply, *source)  # duplicated: dropped, whatever it looks like
 
     results: list[Any] = []
     async with stranger, fake_server(respond) as port:

@@ -1,10 +1,11 @@
 """The slave's answer-at-once: the commonest requests answered where they arrive.
 
-A request normally goes the general route: the link hands a
+A request normally goes the general route: on a serial line the link hands a
 [`FrameReceived`][aiortu.core.rtu.FrameReceived] to the slave's listener, the listener queues
 it, and the serve loop drives the table machine
 ([`SlaveMachine`][aiortu.core.machines.SlaveMachine]) through the handler, the hooks and
-the reply. That costs a task wake-up per request.
+the reply; a Modbus UDP server's datagram waits for the server's task, which does the same.
+That costs a task wake-up per request.
 
 This module is the one shortcut around it. Where `AnswerAtOnce.may_answer` (the
 one predicate: every condition is a named line there) allows it, a request is answered
@@ -12,8 +13,12 @@ in the callback that got it, with no task wake-up and no request or response obj
 
 - from the link's read callback, for a whole 8-byte request (function codes 01 to 06)
   that arrived as one chunk on a stream that pushes its bytes (the serial port; see
-  `Link.expect_requests`);
-- from the link's listener, for any other request while nothing is pending.
+  `Link.expect_requests`), and from the link's listener, for any other request while
+  nothing is pending (`LineAnswerAtOnce`, the shortcut bound to a slave's link);
+- from the event loop's datagram callback of a Modbus UDP server
+  ([`ModbusUdpServer`][aiortu.slave.ModbusUdpServer], through
+  [`DatagramServer`][aiortu.transport.DatagramServer]), for any request while none waits for
+  the server's task.
 
 A *fast path* (`FAST_PATHS`) maps the request's bytes to the reply's bytes for the built-in
 [`MemoryStore`][aiortu.slave.MemoryStore]. It gives up (`None`) on anything but a well-formed
@@ -24,9 +29,9 @@ already kept) is counted in one step
 and log entries as the table's four steps); otherwise the machine is driven step by step and a reply
 that must wait for the frame gap is left to the serve loop as a `Taken`.
 
-`tests/slave/test_fast_path_differential.py` runs random request sequences with the
-shortcut on and off and compares the bytes on the wire, the stores, the counters and the
-event log.
+`tests/slave/test_fast_path_differential.py` (serial lines) and
+`tests/slave/test_udp_at_once.py` (Modbus UDP) run random request sequences with the shortcut on
+and off and compare the bytes on the wire, the stores, the counters and the event log.
 """
 
 from __future__ import annotations
@@ -52,7 +57,7 @@ from aiortu.line import Link, LinkEvent
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler
 from aiortu.slave._store import MemoryStore
 
-__all__ = ("FAST_PATHS", "AnswerAtOnce", "FastPath", "Taken")
+__all__ = ("FAST_PATHS", "AnswerAtOnce", "FastPath", "LineAnswerAtOnce", "Send", "Taken")
 
 
 @dataclass(slots=True)
@@ -64,30 +69,147 @@ class Taken:
     reply: bytes
 
 
-class AnswerAtOnce:
-    """The slave's shortcut (see the module docstring), bound to one slave's line.
+Send = Callable[[int, bytes], bool]
+"""`send(unit, reply)`: send the reply PDU for `unit` now if the carrier can (True), else
+nothing (False: the reply must wait)."""
 
-    `queue` is the serve loop's queue, `before` and `after` its hook lists (the same
-    objects: the predicate sees every change); `serve_later` hands a `Taken` to
-    the serve loop; `to_listener` hands a whole request the shortcut did not answer to
-    the slave's listener, as the receiver would have, past the listener's own try of the
-    shortcut (the predicate and the fast path run once per request).
+
+class AnswerAtOnce:
+    """The server's shortcut (see the module docstring): its one predicate and its answer, for
+    any carrier of requests.
+
+    `machine` is the server's state machine; `pending` what waits for the general route (the
+    serve loop's queue, the datagrams waiting for the server's task), `before` and `after` its
+    hook lists (the same objects: the predicate sees every change).
     """
 
     __slots__ = (
         "_after",
         "_before",
         "_fast_paths",
-        "_link",
         "_machine",
-        "_queue",
-        "_serve_later",
+        "_pending",
         "_stores",
-        "_to_listener",
         "answered",
         "enabled",
         "trace_set",
     )
+
+    def __init__(
+        self,
+        machine: SlaveMachine,
+        pending: Sized,
+        *,
+        before: Sized,
+        after: Sized,
+    ) -> None:
+        self._machine = machine
+        self._pending = pending
+        self._before = before
+        self._after = after
+        self._fast_paths: dict[int, FastPath] = {}
+        self._stores: dict[int, MemoryStore] = {}
+        self.enabled = True
+        """Off, every request takes the general route (the differential tests compare)."""
+        self.trace_set = False
+        """Whether the server has a trace callback."""
+        self.answered = 0
+        """How many requests were answered at once."""
+
+    def may_answer(self, unit: int, function_code: int) -> bool:
+        """Whether a request with `function_code` for `unit` (after the server's unit aliases),
+        well carried (a good CRC, a well-formed ADU), may be answered at once.
+
+        Every condition of the shortcut is here; anything else takes the general route.
+        """
+        machine = self._machine
+        return (
+            # Switched off: the general route only (the differential tests compare both).
+            self.enabled
+            # Requests are answered in order: one left to the general route goes first.
+            and not self._pending
+            # A request under way (a handler awaiting, a reply waiting) finishes first.
+            and machine.state is SlaveState.IDLE
+            # Listen-only mode: requests are monitored, never executed nor answered.
+            and not machine.listen_only
+            # A trace callback sees every frame received and sent, from the general route.
+            and not self.trace_set
+            # Hooks run around every request: only the general route calls them.
+            and not (self._before or self._after)
+            # The built-in handler serves this function code (not a user's), and has a
+            # fast path.
+            and function_code in self._fast_paths
+            # A unit of ours whose store is the built-in MemoryStore (not routed, not a
+            # subclass, not async). Never a broadcast: it runs once per store, unanswered.
+            and unit in self._stores
+        )
+
+    def configure(
+        self,
+        handlers: Mapping[int, Handler],
+        stores: Mapping[int, DataStore | AsyncDataStore],
+    ) -> None:
+        """Take the server's `handlers` (by function code) and `stores` (by unit, routes
+        applied): the fast paths that stand in for a built-in handler, the units whose
+        store they can serve."""
+        self._fast_paths = {
+            code: fast
+            for code, (handler, fast) in FAST_PATHS.items()
+            if handlers.get(code) is handler
+        }
+        self._stores = {unit: store for unit, store in stores.items() if type(store) is MemoryStore}
+
+    def answer(self, unit: int, pdu: bytes, send: Send) -> bytes | bool:
+        """Answer the request `pdu` for `unit` if `may_answer` allows it and its fast path
+        answers, the reply sent with `send`.
+
+        `False`: nothing was done or counted, the general route takes it. `True`: answered
+        and sent. Bytes: answered, counted up to FORMATTING_REPLY or FORMATTING_ERROR, and
+        this reply PDU must wait (`send` could not send it now).
+        """
+        function_code = pdu[0]
+        if not self.may_answer(unit, function_code):
+            return False
+        try:
+            reply = self._fast_paths[function_code](self._stores[unit], pdu)
+        except ExceptionResponse as error:
+            self.answered += 1
+            return self._reply_failed(unit, function_code, error.code, send)
+        if reply is None:
+            return False
+        self.answered += 1
+        machine = self._machine
+        if send(unit, reply):
+            machine.answered_at_once(unit, function_code)
+            return True
+        machine.frame_received(unit, function_code)
+        machine.check_request(supported=True)
+        machine.processed()
+        return reply
+
+    def _reply_failed(self, unit: int, function_code: int, code: int, send: Send) -> bytes | bool:
+        """The fast path raised exception `code`, before changing anything."""
+        machine = self._machine
+        machine.frame_received(unit, function_code)
+        machine.check_request(supported=True)
+        machine.processing_failed(code)
+        reply = encode_exception(function_code, code)
+        if not send(unit, reply):
+            return reply
+        machine.reply_sent()
+        return True
+
+
+class LineAnswerAtOnce(AnswerAtOnce):
+    """The shortcut on a serial line, bound to one slave's link.
+
+    `queue` is the serve loop's queue; `serve_later` hands a `Taken` to the serve loop;
+    `to_listener` hands a whole request the shortcut did not answer to the slave's listener,
+    as the receiver would have, past the listener's own try of the shortcut (the predicate
+    and the fast path run once per request).
+    """
+
+    __slots__ = ("_link", "_serve_later", "_to_listener")
 
     def __init__(
         self,
@@ -100,63 +222,10 @@ class AnswerAtOnce:
         serve_later: Callable[[Taken], None],
         to_listener: Callable[[LinkEvent], None],
     ) -> None:
-        self._machine = machine
+        super().__init__(machine, queue, before=before, after=after)
         self._link = link
-        self._queue = queue
-        self._before = before
-        self._after = after
         self._serve_later = serve_later
         self._to_listener = to_listener
-        self._fast_paths: dict[int, FastPath] = {}
-        self._stores: dict[int, MemoryStore] = {}
-        self.enabled = True
-        """Off, every request takes the general route (the differential test compares)."""
-        self.trace_set = False
-        """Whether the slave has a trace callback."""
-        self.answered = 0
-        """How many requests were answered at once."""
-
-    def may_answer(self, frame: bytes) -> bool:
-        """Whether `frame`, a request with a good CRC, may be answered at once.
-
-        Every condition of the shortcut is here; anything else takes the general route.
-        """
-        machine = self._machine
-        return (
-            # Switched off: the general route only (the differential test compares both).
-            self.enabled
-            # Requests are answered in order: one left to the serve loop goes first.
-            and not self._queue
-            # A request under way (a handler awaiting, a reply waiting) finishes first.
-            and machine.state is SlaveState.IDLE
-            # Listen-only mode: requests are monitored, never executed nor answered.
-            and not machine.listen_only
-            # A trace callback sees every frame received and sent, from the general route.
-            and not self.trace_set
-            # Hooks run around every request: only the general route calls them.
-            and not (self._before or self._after)
-            # The built-in handler serves this function code (not a user's), and has a
-            # fast path.
-            and frame[1] in self._fast_paths
-            # A unit of ours whose store is the built-in MemoryStore (not routed, not a
-            # subclass, not async). Never a broadcast: it runs once per store, unanswered.
-            and frame[0] in self._stores
-        )
-
-    def configure(
-        self,
-        handlers: Mapping[int, Handler],
-        stores: Mapping[int, DataStore | AsyncDataStore],
-    ) -> None:
-        """Take the slave's `handlers` (by function code) and `stores` (by unit, routes
-        applied): the fast paths that stand in for a built-in handler, the units whose
-        store they can serve."""
-        self._fast_paths = {
-            code: fast
-            for code, (handler, fast) in FAST_PATHS.items()
-            if handlers.get(code) is handler
-        }
-        self._stores = {unit: store for unit, store in stores.items() if type(store) is MemoryStore}
 
     def attach(self) -> None:
         """Have the link hand whole 8-byte requests to `on_whole_request`."""
@@ -170,47 +239,21 @@ class AnswerAtOnce:
     def on_whole_request(self, frame: bytes, end: float) -> None:
         """The link's read callback got `frame`, a whole request with a good CRC ending at
         `end`: answer it, or hand it to the listener as the receiver would have."""
-        if not self.answer(frame):
+        if not self.answer_frame(frame):
             start = end - (len(frame) - 1) * self._link.char_time
             self._to_listener(FrameReceived(frame, start, end))
 
-    def answer(self, frame: bytes) -> bool:
-        """Answer `frame` if `may_answer` allows it and its fast path answers.
-
-        `False` means nothing was done or counted: the general route takes it.
-        """
-        if not self.may_answer(frame):
-            return False
-        try:
-            reply = self._fast_paths[frame[1]](self._stores[frame[0]], frame[1:-2])
-        except ExceptionResponse as error:
-            self.answered += 1
-            self._reply_failed(frame, error.code)
+    def answer_frame(self, frame: bytes) -> bool:
+        """Answer the request `frame` at once where `answer` does; a reply that must wait for
+        the frame gap goes to the serve loop. `False`: the general route takes it."""
+        done = self.answer(frame[0], frame[1:-2], self._send_now)
+        if type(done) is bytes:
+            self._serve_later(Taken(frame, done))
             return True
-        if reply is None:
-            return False
-        self.answered += 1
-        machine = self._machine
-        if self._link.send_now(encode_frame(frame[0], reply)) is not None:
-            machine.answered_at_once(frame[0], frame[1])
-            return True
-        machine.frame_received(frame[0], frame[1])
-        machine.check_request(supported=True)
-        machine.processed()
-        self._serve_later(Taken(frame, reply))
-        return True
+        return done is True
 
-    def _reply_failed(self, frame: bytes, code: int) -> None:
-        """The fast path raised exception `code`, before changing anything."""
-        machine = self._machine
-        machine.frame_received(frame[0], frame[1])
-        machine.check_request(supported=True)
-        machine.processing_failed(code)
-        reply = encode_exception(frame[1], code)
-        if self._link.send_now(encode_frame(frame[0], reply)) is None:
-            self._serve_later(Taken(frame, reply))
-        else:
-            machine.reply_sent()
+    def _send_now(self, unit: int, reply: bytes) -> bool:
+        return self._link.send_now(encode_frame(unit, reply)) is not None
 
 
 # -- the fast paths for the built-in MemoryStore -------------------------------------------

@@ -60,7 +60,7 @@ from aiortu.core.rtu import DiscardReason, FrameReceived, Role, TimingMode, enco
 from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue
 from aiortu.line import Link, LinkEvent, Waiter
-from aiortu.slave._answer_at_once import AnswerAtOnce, Taken
+from aiortu.slave._answer_at_once import LineAnswerAtOnce, Taken
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, AfterHook, BeforeHook, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
 from aiortu.transport import AsciiStream
@@ -127,7 +127,7 @@ class Slave(Dispatcher):
         self.connection_error: ConnectionLost | None = None
         """Why the background serve loop ended, when it ended because the line failed."""
         self._queue: deque[LinkEvent | Taken] = deque()
-        self._at_once = AnswerAtOnce(
+        self._at_once = LineAnswerAtOnce(
             self.machine,
             self.link,
             self._queue,
@@ -296,7 +296,7 @@ class Slave(Dispatcher):
             # the machine's state...), else left to the serve loop.
             type(event) is FrameReceived
             and event.frame[0] in self._served
-            and self._at_once.answer(event.frame)
+            and self._at_once.answer_frame(event.frame)
         ):
             self._unanswered(event)
 

@@ -29,6 +29,7 @@ from aiortu.transport._authorization import (
     parse_rules,
 )
 from aiortu.transport._datagram_listener import PEER_BACKLOG, DatagramListener
+from aiortu.transport._datagram_server import DATAGRAM_BACKLOG, DatagramServer, DatagramSource
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._listen import (
@@ -77,7 +78,7 @@ from aiortu.transport._udp import (
     open_modbus_udp,
     serve_datagrams,
 )
-from aiortu.transport._udp_push import PushDatagramStream
+from aiortu.transport._udp_push import PushDatagramStream, push_datagrams
 from aiortu.transport._url import (
     ASCII_TCP_SCHEME,
     MODBUS_TCP_SCHEME,
@@ -99,6 +100,7 @@ if TYPE_CHECKING:
 __all__ = (
     "ASCII_BYTESIZE",
     "ASCII_TCP_SCHEME",
+    "DATAGRAM_BACKLOG",
     "MODBUS_TCP_SCHEME",
     "MODBUS_UDP_SCHEME",
     "PEER_BACKLOG",
@@ -115,6 +117,8 @@ __all__ = (
     "ConnectionLimit",
     "DatagramCounters",
     "DatagramListener",
+    "DatagramServer",
+    "DatagramSource",
     "FileDescriptorStream",
     "FramedStream",
     "AsciiFraming",
@@ -158,6 +162,7 @@ __all__ = (
     "parse_rules",
     "parse_unix_url",
     "peer_address",
+    "push_datagrams",
     "remove_socket",
     "serve_datagrams",
     "serve_listener",

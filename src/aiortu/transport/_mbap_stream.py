@@ -53,24 +53,38 @@ def request_adu(counters: ModbusTcpCounters, item: bytes) -> tuple[int, bytes]:
     id taken from `counters` and the request counted."""
     if len(item) < 4:
         raise InvalidValue("len(item)", len(item), "at least 4 (unit, PDU and CRC)")
+    transaction_id = take_transaction_id(counters)
+    return transaction_id, encode_adu(transaction_id, item[0], bytes(item[1:-2]))
+
+
+def take_transaction_id(counters: ModbusTcpCounters) -> int:
+    """The transaction id of a request about to go, taken from `counters`; the request counted."""
     transaction_id = counters.next_transaction_id
     counters.next_transaction_id = (transaction_id + 1) & 0xFFFF
     counters.requests += 1
-    return transaction_id, encode_adu(transaction_id, item[0], bytes(item[1:-2]))
+    return transaction_id
+
+
+def reply_taken(counters: ModbusTcpCounters, outstanding: int, transaction_id: int) -> bool:
+    """Whether a reply with `transaction_id` answers the transaction `outstanding`: counted as
+    a reply if so, else as dropped (a late reply, an id never sent)."""
+    if transaction_id != outstanding:
+        counters.dropped += 1
+        _log.debug(
+            "dropped a reply with transaction id %d (waiting for %d)",
+            transaction_id,
+            outstanding,
+        )
+        return False
+    counters.replies += 1
+    return True
 
 
 def reply_frame(counters: ModbusTcpCounters, outstanding: int, adu: Adu) -> bytes | None:
     """The RTU frame (CRC computed) of `adu` when it answers the transaction `outstanding`,
     counted as a reply; else None, counted as dropped (a late reply, an id never sent)."""
-    if adu.transaction_id != outstanding:
-        counters.dropped += 1
-        _log.debug(
-            "dropped a reply with transaction id %d (waiting for %d)",
-            adu.transaction_id,
-            outstanding,
-        )
+    if not reply_taken(counters, outstanding, adu.transaction_id):
         return None
-    counters.replies += 1
     frame = bytes((adu.unit,)) + adu.pdu
     crc = crc16(frame)
     return frame + bytes((crc & 0xFF, crc >> 8))

@@ -176,6 +176,8 @@ class DatagramCounters:
     """Datagrams that were not exactly one well-formed ADU, dropped unanswered."""
     replies: int = 0
     """Replies sent."""
+    unsent: int = 0
+    """Replies lost because the socket could not take them (its send buffer full)."""
 
 
 async def serve_datagrams(

@@ -3,8 +3,9 @@ callback.
 
 Where the event loop is asyncio, [`open_modbus_udp`][aiortu.transport.open_modbus_udp] returns
 this stream rather than a [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over a datagram
-socket read by a task: an `asyncio.DatagramProtocol` takes each datagram in the loop's read
-callback, and the stream implements the push extension
+socket read by a task: the loop's reader callback takes each datagram
+(`DatagramSocket`), and the stream implements the push
+extension
 ([`PushStream`][aiortu.transport.PushStream]), so the [`Link`][aiortu.line.Link] gets each reply
 without a task wake-up and writes each request without a yield, and the master's usual exchange
 runs over UDP as it does on a serial port.
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -32,11 +34,14 @@ import anyio.lowlevel
 from aiortu._log import get_logger
 from aiortu.core.mbap import Adu
 from aiortu.errors import FrameError
+from aiortu.transport._datagram_socket import DatagramSocket
 from aiortu.transport._mbap_stream import (
     NONE_OUTSTANDING,
     ModbusTcpCounters,
     reply_frame,
+    reply_taken,
     request_adu,
+    take_transaction_id,
 )
 from aiortu.transport._url import MODBUS_UDP_SCHEME, format_tcp_url
 
@@ -48,7 +53,9 @@ _Address = tuple[str, int]
 
 
 def push_datagrams() -> bool:
-    """Whether a master's Modbus UDP stream is pushed: where the running loop is asyncio."""
+    """Whether Modbus UDP reads its socket from the event loop's reader callback (a master's
+    [`PushDatagramStream`][aiortu.transport.PushDatagramStream], a server's
+    [`DatagramServer`][aiortu.transport.DatagramServer]): where the running loop is asyncio."""
     try:
         asyncio.get_running_loop()
     except RuntimeError:
@@ -60,22 +67,6 @@ def log_level(count: int) -> int:
     """Log the first of a kind as a warning and the rest at debug level: a flood of bad
     datagrams costs counts, not log lines."""
     return logging.WARNING if count == 1 else logging.DEBUG
-
-
-class _Protocol(asyncio.DatagramProtocol):
-    def __init__(self, stream: PushDatagramStream) -> None:
-        self.stream = stream
-
-    def datagram_received(self, data: bytes, addr: Any) -> None:
-        self.stream.datagram(data, addr)
-
-    def error_received(self, exc: Exception) -> None:
-        # An ICMP error (port unreachable): the request is lost, as a datagram may be; the
-        # response timeout and the retries deal with it.
-        _log.debug("%s: %s", self.stream.where, exc)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        self.stream.lost(exc)
 
 
 class PushDatagramStream(anyio.abc.ByteStream):
@@ -94,8 +85,18 @@ class PushDatagramStream(anyio.abc.ByteStream):
         self.counters = counters
         """Requests, replies and dropped, refused and strangers' datagrams."""
         self.where = where
-        self.transport: asyncio.DatagramTransport | None = None
+        self.socket: DatagramSocket | None = None
+        """The socket, once `open_push_datagrams`
+        has opened it."""
         self._outstanding = NONE_OUTSTANDING
+        self._last_tail: bytes | None = None
+        """The last reply taken, after its transaction id (see `datagram`)."""
+        self._last_frame = b""
+        """Its RTU frame."""
+        self._last_request: bytes | None = None
+        """The last request's RTU frame (see `send_nowait`)."""
+        self._last_request_tail = b""
+        """Its ADU, after the transaction id."""
         self._receiver: Callable[[bytes], None] | None = None
         self._on_lost: Callable[[], None] | None = None
         self._kept: deque[bytes] = deque()
@@ -114,7 +115,7 @@ class PushDatagramStream(anyio.abc.ByteStream):
     # -- receiving -------------------------------------------------------------------
 
     def datagram(self, data: bytes, source: Any) -> None:
-        """The protocol's callback: check `data`, and hand on the reply it carries."""
+        """The socket's callback: check `data`, and hand on the reply it carries."""
         counters = self.counters
         if (source[0], source[1]) != self.peer:
             counters.strangers += 1
@@ -126,13 +127,24 @@ class PushDatagramStream(anyio.abc.ByteStream):
                 format_tcp_url(source[0], source[1], MODBUS_UDP_SCHEME),
             )
             return
-        try:
-            adu = self._check(data)
-        except FrameError as error:
-            counters.refused += 1
-            _log.log(log_level(counters.refused), "%s: refused a datagram: %s", self.where, error)
-            return
-        frame = reply_frame(counters, self._outstanding, adu)
+        frame: bytes | None
+        if data[2:] == self._last_tail:
+            # The last reply taken again, byte for byte after the transaction id (a poll's
+            # usual reply): checked then, its RTU frame made then.
+            taken = reply_taken(counters, self._outstanding, (data[0] << 8) | data[1])
+            frame = self._last_frame if taken else None
+        else:
+            try:
+                adu = self._check(data)
+            except FrameError as error:
+                counters.refused += 1
+                _log.log(
+                    log_level(counters.refused), "%s: refused a datagram: %s", self.where, error
+                )
+                return
+            frame = reply_frame(counters, self._outstanding, adu)
+            if frame is not None:
+                self._last_tail, self._last_frame = data[2:], frame
         if frame is None:
             return
         self._outstanding = NONE_OUTSTANDING  # one reply per request
@@ -142,12 +154,10 @@ class PushDatagramStream(anyio.abc.ByteStream):
         self._kept.append(frame)
         self._wake()
 
-    def lost(self, exc: BaseException | None) -> None:
-        """The transport closed (by `aclose`, or failed)."""
+    def lost(self) -> None:
+        """The socket closed (by `aclose`)."""
         if self._error is None:
-            self._error = (
-                anyio.BrokenResourceError(str(exc)) if exc else anyio.ClosedResourceError()
-            )
+            self._error = anyio.ClosedResourceError()
         self._wake()
         if self._on_lost is not None:
             on_lost, self._on_lost = self._on_lost, None
@@ -172,7 +182,7 @@ class PushDatagramStream(anyio.abc.ByteStream):
         while self._kept:
             receiver(self._kept.popleft())
         if self._error is not None:
-            self.lost(None)
+            self.lost()
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
         """The next reply to the request outstanding, as an RTU frame."""
@@ -190,29 +200,44 @@ class PushDatagramStream(anyio.abc.ByteStream):
     # -- sending ---------------------------------------------------------------------
 
     def send_nowait(self, item: bytes) -> bool:
-        """The push extension: send the RTU frame `item` as one datagram now."""
-        transport = self.transport
-        if transport is None or self._error is not None:
+        """The push extension: send the RTU frame `item` as one datagram now, if the socket
+        can take it now."""
+        sock = self.socket
+        if sock is None or self._error is not None:
             return False
-        transaction_id, adu = request_adu(self.counters, item)
+        counters = self.counters
+        if item == self._last_request:
+            # The last request again (a poll's): its ADU but for the transaction id is known.
+            transaction_id = take_transaction_id(counters)
+            adu = transaction_id.to_bytes(2, "big") + self._last_request_tail
+        else:
+            transaction_id, adu = request_adu(counters, item)
+            self._last_request, self._last_request_tail = item, adu[2:]
+        if not sock.sendto(adu, self.peer):
+            # Not sent: the id and the count are taken back, for send() to try again.
+            counters.requests -= 1
+            counters.next_transaction_id = transaction_id
+            return False
         self._outstanding = transaction_id
         self._kept.clear()  # a new request: nothing that came before answers it
-        transport.sendto(adu, self.peer)
         return True
 
     async def send(self, item: bytes) -> None:
-        """Send the RTU frame `item` as one datagram with the next transaction id."""
+        """Send the RTU frame `item` as one datagram with the next transaction id, once the
+        socket can take it."""
         await anyio.lowlevel.checkpoint()
-        if not self.send_nowait(item):
-            raise self._error or anyio.ClosedResourceError()
+        while not self.send_nowait(item):
+            if self._error is not None or self.socket is None:
+                raise self._error or anyio.ClosedResourceError()
+            await self.socket.wait_writable()
 
     async def send_eof(self) -> None:
         pass  # datagrams have no end of stream
 
     async def aclose(self) -> None:
-        if self.transport is not None:
-            self.transport.close()
-        self.lost(None)
+        if self.socket is not None:
+            self.socket.close()
+        self.lost()
         await anyio.lowlevel.checkpoint()
 
 
@@ -226,7 +251,7 @@ async def open_push_datagrams(
     """A [`PushDatagramStream`][aiortu.transport.PushDatagramStream] to `peer` on a new socket
     of `family`, each datagram checked by `check` (on asyncio only; see `push_datagrams`)."""
     stream = PushDatagramStream(peer, counters, where, check)
-    loop = asyncio.get_running_loop()
-    transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(stream), family=family)
-    stream.transport = transport
+    stream.socket = DatagramSocket(
+        socket.socket(family, socket.SOCK_DGRAM), stream.datagram, stream.lost, where
+    )
     return stream
