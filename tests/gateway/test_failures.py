@@ -58,8 +58,10 @@ async def test_a_port_gone_gets_0a() -> None:
             # The master has no event for it; the line task notices soon.
             while bench.master.connected:  # noqa: ASYNC110
                 await anyio.sleep(0.01)
+        asked = anyio.current_time()
         assert await tcp.request("03 0000 0001", UNIT, 2) == "83 0A"
         assert await tcp.request("41 00", UNIT, 3) == "C1 0A"
+        assert anyio.current_time() == asked  # at once, not after a timeout
 
 
 @pytest.mark.parametrize(
@@ -141,8 +143,10 @@ async def test_0a_at_once_while_the_port_is_reopened_then_served_again() -> None
         with anyio.fail_after(5):
             while bench.master.connected:  # noqa: ASYNC110  # no event to wait on
                 await anyio.sleep(0.01)
+        asked = anyio.current_time()
         for transaction_id in (2, 3):
             assert await tcp.request("03 0000 0001", UNIT, transaction_id) == "83 0A"
+        assert anyio.current_time() == asked  # at once, while the port is reopened
         back.set()
         with anyio.fail_after(5):
             while not bench.master.connected:  # noqa: ASYNC110
