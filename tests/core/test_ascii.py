@@ -306,11 +306,11 @@ def test_expire_drops_a_stalled_frame_at_its_deadline() -> None:
 
 def test_times_are_the_arrivals_of_colon_and_delimiter() -> None:
     receiver = AsciiReceiver()
-    char = receiver.char_time
+    char = 10 / 9600  # the default line: 9600 baud, 7E1, 10 bits a character
     (out,) = receiver.feed(READ, 5.0)
     assert isinstance(out, AsciiFrameReceived)
     assert out.end == 5.0
-    assert out.start == pytest.approx(5.0 - (len(READ) - 1) * char)
+    assert out.start == pytest.approx(5.0 - (len(READ) - 1) * char, rel=0, abs=1e-12)
 
 
 def test_bad_settings_are_refused() -> None:

@@ -111,6 +111,13 @@ def test_the_usual_reply_taken_at_once_obeys_the_same_rule() -> None:
         assert not engine.busy
         assert future.result().values == (1, 2)  # type: ignore[attr-defined]
 
+        # A reply whose first byte came exactly at the earliest is taken: the machine's rule
+        # too (a frame is stale when it starts before `earliest_reply`).
+        engine, future = _fast_path(loop, 0.0015)
+        engine.fast.on_reply(frame, engine.fast._stale_before)
+        assert not engine.attempts.events
+        assert future.result().values == (1, 2)  # type: ignore[attr-defined]
+
         # Without real wire times no reply is stale by its time here.
         engine, future = _fast_path(loop, None)
         engine.fast.on_reply(frame, 1.0)

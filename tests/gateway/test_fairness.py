@@ -13,7 +13,8 @@ from contextlib import AsyncExitStack
 import anyio
 import pytest
 
-from aiortu.gateway import Gateway, Listen
+from aiortu.errors import InvalidValue
+from aiortu.gateway import Gateway, Listen, gateway
 from aiortu.slave import RequestContext
 from tests.gateway.helpers import UNIT, Line, TcpClient, client, line, memory_client
 from tests.virtual_clock import on_virtual_clock
@@ -197,6 +198,15 @@ async def test_a_listener_with_a_lower_priority_value_goes_first() -> None:
             # Nothing goes before it but the request on the line: the busy listener's
             # queued requests all wait in the engine's queue behind it.
             assert urgent_frame - before == 0
+
+
+@pytest.mark.parametrize("priority", ["1", 1.5, True, None])
+async def test_a_priority_that_is_no_int_is_refused_before_anything_opens(priority: object) -> None:
+    listen = Listen("tcp://127.0.0.1:0", priority=priority)  # type: ignore[arg-type]
+    refused = r"^priority must be an int \(lower values go first\), not "
+    with pytest.raises(InvalidValue, match=refused):
+        async with gateway("/dev/null-not-opened", [listen]):
+            pass
 
 
 @on_virtual_clock

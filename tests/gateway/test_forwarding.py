@@ -3,11 +3,18 @@ client's transaction id and unit id; broadcasts; unit 255; pipelining."""
 
 from __future__ import annotations
 
+import anyio
 import pytest
 
-from aiortu.core.pdu import RawPDU
+from aiortu.core.pdu import RawPDU, ReadInputRegistersResponse
+from aiortu.core.rtu import FrameReceived, Role, encode_frame
+from aiortu.core.serial import LineSettings
+from aiortu.gateway import gateway
 from aiortu.gateway._forward import request_of
+from aiortu.line import Link
+from aiortu.master import Master
 from aiortu.slave import RequestContext
+from aiortu.testing import VirtualBus
 from tests.gateway.helpers import UNIT, client, line, memory_client
 from tests.virtual_clock import on_virtual_clock
 
@@ -100,3 +107,33 @@ async def test_unit_255_is_the_default_unit_or_refused_with_0b() -> None:
         assert await tcp.request("03 0000 0001", 0xFF, transaction_id=3) == "83 0B"
         assert await tcp.request("03 0000 0001", 250) == "83 0B"
         assert bench.messages == 0
+
+
+async def _silent_then_misshapen(link: Link) -> None:
+    """A device that lets a request outside the spec time out, then answers the next request
+    (a read of one input register) twice: first with two registers, then as it should."""
+    with anyio.fail_after(10):
+        for replies in ([], [ReadInputRegistersResponse((1, 2)), ReadInputRegistersResponse((7,))]):
+            event = await link.receive()
+            while not isinstance(event, FrameReceived):
+                event = await link.receive()
+            for reply in replies:
+                await link.send(encode_frame(event.unit, reply.encode()))
+                await anyio.sleep(0.01)
+
+
+async def test_a_reply_of_another_code_is_no_late_reply_to_a_request_forwarded_as_it_came() -> None:
+    # The read of 0 registers goes out as it came, and times out. The next request's
+    # misshapen reply (function code 04) cannot be its late reply (03): the attempt fails
+    # at once, and the good reply after it is not taken.
+    bus = VirtualBus(2)
+    settings = LineSettings(1_000_000)
+    device = Link(bus.endpoints[1], settings, role=Role.SLAVE, units=range(248), frame_gap=0)
+    master = Master(bus.endpoints[0], settings, frame_gap=0, timeout=0.2, retries=0)
+    async with device, master, anyio.create_task_group() as tasks:
+        tasks.start_soon(_silent_then_misshapen, device)
+        await anyio.sleep(0.05)  # both receivers past their first silence
+        async with gateway(master, ["tcp://127.0.0.1:0"]) as server, client(server) as tcp:
+            assert await tcp.request("03 0000 0000", UNIT) == "83 0B"
+            assert await tcp.request("04 0000 0001", UNIT) == "84 0B"
+        assert master.unit_stats(UNIT).late_replies == 0

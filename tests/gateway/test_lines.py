@@ -84,6 +84,7 @@ async def test_a_broadcast_goes_on_every_line() -> None:
         assert await tcp.request("03 0001 0001", unit=5) == "03 02 00 63"
         assert await tcp.request("03 0001 0001", unit=30) == "03 02 00 63"
         assert server.counters.broadcasts == 2
+        assert [server.statistics.lines[name].broadcasts for name in ("A", "B")] == [1, 1]
         assert slave_a.counters.bus_message_count == 2  # the broadcast, the read
         assert slave_b.counters.bus_message_count == 2
 

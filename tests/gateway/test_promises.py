@@ -15,13 +15,23 @@ import tracemalloc
 from collections.abc import Callable
 
 import anyio
+import anyio.abc
 import pytest
 
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import InvalidValue
 from aiortu.gateway import Gateway, GatewayLine, gateway
 from aiortu.slave import MemoryStore, RequestContext
-from tests.gateway.helpers import UNIT, Line, client, device, line, memory_client, memory_stream
+from tests.gateway.helpers import (
+    UNIT,
+    Line,
+    TcpClient,
+    client,
+    device,
+    line,
+    memory_client,
+    memory_stream,
+)
 from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(30)
@@ -382,3 +392,18 @@ async def test_a_gateway_made_directly_coalesces_and_has_no_port_before_it_liste
         assert (made.max_in_flight, made.max_connections) == (4, 32)
         with pytest.raises(RuntimeError, match="the gateway is not listening yet"):
             _ = made.port
+
+
+async def test_a_connection_served_directly_speaks_modbus_tcp_by_default() -> None:
+    async with (
+        line() as bench,
+        await anyio.create_tcp_listener(local_host="127.0.0.1") as listener,
+        anyio.create_task_group() as tasks,
+    ):
+        made = Gateway(bench.master)
+        tasks.start_soon(listener.serve, made.serve_connection)
+        port = listener.extra(anyio.abc.SocketAttribute.local_port)
+        async with await anyio.connect_tcp("127.0.0.1", port) as stream:
+            with anyio.fail_after(5):
+                assert await TcpClient(stream).request("03 0000 0001") == "03 02 12 34"
+        tasks.cancel_scope.cancel()

@@ -1,17 +1,22 @@
 """The `rtu+tcp://` listener: RTU frames over TCP, as a serial device server sends them. A frame
-of unknown length ends after a silence, and a dropped frame is asserted by a wait: these run on
-a virtual clock, their clients on in-memory streams served as the listener serves a socket."""
+of unknown length ends after a silence, and a dropped frame is asserted by a wait: those tests
+run on a virtual clock, their clients on in-memory streams served as the listener serves a
+socket. The server framings' own rules are checked without I/O."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import anyio
 import anyio.abc
 import pytest
 
+from aiortu.core.ascii import encode_ascii_frame
+from aiortu.core.mbap import encode_adu
 from aiortu.core.pdu import RawPDU
 from aiortu.core.rtu import encode_frame
 from aiortu.slave import RequestContext
-from aiortu.transport import RTU_SILENCE
+from aiortu.transport import RTU_SILENCE, AsciiFraming, Framing, MbapFraming, RtuFraming
 from tests.gateway.helpers import UNIT, line, memory_stream
 from tests.virtual_clock import on_virtual_clock
 
@@ -71,3 +76,46 @@ async def test_a_bad_crc_is_dropped_and_the_connection_goes_on() -> None:
         assert bench.messages == 0
         await stream.send(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
         assert await _reply(stream) == encode_frame(UNIT, bytes.fromhex("03 02 1234"))
+
+
+READ = bytes.fromhex("03 0000 0001")
+
+
+@pytest.mark.parametrize(
+    ("framing", "request_bytes"),
+    [
+        (MbapFraming(), encode_adu(7, UNIT, READ)),
+        (RtuFraming(), encode_frame(UNIT, READ)),
+        (AsciiFraming(), encode_ascii_frame(UNIT, READ)),
+    ],
+    ids=lambda value: type(value).__name__,
+)
+def test_a_framing_whose_replies_carry_no_transaction_id_keeps_them_in_order(
+    framing: Framing, request_bytes: bytes
+) -> None:
+    # A server pipelines a connection's requests only when its replies say which they answer.
+    (request,) = framing.feed(request_bytes)
+    assert request.pdu == READ
+    assert framing.discarded == 0
+    ids = {framing.encode(replace(request, transaction_id=i), b"\x83\x02") for i in (1, 2)}
+    assert framing.in_order is (len(ids) == 1)
+
+
+@pytest.mark.parametrize(
+    ("framing", "bad", "good"),
+    [
+        (RtuFraming(), encode_frame(UNIT, READ)[:-1] + b"\x00", encode_frame(UNIT, READ)),
+        (
+            AsciiFraming(),
+            encode_ascii_frame(UNIT, READ)[:-4] + b"00\r\n",
+            encode_ascii_frame(UNIT, READ),
+        ),
+    ],
+    ids=lambda value: type(value).__name__,
+)
+def test_a_framing_counts_each_frame_it_drops_once(
+    framing: Framing, bad: bytes, good: bytes
+) -> None:
+    assert framing.discarded == 0
+    assert [request.pdu for request in framing.feed(bad + good)] == [READ]
+    assert framing.discarded == 1

@@ -39,7 +39,7 @@ async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_q
         async with line(default=silent, timeout=5.0, retries=0, fast_path=False) as (
             master,
             _,
-            _,
+            bus,
         ):
             engine = master.engine
             read_scope = anyio.CancelScope()
@@ -66,6 +66,9 @@ async def test_closing_while_the_line_task_finishes_a_cancelled_read_fails_the_q
     assert len(ended) == 1
     assert isinstance(ended[0], ConnectionLost), ended
     assert engine.machine.state is MasterState.IDLE
+    # Only the read went out: the write failed in the queue.
+    sent = [entry.data for entry in bus.trace if entry.sender == 0]
+    assert sent == [encode_frame(1, ReadHoldingRegistersRequest(0, 2).encode())]
 
 
 async def _slow(slave: FakeSlave, unit: int, request: Request) -> None:

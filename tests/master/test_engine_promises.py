@@ -17,6 +17,7 @@ from contextlib import asynccontextmanager
 import anyio
 import pytest
 
+from aiortu.core.rtu import FrameReceived, encode_frame
 from aiortu.core.serial import LineSettings
 from aiortu.master import Master
 from aiortu.slave import RequestContext, Slave
@@ -118,3 +119,16 @@ async def test_after_a_retry_succeeds_the_next_request_waits_the_guard() -> None
         wire = 8 * master.settings.char_time
         assert times[1] - times[0] == pytest.approx(0.05 + wire + guard, abs=1e-9)
         assert times[2] - times[1] == pytest.approx(guard, abs=1e-9)
+
+
+async def test_frames_nobody_examines_keep_the_newest_and_count_the_dropped() -> None:
+    # Frames the link delivers while no attempt examines them (other units' traffic on a busy
+    # bus) are bounded by the link's queue size: the oldest go, each counted once.
+    async with line() as (master, _, _):
+        link = master.engine.link
+        frames = [FrameReceived(encode_frame(9, bytes((7, n))), 0.0, 0.0) for n in range(70)]
+        link._deliver(frames)
+        kept = list(master.engine.attempts.events)
+        assert len(kept) == link.queue_size == 64
+        assert kept == frames[-64:]
+        assert link.events_dropped == 6

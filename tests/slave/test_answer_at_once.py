@@ -121,6 +121,14 @@ async def test_answers_from_the_read_callback_equal_the_serve_loops(frame_gap: f
 
             slave._send_reply = counted  # type: ignore[method-assign]
             await anyio.sleep(0.05)  # the receiver first waits for silence
+            deliver = slave.link._deliver
+
+            def delivered(events: list[Any]) -> None:
+                events_from_the_receiver.extend(events)
+                deliver(events)
+
+            events_from_the_receiver: list[Any] = []
+            slave.link._deliver = delivered  # type: ignore[method-assign]
             on_pty = [
                 await _exchange_on_pty(
                     master_fd, slave, encode_frame(unit, bytes.fromhex(pdu)), _reply_due(unit)
@@ -170,6 +178,10 @@ async def test_answers_from_the_read_callback_equal_the_serve_loops(frame_gap: f
     # The eight others were computed at once, by the fast paths of their codes.
     at_once = [reply for reply in on_pty if reply and reply[1] & 0x7F in FAST_PATHS]
     assert answered_at_once == len(at_once) - 1 == 8  # less the malformed read's 83
+    # The whole 8-byte requests (01 to 06) went from the read callback to the fast paths
+    # without the receiver making an event of them, whatever their unit.
+    made = [event.frame for event in events_from_the_receiver if type(event) is FrameReceived]
+    assert [(frame[0], frame[1]) for frame in made] == [(UNIT, code) for code in (16, 7, 8, 11, 12)]
 
 
 async def test_a_request_under_way_is_never_dropped_when_the_queue_overflows() -> None:

@@ -92,11 +92,15 @@ async def test_exception_pdus_and_replies_are_answers() -> None:
         slave.set_handler(0x45, lambda request, context: Reply(RawPDU(0x45, b"\x01")))
         slave.set_handler(0x46, lambda request, context: Reply(RawPDU(0x46), delay=-1.0))
         slave.set_handler(0x47, lambda request, context: Reply(RawPDU(0x47), unit=300))
+        slave.set_handler(0x48, lambda request, context: Reply(RawPDU(0x48), delay=-0.001))
+        slave.set_handler(0x49, lambda request, context: Reply(RawPDU(0x49), unit=-1))
         assert await master.request(UNIT, "44") == "C4 06"
         assert slave.counters.server_busy_count == 1  # counted as the exception it is
         assert await master.request(UNIT, "45") == "45 01"
         assert await master.request(UNIT, "46") == "C6 04"
         assert await master.request(UNIT, "47") == "C7 04"
+        assert await master.request(UNIT, "48") == "C8 04"  # no delay is below 0
+        assert await master.request(UNIT, "49") == "C9 04"  # nor a unit id
         assert await master.request(UNIT, "03 00 6B 00 01") == "03 02 AE 41"
 
 

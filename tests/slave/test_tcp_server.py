@@ -270,6 +270,25 @@ async def test_rtu_over_tcp_listens_and_serves_each_connection_as_a_line() -> No
     assert store.get(Table.HOLDING_REGISTERS, 9) == [6]
 
 
+async def test_rtu_over_tcp_to_a_named_host_and_port_connects_to_a_device_server() -> None:
+    # The address of a serial device server that listens: the slave connects to it, and
+    # answers the requests that come through it as a device on its line.
+    from aiortu.core.rtu import decode_frame, encode_frame
+    from aiortu.slave import Slave
+
+    async with await anyio.create_tcp_listener(local_host="127.0.0.1") as listeners:
+        listener = listeners.listeners[0]
+        port = listener.extra(anyio.abc.SocketAttribute.local_port)
+        with anyio.fail_after(5):
+            async with serve(f"rtu+tcp://127.0.0.1:{port}", {UNIT: device()}) as slave:
+                assert isinstance(slave, Slave)
+                async with await listener.accept() as line:
+                    await anyio.sleep(0.05)  # the slave's receiver first waits for silence
+                    await line.send(encode_frame(UNIT, bytes.fromhex("03 00 01 00 01")))
+                    reply = await line.receive()
+                    assert decode_frame(reply).pdu == bytes.fromhex("03 02 AB CD")
+
+
 async def test_listen_is_for_urls_only() -> None:
     with pytest.raises(InvalidValue, match="only a URL listens"):
         async with serve("/dev/ttyUSB0", {UNIT: device()}, listen=True):
@@ -409,3 +428,11 @@ async def test_rtu_over_tcp_connections_share_one_device() -> None:
         assert await ask(second, "03 0000 0001") is None  # the device is silent for all
         assert await ask(second, "08 0001 0000") is None  # restarted, from listen-only
         assert await ask(first, "03 0000 0001") is not None
+
+
+def test_units_1_to_247_are_served_and_others_refused_in_one_sentence() -> None:
+    ModbusTcpServer({1: device(), 247: device()})
+    for unit in (0, 248):
+        with pytest.raises(InvalidValue) as raised:
+            ModbusTcpServer({unit: device()})
+        assert str(raised.value) == f"unit = {unit} is outside the allowed range 1..247"

@@ -19,13 +19,11 @@ import anyio
 import anyio.abc
 import pytest
 
-from aiortu.core.ascii import encode_ascii_frame
 from aiortu.core.pdu import ExceptionPDU, encode_exception
 from aiortu.core.rtu import MAX_FRAME_LENGTH, crc16, encode_frame
 from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.testing import virtual_pair
 from aiortu.transport import (
-    AsciiFraming,
     ConnectionLimit,
     RtuFraming,
     UnixAddress,
@@ -205,21 +203,6 @@ def _logged(name: str) -> Iterator[list[str]]:
         yield messages
     finally:
         logger.removeHandler(handler)
-
-
-@on_virtual_clock
-async def test_the_ascii_framing_times_a_gap_on_the_event_loops_clock() -> None:
-    pdu = bytes.fromhex("03 0000 0001")
-    frame = encode_ascii_frame(17, pdu)
-    framing = AsciiFraming(timeout=1.0)
-    assert framing.feed(frame[:5]) == []
-    await anyio.sleep(1.0)  # the longest gap allowed
-    assert [(adu.unit, adu.pdu) for adu in framing.feed(frame[5:])] == [(17, pdu)]
-    assert framing.feed(frame[:5]) == []
-    await anyio.sleep(1.5)  # longer: the frame is dropped, and its tail is noise
-    assert framing.feed(frame[5:]) == []
-    assert framing.discarded == 2
-    assert [adu.pdu for adu in framing.feed(frame)] == [pdu]
 
 
 def test_unix_urls_take_a_mode_and_a_group() -> None:

@@ -149,11 +149,6 @@ class Attempts:
 
     # -- sending ------------------------------------------------------------------------------
 
-    @property
-    def guard_pending(self) -> bool:
-        """Whether a failed attempt's guard is still to be kept before anything goes out."""
-        return self.guard_until != NO_GUARD
-
     def start_guard(self) -> None:
         """An attempt failed: nothing goes out until the late-reply guard is kept."""
         self.guard_until = self.link.clock() + self.guard_seconds

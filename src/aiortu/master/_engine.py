@@ -131,7 +131,7 @@ class LineEngine(LineState):
         queue = self.queue
         if not queue.busy and self.open:
             queue.busy = True  # an idle line: the transaction runs at once, here
-            return await self._run(Job(transaction, NO_FUTURE, -1))
+            return await self._run(Job(transaction, NO_FUTURE))
         job = self._queue(transaction)
         try:
             result = await job.future
@@ -273,7 +273,6 @@ class LineEngine(LineState):
         if self._failed is None:
             self._failed = error
         self.open = False
-        self.closed = True
         why = str(self._failed)
         self.queue.fail_all(why)
         fast = self.fast

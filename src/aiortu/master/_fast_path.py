@@ -198,7 +198,7 @@ class FastPath:
         machine.begin(transaction)
         machine.sent(self._start, self._start + len(self._known.frame) * engine.link.char_time)
         future = self._future
-        job = Job(transaction, future, -1)
+        job = Job(transaction, future)
         if future.done():
             transaction.abandoned = True  # cancelled already: no retries
         else:

@@ -41,9 +41,7 @@ class LineState:
             link, self.machine, config.timings.late_reply_guard, self.on_time_up
         )
         self.open = False
-        """The line task serves a live link, and the engine is not closed."""
-        self.closed = False
-        """The engine is closed for good."""
+        """The line task serves a live link."""
         self._connected = anyio.Event()
         self._connected.set()
 
@@ -93,7 +91,7 @@ class LineState:
         """The line task serves `link` (entered) from now on."""
         self.link = self.attempts.link = link
         self.attempts.events.clear()
-        self.open = not self.closed
+        self.open = True
         link.listen(self._on_link_event)  # a closed link: `open` is false at once
         try:
             while link.receive_nowait() is not None:  # queued before we listened

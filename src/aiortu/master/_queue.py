@@ -14,7 +14,7 @@ import enum
 import heapq
 import itertools
 from collections.abc import Callable, Generator
-from typing import Any, Final, Protocol
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 import anyio
 import anyio.abc
@@ -22,6 +22,9 @@ import anyio.abc
 from aiortu.core.machines import Transaction
 from aiortu.core.pdu import ExceptionPDU, Response
 from aiortu.errors import ConnectionLost
+
+if TYPE_CHECKING:
+    import asyncio
 
 __all__ = ("NO_FUTURE", "TURN", "EventFuture", "Job", "JobFuture", "JobResult", "LineQueue", "Turn")
 
@@ -43,7 +46,6 @@ class JobFuture(Protocol):
     """What a job's caller awaits: an asyncio future, or an `EventFuture`."""
 
     def done(self) -> bool: ...
-    def cancelled(self) -> bool: ...
     def set_result(self, result: JobResult | Turn, /) -> None: ...
     def set_exception(self, error: BaseException, /) -> None: ...
     def add_done_callback(self, callback: Callable[[Any], object], /) -> None: ...
@@ -66,9 +68,6 @@ class EventFuture:
 
     def done(self) -> bool:
         return self._event.is_set()
-
-    def cancelled(self) -> bool:
-        return False
 
     def set_result(self, result: JobResult | Turn, /) -> None:
         self._result = result
@@ -100,9 +99,6 @@ class _Told:
     def done(self) -> bool:
         return True
 
-    def cancelled(self) -> bool:
-        return False
-
     def set_result(self, result: JobResult | Turn, /) -> None:
         raise AssertionError("a job run by its caller is never woken")
 
@@ -123,13 +119,12 @@ NO_FUTURE: Final[JobFuture] = _Told()
 class Job:
     """A transaction waiting for the line or on it, and the future its caller awaits."""
 
-    __slots__ = ("future", "granted", "sequence", "transaction", "woken")
+    __slots__ = ("future", "granted", "transaction", "woken")
 
-    def __init__(self, transaction: Transaction, future: JobFuture, sequence: int) -> None:
+    def __init__(self, transaction: Transaction, future: JobFuture) -> None:
         self.transaction = transaction
         self.future = future
         """Completed once: `TURN`, the result, or the error (see the module docstring)."""
-        self.sequence = sequence
         self.granted = False
         """Whether the job was handed the line."""
         self.woken = False
@@ -145,9 +140,10 @@ class Job:
         else:
             future.set_exception(error)
 
-    def abandon_if_cancelled(self, future: JobFuture) -> None:
-        """The done callback of a future whose caller awaits it directly: a cancelled
-        caller is gone, and its transaction is finished without retries."""
+    def abandon_if_cancelled(self, future: asyncio.Future[Any]) -> None:
+        """The done callback of an event loop's future whose caller awaits it directly: a
+        cancelled caller is gone, and its transaction is finished without retries. (An
+        `EventFuture` calls no done callback: the engine notices its caller's cancellation.)"""
         if future.cancelled():
             self.transaction.abandoned = True
 
@@ -176,8 +172,9 @@ class LineQueue:
 
     def push(self, transaction: Transaction, future: JobFuture) -> Job:
         """Queue `transaction`, whose caller awaits `future`; return its job."""
-        job = Job(transaction, future, next(self._sequence))
-        heapq.heappush(self.waiting, (transaction.priority, transaction.order, job.sequence, job))
+        job = Job(transaction, future)
+        key = (transaction.priority, transaction.order, next(self._sequence), job)
+        heapq.heappush(self.waiting, key)
         return job
 
     def next_job(self) -> Job | None:

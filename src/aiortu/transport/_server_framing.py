@@ -19,9 +19,8 @@ TCP or ASCII over TCP (the server framings, one home for all).
 
 from __future__ import annotations
 
+import time
 from typing import Final, Protocol
-
-import anyio
 
 from aiortu.core.ascii import (
     DEFAULT_ASCII_TIMEOUT,
@@ -198,9 +197,8 @@ class RtuFraming:
 class AsciiFraming:
     """Modbus ASCII frames over TCP (':' to CR LF, checked by their LRC), told apart by their
     delimiters: the core's [`AsciiReceiver`][aiortu.core.ascii.AsciiReceiver], with `timeout`
-    the longest gap between two characters of a frame, on the event loop's clock (`feed` is
-    called in the loop). Like RTU frames they carry no transaction id: one request at a time,
-    replies in order."""
+    the longest gap between two characters of a frame. Like RTU frames they carry no
+    transaction id: one request at a time, replies in order."""
 
     in_order = True
 
@@ -214,7 +212,7 @@ class AsciiFraming:
 
     def feed(self, data: bytes) -> list[Adu]:
         requests = []
-        for output in self._receiver.feed(data, anyio.current_time()):
+        for output in self._receiver.feed(data, time.monotonic()):
             if isinstance(output, AsciiFrameReceived):
                 requests.append(Adu(0, output.unit, output.pdu))
             elif isinstance(output, AsciiFrameDiscarded):

@@ -218,3 +218,43 @@ def test_a_template_of_evccs_built_in_models_has_no_register_map() -> None:
     template = {"template": "t", "render": "type: mbmd\nmodel: sdm\npower: Power\n"}
     with pytest.raises(ConfigError, match=r"t.yaml: render: renders no register map \(a 'mbmd'"):
         profile_from_evcc(template, yaml.safe_load, source="t.yaml")
+
+
+@pytest.mark.parametrize(
+    ("decode", "kind", "size", "missing"),
+    [
+        ("int16", PointType.I16, 1, -0x8000),
+        ("uint16", PointType.U16, 1, 0xFFFF),
+        ("int32", PointType.I32, 2, -0x80000000),
+        ("uint32", PointType.U32, 2, 0xFFFFFFFF),
+        ("int64", PointType.I64, 4, -0x8000000000000000),
+        ("uint64", PointType.U64, 4, 0xFFFFFFFFFFFFFFFF),
+        ("float32", PointType.F32, 2, None),
+        ("float64", PointType.F64, 4, None),
+    ],
+)
+def test_every_evcc_decode_and_its_not_available_value(
+    decode: str, kind: PointType, size: int, missing: int | None
+) -> None:
+    """evcc's `...nan` decodes mark a value as missing: the type's lowest value when signed,
+    its highest when unsigned; an `s` swaps the words."""
+    for suffix, layout, not_available in [
+        ("", Layout.ABCD, None),
+        ("s", Layout.CDAB, None),
+        ("nan", Layout.ABCD, missing),
+        ("snan", Layout.CDAB, missing),
+    ]:
+        register = {"address": 7, "type": "input", "decode": decode + suffix}
+        template = {
+            "template": "t",
+            "render": yaml.safe_dump(
+                {"type": "custom", "power": {"source": "modbus", "register": register}}
+            ),
+        }
+        point = profile_from_evcc(template, yaml.safe_load).profile.point("power")
+        assert (point.type, point.size, point.layout, point.not_available) == (
+            kind,
+            size,
+            layout,
+            not_available,
+        ), decode + suffix

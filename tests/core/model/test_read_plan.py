@@ -92,6 +92,19 @@ def test_plan_covers_each_point_once_within_limits(
             assert raw == expected or (raw != raw and expected != expected), (point, seed)
 
 
+def test_a_gap_or_a_block_of_exactly_the_limit_is_read_in_one() -> None:
+    def spans(*addresses: int, **limits: int) -> list[tuple[int, int]]:
+        points = [
+            ProfilePoint(f"p{a}", Table.HOLDING_REGISTERS, a, PointType.U16, 1) for a in addresses
+        ]
+        return [(read.address, read.count) for read in plan_blocks(points, make(points, **limits))]
+
+    assert spans(0, 4, max_gap=3) == [(0, 5)]  # 3 registers between: within the gap
+    assert spans(0, 5, max_gap=3) == [(0, 1), (5, 1)]
+    assert spans(0, 9, max_block=10) == [(0, 10)]  # 10 registers: the largest read
+    assert spans(0, 10, max_block=10, max_gap=20) == [(0, 1), (10, 1)]
+
+
 def test_greedy_merge_is_fewest_reads_for_the_sdm630() -> None:
     profile = load_profile(SDM630)
     measurements = [p for p in profile.points if p.table is Table.INPUT_REGISTERS]
@@ -176,6 +189,15 @@ def test_values_apply_scale_offset_factor_and_sentinel() -> None:
     assert values["f"] == ("x", "2")
     del raws["w_sf"]
     assert ReadPlan(profile).values(raws)["w"] is None
+
+
+def test_an_empty_string_is_no_value_only_where_its_not_available_value_is_0() -> None:
+    # SunSpec's rule: a string of NULs (or padding only) is "not implemented".
+    unset = ProfilePoint("s", Table.HOLDING_REGISTERS, 0, PointType.STRING, 2, not_available=0)
+    plain = ProfilePoint("s", Table.HOLDING_REGISTERS, 0, PointType.STRING, 2)
+    assert decode_point(unset, [0, 0]) is None
+    assert decode_point(unset, [0x4142, 0x2000]) == "AB"
+    assert decode_point(plain, [0, 0]) == ""
 
 
 @settings(max_examples=300, deadline=None)

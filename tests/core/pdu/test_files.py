@@ -302,6 +302,14 @@ def test_malformed_vectors(decode: Any, wire: str, field: str, code: int) -> Non
     assert caught.value.exception_code == code
 
 
+def test_a_bad_record_length_names_the_odd_lengths_that_fit() -> None:
+    # A record is its reference type and whole registers: 3, 5, ... bytes, up to the PDU's end.
+    with pytest.raises(MalformedPDU) as caught:
+        decode_response(bytes.fromhex("14 06 04 06 00 01 00 02"))
+    assert caught.value.allowed == range(3, 6, 2)
+    assert str(caught.value).endswith("records[0] length = 4, allowed 3..5 in steps of 2")
+
+
 encoded = st.one_of(
     *(REQUEST_STRATEGIES[cls] for cls in REQUESTS),
     *(RESPONSE_STRATEGIES[cls] for cls in RESPONSES),

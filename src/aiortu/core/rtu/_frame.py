@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final
 
-from aiortu.core.codes import EXCEPTION_BIT, MEI_READ_DEVICE_IDENTIFICATION
+from aiortu.core.codes import EXCEPTION_BIT, MEI_READ_DEVICE_IDENTIFICATION, FunctionCode
 from aiortu.core.errors import CRCError, InvalidValue, MalformedPDU
 from aiortu.core.rtu._crc import crc16
 
@@ -93,60 +93,64 @@ def decode_frame(frame: bytes) -> Frame:
     return Frame(frame[0], bytes(frame[1:-2]))
 
 
-# How to compute the total frame length (unit and CRC included) for one function code,
-# as (kind, a, b):
-#   (_FIXED, n, 0)         always n bytes
-#   (_BYTE, i, base)       a one-byte count at offset i; total = base + count
-#   (_WORD, i, base)       a big-endian two-byte count at offset i; total = base + count
-#   (_MEI, 0, 0)           2B: depends on the MEI type and, for replies, on the objects
-_FIXED, _BYTE, _WORD, _MEI = range(4)
-_Layout = tuple[int, int, int]
-_FIXED8: _Layout = (_FIXED, 8, 0)
+@dataclass(frozen=True, slots=True)
+class _Counted:
+    """A frame whose total length (unit and CRC included) is `base` plus the count in its
+    `width` bytes (big-endian) at `offset`."""
+
+    offset: int
+    base: int
+    width: int = 1
+
+
+# A function code's frame length: an int when it is always that many bytes, a count otherwise.
+# 2B (MEI) is in neither table: its length depends on the MEI type (see _predict_mei).
+_Layout = int | _Counted
+_ENCAPSULATED: Final = int(FunctionCode.ENCAPSULATED_INTERFACE_TRANSPORT)
+_BYTE_COUNT_AT_2 = _Counted(2, 5)
 
 _REQUEST_LAYOUTS: dict[int, _Layout] = {
-    0x01: _FIXED8,
-    0x02: _FIXED8,
-    0x03: _FIXED8,
-    0x04: _FIXED8,
-    0x05: _FIXED8,
-    0x06: _FIXED8,
-    0x07: (_FIXED, 4, 0),
+    0x01: 8,
+    0x02: 8,
+    0x03: 8,
+    0x04: 8,
+    0x05: 8,
+    0x06: 8,
+    0x07: 4,
     # 08 sub-function 00 may echo any even amount of data; 8 bytes is every other
     # sub-function and the usual query, and a wrong guess only costs waiting for silence.
-    0x08: _FIXED8,
-    0x0B: (_FIXED, 4, 0),
-    0x0C: (_FIXED, 4, 0),
-    0x0F: (_BYTE, 6, 9),
-    0x10: (_BYTE, 6, 9),
-    0x11: (_FIXED, 4, 0),
-    0x14: (_BYTE, 2, 5),
-    0x15: (_BYTE, 2, 5),
-    0x16: (_FIXED, 10, 0),
-    0x17: (_BYTE, 10, 13),
-    0x18: (_FIXED, 6, 0),
-    0x2B: (_MEI, 0, 0),
+    0x08: 8,
+    0x0B: 4,
+    0x0C: 4,
+    0x0F: _Counted(6, 9),
+    0x10: _Counted(6, 9),
+    0x11: 4,
+    0x14: _BYTE_COUNT_AT_2,
+    0x15: _BYTE_COUNT_AT_2,
+    0x16: 10,
+    0x17: _Counted(10, 13),
+    0x18: 6,
 }
 
 _RESPONSE_LAYOUTS: dict[int, _Layout] = {
-    0x01: (_BYTE, 2, 5),
-    0x02: (_BYTE, 2, 5),
-    0x03: (_BYTE, 2, 5),
-    0x04: (_BYTE, 2, 5),
-    0x05: _FIXED8,
-    0x06: _FIXED8,
-    0x07: (_FIXED, 5, 0),
-    0x08: _FIXED8,
-    0x0B: _FIXED8,
-    0x0C: (_BYTE, 2, 5),
-    0x0F: _FIXED8,
-    0x10: _FIXED8,
-    0x11: (_BYTE, 2, 5),
-    0x14: (_BYTE, 2, 5),
-    0x15: (_BYTE, 2, 5),
-    0x16: (_FIXED, 10, 0),
-    0x17: (_BYTE, 2, 5),
-    0x18: (_WORD, 2, 6),
-    0x2B: (_MEI, 0, 0),
+    0x01: _BYTE_COUNT_AT_2,
+    0x02: _BYTE_COUNT_AT_2,
+    0x03: _BYTE_COUNT_AT_2,
+    0x04: _BYTE_COUNT_AT_2,
+    0x05: 8,
+    0x06: 8,
+    0x07: 5,
+    0x08: 8,
+    0x0B: 8,
+    0x0C: _BYTE_COUNT_AT_2,
+    0x0F: 8,
+    0x10: 8,
+    0x11: _BYTE_COUNT_AT_2,
+    0x14: _BYTE_COUNT_AT_2,
+    0x15: _BYTE_COUNT_AT_2,
+    0x16: 10,
+    0x17: _BYTE_COUNT_AT_2,
+    0x18: _Counted(2, 6, width=2),
 }
 
 
@@ -159,22 +163,15 @@ def _predict(frame: bytes | bytearray, layouts: dict[int, _Layout], reply: bool)
         # A request never has the top bit set; a reply with it is an exception: 5 bytes.
         return 5 if reply else CANNOT_KNOW
     layout = layouts.get(function_code)
-    if layout is None:
-        return CANNOT_KNOW
-    kind, a, b = layout
-    if kind == _FIXED:
-        return a
-    if kind == _BYTE:
-        if have <= a:
+    if type(layout) is int:
+        return layout
+    if isinstance(layout, _Counted):
+        at = layout.offset
+        if have < at + layout.width:
             return NEED_MORE
-        total = b + frame[a]
+        total = layout.base + (frame[at] if layout.width == 1 else frame[at] << 8 | frame[at + 1])
         return total if total <= MAX_FRAME_LENGTH else CANNOT_KNOW
-    if kind == _WORD:
-        if have <= a + 1:
-            return NEED_MORE
-        total = b + (frame[a] << 8 | frame[a + 1])
-        return total if total <= MAX_FRAME_LENGTH else CANNOT_KNOW
-    return _predict_mei(frame, reply)
+    return _predict_mei(frame, reply) if function_code == _ENCAPSULATED else CANNOT_KNOW
 
 
 def _predict_mei(frame: bytes | bytearray, reply: bool) -> int:
