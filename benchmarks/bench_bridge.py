@@ -1,8 +1,10 @@
-"""The MQTT bridge: a fleet on one machine, and aiortu's bridge against modbus4mqtt.
+"""The MQTT bridge: a fleet on one machine, aiortu's bridge against modbus4mqtt, and the floor
+under a poll.
 
-    python benchmarks/bench_bridge.py                       # both sections
+    python benchmarks/bench_bridge.py                       # every section
     python benchmarks/bench_bridge.py --section fleet --seconds 20
     python benchmarks/bench_bridge.py --section modbus4mqtt --modbus4mqtt /tmp/m4m/bin/modbus4mqtt
+    python benchmarks/bench_bridge.py --section floor --seconds 15
 
 **fleet**: 8 `aiortu bridge` processes, each on its own virtual line of 10 simulated units of
 50 points (every point published every poll, 1 s), into one mosquitto started here; one
@@ -15,12 +17,17 @@ every second, changing every second; 10 counters and settings in a 60 s poll cla
 profiles describe them), bridged by `aiortu bridge` and by modbus4mqtt (PyPI; run from its own
 venv as a separate process, `--modbus4mqtt PATH`), one at a time, interleaved, into the same
 broker. Reported: line transactions per published point, bridge CPU per published point, and
-the time from a register change to its MQTT message (p50, p99).
+the time from a register change to its MQTT message (p50, p99). `--baseline SRC` runs the
+aiortu bridge of another source tree as a third, interleaved (`--baseline /work/main/src`).
+
+**floor**: what a 1 s poll of the meter costs before any MQTT (the loop's wake, the master's
+read, the poller's `Device.read`): the part of the bridge's CPU no MQTT code can remove.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -225,10 +232,15 @@ def _run_one(
     subscriber: Subscriber,
     prefix: str,
     seconds: float,
+    env: dict[str, str] | None = None,
 ) -> dict[str, float]:
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    seen = len(subscriber.on(f"{prefix}/meter/f00"))
+    process = subprocess.Popen(
+        command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
+    )
     try:
-        subscriber.wait_for(lambda: len(subscriber.on(f"{prefix}/meter/f00")) >= 2, 30)
+        # Two values of this run (not of an earlier one): its start-up is over.
+        subscriber.wait_for(lambda: len(subscriber.on(f"{prefix}/meter/f00")) >= seen + 2, 30)
         time.sleep(1.0)
         cpu0, requests0 = cpu_exact(process.pid), meter.requests
         with subscriber.lock:
@@ -262,6 +274,9 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
     broker = Mosquitto()
     broker.start()
     results: dict[str, list[dict[str, float]]] = {"aiortu bridge": [], "modbus4mqtt": []}
+    baseline = f"aiortu bridge ({args.baseline})" if args.baseline else None
+    if baseline is not None:
+        results[baseline] = []
     with TemporaryDirectory() as tmp:
         folder = Path(tmp)
         meter = _Meter(_meter_profile(folder / "meter.toml"))
@@ -294,12 +309,25 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
             ],
         }
         prefixes = {"aiortu bridge": "aiortu", "modbus4mqtt": "m4m"}
+        envs: dict[str, dict[str, str] | None] = {"aiortu bridge": None, "modbus4mqtt": None}
+        if baseline is not None:
+            commands[baseline] = commands["aiortu bridge"]
+            prefixes[baseline] = "aiortu"
+            envs[baseline] = {**os.environ, "PYTHONPATH": args.baseline}
         subscriber = Subscriber(broker.port, ["aiortu/#", "m4m/#"], "bench")
         try:
             for _ in range(args.rounds):
                 for name, command in commands.items():
                     results[name].append(
-                        _run_one(name, command, meter, subscriber, prefixes[name], args.seconds)
+                        _run_one(
+                            name,
+                            command,
+                            meter,
+                            subscriber,
+                            prefixes[name],
+                            args.seconds,
+                            envs[name],
+                        )
                     )
         finally:
             subscriber.close()
@@ -322,6 +350,13 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
         for name in results
     ]
     ratio = {k: medians["aiortu bridge"][k] / medians["modbus4mqtt"][k] for k in keys[:2]}
+    cpu = "CPU us per point"
+    others = [
+        f"{name} / modbus4mqtt: CPU per published point "
+        f"{medians[name][cpu] / medians['modbus4mqtt'][cpu]:.2f}x"
+        for name in results
+        if name not in ("aiortu bridge", "modbus4mqtt")
+    ]
     return [
         f"## Against modbus4mqtt ({args.rounds} interleaved rounds of {args.seconds:.0f} s each; "
         f"medians; 1 s poll, values changing every second; aiortu at QoS {args.qos}, "
@@ -332,10 +367,57 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
         f"aiortu / modbus4mqtt: line transactions per published point "
         f"{ratio['transactions per point']:.2f}x, CPU per published point "
         f"{ratio['CPU us per point']:.2f}x",
+        *others,
     ]
 
 
-SECTIONS = {"fleet": fleet, "modbus4mqtt": versus_modbus4mqtt}
+def floor(args: argparse.Namespace) -> list[str]:
+    """What a 1 s poll costs before any MQTT: the event loop woken once a second, then with
+    one read of the meter's 40 measurements by the master, then by `Device.read` (what the
+    bridge's poller does). CPU of the polling thread (`time.thread_time`), the meter served by
+    another thread; alone on the machine, not interleaved (each a floor under the bridge)."""
+    from aiortu.core.model import load_profile
+    from aiortu.master import Device, open_master
+
+    rows: list[list[str]] = []
+    with TemporaryDirectory() as tmp:
+        meter = _Meter(_meter_profile(Path(tmp) / "meter.toml"))
+        profile = load_profile(Path(tmp) / "meter.toml")
+
+        async def main() -> None:
+            await anyio.sleep(0.5)  # the meter's listener
+            url = f"tcp://127.0.0.1:{meter.port}"
+            async with open_master(url, fail_fast_offline=True) as master:
+                device = Device(master, 1, profile)
+                polls = {
+                    "the loop woken once a second": None,
+                    "+ master.read_input_registers(1, 0, 40)": (
+                        lambda: master.read_input_registers(1, 0, 40)
+                    ),
+                    "+ Device.read (the poller's read)": lambda: device.read("normal"),
+                }
+                for name, poll in polls.items():
+                    await device.read("normal")
+                    start, cycles = time.thread_time(), max(3, round(args.seconds))
+                    for _ in range(cycles):
+                        if poll is not None:
+                            await poll()
+                        await anyio.sleep(1.0)
+                    cpu = (time.thread_time() - start) / cycles
+                    rows.append([name, f"{cpu * 1e3:.2f}", f"{cpu / FAST * 1e6:.1f}"])
+
+        try:
+            anyio.run(main)
+        finally:
+            meter.close()
+    return [
+        f"## The floor under a 1 s poll ({max(3, round(args.seconds))} polls each)",
+        "",
+        table(["each second", "CPU ms/s", f"us per point at {FAST} points/s"], rows),
+    ]
+
+
+SECTIONS = {"fleet": fleet, "modbus4mqtt": versus_modbus4mqtt, "floor": floor}
 
 
 def main() -> None:
@@ -355,6 +437,11 @@ def main() -> None:
     parser.add_argument("--points", type=int, default=50)
     parser.add_argument(
         "--modbus4mqtt", default="modbus4mqtt", help="the modbus4mqtt command (from its own venv)"
+    )
+    parser.add_argument(
+        "--baseline",
+        metavar="SRC",
+        help="also run the aiortu bridge of this source tree (PYTHONPATH), interleaved",
     )
     run_sections(parser.parse_args(), SECTIONS)
 

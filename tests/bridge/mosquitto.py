@@ -45,10 +45,14 @@ class Mosquitto:
 
     def start(self) -> None:
         self.process = subprocess.Popen([MOSQUITTO, "-c", str(self.config)])
+        self.wait_listening(self.port)
+
+    def wait_listening(self, port: int) -> None:
+        """Return once mosquitto accepts connections on `port` (one of its listeners)."""
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
             try:
-                socket.create_connection(("127.0.0.1", self.port), timeout=0.2).close()
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
                 return
             except OSError:
                 time.sleep(0.02)

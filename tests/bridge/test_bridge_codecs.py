@@ -3,6 +3,7 @@ pysparkplug), the outbox's bound, and the payloads of values and commands."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -22,7 +23,7 @@ from aiortu.bridge import (
     format_value,
     parse_command,
 )
-from aiortu.bridge._packets import PacketReader, Publish, publish_packet
+from aiortu.bridge._packets import PacketReader, Publish, puback_packet, publish_packet
 from aiortu.core.model import load_profile
 from tests.bridge.helpers import HEAT_PUMP
 
@@ -174,3 +175,93 @@ def test_bad_command_payloads_say_why(point: str, payload: bytes, reason: str) -
     with pytest.raises(CommandError) as caught:
         parse_command(PROFILE.point(point), payload)
     assert str(caught.value) == reason
+
+
+_LOOKALIKE = publish_packet("t", puback_packet(7) * 3, qos=1, packet_id=9)
+"""A PUBLISH whose payload looks like PUBACKs: cut at its payload, it must not be read as them."""
+
+
+@st.composite
+def received(draw: st.DrawFn) -> bytes:
+    """What a broker sends a publisher: PUBACKs mostly, now and then something else."""
+    return draw(st.one_of(
+        st.integers(1, 65535).map(puback_packet),
+        st.integers(1, 65535).map(puback_packet),
+        st.just(bytes((0xD0, 0))),  # PINGRESP
+        st.just(bytes((0x90, 3, 0, 1, 1))),  # SUBACK
+        st.just(_LOOKALIKE),
+        st.binary(max_size=200).map(lambda payload: publish_packet("a/b", payload)),
+    ))  # fmt: skip
+
+
+@given(st.lists(received(), max_size=30), st.lists(st.integers(0, 400), max_size=12))
+def test_acknowledgements_read_as_every_packet_is_read(
+    packets: list[bytes], cuts: list[int]
+) -> None:
+    """The PUBACK shortcut against the general reader: the same packets, in the same order,
+    whatever the chunks."""
+    stream = b"".join(packets)
+    bounds = [0, *sorted(c for c in cuts if c < len(stream)), len(stream)]
+    chunks = [stream[a:b] for a, b in itertools.pairwise(bounds) if b > a]
+    shortcut, general = PacketReader(), PacketReader()
+    got: list[tuple[int, int, bytes]] = []
+    expected: list[tuple[int, int, bytes]] = []
+    for chunk in chunks:
+        ids = shortcut.acknowledgements(chunk)
+        if ids is None:
+            got += [(p.type, p.flags, p.body) for p in shortcut.feed(chunk)]
+        else:
+            got += [(4, 0, packet_id.to_bytes(2, "big")) for packet_id in ids]
+        expected += [(p.type, p.flags, p.body) for p in general.feed(chunk)]
+    assert got == expected
+    assert len(got) == len(packets)
+
+
+def test_the_acknowledgement_shortcut_takes_whole_pubacks_only() -> None:
+    reader = PacketReader()
+    assert reader.acknowledgements(puback_packet(1) + puback_packet(0x1234)) == (1, 0x1234)
+    assert reader.acknowledgements(puback_packet(1)[:3]) is None
+    assert reader.acknowledgements(b"") is None
+    assert reader.acknowledgements(bytes((0x41, 2, 0, 1))) is None  # flags a PUBACK has not
+    assert reader.acknowledgements(bytes((0x40, 3, 0, 1))) is None
+    assert reader.acknowledgements(bytes((0xD0, 0, 0xD0, 0))) is None  # two PINGRESPs
+    assert reader.feed(_LOOKALIKE[:7]) == []
+    # Part of a packet waits: what follows is its rest, whatever it looks like.
+    assert reader.acknowledgements(puback_packet(7)) is None
+
+
+def test_long_remaining_lengths_and_a_malformed_one() -> None:
+    payload = bytes(range(256)) * 80  # 20,480 bytes: a remaining length of three bytes
+    packet = publish_packet("big", payload, qos=1, packet_id=3)
+    assert packet[1:4] == bytes((0x87, 0xA0, 0x01))  # 20,487 = 7 + 32 * 128 + 1 * 16,384
+    reader = PacketReader()
+    assert reader.feed(packet[:2]) == reader.feed(packet[2:3]) == []
+    (got,) = reader.feed(packet[3:])
+    assert Publish.parse(got) == Publish("big", payload, 1, False, 3)
+    with pytest.raises(ValueError, match="malformed MQTT remaining length"):
+        PacketReader().feed(bytes((0x30, 0xFF, 0xFF, 0xFF, 0xFF, 0x01)))
+    with pytest.raises(ValueError, match="at most 65535 bytes"):
+        publish_packet("t" * 65536, b"")
+
+
+@given(
+    st.lists(st.lists(st.binary(max_size=40), max_size=12), max_size=8),
+    st.integers(1, 20), st.integers(20, 400), st.integers(1, 8),
+)  # fmt: skip
+def test_a_batch_put_leaves_what_putting_one_by_one_leaves(
+    batches: list[list[bytes]], max_messages: int, max_bytes: int, step: int
+) -> None:
+    batched, single = Outbox(max_messages, max_bytes), Outbox(max_messages, max_bytes)
+    for batch in batches:
+        batched.put_all([Message("t", p) for p in batch])
+        for payload in batch:
+            single.put(Message("t", payload))
+        assert (len(batched), batched.bytes, batched.dropped, batched.accepted) == (
+            len(single), single.bytes, single.dropped, single.accepted)  # fmt: skip
+    kept = [m.payload for m in single.take(len(single))]
+    taken: list[bytes] = []
+    while batched:
+        taken += [m.payload for m in batched.take(step)]
+        assert batched.bytes == sum(len("t") + len(p) for p in kept[len(taken) :])
+    assert taken == kept
+    assert batched.bytes == 0

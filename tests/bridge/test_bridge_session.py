@@ -3,6 +3,8 @@ are sent again first, in order, on the next one; commands are acknowledged and h
 
 from __future__ import annotations
 
+import contextlib
+
 import anyio
 import anyio.abc
 import pytest
@@ -85,3 +87,45 @@ async def test_unacknowledged_messages_go_again_first_and_in_order() -> None:
     assert session.delivered == 8
     assert session.connections == 2
     assert [(c.topic, c.payload) for c in commands] == [("cmd/x/set", b"1")]
+
+
+async def _session_against(answer_pings: bool, seconds: float) -> BrokerSession:
+    """A session with a keep-alive of 1 s, `seconds` against a broker that accepts each
+    connection and then answers PINGREQs, or says nothing more."""
+
+    async def broker(stream: anyio.abc.ByteStream) -> None:
+        reader = PacketReader()
+        await _packets(stream, reader, 1)  # CONNECT
+        await stream.send(CONNACK)
+        # Until the session hangs up (the end of the stream), or the test is over.
+        with anyio.move_on_after(seconds + 1), contextlib.suppress(anyio.EndOfStream):
+            while True:
+                for packet in await _packets(stream, reader, 1):
+                    if packet.type == PacketType.PINGREQ and answer_pings:
+                        await stream.send(bytes((0xD0, 0)))  # PINGRESP
+
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+    port = listener.extra(anyio.abc.SocketAttribute.local_port)
+    hooks = SessionHooks(will=lambda: None, subscriptions=list, on_connect=list,
+                         on_publish=lambda publish: None)  # fmt: skip
+    session = BrokerSession(Broker("127.0.0.1", port, keepalive=1), Outbox(), hooks,
+                            reconnect_delay=(0.05, 0.05))  # fmt: skip
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(listener.serve, broker)
+        tasks.start_soon(session.run)
+        await anyio.sleep(seconds)
+        tasks.cancel_scope.cancel()
+    return session
+
+
+async def test_a_silent_broker_is_left_within_one_and_a_half_keep_alives() -> None:
+    session = await _session_against(answer_pings=False, seconds=3.2)
+    # Silent for a keep-alive (two pings unanswered) ends each connection: at 1 s, 2 s, 3 s.
+    assert 2 <= session.connections <= 4
+    assert session.last_error == "the broker said nothing in 1 s"
+
+
+async def test_a_broker_that_answers_pings_keeps_the_connection() -> None:
+    session = await _session_against(answer_pings=True, seconds=3.2)
+    assert session.connections == 1
+    assert session.last_error is None

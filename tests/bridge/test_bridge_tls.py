@@ -12,7 +12,7 @@ import pytest
 
 from aiortu.bridge import Bridge, BridgeConfig, BrokerError
 from tests.bridge.helpers import config
-from tests.bridge.mosquitto import Mosquitto, Subscriber
+from tests.bridge.mosquitto import Mosquitto, Subscriber, free_port
 from tests.bridge.test_bridge_broker import until
 
 pytestmark = pytest.mark.timeout(60)
@@ -37,20 +37,22 @@ def _certificates(folder: Path, name: str) -> tuple[Path, Path, Path]:
 async def test_mqtts_with_the_broker_s_ca(tmp_path: Path) -> None:
     ca, cert, key = _certificates(tmp_path, "broker")
     other_ca, _, _ = _certificates(tmp_path, "other")
-    plain_port = Mosquitto().port
+    plain_port = free_port()
     broker = Mosquitto(extra=f"cafile {ca}\ncertfile {cert}\nkeyfile {key}\n"
                              f"listener {plain_port} 127.0.0.1\n")  # fmt: skip
-    broker.start()
-    subscriber = Subscriber(plain_port, ["aiortu/#"])
 
     def secured(ca_file: Path) -> BridgeConfig:
         plain = config(broker.url.replace("mqtt://", "mqtts://"), units=(1,))
         return replace(plain, broker=replace(plain.broker, ca_file=str(ca_file)))
 
+    broker.start()
+    subscriber: Subscriber | None = None
     try:
+        broker.wait_listening(plain_port)  # the listeners open one after the other
+        subscriber = watcher = Subscriber(plain_port, ["aiortu/#"])
         async with Bridge(secured(ca)) as bridge:
             assert bridge.session.connected
-            await until(lambda: subscriber.on("aiortu/hp-1/power") == [b"1800.0"])
+            await until(lambda: watcher.on("aiortu/hp-1/power") == [b"1800.0"])
         # A broker whose certificate does not check stops the start, in one sentence.
         with pytest.raises(BrokerError, match=r"TLS failed: .*certificate"):
             async with Bridge(secured(other_ca)):
@@ -59,5 +61,6 @@ async def test_mqtts_with_the_broker_s_ca(tmp_path: Path) -> None:
             async with Bridge(secured(tmp_path / "none")):
                 pass
     finally:
-        subscriber.close()
-        broker.close()
+        if subscriber is not None:
+            subscriber.close()
+        broker.close()  # also when the subscriber could not connect

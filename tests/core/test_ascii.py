@@ -20,6 +20,7 @@ from aiortu.core.ascii import (
     AsciiReceiver,
     AsciiReceiverOutput,
     AsciiState,
+    check_ascii_body,
     decode_ascii_frame,
     encode_ascii_frame,
     lrc,
@@ -120,6 +121,36 @@ def test_decoding_any_bytes_gives_a_frame_or_a_frame_error(data: bytes) -> None:
         _one_sentence(str(error))
     else:
         assert decode_ascii_frame(encode_ascii_frame(frame.unit, frame.pdu)) == frame
+
+
+_HEX_TEXT = re.compile(rb"(?:[0-9A-Fa-f]{2})*")
+
+
+@settings(max_examples=500)
+@given(
+    st.lists(
+        st.sampled_from(b"0123456789abcdefABCDEF") | st.sampled_from(b" \t\n\x0b\x0c\rgG:\xa0\xff"),
+        min_size=6,
+        max_size=40,
+    ).map(bytes),
+    st.booleans(),
+)
+def test_the_hex_check_takes_exactly_the_texts_of_hex_pairs(body: bytes, fix_lrc: bool) -> None:
+    # The check decodes with bytes.fromhex, which skips whitespace: its length check must
+    # refuse every text but pairs of hex digits, with the regex's words.
+    if fix_lrc and _HEX_TEXT.fullmatch(body) and len(body) >= 6:
+        data = bytes.fromhex(body.decode())
+        body = (data[:-1] + bytes((lrc(data[:-1]),))).hex().encode()
+    try:
+        data = check_ascii_body(body)
+    except LRCError:
+        assert _HEX_TEXT.fullmatch(body)
+    except FrameError as error:
+        assert not _HEX_TEXT.fullmatch(body) or len(body) % 2
+        _one_sentence(str(error))
+    else:
+        assert _HEX_TEXT.fullmatch(body)
+        assert data == bytes.fromhex(body.decode())
 
 
 # -- the receiver's table ---------------------------------------------------------------

@@ -4,12 +4,16 @@ by default on the event loop's (a virtual clock here)."""
 
 from __future__ import annotations
 
+import time
+
 import anyio
 import pytest
 
 from aiortu.errors import InvalidValue
 from aiortu.gateway import Gateway
 from aiortu.gateway._cache import ReadCache
+from aiortu.master import Master
+from aiortu.testing import VirtualBus
 from tests.gateway.helpers import UNIT, client, line, memory_client
 from tests.virtual_clock import on_virtual_clock
 
@@ -122,6 +126,14 @@ async def test_by_default_the_cache_ages_on_the_event_loops_clock() -> None:
                 await anyio.sleep(0.001)
                 await tcp.request("03 0000 0003")
                 assert bench.messages == on_the_line + 1
+
+
+def test_a_gateway_made_outside_an_event_loop_ages_its_cache_on_asyncios_clock() -> None:
+    # No loop to ask: asyncio's clock, time.monotonic (not an error, and never no clock).
+    made = Gateway(Master(VirtualBus(2).endpoints[0]), cache_ms=500)
+    cache = made._lines[0].cache
+    assert cache is not None
+    assert cache._clock is time.monotonic
 
 
 async def test_without_cache_ms_every_read_goes_on_the_line() -> None:

@@ -7,10 +7,13 @@ streams."""
 from __future__ import annotations
 
 import asyncio
+import socket
+import struct
 from collections.abc import Callable
 from contextlib import AsyncExitStack
 
 import anyio
+import anyio.abc
 import pytest
 
 from aiortu.errors import InvalidValue
@@ -163,16 +166,44 @@ async def test_a_connection_runs_its_requests_on_at_most_max_in_flight_tasks(
     monkeypatch.setattr(Gateway, "_request", spied)
     async with line(max_in_flight=3) as bench:
         async with client(bench.gateway) as tcp:
+            # Writes: a read the engine runs itself is answered from a callback, on no task.
             for transaction_id in range(10):
-                assert await tcp.request("03 0000 0001", UNIT, transaction_id)
+                assert await tcp.request("06 0000 0001", UNIT, transaction_id)
             assert len(tasks) == 1  # one after the other: one worker
             for _ in range(5):
                 for transaction_id in range(6):
-                    await tcp.send("03 0000 0001", UNIT, transaction_id)
+                    await tcp.send("06 0000 0001", UNIT, transaction_id)
                 replies = [await tcp.receive() for _ in range(6)]
                 assert [reply.transaction_id for reply in replies if reply] == list(range(6))
             assert len(tasks) <= 3
         assert bench.gateway.counters.requests == 40
+
+
+async def test_reads_on_a_line_with_an_event_loop_run_on_no_task(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The engine runs each read itself (the fast path, or its line task) and completes a
+    # future: the gateway answers from its done-callback, and no worker is ever started.
+    workers: list[object] = []
+    worker = Gateway._worker
+
+    async def spied(self: Gateway, *args: object) -> None:
+        workers.append(args)
+        await worker(self, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Gateway, "_worker", spied)
+    async with line(max_in_flight=3) as bench:
+        async with client(bench.gateway) as a, client(bench.gateway) as b:
+            for _ in range(5):
+                for transaction_id in range(3):
+                    await a.send(f"03 {transaction_id:04X} 0001", UNIT, transaction_id)
+                    await b.send(f"04 {transaction_id:04X} 0001", UNIT, transaction_id)
+                for tcp in (a, b):
+                    replies = [await tcp.receive() for _ in range(3)]
+                    assert [reply.transaction_id for reply in replies if reply] == [0, 1, 2]
+        assert bench.gateway.counters.requests == 30
+        assert bench.gateway.counters.transactions == 30
+    assert workers == []
 
 
 async def test_a_listener_with_a_lower_priority_value_goes_first() -> None:
@@ -235,3 +266,54 @@ async def test_a_read_sent_after_a_write_never_joins_a_read_from_before_it() -> 
             assert new is not None
             assert (old.pdu.hex(" "), new.pdu.hex(" ")) == ("03 02 12 34", "03 02 00 42")
             assert bench.gateway.counters.coalesced == 0
+
+
+async def test_a_client_that_resets_has_its_queued_reads_dropped_before_the_line() -> None:
+    # A's read holds the line; B's reads queue behind it, answered from callbacks; B resets
+    # its connection: none of them reaches the line, and the line goes on.
+    gate = Gate()
+    async with line(max_in_flight=4, master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as a:
+            gate.close()
+            await a.send("03 0000 0001", UNIT, 1)
+            await _until(lambda: gate.held == 1)
+            stream = await anyio.connect_tcp("127.0.0.1", bench.gateway.port)
+            b = TcpClient(stream)
+            for transaction_id in range(3):
+                await b.send(f"03 {transaction_id + 1:04X} 0001", UNIT, transaction_id)
+            await _until(lambda: bench.master.engine.queued == 3)
+            raw = stream.extra(anyio.abc.SocketAttribute.raw_socket)
+            raw.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            await stream.aclose()  # a reset, not an end of stream
+            await _until(lambda: bench.gateway.connections == 1)
+            gate.opened.set()
+            assert await a.receive() is not None
+            assert await a.request("03 0005 0001", UNIT, 2)
+        assert bench.messages == 2  # A's two reads; none of B's
+        assert not bench.master.engine.busy
+
+
+async def test_a_read_that_joined_another_is_not_answered_once_its_client_reset() -> None:
+    # A's read holds the line; B's identical read joins it; B resets: A's reply is the only
+    # one counted (and sent).
+    gate = Gate()
+    async with line(master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as a:
+            gate.close()
+            await a.send("03 0000 0001", UNIT, 1)
+            await _until(lambda: gate.held == 1)
+            stream = await anyio.connect_tcp("127.0.0.1", bench.gateway.port)
+            await TcpClient(stream).send("03 0000 0001", UNIT, 7)
+            await _until(lambda: bench.gateway.counters.coalesced == 1)
+            raw = stream.extra(anyio.abc.SocketAttribute.raw_socket)
+            raw.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            await stream.aclose()
+            await _until(lambda: bench.gateway.connections == 1)
+            gate.opened.set()
+            assert await a.receive() is not None
+        statistics = bench.gateway.statistics
+        (unit,) = statistics.units.values()
+        assert (unit.requests, unit.replies) == (2, 1)
+        assert statistics.clients["127.0.0.1"].replies == 1

@@ -174,3 +174,77 @@ async def test_a_wait_outlasting_the_link_still_ends_after_the_silence() -> None
                 assert timer.deadline < math.inf
             assert timer.closed
     assert returned_at >= quiet_at
+
+
+# -- a callback once the line is quiet (Link.call_when_quiet) -------------------------------
+
+
+async def _called_when_quiet(link: Link, gap_after: float = 0) -> float:
+    """Ask for a call once the frame gap has passed; return when it came (the link's clock)."""
+    called = anyio.Event()
+    when = math.nan
+
+    def callback() -> None:
+        nonlocal when
+        when = link.clock()
+        called.set()
+
+    link.call_when_quiet(callback)
+    with anyio.fail_after(2):
+        await called.wait()
+    return when
+
+
+@pytest.mark.parametrize("timer", [True, False], ids=["wake timer", "loop timers"])
+async def test_a_quiet_call_comes_once_the_gap_has_passed(
+    timer: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    if not timer:
+        monkeypatch.setattr(aiortu.line._sender, "create_wake_timer", lambda on_fire: None)
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=GAP) as link:
+        assert link.loop is not None  # a stream that pushes its bytes
+        await _settle()
+        for _ in range(3):
+            await _receive_a_frame(link, far)
+            quiet_at = link.quiet_at()
+            assert quiet_at == link.last_activity + GAP
+            assert await _called_when_quiet(link) >= quiet_at
+        assert (link._silence.timer is not None) == (timer and _timerfd_libc() is not None)
+
+
+async def test_bytes_arriving_before_a_quiet_call_move_it() -> None:
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=GAP) as link:
+        await _settle()
+        await _receive_a_frame(link, far)
+        first_quiet_at = link.quiet_at()
+        async with anyio.create_task_group() as tg:
+
+            async def more_bytes() -> None:
+                await anyio.sleep(GAP / 2)
+                await _receive_a_frame(link, far)
+
+            tg.start_soon(more_bytes)
+            called_at = await _called_when_quiet(link)
+        assert link.quiet_at() > first_quiet_at
+        assert called_at >= link.quiet_at()
+
+
+async def test_a_cancelled_quiet_call_never_comes_and_leaves_the_timer_disarmed() -> None:
+    near, far = virtual_pair()
+    async with Link(near, FAST, frame_gap=GAP) as link:
+        await _settle()
+        await _receive_a_frame(link, far)
+        await _called_when_quiet(link)  # the timer made
+        await _receive_a_frame(link, far)
+        calls: list[float] = []
+        link.call_when_quiet(lambda: calls.append(link.clock()))
+        timer = link._silence.timer
+        if timer is not None:
+            assert timer.deadline < math.inf  # the call waits on it
+        link.cancel_quiet_call()
+        if timer is not None:
+            assert timer.deadline == math.inf
+        await anyio.sleep(GAP * 2)
+        assert calls == []

@@ -247,11 +247,13 @@ async def test_closing_the_master_fails_a_usual_exchange_in_flight() -> None:
 
 
 @contextlib.asynccontextmanager
-async def _master_on_a_pty(response_timeout: float) -> AsyncIterator[tuple[Master, Pty]]:
+async def _master_on_a_pty(
+    response_timeout: float, frame_gap: float = 0
+) -> AsyncIterator[tuple[Master, Pty]]:
     """A master on one end of a pty, past its initial silence, and the other end."""
     with open_pty() as pty:
         stream = await open_serial(pty.path, LINE)
-        async with Master(stream, LINE, timeout=response_timeout, frame_gap=0) as master:
+        async with Master(stream, LINE, timeout=response_timeout, frame_gap=frame_gap) as master:
             await anyio.sleep(0.05)
             yield master, pty
 
@@ -314,6 +316,12 @@ async def test_closing_the_engine_fails_a_read_taken_over_and_not_finished() -> 
 
 class _Link:
     loop = object()  # a push stream's link has one
+    sends_at_once = True
+
+
+class _LinkSending:
+    loop = object()
+    sends_at_once = False  # someone else is sending, or the stream failed
 
 
 def _engine(**changes: object) -> LineEngine:
@@ -361,6 +369,7 @@ def _late_reply_awaited() -> MasterMachine:
 VETOES: dict[str, dict[str, object]] = {
     "switched off": {"enabled": False},
     "no read callback": {"link": _NoLoop()},
+    "the link cannot write at once": {"link": _LinkSending()},
     "the line task does not serve": {"open": False},
     "line held or waited for": {"busy": True},
     "late-reply guard pending": {"guard_until": 12.0},
@@ -455,3 +464,85 @@ async def test_a_queued_caller_cancelled_after_the_hand_over_leaves_its_reply_co
             assert await third == [10, 11]
         stats = master.unit_stats(1)
         assert (stats.requests, stats.successes, stats.failures) == (3, 3, 0)
+
+
+# -- a request that waits for the line's silence ----------------------------------------------
+
+GAP = 0.05
+"""A frame gap long enough that a test acts while a handed-over request waits for it."""
+AT_4 = _with_crc(bytes.fromhex("010300040002"))  # unit 1, FC 03, 2 registers at 4
+
+
+async def _handed_over_waiting(
+    master: Master, pty: Pty
+) -> tuple[asyncio.Task[list[int]], asyncio.Task[list[int]]]:
+    """A read on the wire, a second one queued behind it; the first's reply hands the line
+    to the second, whose request waits for the frame gap. Returns both tasks."""
+    first = await _read_on_the_wire(master, pty)
+    second = asyncio.create_task(master.read_holding_registers(1, 0, 2))
+    await _in_the_same_pass(lambda: master.engine.queued == 1)
+    pty.write(REPLY)
+    await _in_the_same_pass(lambda: master.engine.fast.waiting)
+    return first, second
+
+
+async def test_a_queued_read_waits_for_the_gap_on_a_timer_then_goes_out() -> None:
+    async with _master_on_a_pty(response_timeout=1.0, frame_gap=GAP) as (master, pty):
+        await anyio.sleep(GAP)
+        first, second = await _handed_over_waiting(master, pty)
+        assert await first == [7, 8]
+        replied = master.engine.clock()
+        assert await read_master(pty, len(REQUEST)) == REQUEST  # from the timer callback
+        assert master.engine.clock() - replied >= GAP * 0.9  # not before the gap
+        assert master.engine.fast.on_wire
+        pty.write(REPLY)
+        with anyio.fail_after(1):
+            assert await second == [7, 8]
+        assert master.engine.machine.state is MasterState.IDLE
+        assert not master.engine.busy
+
+
+async def test_a_caller_cancelled_while_its_request_waits_for_the_gap_sends_nothing() -> None:
+    # B is handed the line and waits for the gap; B is cancelled: nothing of B's goes out,
+    # and C, queued behind it, gets the line.
+    async with _master_on_a_pty(response_timeout=1.0, frame_gap=GAP) as (master, pty):
+        await anyio.sleep(GAP)
+        first, second = await _handed_over_waiting(master, pty)
+        third = asyncio.create_task(master.read_holding_registers(1, 4, 2))
+        await _in_the_same_pass(lambda: master.engine.queued == 1)
+        second.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await second
+        assert await first == [7, 8]
+        assert await read_master(pty, len(AT_4)) == AT_4  # C's, not B's
+        pty.write(REPLY)
+        with anyio.fail_after(1):
+            assert await third == [7, 8]
+        stats = master.unit_stats(1)
+        assert (stats.requests, stats.successes) == (2, 2)
+        assert not master.engine.busy
+
+
+async def test_a_link_lost_while_a_request_waits_for_the_gap_fails_it() -> None:
+    async with _master_on_a_pty(response_timeout=1.0, frame_gap=GAP) as (master, pty):
+        await anyio.sleep(GAP)
+        first, second = await _handed_over_waiting(master, pty)
+        assert await first == [7, 8]
+        pty.close_master()
+        with anyio.fail_after(1), pytest.raises(ConnectionLost):
+            await second
+        assert not master.engine.fast.waiting
+        assert master.unit_stats(1).requests == 1  # nothing was sent for it
+
+
+async def test_closing_the_engine_fails_a_request_waiting_for_the_gap() -> None:
+    async with _master_on_a_pty(response_timeout=1.0, frame_gap=GAP) as (master, pty):
+        await anyio.sleep(GAP)
+        first, second = await _handed_over_waiting(master, pty)
+        assert await first == [7, 8]
+        master.engine.close(ConnectionLost("closed"))
+        with anyio.fail_after(1), pytest.raises(ConnectionLost, match="closed"):
+            await second
+        assert not master.engine.fast.waiting
+        await anyio.sleep(GAP * 2)
+        assert await _drain(pty) == b""  # the timer sent nothing

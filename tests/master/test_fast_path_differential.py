@@ -244,11 +244,11 @@ def summary(master: Master) -> dict[int, dict[str, object]]:
 
 
 async def on_a_pty(
-    usual_exchanges: bool, ops: list[Op], player: Player = play
+    usual_exchanges: bool, ops: list[Op], player: Player = play, gap: float = 0
 ) -> tuple[object, ...]:
     with open_pty() as pty:
         stream = await open_serial(pty.path, LINE)
-        options = {"timeout": TIMEOUT, "retries": 1, "frame_gap": 0, "late_reply_guard": GUARD}
+        options = {"timeout": TIMEOUT, "retries": 1, "frame_gap": gap, "late_reply_guard": GUARD}
         options["fast_path"] = usual_exchanges
         async with Master(stream, LINE, **options) as master:  # type: ignore[arg-type]
             await anyio.sleep(0.05)  # past the receiver's first silence
@@ -262,7 +262,7 @@ async def on_a_pty(
 
 
 async def on_a_virtual_bus(
-    usual_exchanges: bool, ops: list[Op], player: Player = play
+    usual_exchanges: bool, ops: list[Op], player: Player = play, gap: float = 0
 ) -> tuple[object, ...]:
     bus = VirtualBus(2)
     end = bus.endpoints[1]
@@ -275,7 +275,7 @@ async def on_a_virtual_bus(
         del buffer[:count]
         return data
 
-    options = {"timeout": TIMEOUT, "retries": 1, "frame_gap": 0, "late_reply_guard": GUARD}
+    options = {"timeout": TIMEOUT, "retries": 1, "frame_gap": gap, "late_reply_guard": GUARD}
     options["fast_path"] = usual_exchanges
     async with Master(bus.endpoints[0], LineSettings(19200), **options) as master:  # type: ignore[arg-type]
         await anyio.sleep(0.05)
@@ -306,16 +306,23 @@ def print_failing(seed: int, ops: list[Op]) -> None:
         print(f"  {op}")
 
 
+GAPS = [0, 0.002]
+"""Frame gaps: none, and one the fast path waits for on a timer after each reply."""
+
+
+@pytest.mark.parametrize("gap", GAPS)
 @pytest.mark.parametrize("half", [0, 1])
-async def test_the_fast_path_and_the_machine_agree(half: int) -> None:
+async def test_the_fast_path_and_the_machine_agree(half: int, gap: float) -> None:
     # Each half of the faults is sure to come up once; the other operations are drawn.
     seed = SEED + half
     ops = scenario(seed, 8, FAULTS[half::2])
     runs = {}
     try:
         for usual_exchanges in (True, False):
-            runs["pty", usual_exchanges] = await on_a_pty(usual_exchanges, ops)
-            runs["virtual bus", usual_exchanges] = await on_a_virtual_bus(usual_exchanges, ops)
+            runs["pty", usual_exchanges] = await on_a_pty(usual_exchanges, ops, gap=gap)
+            runs["virtual bus", usual_exchanges] = await on_a_virtual_bus(
+                usual_exchanges, ops, gap=gap
+            )
         compare(runs)
     except BaseException:
         print_failing(seed, ops)
@@ -333,9 +340,11 @@ BURST_PLANS = (
 """The plans of callers that queue: the device plays them in the order they queued."""
 
 
-async def test_many_callers_at_once_agree() -> None:
+@pytest.mark.parametrize("gap", GAPS)
+async def test_many_callers_at_once_agree(gap: float) -> None:
     # Twelve callers at once, mostly reads: eleven queue, and each is handed the line
-    # by the one before; faults on the way send some through the machine (the guard).
+    # by the one before (with a gap, its request waits for the silence on a timer);
+    # faults on the way send some through the machine (the guard).
     seed = SEED + 2
     rng = random.Random(seed)
     ops = [
@@ -352,9 +361,9 @@ async def test_many_callers_at_once_agree() -> None:
     runs = {}
     try:
         for usual_exchanges in (True, False):
-            runs["pty", usual_exchanges] = await on_a_pty(usual_exchanges, ops, play_burst)
+            runs["pty", usual_exchanges] = await on_a_pty(usual_exchanges, ops, play_burst, gap)
             runs["virtual bus", usual_exchanges] = await on_a_virtual_bus(
-                usual_exchanges, ops, play_burst
+                usual_exchanges, ops, play_burst, gap
             )
         compare(runs)
     except BaseException:

@@ -215,6 +215,41 @@ async def test_the_profile_poller_delivers_every_class() -> None:
         assert len(fast) >= 2 + 3 * 2
 
 
+async def test_on_read_gets_each_read_whole_and_max_pending_0_streams_nothing() -> None:
+    profile = parse_profile(
+        HOLEY.replace('name = "a"\naddress = 0', 'name = "a"\naddress = 0\npoll = "fast"').replace(
+            "[defaults]", "[poll]\nfast = 0.05\n\n[defaults]"
+        ),
+        "p.toml",
+    )
+    async with served({5: aiortu.ProfileStore(profile), 6: aiortu.ProfileStore(profile)}) as m:
+        devices = [aiortu.Device(m, 5, profile), aiortu.Device(m, 6, profile)]
+        reads: list[tuple[aiortu.Device, dict[str, aiortu.Reading]]] = []
+        seen: list[aiortu.Reading] = []
+
+        async def on_read(device: aiortu.Device, readings: dict[str, aiortu.Reading]) -> None:
+            reads.append((device, dict(readings)))
+
+        poller = aiortu.ProfilePoller(devices, on_read=on_read, on_reading=seen.append,
+                                      max_pending=0)  # fmt: skip
+        readings = await poller.poll_once()
+        # One read per device and poll class, each whole, in the order of the readings.
+        assert [r for _, read in reads for r in read.values()] == readings == seen
+        assert [(d.unit, sorted(read)) for d, read in reads] == [
+            (5, ["a"]), (6, ["a"]),
+            (5, sorted(p.name for p in profile.points if p.name != "a")),
+            (6, sorted(p.name for p in profile.points if p.name != "a")),
+        ]  # fmt: skip
+        assert all(r.unit == d.unit for d, read in reads for r in read.values())
+        # Nothing waits for `async for`: it ends with the run, and nothing was dropped.
+        with anyio.fail_after(5):
+            await poller.run(cycles=2)
+            assert [r async for r in poller] == []
+        assert poller.dropped == 0
+    with pytest.raises(InvalidValue, match="max_pending"):
+        aiortu.ProfilePoller(devices, max_pending=-1)
+
+
 async def test_units_match_the_profiles_that_identify_them() -> None:
     pump = load_profile(Path(__file__).parents[2] / "examples/profiles/heat-pump.toml")
     meter = load_profile(PROFILES / "eastron-sdm630.toml")  # it says nothing to match by
@@ -243,3 +278,19 @@ async def test_units_match_the_profiles_that_identify_them() -> None:
     assert found[8] == [("other.toml", ("device identification", "probes"))]
     assert found[9] == []  # the objects match, the probe does not
     assert again == []
+
+
+def test_readings_made_for_polls_are_the_readings_the_class_makes() -> None:
+    """The poll's cheaper construction of a frozen `Reading` against the class's own."""
+    from aiortu.master._device import _reading  # the shortcut itself
+
+    rng = random.Random(23)
+    profile = parse_profile(HOLEY, "holey.toml")
+    for point in profile.points:
+        error = rng.choice([None, ResponseTimeout("no reply")])
+        args = (rng.randrange(248), point, rng.choice([None, 1.5, 7, "x"]), rng.randrange(9), error)
+        made, expected = _reading(*args), aiortu.Reading(*args)
+        assert made == expected, f"seed 23, {point.name}"
+        assert (made.name, made.ok) == (point.name, error is None)
+        with pytest.raises(AttributeError):
+            made.value = 0  # type: ignore[misc]

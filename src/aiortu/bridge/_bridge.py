@@ -17,7 +17,7 @@ refused or failed goes to the error topic, and the bridge goes on.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -97,6 +97,7 @@ class Bridge:
         """The simulated devices of `virtual` lines, by device name (set a value to see it
         published)."""
         self._handles: dict[str, Device] = {}
+        self._state_of: dict[Device, DeviceState] = {}
         self._send, self._receive = anyio.create_memory_object_stream[Command](64)
         self._stack: contextlib.AsyncExitStack | None = None
 
@@ -112,8 +113,8 @@ class Bridge:
             for line in self.config.lines:
                 master = await stack.enter_async_context(self._open_line(line))
                 devices = [self._device(master, state) for state in self._states_of(line)]
-                pollers.append(ProfilePoller(devices, on_reading=self._reader(master, line),
-                                             max_pending=1))  # fmt: skip
+                pollers.append(ProfilePoller(devices, on_read=self._publish_read,
+                                             max_pending=0))  # fmt: skip
             tasks = await stack.enter_async_context(anyio.create_task_group())
             stack.callback(tasks.cancel_scope.cancel)
             tasks.start_soon(self.session.run, name="aiortu bridge broker session")
@@ -161,6 +162,7 @@ class Bridge:
     def _device(self, master: Master, state: DeviceState) -> Device:
         device = Device(master, state.config.unit, state.config.profile)
         self._handles[state.name] = device
+        self._state_of[device] = state
         return device
 
     @contextlib.asynccontextmanager
@@ -178,41 +180,24 @@ class Bridge:
         async with Slave(bus.endpoints[1], stores), Master(bus.endpoints[0], **options) as master:
             yield master
 
-    def _reader(self, master: Master, line: LineConfig) -> Callable[[Reading], None]:
-        """The poller's callback for `line`: gathers a poll class's readings per device and
-        publishes them when its last point is read."""
-        states = {state.config.unit: state for state in self._states_of(line)}
-        batches: dict[int, dict[str, Reading]] = {unit: {} for unit in states}
-        ends = {
-            unit: {pts[-1].name for c in s.config.profile.poll_classes
-                   if (pts := s.config.profile.points_of(c))}
-            for unit, s in states.items()
-        }  # fmt: skip
-
-        def on_reading(reading: Reading) -> None:
-            batch = batches[reading.unit]
-            batch[reading.name] = reading
-            if reading.name in ends[reading.unit]:
-                self._publish_batch(states[reading.unit], batch, master)
-                batch.clear()
-
-        return on_reading
-
-    def _publish_batch(self, state: DeviceState, batch: dict[str, Reading], master: Master) -> None:
+    def _publish_read(self, device: Device, batch: dict[str, Reading]) -> None:
+        """The poller's callback: what changed in a read of one poll class of `device` (and
+        its unit's health, if that changed) goes to the outbox."""
+        state = self._state_of[device]
         self.stats.readings += len(batch)
         now = anyio.current_time()
-        config, values = state.config, state.values
-        published = {p.name for p in state.points}
-        state.seen.update(name for name in batch if name in published)
+        config, values, published = state.config, state.values, state.published
+        if not state.complete:
+            state.seen.update(name for name in batch if name in published)
+        every = published if config.publish == "every" else config.every_poll
         changed: dict[str, Value] = {}
         for name, reading in batch.items():
-            if reading.error is not None or name not in published:
-                continue
-            if (config.publish == "every" or name in config.every_poll
-                    or values.get(name, _MISSING) != reading.value):  # fmt: skip
-                changed[name] = values[name] = reading.value
+            value = reading.value
+            if (reading.error is None and name in published
+                    and (name in every or values.get(name, _MISSING) != value)):  # fmt: skip
+                changed[name] = values[name] = value
         messages: list[Message] = []
-        health = master.unit_stats(config.unit).state
+        health = device.master.unit_stats(config.unit).state
         if health is not state.health:
             state.health = health
             _log.info("device %s is %s", state.name, health.value)
@@ -222,8 +207,7 @@ class Bridge:
         self._put(messages)
 
     def _put(self, messages: list[Message]) -> None:
-        for message in messages:
-            self.outbox.put(message)
+        self.outbox.put_all(messages)
         self.stats.messages += len(messages)
 
     def _on_connect(self) -> list[Message]:

@@ -9,7 +9,7 @@ a bounded memory, and a count that tells how much was lost.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import anyio
@@ -38,7 +38,12 @@ class Message:
     @property
     def size(self) -> int:
         """The bytes the message holds (its topic and payload)."""
-        return len(self.topic) + len(self.payload)
+        return _size((self,))
+
+
+def _size(messages: Iterable[Message]) -> int:
+    """The bytes `messages` hold (their topics and payloads)."""
+    return sum([len(m.topic) + len(m.payload) for m in messages])
 
 
 class Outbox:
@@ -70,9 +75,16 @@ class Outbox:
 
     def put(self, message: Message) -> None:
         """Queue `message` last; drop the oldest while over the bound."""
-        self._queue.append(message)
-        self._bytes += message.size
-        self.accepted += 1
+        self.put_all((message,))
+
+    def put_all(self, messages: Sequence[Message]) -> None:
+        """Queue `messages` last, in their order; drop the oldest while over the bound (what
+        stays is what putting them one by one would leave)."""
+        if not messages:
+            return
+        self._queue.extend(messages)
+        self._bytes += _size(messages)
+        self.accepted += len(messages)
         self._trim()
         self._ready.set()
 
@@ -80,19 +92,21 @@ class Outbox:
         """Queue `messages` (sent but never acknowledged) first, in their order."""
         back = list(messages)
         self._queue.extendleft(reversed(back))
-        self._bytes += sum(m.size for m in back)
+        self._bytes += _size(back)
         self._trim()
         if self._queue:
             self._ready.set()
 
     def take(self, count: int) -> list[Message]:
         """Up to `count` messages from the front."""
-        taken: list[Message] = []
         queue = self._queue
-        while queue and len(taken) < count:
-            message = queue.popleft()
-            self._bytes -= message.size
-            taken.append(message)
+        if count >= len(queue):
+            taken = list(queue)
+            queue.clear()
+            self._bytes = 0
+            return taken
+        taken = [queue.popleft() for _ in range(count)]
+        self._bytes -= _size(taken)
         return taken
 
     async def wait(self) -> None:

@@ -18,6 +18,7 @@ __all__ = (
     "PacketReader",
     "PacketType",
     "Publish",
+    "PublishWriter",
     "connect_packet",
     "disconnect_packet",
     "pingreq_packet",
@@ -62,7 +63,7 @@ class ConnectRefused(Exception):
         self.code = code
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Packet:
     """A received packet: its `type`, the flags of its first byte and its `body`."""
 
@@ -93,6 +94,13 @@ class Publish:
             (packet_id,) = struct.unpack_from(">H", packet.body, at)
             at += 2
         return cls(topic, packet.body[at:], qos, bool(packet.flags & 1), packet_id)
+
+
+_PUBACK_FIRST = bytes((PacketType.PUBACK << 4,))
+_PUBACK_LENGTH = b"\x02"
+
+_SHORT = struct.Struct(">H").pack
+"""A two-byte big-endian integer (lengths and packet ids)."""
 
 
 def _length(n: int) -> bytes:
@@ -146,9 +154,45 @@ def publish_packet(
     dup: bool = False,
 ) -> bytes:  # fmt: skip
     """PUBLISH of `payload` on `topic` (`packet_id` for QoS 1)."""
-    first = PacketType.PUBLISH << 4 | (0x08 if dup else 0) | qos << 1 | (1 if retain else 0)
-    body = _text(topic) + (struct.pack(">H", packet_id) if qos else b"") + payload
-    return _packet(first, body)
+    return _publish(_topic_field(topic), payload, qos, retain, packet_id, dup=dup)
+
+
+def _topic_field(topic: str) -> bytes:
+    name = topic.encode()
+    if len(name) > 0xFFFF:
+        raise ValueError(f"an MQTT topic holds at most 65535 bytes, not {len(name)}")
+    return _SHORT(len(name)) + name
+
+
+def _publish(
+    topic: bytes, payload: bytes, qos: int, retain: bool, packet_id: int, *, dup: bool = False
+) -> bytes:
+    # One join, no intermediate body: a bridge makes one of these per value it publishes.
+    size = len(topic) + len(payload) + (2 if qos else 0)
+    first = 0x30 | (0x08 if dup else 0) | qos << 1 | (1 if retain else 0)
+    head = bytes((first, size)) if size < 0x80 else bytes((first,)) + _length(size)
+    if qos:
+        return b"".join((head, topic, _SHORT(packet_id), payload))
+    return b"".join((head, topic, payload))
+
+
+class PublishWriter:
+    """PUBLISH packets as [`publish_packet`][aiortu.bridge._packets.publish_packet] makes
+    them, each topic encoded once: a publisher sends the same topics again and again. Up
+    to `max_topics` encodings are kept (a bridge's topics are set by its configuration)."""
+
+    def __init__(self, max_topics: int = 100_000) -> None:
+        self.max_topics = max_topics
+        self._topics: dict[str, bytes] = {}
+
+    def packet(self, topic: str, payload: bytes, qos: int, retain: bool, packet_id: int) -> bytes:
+        """PUBLISH of `payload` on `topic` (`packet_id` for QoS 1)."""
+        field = self._topics.get(topic)
+        if field is None:
+            field = _topic_field(topic)
+            if len(self._topics) < self.max_topics:
+                self._topics[topic] = field
+        return _publish(field, payload, qos, retain, packet_id)
 
 
 def puback_packet(packet_id: int) -> bytes:
@@ -180,28 +224,51 @@ class PacketReader:
     def __init__(self) -> None:
         self._buffer = bytearray()
 
+    def acknowledgements(self, data: bytes) -> tuple[int, ...] | None:
+        """The packet ids of `data` if it is whole PUBACKs and nothing else, and no part of a
+        packet waits: the bulk of what a publisher receives, read without a packet each.
+        Else None, and nothing is read: `feed` it `data`."""
+        count, rest = divmod(len(data), 4)
+        if (rest or not count or self._buffer or data[0::4] != _PUBACK_FIRST * count
+                or data[1::4] != _PUBACK_LENGTH * count):  # fmt: skip
+            return None
+        return struct.unpack(">" + "2xH" * count, data)
+
     def feed(self, data: bytes) -> list[Packet]:
         """The packets completed by `data`; raises ValueError for a malformed length."""
         buffer = self._buffer
         buffer += data
         packets: list[Packet] = []
-        while len(buffer) >= 2:
-            length = shift = 0
-            at = 1
-            while True:
-                if at >= len(buffer):
-                    return packets
-                byte = buffer[at]
-                length |= (byte & 0x7F) << shift
-                at += 1
-                if not byte & 0x80:
+        start, size = 0, len(buffer)
+        while size - start >= 2:
+            body, length = start + 2, buffer[start + 1]
+            if length & 0x80:  # a length of more than one byte (a short one is the rule)
+                found = _long_length(buffer, start)
+                if found is None:
                     break
-                shift += 7
-                if shift > 21:
-                    raise ValueError("a malformed MQTT remaining length")
-            if len(buffer) < at + length:
-                return packets
-            first = buffer[0]
-            packets.append(Packet(first >> 4, first & 0x0F, bytes(buffer[at : at + length])))
-            del buffer[: at + length]
+                body, length = found
+            end = body + length
+            if end > size:
+                break
+            first = buffer[start]
+            packets.append(Packet(first >> 4, first & 0x0F, bytes(buffer[body:end])))
+            start = end
+        del buffer[:start]
         return packets
+
+
+def _long_length(buffer: bytearray, start: int) -> tuple[int, int] | None:
+    """Where the body of the packet at `start` begins and its length, or None while the
+    length is incomplete; ValueError for a length of more than four bytes."""
+    length = shift = 0
+    at = start + 1
+    while at < len(buffer):
+        byte = buffer[at]
+        length |= (byte & 0x7F) << shift
+        at += 1
+        if not byte & 0x80:
+            return at, length
+        shift += 7
+        if shift > 21:
+            raise ValueError("a malformed MQTT remaining length")
+    return None

@@ -39,6 +39,7 @@ class PlainLayout:
         self.prefix = topics.prefix
         self.status_topic = f"{self.prefix}/bridge/{topics.node}/status"
         self._command_prefixes: dict[str, DeviceState] = {}
+        self._state_topics: dict[str, dict[str, str]] = {}
 
     def will(self) -> Message | None:
         """The bridge's status `offline`, retained."""
@@ -51,6 +52,10 @@ class PlainLayout:
     def bind(self, devices: list[DeviceState]) -> None:
         """Learn the devices (before the first connection)."""
         self._command_prefixes = {d.name: d for d in devices if d.writable}
+        # Made once: the same strings each poll (their hashes kept for the session's cache).
+        self._state_topics = {
+            d.name: {p.name: f"{self.prefix}/{d.name}/{p.name}" for p in d.points} for d in devices
+        }
 
     def on_connect(self, devices: list[DeviceState], dropped: int, now: float) -> list[Message]:
         """Status, the dropped count, discovery, and each device's availability and values."""
@@ -81,11 +86,11 @@ class PlainLayout:
 
     def values(self, device: DeviceState, changed: dict[str, Value], now: float) -> list[Message]:
         """One message per value, on the point's topic."""
-        base = f"{self.prefix}/{device.name}/"
+        topics = self._state_topics[device.name]
         qos, retain = self.topics.qos, self.topics.retain
         points = device.config.profile.point
         return [
-            Message(base + name, format_value(points(name), value), qos, retain, now)
+            Message(topics[name], format_value(points(name), value), qos, retain, now)
             for name, value in changed.items()
         ]
 

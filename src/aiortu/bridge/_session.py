@@ -28,11 +28,11 @@ from aiortu.bridge._packets import (
     PacketReader,
     PacketType,
     Publish,
+    PublishWriter,
     connect_packet,
     disconnect_packet,
     pingreq_packet,
     puback_packet,
-    publish_packet,
     subscribe_packet,
 )
 
@@ -69,9 +69,9 @@ _FATAL = (1, 2, 4, 5)
 class SessionHooks:
     """What the bridge tells the session: the last `will` of each connection (made anew for
     each: Sparkplug's bdSeq counts connections), the `subscriptions`, the messages to send
-    first after connecting (`on_connect`), how to encode a message when it is sent
-    (`prepare`: its Sparkplug sequence number), and where received messages go
-    (`on_publish`, which must not block)."""
+    first after connecting (`on_connect`), how to encode a message that carries `metrics`
+    when it is sent (`prepare`: its Sparkplug sequence number; any other goes as made), and
+    where received messages go (`on_publish`, which must not block)."""
 
     will: Callable[[], Message | None]
     subscriptions: Callable[[], list[str]]
@@ -113,15 +113,25 @@ class BrokerSession:
         self._inflight: dict[int, Message] = {}
         self._next_id = 0
         self._stream: anyio.abc.ByteStream | None = None
-        self._acked = anyio.Event()
+        self._acked: anyio.Event | None = None
+        self._heard = 0
         self._reader = PacketReader()
+        self._writer = PublishWriter()
         self._early: list[Packet] = []
         self._sending = anyio.Lock()
 
     async def _write(self, stream: anyio.abc.ByteStream, data: bytes) -> None:
-        # The sender, the pinger and the acknowledgements of commands share the stream.
-        async with self._sending:
+        # The sender, the pinger and the acknowledgements of commands share the stream. The
+        # lock is taken without a checkpoint when free (the usual case): the send has one.
+        sending = self._sending
+        try:
+            sending.acquire_nowait()
+        except anyio.WouldBlock:
+            await sending.acquire()
+        try:
             await stream.send(data)
+        finally:
+            sending.release()
 
     async def connect(self) -> None:
         """Connect once: raise [`BrokerError`][aiortu.bridge.BrokerError] if the broker
@@ -231,45 +241,53 @@ class BrokerSession:
                 while len(self._inflight) >= self.window:
                     self._acked = anyio.Event()
                     await self._acked.wait()
+                    self._acked = None
                 await self._send(stream, self.outbox.take(self.window - len(self._inflight)))
 
     async def _send(self, stream: anyio.abc.ByteStream, messages: list[Message]) -> None:
         if not messages:
             return
-        data = bytearray()
-        prepare = self.hooks.prepare
+        packets = []
+        prepare, inflight, write = self.hooks.prepare, self._inflight, self._writer.packet
         for message in messages:
-            packet_id = 0
+            number = 0
             if message.qos:
-                packet_id = self._packet_id()
-                self._inflight[packet_id] = message
+                number = self._next_id % 65535 + 1  # the next id, unless still in flight
+                if number in inflight:
+                    number = self._packet_id()
+                self._next_id = number
+                inflight[number] = message
             else:
                 self.delivered += 1
-            data += publish_packet(
-                message.topic, prepare(message), qos=message.qos, retain=message.retain,
-                packet_id=packet_id,
-            )  # fmt: skip
-        await self._write(stream, bytes(data))
+            payload = message.payload if message.metrics is None else prepare(message)
+            packets.append(write(message.topic, payload, message.qos, message.retain, number))
+        await self._write(stream, b"".join(packets))
 
     async def _receive(self, stream: anyio.abc.ByteStream, scope: anyio.CancelScope) -> None:
         reader = self._reader
-        # The broker answers a PINGREQ within the keep-alive; silence beyond it is a dead link.
-        limit = self.broker.keepalive * 1.5
         early, self._early = self._early, []
         for packet in early:
             await self._handle(stream, packet)
         while True:
-            with anyio.fail_after(limit):
-                data = await stream.receive()
+            data = await stream.receive()
+            self._heard += 1
+            acknowledged = reader.acknowledgements(data)
+            if acknowledged is not None:
+                self._acknowledged(acknowledged)
+                continue
             for packet in reader.feed(data):
                 await self._handle(stream, packet)
 
+    def _acknowledged(self, packet_ids: tuple[int, ...]) -> None:
+        pop = self._inflight.pop
+        done = [pop(packet_id, None) for packet_id in packet_ids]
+        self.delivered += len(done) - done.count(None)
+        if self._acked is not None:
+            self._acked.set()
+
     async def _handle(self, stream: anyio.abc.ByteStream, packet: Packet) -> None:
         if packet.type == PacketType.PUBACK:
-            message = self._inflight.pop(int.from_bytes(packet.body[:2], "big"), None)
-            if message is not None:
-                self.delivered += 1
-                self._acked.set()
+            self._acknowledged((int.from_bytes(packet.body[:2], "big"),))
         elif packet.type == PacketType.PUBLISH:
             publish = Publish.parse(packet)
             if publish.qos == 1 and publish.packet_id is not None:
@@ -280,8 +298,18 @@ class BrokerSession:
                          self.broker.url)  # fmt: skip
 
     async def _ping(self, stream: anyio.abc.ByteStream) -> None:
+        """A PINGREQ every half keep-alive. The broker answers each at once, so a link that
+        stays silent for two of them (a keep-alive) is dead: found within 1.5 keep-alives,
+        and no timer is set for each receive."""
+        heard, silent = self._heard, 0
         while True:
             await anyio.sleep(self.broker.keepalive / 2)
+            if self._heard != heard:
+                heard, silent = self._heard, 0
+            else:
+                silent += 1
+                if silent >= 2:
+                    raise TimeoutError(f"the broker said nothing in {self.broker.keepalive} s")
             await self._write(stream, pingreq_packet())
 
     def _packet_id(self) -> int:
@@ -299,4 +327,5 @@ class BrokerSession:
             await anyio.aclose_forcefully(stream)
         self.outbox.put_back(self._inflight.values())  # a dict keeps the order they were sent
         self._inflight.clear()
-        self._acked.set()
+        if self._acked is not None:
+            self._acked.set()

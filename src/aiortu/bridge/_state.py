@@ -32,6 +32,11 @@ class DeviceState:
     health: UnitState = UnitState.ONLINE
     seen: set[str] = field(default_factory=set)
     """The points read at least once (with or without a value)."""
+    published: frozenset[str] = field(init=False)
+    """The names of `points`."""
+
+    def __post_init__(self) -> None:
+        self.published = frozenset(p.name for p in self.points)
 
     @property
     def complete(self) -> bool:

@@ -8,10 +8,12 @@
   connections interleave round-robin and a newcomer waits for one request of each.
 - **Leaving.** `leave` cancels the connection's requests: those still queued are dropped
   before they reach the line, one on the wire completes there (the engine finishes it).
-- **Workers.** The connection's requests run on its own tasks, at most one per request in
-  flight: one that has answered its request takes the next queued (`put`), or waits for it
-  (`park`), so a request costs no task of its own. (The engine runs a queued transaction on
-  its caller's task, so a request needs one to wait on.)
+- **Callbacks and workers.** A request whose reply comes as an event loop future (a read the
+  engine runs itself) is answered from the future's done-callback, with no task; the
+  connection keeps those futures (`on_line`) to cancel them when it leaves. The others run on
+  the connection's own tasks, at most one per request in flight: one that has answered its
+  request takes the next queued (`put`), or waits for it (`park`), so a request costs no
+  task of its own.
 - **Stalls.** A reply that cannot be written (the client reads nothing) for `idle_timeout`
   seconds makes the connection idle: `send` says so, and the gateway closes it.
 """
@@ -19,7 +21,7 @@
 from __future__ import annotations
 
 from collections import deque
-from typing import Final, Generic, TypeVar
+from typing import Any, Final, Generic, TypeVar
 
 import anyio
 import anyio.abc
@@ -83,6 +85,12 @@ class Connection(Generic[R]):
         """The connection's requests (set while it is served)."""
         self.pending: deque[R] = deque()
         """Requests started that no worker has taken yet (see `put`)."""
+        self.on_line: set[Any] = set()
+        """The futures of the requests answered from a callback, until they are done."""
+        self.unsent: deque[tuple[Adu, bytes]] = deque()
+        """Replies the stream did not take at once, for the connection's writer (see
+        `send_later`)."""
+        self._unsent_event = anyio.Event()
         self._parked: list[anyio.Event] = []
         self._turns: dict[Turns, int] = {}
         self._freed: anyio.Event | None = None
@@ -128,6 +136,28 @@ class Connection(Generic[R]):
         self._parked.append(worker)
         await worker.wait()
 
+    def send_now(self, request: Adu, reply: bytes) -> bool:
+        """Send `reply` with `request`'s ids at once where the stream takes it without a wait
+        and no earlier reply waits (True; also for a client gone: nothing to send); False:
+        nothing sent, use `send_later`."""
+        if not self.open:
+            return True
+        if self._send_lock.locked() or self.unsent:
+            return False
+        return write_now(self.stream, self.framing.encode(request, reply))
+
+    def send_later(self, request: Adu, reply: bytes) -> None:
+        """Have the connection's writer send `reply` (from a callback, where no task can)."""
+        self.unsent.append((request, reply))
+        self._unsent_event.set()
+
+    async def next_unsent(self) -> tuple[Adu, bytes]:
+        """The oldest reply `send_later` kept, once there is one (for the writer)."""
+        while not self.unsent:
+            await self._unsent_event.wait()
+            self._unsent_event = anyio.Event()
+        return self.unsent[0]
+
     async def send(self, request: Adu, reply: bytes) -> bool:
         """Send `reply` with `request`'s ids; a client gone leaves (see `leave`). False when
         the reply could not be written for `idle_timeout` seconds: the client reads nothing."""
@@ -148,5 +178,7 @@ class Connection(Generic[R]):
     def leave(self) -> None:
         """The client has gone, or is sent away: drop its requests (see the module docstring)."""
         self.open = False
+        for future in self.on_line:
+            future.cancel()  # queued: dropped; on the wire: it completes there
         if self.tasks is not None:
             self.tasks.cancel_scope.cancel()

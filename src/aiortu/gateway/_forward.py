@@ -48,7 +48,10 @@ __all__ = (
     "forward_broadcast",
     "forward_unanswered",
     "on_the_line",
+    "reply_from",
+    "reply_pdu",
     "request_of",
+    "start_forward",
 )
 
 _log = get_logger(__name__)
@@ -114,19 +117,46 @@ async def forward(master: Master, unit: int, pdu: bytes, priority: int, order: i
     if pdu[0] == 0 or pdu[0] & 0x80:
         # Function code 0, or an exception's: not a request, nothing on the line answers it.
         return exception_reply(pdu, ExceptionCode.ILLEGAL_FUNCTION)
+    return await reply_from(start_forward(master, unit, pdu, priority, order), unit, pdu)
+
+
+def start_forward(
+    master: Master, unit: int, pdu: bytes, priority: int, order: int
+) -> Awaitable[Response | ExceptionPDU | None]:
+    """Hand request `pdu` (a request's function code) to `unit` on the line of `master`; return
+    the awaitable of its reply (see `on_the_line`), which `reply_pdu` turns into the reply PDU."""
     request = request_of(pdu)
     policy = master.policy.for_function(request.function_code)
-    transaction = Transaction(unit, request, master.timeout, policy)
+    return on_the_line(master, Transaction(unit, request, master.timeout, policy), priority, order)
+
+
+async def reply_from(
+    awaitable: Awaitable[Response | ExceptionPDU | None], unit: int, pdu: bytes
+) -> bytes:
+    """The reply PDU to `pdu` once `awaitable` (from `start_forward`) is done."""
     try:
-        reply = await on_the_line(master, transaction, priority, order)
-    except ConnectionLost as error:
+        reply = await awaitable
+    except ModbusError as error:
+        return reply_pdu(pdu, unit, None, error)
+    return reply_pdu(pdu, unit, reply, None)
+
+
+def reply_pdu(
+    pdu: bytes, unit: int, reply: Response | ExceptionPDU | None, error: BaseException | None
+) -> bytes:
+    """The reply PDU to request `pdu` forwarded to `unit`: `reply` encoded, or for `error` (a
+    [`ModbusError`][aiortu.errors.ModbusError]) exception 0A (the line is down) or 0B (no answer).
+    Any other error is re-raised: a bug."""
+    if error is None:
+        assert reply is not None
+        return reply.encode()
+    if isinstance(error, ConnectionLost):
         _log.debug("gateway: unit %d: the line is down (%s)", unit, error)
         return exception_reply(pdu, _NO_PATH)
-    except ModbusError as error:
+    if isinstance(error, ModbusError):
         _log.debug("gateway: unit %d did not answer: %s", unit, error)
         return exception_reply(pdu, _NO_RESPONSE)
-    assert reply is not None
-    return reply.encode()
+    raise error
 
 
 async def forward_broadcast(master: Master, pdu: bytes, priority: int, order: int) -> bool:

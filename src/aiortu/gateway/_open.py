@@ -185,7 +185,7 @@ async def gateway(
     default_unit: int | None = None,
     coalesce: bool = True,
     cache_ms: float = 0,
-    clock: Callable[[], float] = anyio.current_time,
+    clock: Callable[[], float] | None = None,
     metrics: str | None = None,
     client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     tls: ssl.SSLContext | None = None,

@@ -48,10 +48,13 @@ each to the engine of its line at once, with a key that keeps the line fair. Wha
 
 from __future__ import annotations
 
+import asyncio
+import functools
 import logging
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Final
+import time
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Final, TypeGuard
 
 import anyio
 import anyio.abc
@@ -71,10 +74,14 @@ from aiortu.gateway._forward import (
     forward,
     forward_broadcast,
     forward_unanswered,
+    reply_from,
+    reply_pdu,
     request_of,
+    start_forward,
 )
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS, GatewayStatistics, LineStatistics
+from aiortu.line import loop_clock
 from aiortu.master import Master
 from aiortu.transport import (
     RTU_SILENCE,
@@ -174,6 +181,14 @@ class _Request:
     unit: int
     """The unit on the line (unit 255 mapped)."""
     line: _Line
+    turn: int
+    """Its connection's turn on the line, taken as it came."""
+    awaitable: Awaitable[bytes | None] | None = None
+    """What a worker awaits for its reply (None: it is answered from a callback)."""
+    shared: _Shared | None = None
+    """The shared read it leads (see `Gateway._start_read`)."""
+    generation: tuple[int, int] | None = None
+    """The cache's generation of its unit when a cacheable read began."""
 
 
 _Client = Connection[_Request]
@@ -181,12 +196,10 @@ _Client = Connection[_Request]
 
 @dataclass(slots=True)
 class _Shared:
-    """A read on the line that identical reads wait for; `reply` stays None when the read's
-    own client left before its reply came (the others then ask again)."""
+    """A read on the line that identical reads wait for: they get its reply, or ask again
+    when its own client left before its reply came."""
 
-    reply: bytes | None = None
-    done: anyio.Event | None = None
-    """Made by the first read that waits (most reads have none)."""
+    followers: list[_Request] = field(default_factory=list)
 
 
 class Gateway:
@@ -201,8 +214,8 @@ class Gateway:
     id, and a unit no line serves gets exception 0A (gateway path unavailable: the spec's code
     for a gateway with no path to the target, as a misconfiguration). With `cache_ms`, a read
     (01 to 04) of the same unit and block as one answered at most that many milliseconds ago is
-    answered again without the line; `clock` gives the cache's time in seconds (the event loop's by
-    default).
+    answered again without the line; `clock` gives the cache's time in seconds (None: the event
+    loop's, read where the gateway is made; `time.monotonic` if it is made outside one).
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a `max_in_flight`,
     `max_connections` or `client_statistics` below 1, an `idle_timeout` that is not positive, a
@@ -219,7 +232,7 @@ class Gateway:
         default_unit: int | None = None,
         coalesce: bool = True,
         cache_ms: float = 0,
-        clock: Callable[[], float] = anyio.current_time,
+        clock: Callable[[], float] | None = None,
         client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     ) -> None:
         lines = [GatewayLine(master)] if isinstance(master, Master) else list(master)
@@ -239,7 +252,7 @@ class Gateway:
             _Line(
                 line,
                 name,
-                ReadCache(cache_ms / 1000, clock) if cache_ms else None,
+                ReadCache(cache_ms / 1000, _cache_clock(clock)) if cache_ms else None,
                 self.statistics.line(name),
             )
             for line, name in zip(lines, line_names(lines), strict=True)
@@ -353,13 +366,14 @@ class Gateway:
             async with anyio.create_task_group() as tasks:
                 connection.tasks = tasks
                 tasks.start_soon(self._watch_idle, connection)
+                tasks.start_soon(self._writer, connection)
                 await self._read(connection)
                 # End of stream: the requests read go on, and their replies are sent.
                 while connection.in_flight:
                     await connection.freed()
-                tasks.cancel_scope.cancel()  # the watch
+                tasks.cancel_scope.cancel()  # the watch and the writer
         finally:
-            connection.open = False
+            connection.leave()  # what is still on the line is dropped
             await stream.aclose()
 
     async def _watch_idle(self, connection: _Client) -> None:
@@ -449,10 +463,7 @@ class Gateway:
             self.statistics.answered(line.name, unit, cached)
             await self._answer(connection, adu, cached)
             return
-        connection.in_flight += 1
-        if not connection.put(_Request(connection, adu, unit, line)):
-            assert connection.tasks is not None
-            connection.tasks.start_soon(self._worker, connection, name=_WORKER_TASK)
+        self._start(_Request(connection, adu, unit, line, connection.turn(line)))
 
     @staticmethod
     def _refused_unit(line: _Line | None, unit: int, pdu: bytes) -> ExceptionCode | None:
@@ -503,6 +514,36 @@ class Gateway:
 
     # -- one request on the line ---------------------------------------------------------
 
+    def _start(self, request: _Request) -> None:
+        """Start `request` on its line (it takes a place in its connection's window): a read
+        in `_start_read`, anything else on a worker. What a write or a broadcast changes for
+        later reads (shared reads, the cache) changes here, in the order requests come."""
+        request.connection.in_flight += 1
+        pdu, unit, line = request.adu.pdu, request.unit, request.line
+        if unit == BROADCAST_UNIT:
+            for each in self._lines:  # a broadcast may write anything
+                each.shared.clear()
+                if each.cache is not None:
+                    each.cache.clear()
+        elif pdu[0] in COALESCED_CODES:
+            self._start_read(request)
+            return
+        else:
+            for other in [k for k in line.shared if k[0] == unit]:
+                del line.shared[other]  # later reads of this unit must follow the write
+            if line.cache is not None:
+                line.cache.invalidate(unit, pdu)
+            self._count_transaction(line)
+        request.awaitable = self._line_request(request)
+        self._to_worker(request)
+
+    def _to_worker(self, request: _Request) -> None:
+        """Have a worker of the connection await `request.awaitable` (started if none is parked)."""
+        connection = request.connection
+        if not connection.put(request):
+            assert connection.tasks is not None
+            connection.tasks.start_soon(self._worker, connection, name=_WORKER_TASK)
+
     async def _worker(self, connection: _Client) -> None:
         """Run the connection's requests one after the other, parked between them, until the
         connection is done: a request costs no task of its own."""
@@ -513,20 +554,133 @@ class Gateway:
             await connection.park()
 
     async def _request(self, request: _Request) -> None:
-        """Get `request`'s reply from its line and send it; its window place is freed after."""
-        connection = request.connection
+        """Await `request`'s reply and end it (see `_end`)."""
+        assert request.awaitable is not None
         try:
+            reply = await request.awaitable
+        except Exception:
+            # A bug must cost one request, not every connection.
+            _log.exception("gateway: forwarding a request failed; answered with exception 0B")
+            reply = exception_reply(request.adu.pdu, _NO_RESPONSE)
+        except BaseException:
+            self._end(request, None)  # its client left: identical reads ask again
+            raise
+        self._end(request, reply)
+
+    async def _line_request(self, request: _Request) -> bytes | None:
+        """The reply to `request`, not a read, from the line (None for a broadcast)."""
+        pdu, unit, line = request.adu.pdu, request.unit, request.line
+        priority, turn = request.connection.priority, request.turn
+        if unit == BROADCAST_UNIT:
+            await self._broadcast(pdu, priority, turn)
+            return None
+        if pdu.startswith(FORCE_LISTEN_ONLY) or (
+            unit in line.listen_only and pdu.startswith(RESTART)
+        ):
+            return await self._unanswered(line, unit, pdu, priority, turn)
+        return await forward(line.master, unit, pdu, priority, turn)
+
+    def _start_read(self, request: _Request) -> None:
+        """Start read `request`: it joins an identical read in flight (the key holds the unit
+        and the whole PDU), or goes on the line. Its reply comes from the done-callback of an
+        event loop future where the engine runs it itself (a queued read, or one its fast
+        path sent), else from a worker; `_end` ends it either way."""
+        pdu, unit, line = request.adu.pdu, request.unit, request.line
+        request.shared = None
+        if self.coalesce:
+            key = (unit, pdu)
+            shared = line.shared.get(key)
+            if shared is not None:
+                self.counters.coalesced += 1
+                line.stats.coalesced += 1
+                shared.followers.append(request)
+                return
+            request.shared = line.shared[key] = _Shared()
+        cache = line.cache
+        if cache is not None and cache.cacheable(pdu):
+            request.generation = cache.generation(unit)
+        self._count_transaction(line)
+        try:
+            awaitable = start_forward(
+                line.master, unit, pdu, request.connection.priority, request.turn
+            )
+        except Exception:
+            _log.exception("gateway: forwarding a request failed; answered with exception 0B")
+            self._end(request, exception_reply(pdu, _NO_RESPONSE))
+            return
+        if answered_from_callback(awaitable):
+            request.connection.on_line.add(awaitable)
+            awaitable.add_done_callback(functools.partial(self._read_done, request))
+        else:
+            request.awaitable = reply_from(awaitable, unit, pdu)
+            self._to_worker(request)
+
+    def _read_done(self, request: _Request, future: asyncio.Future[Any]) -> None:
+        """The done-callback of read `request`'s future: end it with its reply (none when
+        its client left: the future is cancelled)."""
+        request.connection.on_line.discard(future)
+        reply: bytes | None = None
+        if not future.cancelled():
+            pdu = request.adu.pdu
             try:
-                reply = await self._reply(request)
+                reply = reply_pdu(pdu, request.unit, *_outcome(future))
             except Exception:
-                # A bug must cost one request, not every connection.
                 _log.exception("gateway: forwarding a request failed; answered with exception 0B")
-                reply = exception_reply(request.adu.pdu, _NO_RESPONSE)
-            if reply is not None:
-                self.statistics.answered(request.line.name, request.unit, reply)
-                await self._answer(connection, request.adu, reply)
-        finally:
+                reply = exception_reply(pdu, _NO_RESPONSE)
+        self._end(request, reply)
+
+    def _end(self, request: _Request, reply: bytes | None) -> None:
+        """`request` is over with `reply` (None: a broadcast, or its client left): the cache
+        and the reads that shared it are told, the line's turn moves on, the reply is sent
+        (unless its client has left), and its window place is freed once it is."""
+        line = request.line
+        if request.generation is not None and reply is not None:
+            assert line.cache is not None
+            line.cache.put(request.unit, request.adu.pdu, reply, request.generation)
+        line.now = max(line.now, request.turn)
+        connection = request.connection
+        if reply is None or not connection.open:
             connection.done()
+        else:
+            self.statistics.answered(line.name, request.unit, reply)
+            self.statistics.client(connection.client).replies += 1
+            if connection.send_now(request.adu, reply):
+                connection.done()
+            else:
+                connection.send_later(request.adu, reply)  # `_writer` frees its place
+        shared = request.shared
+        if shared is not None:  # after its own reply: a client's replies come in order
+            self._shared_over(request, shared, reply)
+
+    def _shared_over(self, request: _Request, shared: _Shared, reply: bytes | None) -> None:
+        """The read that `shared` stands for is over: identical reads that joined it get
+        `reply`, or ask again when its client left before it came (`reply` None)."""
+        line = request.line
+        key = (request.unit, request.adu.pdu)
+        if line.shared.get(key) is shared:
+            del line.shared[key]
+        for follower in shared.followers:
+            if reply is not None:
+                self._end(follower, reply)
+            elif follower.connection.open:
+                self.counters.coalesced -= 1
+                line.stats.coalesced -= 1
+                follower.connection.in_flight -= 1  # counted again as it starts again
+                self._start(follower)
+            else:
+                follower.connection.done()
+
+    async def _writer(self, connection: _Client) -> None:
+        """Send the connection's replies the stream did not take at once, in order, each
+        freeing its window place once sent (see `Connection.send`)."""
+        while True:
+            adu, reply = await connection.next_unsent()
+            try:
+                if not await connection.send(adu, reply):
+                    self._idle(connection, "read no reply")
+            finally:
+                connection.unsent.popleft()
+                connection.done()
 
     def _cached(self, line: _Line, unit: int, pdu: bytes) -> bytes | None:
         """The cache's reply to read `pdu`, counted; None when it has none."""
@@ -538,35 +692,6 @@ class Gateway:
             self.counters.cache_hits += 1
             line.stats.cache_hits += 1
         return cached
-
-    async def _reply(self, request: _Request) -> bytes | None:
-        """The reply to `request` from the line (None for a broadcast)."""
-        pdu, unit, line = request.adu.pdu, request.unit, request.line
-        turn = request.connection.turn(line)
-        priority = request.connection.priority
-        try:
-            if unit == BROADCAST_UNIT:
-                await self._broadcast(pdu, priority, turn)
-                return None
-            if pdu[0] not in COALESCED_CODES:
-                for other in [k for k in line.shared if k[0] == unit]:
-                    del line.shared[other]  # later reads of this unit must follow the write
-                if line.cache is not None:
-                    line.cache.invalidate(unit, pdu)
-                self._count_transaction(line)
-                if pdu.startswith(FORCE_LISTEN_ONLY) or (
-                    unit in line.listen_only and pdu.startswith(RESTART)
-                ):
-                    return await self._unanswered(line, unit, pdu, priority, turn)
-                return await forward(line.master, unit, pdu, priority, turn)
-            cache = line.cache if line.cache is not None and line.cache.cacheable(pdu) else None
-            generation = cache.generation(unit) if cache is not None else (0, 0)
-            reply = await self._shared_read(request, priority, turn)
-            if cache is not None:
-                cache.put(unit, pdu, reply, generation)
-            return reply
-        finally:
-            line.now = max(line.now, turn)
 
     @staticmethod
     async def _unanswered(line: _Line, unit: int, pdu: bytes, priority: int, turn: int) -> bytes:
@@ -581,11 +706,8 @@ class Gateway:
         return reply
 
     async def _broadcast(self, pdu: bytes, priority: int, turn: int) -> None:
-        """Send `pdu` to every unit of every line: a broadcast may write anything."""
+        """Send `pdu` to every unit of every line."""
         for line in self._lines:
-            line.shared.clear()
-            if line.cache is not None:
-                line.cache.clear()
             if await forward_broadcast(line.master, pdu, priority, turn):
                 self._count_transaction(line)
                 self.counters.broadcasts += 1
@@ -595,35 +717,20 @@ class Gateway:
         self.counters.transactions += 1
         line.stats.transactions += 1
 
-    async def _shared_read(self, request: _Request, priority: int, turn: int) -> bytes:
-        """The reply to read `request`, shared with identical reads in flight at the same
-        moment (the key holds the unit and the whole PDU)."""
-        pdu, unit, line = request.adu.pdu, request.unit, request.line
-        if not self.coalesce:
-            self._count_transaction(line)
-            return await forward(line.master, unit, pdu, priority, turn)
-        key = (unit, pdu)
-        while (shared := line.shared.get(key)) is not None:
-            self.counters.coalesced += 1
-            line.stats.coalesced += 1
-            if shared.done is None:
-                shared.done = anyio.Event()
-            await shared.done.wait()
-            if shared.reply is not None:
-                return shared.reply
-            # Its client left before the reply: ask again.
-            self.counters.coalesced -= 1
-            line.stats.coalesced -= 1
-        shared = line.shared[key] = _Shared()
-        self._count_transaction(line)
-        try:
-            shared.reply = await forward(line.master, unit, pdu, priority, turn)
-        finally:
-            if line.shared.get(key) is shared:
-                del line.shared[key]
-            if shared.done is not None:
-                shared.done.set()
-        return shared.reply
+
+def answered_from_callback(awaitable: object) -> TypeGuard[asyncio.Future[Any]]:
+    """The read shortcut's predicate: the reply comes as an event loop future (the engine runs
+    the read itself: its fast path, or its queue on a line with an event loop), so the future's
+    done-callback answers it, with no task. Elsewhere (trio, a line without an event loop, a
+    read the engine runs on its caller's task) a worker awaits it. Both end in
+    `Gateway._end`."""
+    return isinstance(awaitable, asyncio.Future)
+
+
+def _outcome(future: asyncio.Future[Any]) -> tuple[Any, BaseException | None]:
+    """The result and the error of done, not cancelled, `future`."""
+    error = future.exception()
+    return (None, error) if error is not None else (future.result(), None)
 
 
 def _check_options(
@@ -673,3 +780,14 @@ def _host(stream: anyio.abc.ByteStream) -> str | None:
     if isinstance(address, tuple):
         return str(address[0])
     return "unix" if isinstance(address, str) else "local"
+
+
+def _cache_clock(clock: Callable[[], float] | None) -> Callable[[], float]:
+    """`clock`, or the event loop's where the gateway is made in one. (Not `anyio.current_time`:
+    the cache is also read from the loop's callbacks, where no task runs to tell the backend.)"""
+    if clock is not None:
+        return clock
+    try:
+        return loop_clock()
+    except RuntimeError:  # no event loop runs here: asyncio's clock
+        return time.monotonic

@@ -509,6 +509,40 @@ class Link:
         finally:
             turns.pass_on()
 
+    @property
+    def sends_at_once(self) -> bool:
+        """Whether [`send_now`][aiortu.line.Link.send_now] may write a frame without a yield:
+        the stream pushes its bytes and writes without one (a serial port), nobody else is
+        sending, and the stream has not failed. The silence is asked apart
+        ([`quiet_at`][aiortu.line.Link.quiet_at])."""
+        return (
+            self._send_nowait is not None
+            and not self._turns.busy
+            and self._error is None
+            and not self._stopped
+        )
+
+    def quiet_at(self) -> float:
+        """When `frame_gap` of silence will have passed, in the link's clock, unless bytes
+        arrive before then (they move it)."""
+        activity = self._activity
+        return max(activity.last_received, activity.transmit_end) + self.frame_gap
+
+    def call_when_quiet(self, callback: Callable[[], object]) -> None:
+        """Have the event loop call `callback()` once `frame_gap` of silence has passed (bytes
+        that arrive meanwhile move it): at the time itself where a
+        [`WakeTimer`][aiortu.line.WakeTimer] can watch it. One callback at a time (a second
+        replaces the first); [`cancel_quiet_call`][aiortu.line.Link.cancel_quiet_call] undoes
+        it. Only where [`loop`][aiortu.line.Link.loop] is set: a sender that is no task (the
+        master's fast path) waits for the silence this way."""
+        self._silence.call_when_quiet(
+            self.loop, self._activity, self.clock, self.frame_gap, callback
+        )
+
+    def cancel_quiet_call(self) -> None:
+        """Undo [`call_when_quiet`][aiortu.line.Link.call_when_quiet], if it has not called."""
+        self._silence.cancel_call()
+
     def send_now(self, frame: bytes) -> float | None:
         """Send `frame` at once if the line lets it go without a wait, else send nothing.
 

@@ -3,8 +3,10 @@
 [`Link.send`][aiortu.line.Link.send] takes a turn from `SendTurns` (no yield when nobody
 else is sending: a master's line has a single sender), and waits for the spec's silence with
 `SilenceWaits`, which ends the wait on a [`WakeTimer`][aiortu.line.WakeTimer] where the loop
-can watch one. `LineActivity` is when the line was last busy in each direction, which the
-reader moves on every chunk and the sender on every frame.
+can watch one, and calls back once the silence has passed for a sender that is no task (the
+master's fast path, run from the link's read callback). `LineActivity` is when the line was
+last busy in each direction, which the reader moves on every chunk and the sender on every
+frame.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import anyio.lowlevel
 
 from aiortu.line._wake_timer import WakeTimer, create_wake_timer
 
-__all__ = ("LineActivity", "SendTurns", "SilenceWaits")
+__all__ = ("LineActivity", "QuietCall", "SendTurns", "SilenceWaits")
 
 
 @dataclass(slots=True)
@@ -77,7 +79,7 @@ class SilenceWaits:
     """Waits for the line to have been quiet long enough (see
     [`Link.wait_for_silence`][aiortu.line.Link.wait_for_silence])."""
 
-    __slots__ = ("__weakref__", "loop", "timer", "tried", "waiters")
+    __slots__ = ("__weakref__", "call", "loop", "timer", "tried", "waiters")
 
     def __init__(self) -> None:
         self.timer: WakeTimer | None = None
@@ -87,6 +89,8 @@ class SilenceWaits:
         """The event loop the timer is watched by."""
         self.waiters: list[Any] = []
         """The loop futures of the waits under way on the timer."""
+        self.call: QuietCall | None = None
+        """The callback waiting for the silence (see `call_when_quiet`)."""
 
     async def wait(
         self, activity: LineActivity, clock: Callable[[], float], silence: float
@@ -109,12 +113,57 @@ class SilenceWaits:
             else:
                 await self._wait_for_timer(timer, time.monotonic() + remaining)
 
-    def _make_timer(self) -> None:
+    def _make_timer(self, loop: Any = None) -> None:
+        """Make the wake timer, on the running loop (`loop`: from a callback, where anyio
+        cannot tell the backend)."""
         self.tried = True
         timer = create_wake_timer(self._on_timer)
         if timer is not None:
-            self.loop = anyio.lowlevel.current_token().native_token
+            self.loop = loop if loop is not None else anyio.lowlevel.current_token().native_token
             self.timer = timer
+
+    def call_when_quiet(
+        self, loop: Any, activity: LineActivity, clock: Callable[[], float], silence: float,
+        callback: Callable[[], object],
+    ) -> None:  # fmt: skip
+        """Have `loop` call `callback()` once neither side has used the line for `silence`
+        seconds: on the wake timer where there is one (at the time itself), else on the
+        loop's timers. One call at a time (a second replaces the first); `cancel_call`
+        undoes it."""
+        self.cancel_call()
+        self.call = QuietCall(loop, activity, clock, silence, callback)
+        self._arm_call()
+
+    def _arm_call(self) -> None:
+        """Call the waiting callback if the silence has passed, else wait for it (bytes
+        that arrived meanwhile move its end: look again on waking)."""
+        call = self.call
+        assert call is not None
+        call.handle = None
+        activity = call.activity
+        remaining = max(activity.last_received, activity.transmit_end) + call.silence - call.clock()
+        if remaining <= 0:
+            self.call = None
+            call.callback()
+            return
+        if not self.tried:
+            self._make_timer(call.loop)
+        timer = self.timer
+        if timer is None:
+            call.handle = call.loop.call_later(remaining, self._arm_call)
+        else:
+            timer.begin(self.loop, time.monotonic() + remaining)
+            call.on_timer = True
+
+    def cancel_call(self) -> None:
+        """Forget the callback waiting for the silence, if any."""
+        call, self.call = self.call, None
+        if call is None:
+            return
+        if call.on_timer and self.timer is not None:
+            self.timer.end()
+        if call.handle is not None:
+            call.handle.cancel()
 
     async def _wait_for_timer(self, timer: WakeTimer, when: float) -> None:
         """Wait until `timer` goes off: at `when` (`time.monotonic()` seconds), or earlier for
@@ -133,6 +182,12 @@ class SilenceWaits:
         for woken in self.waiters:
             if not woken.done():
                 woken.set_result(None)
+        call = self.call
+        if call is not None and call.on_timer:
+            call.on_timer = False
+            if self.timer is not None:
+                self.timer.end()
+            self._arm_call()
 
     def close(self) -> None:
         """Close the timer; whoever waits on it finishes the wait on the event loop's timers."""
@@ -141,4 +196,24 @@ class SilenceWaits:
         self.tried = True  # a closing link makes no new one
         if timer is not None:
             timer.close()
+            call = self.call
+            if call is not None:
+                call.on_timer = False  # the closed timer has no waiter to end
             self._on_timer()
+            if self.call is not None:
+                self._arm_call()  # on the loop's timers now
+
+
+@dataclass(slots=True)
+class QuietCall:
+    """A callback waiting for the line to fall silent (see `SilenceWaits.call_when_quiet`)."""
+
+    loop: Any
+    activity: LineActivity
+    clock: Callable[[], float]
+    silence: float
+    callback: Callable[[], object]
+    on_timer: bool = False
+    """Whether it waits on the wake timer (one of its waiters)."""
+    handle: Any = None
+    """The loop timer it waits on instead."""

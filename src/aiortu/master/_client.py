@@ -16,15 +16,15 @@ lives in [`aiortu.master`][aiortu.master], the state machine in
 [`aiortu.core.machines`][aiortu.core.machines], the per-unit and broadcast handles in
 [`aiortu.master`][aiortu.master].
 
-Who runs a transaction. The line is owned by one transaction at a time, and that
-transaction runs in its caller's task: on an idle line a call sends its request and
-waits for the reply itself, and a busy line hands itself to the next queued call (FIFO,
-lower priority first) when the transaction in progress ends. Exchanges never overlap,
-and a caller cancelled after its request began to go out leaves the attempt to the
-master's line task, which waits for its reply (so that it never reaches a later request)
-and only then hands the line on. The line task also notices a dead link and fails the
-queue. Why the transaction runs in its caller's task: see "Design notes" in
-docs/protocol.md.
+Who runs a transaction. The line is owned by one transaction at a time: on an idle line a
+call sends its request and waits for the reply itself, and a busy line hands itself to the
+next queued call (FIFO, lower priority first) when the transaction in progress ends; on a
+serial port (a line with an event loop) the engine runs that call's transaction for it and
+completes the future the call awaits, elsewhere the call runs it in its own task.
+Exchanges never overlap, and a caller cancelled after its request began to go out leaves
+the attempt to the master's line task, which waits for its reply (so that it never
+reaches a later request) and only then hands the line on. The line task also notices a
+dead link and fails the queue. Why and where the transaction runs: see docs/architecture.md.
 """
 
 from __future__ import annotations

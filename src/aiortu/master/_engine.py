@@ -12,17 +12,22 @@ method, `LineEngine.submit`, and awaits what it returns. Its parts, one module e
   late-reply guard;
 - the line task (`_line_task.py`): what no caller can run, and a dead link.
 
-The transaction runs in the task of the caller that submitted it: on an idle line the
-caller sends the request and waits for the reply itself, so a read costs no hand-over
-between tasks. When the line is busy, the caller queues and waits for its turn; the
-transaction that ends hands the line to the next one (`LineEngine.release`), running its
-fast path at once where the predicate lets it, so a queue of reads costs what one caller
-costs.
+On an idle line the transaction runs in the task of the caller that submitted it: the
+caller sends the request and waits for the reply itself (or awaits the future of the fast
+path, which sent it), so a read costs no hand-over between tasks. When the line is busy,
+the caller queues; the transaction that ends hands the line to the next one
+(`LineEngine.release`), running its fast path where the predicate lets it, so a queue of
+reads costs what one caller costs. On a line with an event loop the engine runs every
+queued transaction itself (the fast path, else the line task through the machine) and
+completes the caller's future with the result, so a caller may finish from the future's
+done-callback, with no task (the line server does); elsewhere the caller is handed the line
+(`TURN`) and runs it in its own task.
 
 Cancellation never leaves the line half way through an exchange. A caller cancelled while
 queued is dropped; one cancelled before its request began to go out gives the line up at
-once; one cancelled after that leaves its attempt to the line task, which finishes it
-without retries, then hands the line on.
+once (a queued transaction the line task runs for it still goes out once the line task has
+begun it, without retries); one cancelled after that leaves its attempt to the line task,
+which finishes it without retries, then hands the line on.
 
 It keeps [`UnitStats`][aiortu.master.UnitStats] per unit and their health: a unit is offline
 after *offline_after* consecutive failed transactions, and online again after a success. With
@@ -114,9 +119,24 @@ class LineEngine(LineState):
         on the wire when this returns, and the awaitable is a future.
         """
         future = self.fast.start(transaction)
+        if future is None and self.link.loop is not None and self._queues_at_once(transaction):
+            # Behind a busy line on an event loop: the engine runs the transaction when its
+            # turn comes (the fast path, else the line task), and completes the future.
+            transaction.reply_delay = self.reply_delay(transaction.unit)
+            future = self._queue(transaction, caller_runs=False).future
         if future is not None:
             return future  # type: ignore[return-value]  # completed with a result only
         return self._submit(transaction)
+
+    def _queues_at_once(self, transaction: Transaction) -> bool:
+        """Whether `transaction` goes straight into the queue: the line is up and held,
+        and it is not a request that fail-fast may refuse (to a unit known offline)."""
+        if not (self.queue.busy and self.open and self._failed is None):
+            return False
+        if not (self.health.fail_fast_offline and transaction.expects_reply):
+            return True
+        stats = self.stats.get(transaction.unit)
+        return stats is None or stats.online
 
     async def _submit(self, transaction: Transaction) -> JobResult:
         if self._failed is not None:
@@ -150,8 +170,9 @@ class LineEngine(LineState):
             if self.line_task.job is not job:
                 self.release()
 
-    def _queue(self, transaction: Transaction) -> Job:
-        """Queue `transaction`; return its job."""
+    def _queue(self, transaction: Transaction, caller_runs: bool = True) -> Job:
+        """Queue `transaction`; return its job, whose caller runs it when handed the line
+        (`caller_runs`), else the engine does."""
         link = self.link
         loop = link.loop
         if loop is not None:
@@ -159,7 +180,7 @@ class LineEngine(LineState):
         else:
             backend = link.backend
             future = EventFuture(anyio.Event() if backend is None else backend.create_event())
-        job = self.queue.push(transaction, future)
+        job = self.queue.push(transaction, future, caller_runs)
         if not self.queue.busy and self.open:
             self.release()
         return job
@@ -186,8 +207,14 @@ class LineEngine(LineState):
         job = queue.next_job()
         if job is None:
             return
-        if self.fast.start(job.transaction, job) is None:
+        if self.fast.start(job.transaction, job) is not None:
+            return
+        if job.caller_runs:
             job.wake()
+        else:
+            # Nobody runs it but the engine: the line task, through the machine.
+            job.future.add_done_callback(job.abandon_if_cancelled)
+            self.line_task.take_over(job, on_the_wire=False)
 
     # -- a transaction through the machine ----------------------------------------------------
 
@@ -248,16 +275,21 @@ class LineEngine(LineState):
     def _on_link_event(self, event: LinkEvent | None) -> None:
         """The link's listener: the attempt that waits gets `event`; so does the machine,
         taking the fast path's exchange over, if one is on the wire."""
+        fast = self.fast
         if event is None:
             self.open = False
             self.line_task.wake()
-        fast = self.fast
+            if fast.waiting:
+                # Nothing was sent: its caller fails as a queued one does, and the line is
+                # free for the line task to see the link gone.
+                fast.stop_waiting(self.link.connection_lost_error())
+                self.release()
         if fast.on_wire:
             fast.take_over()
         self.attempts.deliver(event)
 
-    def take_over(self, job: Job) -> None:
-        self.line_task.take_over(job)
+    def take_over(self, job: Job, on_the_wire: bool) -> None:
+        self.line_task.take_over(job, on_the_wire)
 
     def adopt(self, job: Job) -> None:
         self.line_task.adopt(job)
@@ -276,6 +308,8 @@ class LineEngine(LineState):
         why = str(self._failed)
         self.queue.fail_all(why)
         fast = self.fast
+        if fast.waiting:
+            fast.stop_waiting(ConnectionLost(why))
         if fast.on_wire:
             # The line task is gone: nobody takes the fast path's exchange over.
             fast.on_wire = False

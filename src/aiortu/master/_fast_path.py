@@ -9,10 +9,13 @@ machine. `FastPath` does, one exchange at a time:
 
 1. `FastPath.may_run` is the predicate: every condition under which it may run is named
    there, and nowhere else.
-2. `FastPath.start` sends the request at once (no wait, no yield) and asks the link to hand
-   the reply of the usual shape (first bytes, length) straight from its read callback
-   ([`expect`][aiortu.line.Link.expect]). It returns the future the caller awaits: a new one,
-   or the future of the queued caller the line was just handed to.
+2. `FastPath.start` sends the request (no yield: at once where the line is quiet, else
+   from a timer callback once the frame gap has passed,
+   [`call_when_quiet`][aiortu.line.Link.call_when_quiet]) and asks the link to hand the
+   reply of the usual shape (first bytes, length) straight from its read callback
+   ([`expect`][aiortu.line.Link.expect]). It returns the future the caller awaits: a new
+   one, or the future of the queued caller the line was just handed to. So a queue of
+   reads runs from callbacks, each caller woken once, with its reply.
 3. That reply ends it (`FastPath.on_reply`): decoded and counted, the line handed on, the
    future completed. One that began before the unit could have answered (where the line's
    wire times are real) is stale: the machine takes it over and skips it. The caller's task
@@ -61,6 +64,7 @@ class FastPath:
         "_transaction",
         "enabled",
         "on_wire",
+        "waiting",
     )
 
     def __init__(self, engine: LineState) -> None:
@@ -68,6 +72,8 @@ class FastPath:
         self.enabled = engine.config.fast_path
         self.on_wire = False
         """Whether an exchange of the fast path is on the wire (it then holds the line)."""
+        self.waiting = False
+        """Whether its request waits for the line to fall silent (it holds the line)."""
         self._transaction: Any = None
         self._future: Any = None
         self._known: Any = None
@@ -82,8 +88,9 @@ class FastPath:
         fast path may run it; else None, and it goes through the machine. `handed`: the
         queue has just handed the line to it.
 
-        One more condition is tried rather than asked, as it is the write itself: the link
-        must let the request go at once ([`send_now`][aiortu.line.Link.send_now]).
+        The line's silence is not a condition: a request that comes before the frame gap
+        has passed waits for it on a timer (see `start`). What is left to try is the write
+        itself: a stream that does not take it at once hands the transaction to the machine.
         """
         engine = self._engine
         if not (
@@ -94,6 +101,8 @@ class FastPath:
             and engine.link.loop is not None
             # The line task serves a live link (it runs what the machine takes over).
             and engine.open
+            # The link writes without a yield: nobody else sends, the stream has not failed.
+            and engine.link.sends_at_once
             # Nobody holds the line (nobody waits for it then), or the queue has just handed
             # it to this caller: a queue of register reads runs each as one caller's.
             and (handed or not engine.queue.busy)
@@ -112,27 +121,54 @@ class FastPath:
         return engine.machine.usual_exchange(transaction.unit, transaction.request)
 
     def start(self, transaction: Transaction, job: Job | None = None) -> JobFuture | None:
-        """Send `transaction`'s request now where the predicate lets it run, and return the
-        future its caller awaits (`job`'s, for a queued caller the line is handed to); else
-        None, nothing sent."""
+        """Run `transaction` where the predicate lets it, and return the future its caller
+        awaits (`job`'s, for a queued caller the line is handed to); else None. The request
+        goes out now if the line is quiet, else once it is (`Link.call_when_quiet`): the
+        fast path holds the line meanwhile (`waiting`)."""
         known = self.may_run(transaction, job is not None)
         if known is None:
             return None
         engine = self._engine
         link = engine.link
-        attempts = engine.attempts
-        attempts.events.clear()  # nothing that came before can answer it
-        frame = known.frame
-        end = link.send_now(frame)
-        if end is None:
-            return None
         engine.queue.busy = True
-        self.on_wire = True
-        char_time = link.char_time
-        self._start = end - len(frame) * char_time
         self._transaction = transaction
         self._known = known
         future = self._future = link.loop.create_future() if job is None else job.future
+        if link.quiet_at() > link.clock():
+            self.waiting = True
+            link.call_when_quiet(self._send_when_quiet)
+        else:
+            self._send()
+        return future
+
+    def _send_when_quiet(self) -> None:
+        """The line has been quiet for its frame gap: send, unless the caller is gone (the
+        line is then handed on, nothing sent)."""
+        self.waiting = False
+        if self._future.done():
+            self._transaction.abandoned = True
+            self._engine.release()
+            return
+        self._send()
+
+    def _send(self) -> None:
+        """Send the request and expect its reply (see the module docstring). A stream that
+        does not take the write at once (earlier bytes still queued in it) leaves the
+        transaction to the machine, on the line task."""
+        engine = self._engine
+        link = engine.link
+        attempts = engine.attempts
+        attempts.events.clear()  # nothing that came before can answer it
+        known = self._known
+        transaction: Transaction = self._transaction
+        frame = known.frame
+        end = link.send_now(frame)
+        if end is None:
+            self._hand_to_machine(on_the_wire=False)
+            return
+        self.on_wire = True
+        char_time = link.char_time
+        self._start = end - len(frame) * char_time
         unit = transaction.unit
         stats = self._stats = engine.stats.get(unit) or engine.unit_stats(unit)
         stats.requests += 1
@@ -155,7 +191,6 @@ class FastPath:
             tap = self._taps[shape] = ReplyTap(shape[0], shape[1], self.on_reply, None)
         tap.checked = known.last_reply
         link.expect(tap)
-        return future
 
     def on_reply(self, frame: bytes, end: float) -> None:
         """The link's read callback: `frame`, the usual reply (its shape matched, its CRC
@@ -193,17 +228,34 @@ class FastPath:
         engine = self._engine
         self.on_wire = False
         engine.link.forget_expected()
+        self._hand_to_machine(on_the_wire=True)
+
+    def _hand_to_machine(self, *, on_the_wire: bool) -> None:
+        """The line task runs the transaction through the machine for the caller, who
+        awaits the same future: the rest of it (`on_the_wire`: its first attempt is out),
+        or all of it."""
+        engine = self._engine
         transaction: Transaction = self._transaction
-        machine = engine.machine
-        machine.begin(transaction)
-        machine.sent(self._start, self._start + len(self._known.frame) * engine.link.char_time)
+        if not on_the_wire:
+            transaction.reply_delay = engine.reply_delay(transaction.unit)
+        else:
+            machine = engine.machine
+            machine.begin(transaction)
+            machine.sent(self._start, self._start + len(self._known.frame) * engine.link.char_time)
         future = self._future
         job = Job(transaction, future)
         if future.done():
             transaction.abandoned = True  # cancelled already: no retries
         else:
             future.add_done_callback(job.abandon_if_cancelled)
-        engine.take_over(job)
+        engine.take_over(job, on_the_wire)
+
+    def stop_waiting(self, error: BaseException) -> None:
+        """The line is lost (or the engine closes) while the request waits for the
+        silence: nothing was sent; its caller gets `error`."""
+        self.waiting = False
+        self._engine.link.cancel_quiet_call()
+        self.fail(error)
 
     def fail(self, error: BaseException) -> None:
         """The engine closes with the exchange on the wire: its caller gets `error`."""

@@ -114,8 +114,9 @@ class LineState:
         """The transaction that had the line is over: hand the line on."""
         raise NotImplementedError
 
-    def take_over(self, job: Job) -> None:
-        """The machine took `job` over from the fast path: the line task runs the rest."""
+    def take_over(self, job: Job, on_the_wire: bool) -> None:
+        """The machine took `job` over from the fast path: the line task runs the rest (all
+        of it unless `on_the_wire`)."""
         raise NotImplementedError
 
     def adopt(self, job: Job) -> None:

@@ -3,8 +3,9 @@
 Callers run their own transactions (see [`aiortu.master`][aiortu.master]); the line task runs
 what no caller can: the attempt a cancelled caller left on the wire (*adopted*: finished,
 never retried, so that its reply reaches no later request) and the exchange the machine took
-over from the fast path (*taken over*: the whole transaction, retries included, for a caller
-who awaits its future). It also notices a dead link, and fails the queue then.
+over from the fast path (*taken over*: the rest of the transaction, retries included, for a
+caller who awaits its future; all of it where the stream did not take the fast path's write
+at once). It also notices a dead link, and fails the queue then.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ __all__ = ("LineTask",)
 class LineTask:
     """The line task of the engine whose state is `engine` (see the module docstring)."""
 
-    __slots__ = ("_engine", "_wake", "job", "taken_over")
+    __slots__ = ("_engine", "_on_the_wire", "_wake", "job", "taken_over")
 
     def __init__(self, engine: LineState) -> None:
         self._engine = engine
@@ -31,6 +32,7 @@ class LineTask:
         self.job: Job | None = None
         """The job the line task runs: adopted, or taken over (`taken_over`)."""
         self.taken_over = False
+        self._on_the_wire = True
 
     def wake(self) -> None:
         """Have the line task look at the line again (a job for it, or the link closed)."""
@@ -42,9 +44,10 @@ class LineTask:
         self.job, self.taken_over = job, False
         self._wake.set()
 
-    def take_over(self, job: Job) -> None:
-        """Run the rest of `job`, begun by the fast path, for its caller."""
-        self.job, self.taken_over = job, True
+    def take_over(self, job: Job, on_the_wire: bool) -> None:
+        """Run the rest of `job`, begun by the fast path, for its caller (all of it unless
+        its first attempt is `on_the_wire`)."""
+        self.job, self.taken_over, self._on_the_wire = job, True, on_the_wire
         self._wake.set()
 
     async def serve(self, link: Link) -> ConnectionLost:
@@ -95,7 +98,8 @@ class LineTask:
         """Run the rest of a fast-path exchange the machine took over, for its caller."""
         engine = self._engine
         try:
-            await engine.exchange(job, on_the_wire=True)
+            if self._on_the_wire or not job.future.done():  # done: cancelled, not begun
+                await engine.exchange(job, on_the_wire=self._on_the_wire)
         except Exception as error:
             job.finish(None, error)  # told already, unless the error is a bug's
         except BaseException:

@@ -10,6 +10,9 @@ A cycle of an interval reads, device after device, the poll classes with that in
 timeout per silent unit) and delivers one [`Reading`][aiortu.master.Reading] per point, to the
 `on_reading` callbacks and to `async for`; a consumer more than `max_pending` readings behind
 loses the oldest, counted in [`ProfilePoller.dropped`][aiortu.master.ProfilePoller.dropped].
+The `on_read` callbacks get each read whole instead: the device and its readings of one poll
+class, by name; with `max_pending=0`, readings go to the callbacks only (`async for` gets
+none), which spares a caller that wants whole reads the work of each reading.
 Units the master marks offline fail fast there, so dead devices do not stall the bus.
 """
 
@@ -31,6 +34,10 @@ __all__ = ("ProfilePoller",)
 ReadingCallback = Callable[[Reading], object]
 """Called with every reading (a plain or an async function)."""
 
+ReadCallback = Callable[[Device, dict[str, Reading]], object]
+"""Called with a device and its readings of one poll class, by name, once they are all read
+(a plain or an async function)."""
+
 
 class ProfilePoller(BackgroundPoll[Reading]):
     """Polls `devices` by their profiles' poll classes (see the module docstring); an async
@@ -43,11 +50,14 @@ class ProfilePoller(BackgroundPoll[Reading]):
         devices: Iterable[Device],
         *,
         on_reading: ReadingCallback | Iterable[ReadingCallback] | None = None,
+        on_read: ReadCallback | None = None,
         max_pending: int = 1024,
     ) -> None:
         self.devices = tuple(devices)
         if not self.devices:
             raise InvalidValue("devices", self.devices, "at least one device")
+        if isinstance(max_pending, bool) or not isinstance(max_pending, int) or max_pending < 0:
+            raise InvalidValue("max_pending", max_pending, "an integer >= 0")
         groups: dict[float, list[tuple[Device, str]]] = {}
         for device in self.devices:
             for poll_class, interval in device.profile.poll_classes.items():
@@ -57,6 +67,8 @@ class ProfilePoller(BackgroundPoll[Reading]):
         self._callbacks: list[ReadingCallback] = (
             [on_reading] if callable(on_reading) else list(on_reading or ())
         )
+        self._read_callbacks = [] if on_read is None else [on_read]
+        self._streaming = max_pending > 0
         self._open_stream(max_pending)
         self.cycles = 0
         """Cycles run, every interval counted."""
@@ -104,9 +116,15 @@ class ProfilePoller(BackgroundPoll[Reading]):
     async def _cycle(self, members: list[tuple[Device, str]]) -> list[Reading]:
         readings: list[Reading] = []
         for device, poll_class in members:
-            for reading in (await device.read(poll_class)).values():
-                readings.append(reading)
-                await self._deliver(reading)
+            read = await device.read(poll_class)
+            readings += read.values()
+            for on_read in self._read_callbacks:
+                result = on_read(device, read)
+                if inspect.isawaitable(result):
+                    await result
+            if self._callbacks or self._streaming:  # else nobody wants them one by one
+                for reading in read.values():
+                    await self._deliver(reading)
         self.cycles += 1
         return readings
 
@@ -115,4 +133,5 @@ class ProfilePoller(BackgroundPoll[Reading]):
             result = callback(reading)
             if inspect.isawaitable(result):
                 await result
-        self._publish(reading)
+        if self._streaming:
+            self._publish(reading)

@@ -5,7 +5,8 @@ the `LineQueue`, ordered by the transaction's `priority`, then its `order` (lowe
 then by arrival. Each job has one way to be woken: its `future`, completed once,
 with `TURN` (the line is the caller's: it runs its transaction itself), with the result
 (the engine ran the transaction for it), or with the error that ends it. On an event loop
-the future is a future of that loop; elsewhere (trio) an `EventFuture`.
+the future is a future of that loop, and a job queued there gets its result only (the
+engine runs it: `Job.caller_runs` is false); elsewhere (trio) an `EventFuture`.
 """
 
 from __future__ import annotations
@@ -119,12 +120,17 @@ NO_FUTURE: Final[JobFuture] = _Told()
 class Job:
     """A transaction waiting for the line or on it, and the future its caller awaits."""
 
-    __slots__ = ("future", "granted", "transaction", "woken")
+    __slots__ = ("caller_runs", "future", "granted", "transaction", "woken")
 
-    def __init__(self, transaction: Transaction, future: JobFuture) -> None:
+    def __init__(
+        self, transaction: Transaction, future: JobFuture, caller_runs: bool = True
+    ) -> None:
         self.transaction = transaction
         self.future = future
         """Completed once: `TURN`, the result, or the error (see the module docstring)."""
+        self.caller_runs = caller_runs
+        """Whether its caller runs the transaction once handed the line (`TURN`); else the
+        engine runs it and completes the future with the result."""
         self.granted = False
         """Whether the job was handed the line."""
         self.woken = False
@@ -170,9 +176,9 @@ class LineQueue:
         """The line belongs to a transaction (running, handed over, or left to the line
         task)."""
 
-    def push(self, transaction: Transaction, future: JobFuture) -> Job:
+    def push(self, transaction: Transaction, future: JobFuture, caller_runs: bool = True) -> Job:
         """Queue `transaction`, whose caller awaits `future`; return its job."""
-        job = Job(transaction, future)
+        job = Job(transaction, future, caller_runs)
         key = (transaction.priority, transaction.order, next(self._sequence), job)
         heapq.heappush(self.waiting, key)
         return job

@@ -20,6 +20,7 @@ from anyio.abc import ByteStream
 from aiortu._public import publish
 from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
+from aiortu.transport._ascii_push import PushAsciiStream, ascii_stream, pushes_ascii
 from aiortu.transport._ascii_stream import ASCII_BYTESIZE, AsciiStream, check_ascii_settings
 from aiortu.transport._authorization import (
     WRITE_FUNCTION_CODES,
@@ -130,6 +131,7 @@ __all__ = (
     "ModbusTcpCounters",
     "ModbusTcpStream",
     "PortAddress",
+    "PushAsciiStream",
     "PushDatagramStream",
     "PushStream",
     "RoleRules",
@@ -141,6 +143,7 @@ __all__ = (
     "TcpAddress",
     "TlsListener",
     "UnixAddress",
+    "ascii_stream",
     "certificate_role",
     "check_ascii_settings",
     "check_datagram",
@@ -163,6 +166,7 @@ __all__ = (
     "parse_unix_url",
     "peer_address",
     "push_datagrams",
+    "pushes_ascii",
     "remove_socket",
     "serve_datagrams",
     "serve_listener",
@@ -244,7 +248,7 @@ async def open_stream(
         return stream
     if isinstance(address, SerialAddress):
         check_ascii_settings(port_or_url, settings)
-    return AsciiStream(stream, settings, **ascii_options)
+    return ascii_stream(stream, settings, **ascii_options)
 
 
 async def _open(address: PortAddress, settings: LineSettings, options: Any) -> ByteStream:

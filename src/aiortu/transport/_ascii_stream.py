@@ -98,6 +98,13 @@ class AsciiStream(anyio.abc.ByteStream):
         self.discarded: Counter[AsciiDiscardReason] = Counter()
         """Characters that did not make a frame, counted by reason."""
         self._ready: deque[bytes] = deque()
+        # The last frame received (unit, PDU, LRC) and its RTU frame.
+        self._last_received = b""
+        self._last_frame = b""
+        # The last RTU frame sent, the delimiter it went with, and its ASCII frame.
+        self._sent_item = b""
+        self._sent_delimiter = LF
+        self._sent_frame = b""
 
     @property
     def whole_frames(self) -> bool:
@@ -110,14 +117,26 @@ class AsciiStream(anyio.abc.ByteStream):
 
     async def send(self, item: bytes) -> None:
         """Send the RTU frame `item` (unit, PDU, CRC) as one ASCII frame."""
+        await self.stream.send(self.encode(item))
+        self.sent(item)
+
+    def encode(self, item: bytes) -> bytes:
+        """The ASCII frame that carries the RTU frame `item` (unit, PDU, CRC) to its unit."""
         if len(item) < 4:
             raise InvalidValue("len(item)", len(item), "at least 4 (unit, PDU and CRC)")
-        unit, pdu = item[0], bytes(item[1:-2])
+        unit = item[0]
         delimiter = self.send_delimiters.get(unit, LF)
-        await self.stream.send(encode_ascii_frame(unit, pdu, delimiter))
-        if self.answering and pdu[:3] == _CHANGE_DELIMITER and len(pdu) >= 4:
-            # Our reply to 08/03 has gone out: from now on frames end with the new character.
-            self.receiver.delimiter = pdu[3]
+        if item == self._sent_item and delimiter == self._sent_delimiter:
+            return self._sent_frame  # the same frame again: a poll's request, a store's reply
+        frame = encode_ascii_frame(unit, item[1:-2], delimiter)
+        self._sent_item, self._sent_delimiter, self._sent_frame = bytes(item), delimiter, frame
+        return frame
+
+    def sent(self, item: bytes) -> None:
+        """The RTU frame `item` has gone out: a slave's reply to 08/03 changes the delimiter
+        that ends the frames it receives from now on."""
+        if self.answering and item[1:4] == _CHANGE_DELIMITER and len(item) >= 7:
+            self.receiver.delimiter = item[4]
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
         """The next frame received, as an RTU frame (`max_bytes` is ignored: a frame is never
@@ -139,20 +158,36 @@ class AsciiStream(anyio.abc.ByteStream):
         return self._ready.popleft()
 
     def _take(self, outputs: list[Any]) -> None:
+        self._ready.extend(self.frames(outputs))
+
+    def frames(self, outputs: list[Any]) -> list[bytes]:
+        """The RTU frames (CRC computed) of the frames among the receiver's `outputs`; the rest
+        counted in [`discarded`][aiortu.transport.AsciiStream.discarded] by reason. A unit's reply
+        to 08/03 ends our later requests to it with its new delimiter."""
+        frames = []
         for out in outputs:
             if type(out) is AsciiFrameReceived:
                 self.frames_received += 1
-                body = out.frame[:-1]  # unit and PDU, without the LRC
-                crc = crc16(body)
-                self._ready.append(body + bytes((crc & 0xFF, crc >> 8)))
-                pdu = body[1:]
-                if not self.answering and pdu[:3] == _CHANGE_DELIMITER and len(pdu) >= 4:
-                    # A unit's reply to 08/03: our later requests to it end with its new one.
-                    self.send_delimiters[body[0]] = pdu[3]
+                received = out.frame  # unit, PDU and LRC
+                if received == self._last_received:
+                    frame = self._last_frame  # a poll's unchanged reply: its CRC is known
+                else:
+                    body = received[:-1]
+                    crc = crc16(body)
+                    frame = self._last_frame = body + bytes((crc & 0xFF, crc >> 8))
+                    self._last_received = received
+                frames.append(frame)
+                if (
+                    received.startswith(_CHANGE_DELIMITER, 1)
+                    and len(received) >= 6  # the new delimiter, then the LRC
+                    and not self.answering
+                ):
+                    self.send_delimiters[received[0]] = received[4]
             else:
                 self.discarded[out.reason] += 1
                 if _log.isEnabledFor(logging.DEBUG):
                     _log.debug("ASCII: dropped %r: %s", out.data[:40], out.detail)
+        return frames
 
     async def send_eof(self) -> None:
         await self.stream.send_eof()

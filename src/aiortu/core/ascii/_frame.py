@@ -89,15 +89,20 @@ def check_ascii_body(body: bytes | bytearray) -> bytes:
             f"an ASCII frame holds an even number of hex characters, not {length}",
             reason="ascii",
         )
-    matched = _HEX_PAIRS.match(body)
-    end = matched.end() if matched is not None else 0
-    if end != length:
+    try:
+        # fromhex skips whitespace between pairs and refuses every other non-hex character:
+        # a text of hex digits only is exactly the one that gives length / 2 bytes.
+        data = bytes.fromhex(body.decode("ascii"))
+    except ValueError:  # UnicodeDecodeError included
+        data = b""
+    if 2 * len(data) != length:
+        matched = _HEX_PAIRS.match(body)
+        end = matched.end() if matched is not None else 0
         raise FrameError(
             f"an ASCII frame holds hex digits only, not {bytes(body[end : end + 1])!r} "
             f"at character {end + 1}",
             reason="ascii",
         )
-    data = bytes.fromhex(body.decode("ascii"))
     if sum(data) & 0xFF:
         raise LRCError(data[-1], lrc(data[:-1]))
     return data
