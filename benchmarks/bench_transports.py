@@ -4,7 +4,7 @@ Security and Modbus ASCII, for the master and for the server, and TLS handshakes
 Run from the repository root with aiortu, pymodbus and cryptography installed::
 
     python benchmarks/bench_transports.py [--rounds 5] [--requests 1000]
-        [--section udp|tls|ascii|handshakes]
+        [--section udp|tls|ascii|handshakes|calls]
 
 Each section runs aiortu's server and pymodbus's in processes of their own (unit 1, holding
 registers from 0), on loopback or, for ASCII, on a socat pty pair at 19200 8N2.
@@ -21,6 +21,9 @@ registers from 0), on loopback or, for ASCII, on a socat pty pair at 19200 8N2.
 - server: aiortu's master sends the same reads to aiortu's server and to pymodbus's, in turns;
   the figure is the server process's CPU time per request (the nanoseconds of
   /proc/PID/task/*/schedstat).
+- calls: Python calls (function and C calls, by ``sys.setprofile``) per read of aiortu's master
+  over TLS and plain TCP and of pymodbus's TLS client, all to aiortu's server: a figure that does
+  not move with the machine's load.
 - handshakes: mutual-TLS handshakes per second to aiortu's TLS server (each a connection, a
   handshake and a close), and the CPU per request on an open TLS connection against plain
   Modbus TCP (the master's side).
@@ -354,6 +357,46 @@ def section_handshakes(args: argparse.Namespace) -> list[str]:
     ]
 
 
+async def _calls(run: Callable[[int, Clock], Awaitable[float]], count: int) -> float:
+    """Python calls per request of `run` over `count` requests, counted by `sys.setprofile`."""
+    calls = 0
+
+    def profile(frame: object, event: str, arg: object) -> None:
+        nonlocal calls
+        if event in ("call", "c_call"):
+            calls += 1
+
+    def clock() -> float:
+        sys.setprofile(profile if sys.getprofile() is None else None)
+        return 0.0
+
+    await run(count, clock)  # the clock turns counting on, then off, around the measured reads
+    return calls / count
+
+
+def section_calls(args: argparse.Namespace) -> list[str]:
+    import pymodbus.client as pm
+
+    with tempfile.TemporaryDirectory() as directory, benchlib.Children() as children:
+        pki = Pki(Path(directory))
+        files = [str(pki.server.certfile), str(pki.server.keyfile), str(pki.cafile)]
+        _, tls_port = _start(children, [sys.executable, __file__, "--serve-aiortu", "tls", *files])
+        _, tcp_port = _start(children, [sys.executable, __file__, "--serve-aiortu", "tcp"])
+        options = pki.master_options()
+        runs = {
+            "aiortu, TLS": ours(aiortu_reads(f"tls://127.0.0.1:{tls_port}", **options))[0],
+            "aiortu, plain TCP": ours(aiortu_reads(f"tcp://127.0.0.1:{tcp_port}"))[0],
+            "pymodbus, TLS": pymodbus_side(
+                lambda: pm.AsyncModbusTlsClient(
+                    "127.0.0.1", port=tls_port, sslctx=pki.client_context(), timeout=2, retries=0
+                )
+            )[0],
+        }
+        count = min(args.requests, 200)
+        rows = [f"| {name} | {anyio.run(_calls, run, count):.0f} |" for name, run in runs.items()]
+    return ["| master | Python calls per read |", "|---|---|", *rows]
+
+
 def _ratios(lines: list[str]) -> list[str]:
     """The rows of a section as a table, with aiortu's CPU as a share of pymodbus's."""
     out = [
@@ -373,6 +416,7 @@ SECTIONS: dict[str, Callable[[argparse.Namespace], list[str]]] = {
     "tls": lambda args: _ratios(section_tls(args)),
     "ascii": lambda args: _ratios(section_ascii(args)),
     "handshakes": section_handshakes,
+    "calls": section_calls,
 }
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import anyio
 
 import aiortu
-from aiortu.transport import ModbusTcpStream
+from aiortu.transport import ModbusTcpStream, PushConnectionStream
 
 
 async def main() -> None:
@@ -31,8 +31,8 @@ async def main() -> None:
             await master.read_holding_registers(17, 100, 2)
         except aiortu.ExceptionResponse as refused:
             print(f"register 100: exception {refused.code:02X}")
-        stream = master.link.stream
-        assert isinstance(stream, ModbusTcpStream)
+        stream = master.link.stream  # pushed on asyncio; a ModbusTcpStream under trio
+        assert isinstance(stream, PushConnectionStream | ModbusTcpStream)
         sent = stream.counters
         print(f"requests {sent.requests}, replies {sent.replies}, dropped {sent.dropped}")
 

@@ -17,7 +17,7 @@ from aiortu.core.pdu import ExceptionPDU, RawPDU
 from aiortu.errors import ExceptionResponse, PortNotFound, ResponseTimeout
 from aiortu.line import Link
 from aiortu.slave import RequestContext, Table
-from aiortu.transport import ModbusTcpCounters, ModbusTcpStream
+from aiortu.transport import ModbusTcpCounters, ModbusTcpStream, PushConnectionStream
 from tests.slave.tcp_helpers import UNIT, device, tcp_server
 
 pytestmark = pytest.mark.timeout(30)
@@ -40,7 +40,7 @@ async def until(condition: Callable[[], bool]) -> None:
 
 def counters(master: aiortu.Master) -> ModbusTcpCounters:
     stream = master.link.stream
-    assert isinstance(stream, ModbusTcpStream)
+    assert isinstance(stream, ModbusTcpStream | PushConnectionStream)
     return stream.counters
 
 

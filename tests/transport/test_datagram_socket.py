@@ -60,7 +60,7 @@ def _pushed(sock: socket.socket, port: int) -> PushDatagramStream:
     stream = PushDatagramStream(
         ("127.0.0.1", port), ModbusTcpCounters(), "udp://test", check_datagram
     )
-    stream.socket = DatagramSocket(sock, stream.datagram, stream.lost, stream.where)
+    stream.socket = DatagramSocket(sock, stream.datagram, stream.closed, stream.where)
     return stream
 
 

@@ -16,8 +16,8 @@ from aiortu.transport import (
     ListenAddress,
     ModbusTcpAddress,
     ModbusTcpCounters,
-    ModbusTcpStream,
     PortAddress,
+    PushConnectionStream,
     SerialAddress,
     SerialStream,
     TcpAddress,
@@ -120,7 +120,7 @@ async def test_modbus_tcp_opens_a_stream_of_whole_frames() -> None:
         counters = ModbusTcpCounters(next_transaction_id=7)
         stream = await open_stream(f"tcp://127.0.0.1:{port}", counters=counters)
         async with stream:
-            assert isinstance(stream, ModbusTcpStream)
+            assert isinstance(stream, PushConnectionStream)  # asyncio: pushed
             assert stream.counters is counters
             assert stream.whole_frames
     with pytest.raises(TypeError, match="Modbus TCP takes no option rs485"):

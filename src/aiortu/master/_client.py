@@ -80,9 +80,9 @@ _STATS_UNITS = range(248)
 def _unit_range(stream: object) -> range:
     """The unit ids `stream`'s framing carries: any byte in an MBAP header, else (a serial
     line, or a seam given in its place) 1..247."""
-    from aiortu.transport import ModbusTcpStream, PushDatagramStream
+    from aiortu.transport import ModbusTcpStream, PushConnectionStream, PushDatagramStream
 
-    mbap = isinstance(stream, ModbusTcpStream | PushDatagramStream)
+    mbap = isinstance(stream, ModbusTcpStream | PushConnectionStream | PushDatagramStream)
     return MBAP_UNIT_RANGE if mbap else UNIT_RANGE
 
 

@@ -39,7 +39,7 @@ to us, and what this server does:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sized
 from dataclasses import dataclass
 from typing import Final
 
@@ -53,15 +53,20 @@ from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.pdu import encode_exception
 from aiortu.errors import InvalidValue
+from aiortu.slave._answer_at_once import AnswerAtOnce
 from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
+from aiortu.slave._tcp_at_once import ConnectionTap, Permits
 from aiortu.transport import (
     RTU_SILENCE,
     ConnectionLimit,
     Framing,
     MbapFraming,
+    PushServerStream,
     listening_address,
     peer_address,
+    push_listener,
+    pushed_listener,
     serve_listener,
 )
 
@@ -186,7 +191,6 @@ class ModbusTcpServer(Dispatcher):
         self.counters = TcpServerCounters()
         """What happened to the connections and requests."""
         self.trace = trace
-        """Sees every request and reply ADU (see the class docstring)."""
         self.local_address: tuple[str, int] | None = None
         """The host and port [`serve`][aiortu.slave.ModbusTcpServer.serve] listens on, once it
         does."""
@@ -197,6 +201,42 @@ class ModbusTcpServer(Dispatcher):
         self._replies = self._new_framing()  # encodes replies: the same for every connection
         self._lock = anyio.Lock(fast_acquire=True)
         self._stopped = anyio.Event()
+
+    def _init_dispatch(
+        self,
+        units: dict[int, DataStore | AsyncDataStore],
+        machine: SlaveMachine,
+        handlers: Mapping[int, Handler],
+    ) -> None:
+        super()._init_dispatch(units, machine, handlers)
+        # Made here: the base class configures the handlers and sets the trace next.
+        self._at_once = AnswerAtOnce(
+            machine, self._pending_requests(), before=self._before, after=self._after
+        )
+
+    def _pending_requests(self) -> Sized:
+        """What waits for the general route, which a request answered at once must not pass.
+        Nothing on a connection: its stream offers the shortcut nothing while its task has
+        bytes to read (a datagram server's backlog is another matter)."""
+        return ()
+
+    def _configured(
+        self,
+        handlers: Mapping[int, Handler],
+        stores: Mapping[int, DataStore | AsyncDataStore],
+    ) -> None:
+        self._at_once.configure(handlers, stores)
+
+    @property
+    def trace(self) -> Callable[[str, bytes], object] | None:
+        """Sees every request and reply ADU, MBAP header included (see the class docstring);
+        one that raises is logged and detached."""
+        return self._trace
+
+    @trace.setter
+    def trace(self, callback: Callable[[str, bytes], object] | None) -> None:
+        self._trace = callback
+        self._at_once.trace_set = callback is not None
 
     @property
     def connections(self) -> int:
@@ -238,6 +278,8 @@ class ModbusTcpServer(Dispatcher):
         Reports started to `task_status` once
         [`local_address`][aiortu.slave.ModbusTcpServer.local_address] is set.
         """
+        if push_listener(listener):
+            listener = pushed_listener(listener)
         try:
             self.local_address = listening_address(listener)
             task_status.started()
@@ -253,8 +295,11 @@ class ModbusTcpServer(Dispatcher):
         [`idle_timeout`][aiortu.slave.ModbusTcpServer.idle_timeout], or it sends a malformed header;
         then close it."""
         framing = self._new_framing()
+        tap = None
+        if isinstance(stream, PushServerStream) and isinstance(framing, MbapFraming):
+            tap = stream.tap = ConnectionTap(self._at_once, self, stream, framing, self._permits())
         try:
-            while (adus := await self._next_requests(stream, framing)) is not None:
+            while (adus := await self._next_requests(stream, framing, tap)) is not None:
                 if adus:
                     await self._answer_all(stream, adus)
         except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
@@ -262,17 +307,28 @@ class ModbusTcpServer(Dispatcher):
         finally:
             await stream.aclose()
 
+    def _permits(self) -> Permits | None:
+        """Whether the client of the connection being served may send a request (None: any)."""
+        return None
+
     async def _next_requests(
-        self, stream: anyio.abc.ByteStream, framing: Framing
+        self, stream: anyio.abc.ByteStream, framing: Framing, tap: ConnectionTap | None
     ) -> list[Adu] | None:
         """The requests the connection's next bytes (or a silence, for a frame of unknown
-        length) complete; None when the connection is to close (idle, malformed)."""
+        length) complete; None when the connection is to close (idle, malformed). Requests
+        `tap` answered at once meanwhile count as traffic."""
         quiet = RTU_SILENCE if framing.waiting_for_silence() else self.idle_timeout
-        with anyio.move_on_after(quiet) as idle:
-            data = await stream.receive(READ_SIZE)
-        if idle.cancelled_caught:
+        while True:
+            with anyio.move_on_after(quiet) as idle:
+                data = await stream.receive(READ_SIZE)
+            if not idle.cancelled_caught:
+                break
             if framing.waiting_for_silence():
                 return framing.silence()
+            if tap is not None and tap.last_answer >= 0:
+                quiet = tap.last_answer + self.idle_timeout - anyio.current_time()
+                if quiet > 0:
+                    continue  # answered at once meanwhile: not idle
             self.counters.connections_idle += 1
             _log.info(
                 "%s: %s idle for %g s, closed", self._name, peer_address(stream), self.idle_timeout

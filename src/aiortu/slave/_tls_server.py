@@ -32,6 +32,7 @@ from aiortu.core.codes import ExceptionCode
 from aiortu.core.mbap import Adu
 from aiortu.core.pdu import encode_exception
 from aiortu.errors import InvalidValue
+from aiortu.slave._tcp_at_once import Permits
 from aiortu.slave._tcp_server import ModbusTcpServer, _Outgoing
 from aiortu.transport import (
     ROLE_OID,
@@ -41,6 +42,8 @@ from aiortu.transport import (
     certificate_role,
     load_rules,
     peer_address,
+    push_listener,
+    pushed_listener,
     server_tls_context,
 )
 
@@ -113,10 +116,18 @@ class ModbusTlsServer(ModbusTcpServer):
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
         """Accept TLS connections on the TCP `listener` and serve each, until cancelled."""
-        secure = self._listener = TlsListener(
-            listener, self.tls_context, standard_compatible=False,
-            handshake_timeout=HANDSHAKE_TIMEOUT,
-        )  # fmt: skip
+        secure: TlsListener
+        if push_listener(listener):
+            secure = pushed_listener(
+                listener, self.tls_context, standard_compatible=False,
+                handshake_timeout=HANDSHAKE_TIMEOUT,
+            )  # fmt: skip
+        else:
+            secure = TlsListener(
+                listener, self.tls_context, standard_compatible=False,
+                handshake_timeout=HANDSHAKE_TIMEOUT,
+            )  # fmt: skip
+        self._listener = secure
         await super().serve(secure, task_status=task_status)
 
     async def serve_connection(self, stream: anyio.abc.ByteStream) -> None:
@@ -143,6 +154,14 @@ class ModbusTlsServer(ModbusTcpServer):
             await super().serve_connection(stream)
         finally:
             _CLIENT.reset(token)
+
+    def _permits(self) -> Permits:
+        client = _CLIENT.get(None)
+        rules = self.rules
+        if client is None:
+            return lambda adu: False
+        role = client.role
+        return lambda adu: rules.refusal(role, adu.unit, adu.pdu) is None
 
     async def _respond(self, adu: Adu) -> _Outgoing | None:
         client = _CLIENT.get(None)

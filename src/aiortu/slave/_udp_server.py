@@ -20,7 +20,7 @@ request by the general route.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Sized
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -28,11 +28,7 @@ import anyio
 import anyio.abc
 
 from aiortu._log import get_logger
-from aiortu.core.machines import SlaveMachine
 from aiortu.core.mbap import Adu, encode_adu
-from aiortu.core.model import AsyncDataStore, DataStore
-from aiortu.slave._answer_at_once import AnswerAtOnce
-from aiortu.slave._handlers import Handler
 from aiortu.slave._tcp_server import ModbusTcpServer
 from aiortu.transport import (
     DatagramCounters,
@@ -57,37 +53,13 @@ class ModbusUdpServer(ModbusTcpServer):
         super().__init__(units, **options)
         self.datagrams = DatagramCounters()
         """Datagrams received, refused and answered."""
-
-    def _init_dispatch(
-        self,
-        units: dict[int, DataStore | AsyncDataStore],
-        machine: SlaveMachine,
-        handlers: Mapping[int, Handler],
-    ) -> None:
-        super()._init_dispatch(units, machine, handlers)
-        # Made here: the base class configures the handlers and sets the trace next.
-        self._waiting: deque[tuple[Adu, DatagramSource]] = deque()
-        self._at_once = AnswerAtOnce(machine, self._waiting, before=self._before, after=self._after)
         self._endpoint: DatagramServer | None = None
 
-    def _configured(
-        self,
-        handlers: Mapping[int, Handler],
-        stores: Mapping[int, DataStore | AsyncDataStore],
-    ) -> None:
-        self._at_once.configure(handlers, stores)
-
-    @property
-    def trace(self) -> Callable[[str, bytes], object] | None:
-        """Sees every request and reply ADU, MBAP header included (see
-        [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]); one that raises is logged and
-        detached."""
-        return self._trace
-
-    @trace.setter
-    def trace(self, callback: Callable[[str, bytes], object] | None) -> None:
-        self._trace = callback
-        self._at_once.trace_set = callback is not None
+    def _pending_requests(self) -> Sized:
+        """The datagrams waiting for the server's task (made here, as the base class makes its
+        answer-at-once)."""
+        self._waiting: deque[tuple[Adu, DatagramSource]] = deque()
+        return self._waiting
 
     @asynccontextmanager
     async def running(self, address: ListenAddress, url: str) -> AsyncIterator[None]:

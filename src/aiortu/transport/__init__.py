@@ -47,13 +47,15 @@ from aiortu.transport._listen import (
     serve_listener,
     write_now,
 )
-from aiortu.transport._mbap_stream import (
-    FramedStream,
-    ModbusTcpCounters,
-    ModbusTcpStream,
-    open_modbus_tcp,
-)
+from aiortu.transport._mbap_stream import FramedStream, ModbusTcpCounters, ModbusTcpStream
 from aiortu.transport._push import PushStream
+from aiortu.transport._push_server import (
+    PushListener,
+    PushServerStream,
+    PushTlsListener,
+    push_listener,
+    pushed_listener,
+)
 from aiortu.transport._server_framing import (
     RTU_SILENCE,
     AsciiFraming,
@@ -62,6 +64,7 @@ from aiortu.transport._server_framing import (
     RtuFraming,
 )
 from aiortu.transport._tcp import open_rtu_over_tcp
+from aiortu.transport._tcp_push import PushConnectionStream, open_modbus_tcp
 from aiortu.transport._tls import (
     ROLE_OID,
     CertificateError,
@@ -132,7 +135,11 @@ __all__ = (
     "ModbusTcpStream",
     "PortAddress",
     "PushAsciiStream",
+    "PushConnectionStream",
     "PushDatagramStream",
+    "PushListener",
+    "PushServerStream",
+    "PushTlsListener",
     "PushStream",
     "RoleRules",
     "RS485Options",
@@ -164,6 +171,8 @@ __all__ = (
     "parse_port_url",
     "parse_rules",
     "parse_unix_url",
+    "push_listener",
+    "pushed_listener",
     "peer_address",
     "push_datagrams",
     "pushes_ascii",

@@ -38,9 +38,8 @@ from aiortu._log import get_logger
 from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
 from aiortu.core.rtu import crc16
 from aiortu.errors import InvalidValue
-from aiortu.transport._tcp import open_tcp_connection
 
-__all__ = ("FramedStream", "ModbusTcpCounters", "ModbusTcpStream", "open_modbus_tcp")
+__all__ = ("FramedStream", "ModbusTcpCounters", "ModbusTcpStream")
 
 _log = get_logger(__name__)
 
@@ -189,24 +188,3 @@ class ModbusTcpStream(anyio.abc.ByteStream):
 
     async def aclose(self) -> None:
         await self.stream.aclose()
-
-
-async def open_modbus_tcp(
-    host: str,
-    port: int,
-    *,
-    connect_timeout: float = 5.0,
-    counters: ModbusTcpCounters | None = None,
-) -> ModbusTcpStream:
-    """Connect to the Modbus TCP server at `host`:`port` and return the connection as a
-    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] of RTU frames.
-
-    `counters` continue those of an earlier connection (see
-    [`ModbusTcpCounters`][aiortu.transport.ModbusTcpCounters]). Raises
-    [`PortNotFound`][aiortu.errors.PortNotFound] when the host is unknown, the connection is
-    refused or fails, or nothing answers within `connect_timeout` seconds, and
-    [`InvalidValue`][aiortu.errors.InvalidValue] for a port outside 1..65535 or a timeout that
-    is not positive.
-    """
-    stream = await open_tcp_connection(host, port, connect_timeout=connect_timeout, scheme="tcp")
-    return ModbusTcpStream(stream, counters)

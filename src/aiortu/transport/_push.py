@@ -15,10 +15,21 @@ other stream, so a push stream must keep `receive()` and `send()` working as wel
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
-__all__ = ("PushStream",)
+__all__ = ("PushStream", "loop_pushes")
+
+
+def loop_pushes() -> bool:
+    """Whether the running event loop is asyncio's, whose protocol callbacks can push a network
+    stream's bytes (a master's Modbus TCP, UDP and TLS streams are pushed there)."""
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        return False
+    return True
 
 
 @runtime_checkable

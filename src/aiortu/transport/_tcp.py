@@ -20,7 +20,10 @@ that trying again later may work. While running, anyio's stream raises
 
 from __future__ import annotations
 
+import asyncio
 import socket
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import anyio
 import anyio.abc
@@ -29,7 +32,7 @@ from anyio.abc import SocketAttribute, SocketStream
 from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.transport._url import format_tcp_url
 
-__all__ = ("format_tcp_url", "open_rtu_over_tcp", "open_tcp_connection")
+__all__ = ("connect_protocol", "format_tcp_url", "open_rtu_over_tcp", "open_tcp_connection")
 
 
 def _leaf_errors(exc: BaseException) -> list[BaseException]:
@@ -64,6 +67,63 @@ async def open_tcp_connection(
     """Connect to `host`:`port` with Nagle's algorithm off, as
     [`open_rtu_over_tcp`][aiortu.transport.open_rtu_over_tcp] describes; errors name the server
     as `scheme://host:port`."""
+    with _connecting(host, port, connect_timeout, scheme):
+        stream = await anyio.connect_tcp(host, port)
+    try:
+        sock = stream.extra(SocketAttribute.raw_socket)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    except BaseException:
+        await stream.aclose()
+        raise
+    return stream
+
+
+async def connect_protocol(
+    host: str,
+    port: int,
+    protocol: asyncio.Protocol,
+    *,
+    connect_timeout: float,
+    scheme: str,
+) -> asyncio.Transport:
+    """Connect `protocol` to `host`:`port` on asyncio's own transport (Nagle's algorithm off,
+    as asyncio sets it), with the checks and errors of
+    [`open_rtu_over_tcp`][aiortu.transport.open_rtu_over_tcp]; asyncio only."""
+    with _connecting(host, port, connect_timeout, scheme):
+        transport = await _first_connection(host, port, protocol)
+    return transport
+
+
+async def _first_connection(host: str, port: int, protocol: asyncio.Protocol) -> asyncio.Transport:
+    """`protocol` on a connection to the first of `host`'s addresses that takes one, each tried
+    in turn (anyio's `connect_tcp` races them); when none does, an `OSError` caused by each
+    address's error, as anyio raises it, for `_describe_failure`."""
+    loop = asyncio.get_running_loop()
+    failures: list[OSError] = []
+    for family, kind, proto, _, address in await anyio.getaddrinfo(
+        host, port, type=socket.SOCK_STREAM
+    ):
+        sock = socket.socket(family, kind, proto)
+        try:
+            sock.setblocking(False)
+            await loop.sock_connect(sock, address)
+        except OSError as error:
+            sock.close()
+            failures.append(error)
+            continue
+        except BaseException:
+            sock.close()
+            raise
+        transport, _ = await loop.create_connection(lambda: protocol, sock=sock)
+        return transport
+    raise OSError("all connection attempts failed") from ExceptionGroup("", failures)
+
+
+@contextmanager
+def _connecting(host: str, port: int, connect_timeout: float, scheme: str) -> Iterator[None]:
+    """Check the port and the timeout, bound the connection's time by the timeout, and turn
+    its failures into [`PortNotFound`][aiortu.errors.PortNotFound] naming
+    `scheme://host:port`."""
     if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
         raise InvalidValue("port", port, range(1, 65536))
     if not connect_timeout > 0:
@@ -71,7 +131,7 @@ async def open_tcp_connection(
     where = format_tcp_url(host, port, scheme)
     try:
         with anyio.fail_after(connect_timeout):
-            stream = await anyio.connect_tcp(host, port)
+            yield
     except TimeoutError:
         raise PortNotFound(
             where, f"no answer within {connect_timeout:g} s (host down or filtered?)"
@@ -80,10 +140,3 @@ async def open_tcp_connection(
         raise PortNotFound(where, f"unknown host {host!r} ({exc.strerror})") from exc
     except OSError as exc:
         raise PortNotFound(where, _describe_failure(exc)) from exc
-    try:
-        sock = stream.extra(SocketAttribute.raw_socket)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-    except BaseException:
-        await stream.aclose()
-        raise
-    return stream

@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import logging
 import ssl
-from collections.abc import Callable, Mapping
+from collections.abc import AsyncIterator, Callable, Mapping
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any, Final
 
@@ -35,9 +36,11 @@ from anyio.streams.tls import TLSListener, TLSStream
 
 from aiortu._log import get_logger
 from aiortu.errors import InvalidValue, PortError
+from aiortu.transport import _tcp_push  # its predicate, looked up at each call
 from aiortu.transport._listen import peer_address
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
 from aiortu.transport._tcp import open_tcp_connection
+from aiortu.transport._tcp_push import PushConnectionStream, open_pushed
 from aiortu.transport._url import TLS_SCHEME, format_tcp_url
 
 __all__ = (
@@ -280,10 +283,12 @@ async def open_modbus_tls(
     cafile: PathLike | None = None,
     connect_timeout: float = 5.0,
     counters: ModbusTcpCounters | None = None,
-) -> ModbusTcpStream:
+) -> ModbusTcpStream | PushConnectionStream:
     """Connect to the Modbus/TCP Security server at `host`:`port` with the client certificate
-    `certfile` and its key `keyfile`, trusting the CAs in `cafile`; return a
-    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] of RTU frames.
+    `certfile` and its key `keyfile`, trusting the CAs in `cafile`; return a stream of RTU
+    frames, as [`open_modbus_tcp`][aiortu.transport.open_modbus_tcp] does (on asyncio a
+    [`PushConnectionStream`][aiortu.transport.PushConnectionStream] on asyncio's TLS transport,
+    elsewhere a [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over anyio's TLS stream).
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a missing or unreadable file,
     [`PortNotFound`][aiortu.errors.PortNotFound] when the server cannot be reached, and
@@ -292,12 +297,31 @@ async def open_modbus_tls(
     """
     context = client_tls_context(certfile, keyfile, cafile)
     where = format_tcp_url(host, port, TLS_SCHEME)
+    counters = counters if counters is not None else ModbusTcpCounters()
+    if _tcp_push.push_connections():
+        pushed = await open_pushed(
+            host, port, counters, connect_timeout=connect_timeout, scheme=TLS_SCHEME
+        )
+        async with _handshake(where, connect_timeout, pushed):
+            await pushed.start_tls(context, host)
+        return pushed
     stream = await open_tcp_connection(host, port, connect_timeout=connect_timeout, scheme="tls")
+    async with _handshake(where, connect_timeout, stream):
+        tls = await TLSStream.wrap(
+            stream, hostname=host, ssl_context=context, standard_compatible=False
+        )
+    return ModbusTcpStream(tls, counters)
+
+
+@asynccontextmanager
+async def _handshake(
+    where: str, seconds: float, stream: anyio.abc.AsyncResource
+) -> AsyncIterator[None]:
+    """Bound the handshake by `seconds`; when it fails, close `stream` and raise
+    [`PortError`][aiortu.errors.PortError] saying why in one sentence."""
     try:
-        with anyio.fail_after(connect_timeout):
-            tls = await TLSStream.wrap(
-                stream, hostname=host, ssl_context=context, standard_compatible=False
-            )
+        with anyio.fail_after(seconds):
+            yield
     except Exception as error:
         await anyio.aclose_forcefully(stream)
         if isinstance(error, ssl.SSLCertVerificationError):
@@ -305,4 +329,3 @@ async def open_modbus_tls(
         else:
             message = f"the TLS handshake failed: {describe_tls_failure(error)}"
         raise PortError(where, message) from None
-    return ModbusTcpStream(tls, counters)

@@ -20,10 +20,8 @@ that picks this path; the differential tests run the same exchanges through both
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import socket
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -35,14 +33,15 @@ from aiortu._log import get_logger
 from aiortu.core.mbap import Adu
 from aiortu.errors import FrameError
 from aiortu.transport._datagram_socket import DatagramSocket
+from aiortu.transport._mbap_push import PushedMbap
 from aiortu.transport._mbap_stream import (
-    NONE_OUTSTANDING,
     ModbusTcpCounters,
     reply_frame,
     reply_taken,
     request_adu,
     take_transaction_id,
 )
+from aiortu.transport._push import loop_pushes
 from aiortu.transport._url import MODBUS_UDP_SCHEME, format_tcp_url
 
 __all__ = ("PushDatagramStream", "log_level", "open_push_datagrams", "push_datagrams")
@@ -56,11 +55,7 @@ def push_datagrams() -> bool:
     """Whether Modbus UDP reads its socket from the event loop's reader callback (a master's
     [`PushDatagramStream`][aiortu.transport.PushDatagramStream], a server's
     [`DatagramServer`][aiortu.transport.DatagramServer]): where the running loop is asyncio."""
-    try:
-        asyncio.get_running_loop()
-    except RuntimeError:
-        return False
-    return True
+    return loop_pushes()
 
 
 def log_level(count: int) -> int:
@@ -69,7 +64,7 @@ def log_level(count: int) -> int:
     return logging.WARNING if count == 1 else logging.DEBUG
 
 
-class PushDatagramStream(anyio.abc.ByteStream):
+class PushDatagramStream(PushedMbap):
     """RTU frames over Modbus UDP to `peer`, pushed (see the module docstring). Made by
     [`open_modbus_udp`][aiortu.transport.open_modbus_udp] on asyncio."""
 
@@ -80,15 +75,12 @@ class PushDatagramStream(anyio.abc.ByteStream):
         where: str,
         check: Callable[[bytes], Adu],
     ) -> None:
+        super().__init__(counters, where)
         self.peer = peer
         self._check = check
-        self.counters = counters
-        """Requests, replies and dropped, refused and strangers' datagrams."""
-        self.where = where
         self.socket: DatagramSocket | None = None
         """The socket, once `open_push_datagrams`
         has opened it."""
-        self._outstanding = NONE_OUTSTANDING
         self._last_tail: bytes | None = None
         """The last reply taken, after its transaction id (see `datagram`)."""
         self._last_frame = b""
@@ -97,16 +89,6 @@ class PushDatagramStream(anyio.abc.ByteStream):
         """The last request's RTU frame (see `send_nowait`)."""
         self._last_request_tail = b""
         """Its ADU, after the transaction id."""
-        self._receiver: Callable[[bytes], None] | None = None
-        self._on_lost: Callable[[], None] | None = None
-        self._kept: deque[bytes] = deque()
-        self._waiter: asyncio.Future[None] | None = None
-        self._error: BaseException | None = None
-
-    @property
-    def whole_frames(self) -> bool:
-        """True: each frame handed over is one whole RTU frame."""
-        return True
 
     @property
     def extra_attributes(self) -> Any:
@@ -145,57 +127,12 @@ class PushDatagramStream(anyio.abc.ByteStream):
             frame = reply_frame(counters, self._outstanding, adu)
             if frame is not None:
                 self._last_tail, self._last_frame = data[2:], frame
-        if frame is None:
-            return
-        self._outstanding = NONE_OUTSTANDING  # one reply per request
-        if self._receiver is not None:
-            self._receiver(frame)
-            return
-        self._kept.append(frame)
-        self._wake()
+        if frame is not None:
+            self.deliver(frame)
 
-    def lost(self) -> None:
+    def closed(self) -> None:
         """The socket closed (by `aclose`)."""
-        if self._error is None:
-            self._error = anyio.ClosedResourceError()
-        self._wake()
-        if self._on_lost is not None:
-            on_lost, self._on_lost = self._on_lost, None
-            on_lost()
-
-    def _wake(self) -> None:
-        waiter = self._waiter
-        if waiter is not None and not waiter.done():
-            waiter.set_result(None)
-
-    def set_receiver(
-        self,
-        receiver: Callable[[bytes], None] | None,
-        on_lost: Callable[[], None] | None = None,
-    ) -> None:
-        """The push extension: hand each reply to `receiver` (None: keep them for
-        `receive()`)."""
-        self._receiver = receiver
-        self._on_lost = on_lost if receiver is not None else None
-        if receiver is None:
-            return
-        while self._kept:
-            receiver(self._kept.popleft())
-        if self._error is not None:
-            self.lost()
-
-    async def receive(self, max_bytes: int = 65536) -> bytes:
-        """The next reply to the request outstanding, as an RTU frame."""
-        await anyio.lowlevel.checkpoint()
-        while not self._kept:
-            if self._error is not None:
-                raise self._error
-            self._waiter = asyncio.get_running_loop().create_future()
-            try:
-                await self._waiter
-            finally:
-                self._waiter = None
-        return self._kept.popleft()
+        self.lost(anyio.ClosedResourceError())
 
     # -- sending ---------------------------------------------------------------------
 
@@ -237,7 +174,7 @@ class PushDatagramStream(anyio.abc.ByteStream):
     async def aclose(self) -> None:
         if self.socket is not None:
             self.socket.close()
-        self.lost()
+        self.closed()
         await anyio.lowlevel.checkpoint()
 
 
@@ -252,6 +189,6 @@ async def open_push_datagrams(
     of `family`, each datagram checked by `check` (on asyncio only; see `push_datagrams`)."""
     stream = PushDatagramStream(peer, counters, where, check)
     stream.socket = DatagramSocket(
-        socket.socket(family, socket.SOCK_DGRAM), stream.datagram, stream.lost, where
+        socket.socket(family, socket.SOCK_DGRAM), stream.datagram, stream.closed, where
     )
     return stream
