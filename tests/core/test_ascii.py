@@ -473,7 +473,7 @@ def _pieces(draw: st.DrawFn, delimiter: int) -> bytes:
         index = draw(st.integers(0, len(frame) - 1))
         return frame[:index] + bytes((draw(st.integers(0, 255)),)) + frame[index + 1 :]
     if kind == "long":
-        return b":" + b"00" * draw(st.integers(253, 257)) + bytes((0x0D, delimiter))
+        return b":" + b"0" * draw(st.integers(508, 513)) + bytes((0x0D, delimiter))
     alphabet = st.sampled_from(b":\r\n!A0F") | st.integers(0, 255)
     return bytes(draw(st.lists(alphabet, max_size=12)))
 
