@@ -179,15 +179,16 @@ async def test_reads_on_a_line_with_an_event_loop_run_on_no_task(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     # The engine runs each read itself (the fast path, or its line task) and completes a
-    # future: the gateway answers from its done-callback, and no worker is ever started.
+    # future: the gateway answers from its done-callback, and no worker awaits a request (a
+    # pushed connection keeps one parked, for the requests its read callback hands on).
     workers: list[object] = []
-    worker = Gateway._worker
+    request = Gateway._request
 
     async def spied(self: Gateway, *args: object) -> None:
         workers.append(args)
-        await worker(self, *args)  # type: ignore[arg-type]
+        await request(self, *args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(Gateway, "_worker", spied)
+    monkeypatch.setattr(Gateway, "_request", spied)
     async with line(max_in_flight=3) as bench:
         async with client(bench.gateway) as a, client(bench.gateway) as b:
             for _ in range(5):
