@@ -7,9 +7,11 @@ answer) run twice on the same kind of line, once with the shortcut and once with
 on a worker (`answered_from_callback` false); and with the `tcp://` listener's connections
 pushed (requests taken in the read callback where `accepted_in_callback` allows) and on anyio's
 streams (`push_listener` false: the reader task takes every request). Each client must get the
-same replies, in the same order (pushed or not: the same replies), and the registers must end
-the same. Each client reads and writes its own block
-(and all read one no one writes), so its replies do not depend on how the clients interleave.
+same replies to the same transaction ids, and the registers must end the same. (The order of a
+Modbus TCP client's replies is not promised: a read answered from a callback may overtake one
+on a worker, and which other client's read a read joins depends on timing.) Each client reads
+and writes its own block (and all read one no one writes), so its replies do not depend on how
+the clients interleave.
 """
 
 from __future__ import annotations
@@ -122,7 +124,7 @@ async def test_reads_answered_from_callbacks_agree_with_reads_on_workers(
     try:
         shortcut = await _run(seed, True, monkeypatch)
         general = await _run(seed, False, monkeypatch)
-        assert shortcut == general
+        assert _by_id(shortcut) == _by_id(general)
     except BaseException:
         print(f"gateway differential seed {seed} (AIORTU_GATEWAY_DIFFERENTIAL_SEED={seed})")
         raise
@@ -141,9 +143,7 @@ async def test_requests_taken_in_the_read_callback_agree_with_the_reader_task(
 ) -> None:
     # The `tcp://` listener's pushed connections (the read callback takes a request when
     # `accepted_in_callback` allows) against anyio's streams (the reader task takes them all),
-    # with the read shortcut on and off. Which other client's read a read joins depends on
-    # timing, which the two streams change; so may the order of a client's replies (their
-    # transaction ids tell them apart), never their contents.
+    # with the read shortcut on and off.
     seed = SEED + offset
     try:
         for shortcut in (True, False):

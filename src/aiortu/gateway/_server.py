@@ -609,6 +609,15 @@ class Gateway:
         path sent), else from a worker; `_end` ends it either way."""
         pdu, unit, line = request.adu.pdu, request.unit, request.line
         request.shared = None
+        connection = request.connection
+        if connection.pending:
+            # A request handed to a worker reaches the engine only once the worker runs: this
+            # read must not pass it on the line, so the worker that takes it takes this read
+            # next (no task started: this may run in a callback).
+            self._count_transaction(line)
+            request.awaitable = forward(line.master, unit, pdu, connection.priority, request.turn)
+            connection.pending.append(request)
+            return
         if self.coalesce:
             key = (unit, pdu)
             shared = line.shared.get(key)
@@ -623,9 +632,7 @@ class Gateway:
             request.generation = cache.generation(unit)
         self._count_transaction(line)
         try:
-            awaitable = start_forward(
-                line.master, unit, pdu, request.connection.priority, request.turn
-            )
+            awaitable = start_forward(line.master, unit, pdu, connection.priority, request.turn)
         except Exception:
             _log.exception("gateway: forwarding a request failed; answered with exception 0B")
             self._end(request, exception_reply(pdu, _NO_RESPONSE))
@@ -759,9 +766,7 @@ def accepted_in_callback(connection: _Client, chunk: bytes) -> Adu | None:
       comes first, through the reader);
     - its window has room (else the reader waits for room, and TCP holds the client back);
     - one of its workers is parked (a write, or a read the engine runs on its caller's task,
-      is handed to it: a callback cannot start a task), and every request of the connection
-      in flight is answered from a callback (one on a worker may not be on the line yet, and
-      a later read must not pass it);
+      is handed to it: a callback cannot start a task);
     - `chunk` is exactly one well-formed MBAP request (several, a part of one or a malformed
       header go to the framing, which splits them or closes the connection).
     """
@@ -769,8 +774,8 @@ def accepted_in_callback(connection: _Client, chunk: bytes) -> Adu | None:
         return None
     if connection.framing.buffered or connection.in_flight >= connection.window:
         return None
-    if not connection.parked or connection.in_flight != len(connection.on_line):
-        return None  # a worker must be free, and none busy: a later read must not pass it
+    if not connection.parked:
+        return None  # a request may need a worker, and a callback cannot start a task
     try:
         return decode_adu(chunk)
     except FrameError:
