@@ -1,7 +1,12 @@
-"""A virtual line with aiortu slaves, a master on it, and a gateway in front of the master."""
+"""A virtual line with aiortu slaves, a master on it, and a gateway in front of the master.
+
+Its clients connect over TCP on 127.0.0.1 (`client`), or over an in-memory stream straight to
+the gateway's `serve_connection` (`memory_client`, with `line(listen=())`): no socket, so that
+the test runs on a virtual clock (`tests/virtual_clock.py`)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import AsyncIterator, Mapping
 from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass
@@ -13,10 +18,19 @@ from aiortu.core.serial import LineSettings
 from aiortu.gateway import Gateway, Listen, gateway
 from aiortu.master import Master
 from aiortu.slave import MemoryStore, Slave
-from aiortu.testing import VirtualBus
+from aiortu.testing import VirtualBus, VirtualEndpoint, virtual_pair
 from tests.slave.tcp_helpers import UNIT, TcpClient, device
 
-__all__ = ("UNIT", "Line", "TcpClient", "client", "device", "line")
+__all__ = (
+    "UNIT",
+    "Line",
+    "TcpClient",
+    "client",
+    "device",
+    "line",
+    "memory_client",
+    "memory_stream",
+)
 
 
 @dataclass
@@ -61,4 +75,23 @@ async def line(
 async def client(server: Gateway) -> AsyncIterator[TcpClient]:
     stream = await anyio.connect_tcp("127.0.0.1", server.port)
     async with stream:
+        yield TcpClient(stream)
+
+
+@asynccontextmanager
+async def memory_stream(server: Gateway, **serve_options: Any) -> AsyncIterator[VirtualEndpoint]:
+    """A client's end of an in-memory stream whose far end `server` serves as it serves an
+    accepted socket (`serve_options` are `serve_connection`'s: `rtu_framing=True`, ...)."""
+    near, far = virtual_pair()
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(functools.partial(server.serve_connection, far, **serve_options))
+        async with near:
+            yield near
+        tasks.cancel_scope.cancel()
+
+
+@asynccontextmanager
+async def memory_client(server: Gateway) -> AsyncIterator[TcpClient]:
+    """A Modbus TCP client of `server` over an in-memory stream (see `memory_stream`)."""
+    async with memory_stream(server) as stream:
         yield TcpClient(stream)

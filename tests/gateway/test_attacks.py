@@ -1,5 +1,7 @@
 """The line server under attack, on loopback: clients that leave with requests queued, that
 never read, that half-close, that reset before they are accepted, and many client hosts.
+These need sockets (resets, half-closes, the kernel's buffers), and run in real time; a slow
+line's client runs on a virtual clock over an in-memory stream.
 
 Each bound is one the gateway guarantees (requests on the wire, connections, counters), not a
 time a quiet machine happens to show."""
@@ -17,7 +19,8 @@ from aiortu.core.mbap import encode_adu
 from aiortu.gateway import GatewayStatistics
 from aiortu.slave import MemoryStore, RequestContext, Table
 from aiortu.transport import listen_tcp
-from tests.gateway.helpers import UNIT, TcpClient, client, device, line
+from tests.gateway.helpers import UNIT, TcpClient, client, device, line, memory_client
+from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -134,15 +137,18 @@ def _send_until_blocked(sock: socket.socket, chunk: bytes) -> int:
     return sent
 
 
+@on_virtual_clock
 async def test_a_request_that_waits_for_a_slow_line_is_not_idle() -> None:
     async def slow(request: object, context: RequestContext) -> None:
         await anyio.sleep(0.8)
 
-    async with line(idle_timeout=0.3, master_options={"timeout": 5.0}) as bench:
+    async with line(idle_timeout=0.3, master_options={"timeout": 5.0}, listen=()) as bench:
         bench.slave.before_request(slow)
-        async with client(bench.gateway) as tcp:
-            assert await tcp.request("03 0000 0001") == "03 02 12 34"
-            assert await tcp.request("03 0001 0001") == "03 02 AB CD"
+        async with memory_client(bench.gateway) as tcp:
+            for address, reply in ((0, "03 02 12 34"), (1, "03 02 AB CD")):
+                asked = anyio.current_time()
+                assert await tcp.request(f"03 {address:04X} 0001") == reply
+                assert anyio.current_time() - asked >= 0.8  # over twice the idle timeout
         assert bench.gateway.counters.connections_idle == 0
 
 

@@ -1,14 +1,21 @@
 """The per-block read cache: reads answered again within the maximum age, writes never cached
-and dropping every block they touch; counted in messages on the slave, on a fake clock."""
+and dropping every block they touch; counted in messages on the slave, on a fake clock, and
+by default on the event loop's (a virtual clock here)."""
 
 from __future__ import annotations
 
+import time
+
+import anyio
 import pytest
 
 from aiortu.errors import InvalidValue
 from aiortu.gateway import Gateway
 from aiortu.gateway._cache import ReadCache
-from tests.gateway.helpers import UNIT, client, line
+from aiortu.master import Master
+from aiortu.testing import VirtualBus
+from tests.gateway.helpers import UNIT, client, line, memory_client
+from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -103,6 +110,30 @@ async def test_through_the_gateway_reads_hit_the_cache_until_a_write_or_the_age(
         clock.now += 0.501
         await tcp.request("03 0000 0003")
         assert bench.messages == before + 3  # too old: read again
+
+
+@on_virtual_clock
+async def test_by_default_the_cache_ages_on_the_event_loops_clock() -> None:
+    async with line(cache_ms=500, listen=()) as bench:
+        # Made by `gateway` (the bench's), and made directly.
+        for server in (bench.gateway, Gateway(bench.master, cache_ms=500)):
+            async with memory_client(server) as tcp:
+                assert await tcp.request("03 0000 0003") == "03 06 12 34 AB CD 00 07"
+                on_the_line = bench.messages
+                await anyio.sleep(0.5)
+                await tcp.request("03 0000 0003")
+                assert bench.messages == on_the_line  # 500 ms old: still answered
+                await anyio.sleep(0.001)
+                await tcp.request("03 0000 0003")
+                assert bench.messages == on_the_line + 1
+
+
+def test_a_gateway_made_outside_an_event_loop_ages_its_cache_on_asyncios_clock() -> None:
+    # No loop to ask: asyncio's clock, time.monotonic (not an error, and never no clock).
+    made = Gateway(Master(VirtualBus(2).endpoints[0]), cache_ms=500)
+    cache = made._lines[0].cache
+    assert cache is not None
+    assert cache._clock is time.monotonic
 
 
 async def test_without_cache_ms_every_read_goes_on_the_line() -> None:

@@ -15,7 +15,8 @@ from aiortu.line import Link
 from aiortu.master import Master
 from aiortu.slave import RequestContext
 from aiortu.testing import VirtualBus
-from tests.gateway.helpers import UNIT, client, line
+from tests.gateway.helpers import UNIT, client, line, memory_client
+from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -90,10 +91,11 @@ async def test_ids_are_the_clients_own_and_pipelined_requests_all_answered() -> 
             assert reply.pdu == bytes.fromhex(f"03 02 {expected:04X}")
 
 
+@on_virtual_clock
 async def test_broadcast_is_executed_and_not_answered() -> None:
-    async with line() as bench, client(bench.gateway) as tcp:
+    async with line(listen=()) as bench, memory_client(bench.gateway) as tcp:
         await tcp.send("06 0008 0077", unit=0, transaction_id=5)
-        assert await tcp.receive(wait=0.5) is None
+        assert await tcp.receive(wait=10) is None
         assert bench.gateway.counters.broadcasts == 1
         assert await tcp.request("03 0008 0001", UNIT) == "03 02 00 77"
 

@@ -17,7 +17,8 @@ from aiortu.gateway import Gateway, GatewayLine, gateway
 from aiortu.master import Master
 from aiortu.slave import MemoryStore, Slave
 from aiortu.testing import VirtualBus
-from tests.gateway.helpers import client
+from tests.gateway.helpers import client, memory_client
+from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -38,7 +39,9 @@ async def _bus(stack: AsyncExitStack, unit: int, value: int) -> tuple[Master, Sl
 
 
 @asynccontextmanager
-async def two_lines() -> AsyncIterator[tuple[Gateway, Slave, Slave]]:
+async def two_lines(
+    listen: tuple[str, ...] = ("tcp://127.0.0.1:0",),
+) -> AsyncIterator[tuple[Gateway, Slave, Slave]]:
     """Unit 5 on line A (units 1-20), unit 30 on line B (units 21-40), one gateway."""
     async with AsyncExitStack() as stack:
         master_a, slave_a = await _bus(stack, 5, 0xA)
@@ -48,7 +51,7 @@ async def two_lines() -> AsyncIterator[tuple[Gateway, Slave, Slave]]:
             GatewayLine(master_a, range(1, 21), "A"),
             GatewayLine(master_b, range(21, 41), "B"),
         ]
-        server = await stack.enter_async_context(gateway(lines, ["tcp://127.0.0.1:0"]))
+        server = await stack.enter_async_context(gateway(lines, listen))
         yield server, slave_a, slave_b
 
 
@@ -73,10 +76,11 @@ async def test_a_unit_no_line_serves_gets_0A_without_a_transaction() -> None:
         assert server.counters.transactions == 0
 
 
+@on_virtual_clock
 async def test_a_broadcast_goes_on_every_line() -> None:
-    async with two_lines() as (server, slave_a, slave_b), client(server) as tcp:
+    async with two_lines(listen=()) as (server, slave_a, slave_b), memory_client(server) as tcp:
         await tcp.send("06 0001 0063", unit=0)
-        assert await tcp.receive(wait=0.3) is None  # never answered
+        assert await tcp.receive(wait=10) is None  # never answered
         assert await tcp.request("03 0001 0001", unit=5) == "03 02 00 63"
         assert await tcp.request("03 0001 0001", unit=30) == "03 02 00 63"
         assert server.counters.broadcasts == 2

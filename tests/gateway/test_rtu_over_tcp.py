@@ -1,4 +1,7 @@
-"""The `rtu+tcp://` listener: RTU frames over TCP, as a serial device server sends them."""
+"""The `rtu+tcp://` listener: RTU frames over TCP, as a serial device server sends them. A frame
+of unknown length ends after a silence, and a dropped frame is asserted by a wait: those tests
+run on a virtual clock, their clients on in-memory streams served as the listener serves a
+socket. The server framings' own rules are checked without I/O."""
 
 from __future__ import annotations
 
@@ -13,12 +16,11 @@ from aiortu.core.mbap import encode_adu
 from aiortu.core.pdu import RawPDU
 from aiortu.core.rtu import encode_frame
 from aiortu.slave import RequestContext
-from aiortu.transport import AsciiFraming, Framing, MbapFraming, RtuFraming
-from tests.gateway.helpers import UNIT, line
+from aiortu.transport import RTU_SILENCE, AsciiFraming, Framing, MbapFraming, RtuFraming
+from tests.gateway.helpers import UNIT, line, memory_stream
+from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(30)
-
-BOTH = ("tcp://127.0.0.1:0", "rtu+tcp://127.0.0.1:0")
 
 
 async def _reply(stream: anyio.abc.ByteStream, wait: float = 3.0) -> bytes | None:
@@ -33,16 +35,23 @@ def _echo(request: object, context: RequestContext) -> RawPDU:
     return RawPDU(0x41, request.data)
 
 
+@on_virtual_clock
 async def test_rtu_frames_are_answered_with_rtu_frames() -> None:
-    async with line(listen=BOTH) as bench:
+    async with line(listen=()) as bench:
         bench.slave.set_handler(0x41, _echo)
-        port = bench.gateway.local_addresses[1][1]
-        async with await anyio.connect_tcp("127.0.0.1", port) as stream:
+        async with memory_stream(bench.gateway, rtu_framing=True) as stream:
             await stream.send(encode_frame(UNIT, bytes.fromhex("03 0001 0002")))
             assert await _reply(stream) == encode_frame(UNIT, bytes.fromhex("03 04 ABCD 0007"))
-            # A user-defined code: its length is unknown, a silence ends it.
+            # A user-defined code: its length is unknown, a silence ends it. The gateway waits
+            # that silence, then the transaction takes what it takes on the line.
+            start = anyio.current_time()
+            await bench.master.execute(UNIT, RawPDU(0x41, b"\x01\x02"))
+            on_the_line = anyio.current_time() - start
+            start = anyio.current_time()
             await stream.send(encode_frame(UNIT, bytes.fromhex("41 0102")))
             assert await _reply(stream) == encode_frame(UNIT, bytes.fromhex("41 0102"))
+            elapsed = anyio.current_time() - start
+            assert elapsed == pytest.approx(RTU_SILENCE + on_the_line, abs=1e-9)
             # Two frames in one chunk: answered in order, one at a time.
             two = encode_frame(UNIT, bytes.fromhex("03 0000 0001")) + encode_frame(
                 UNIT, bytes.fromhex("04 0000 0001")
@@ -57,17 +66,16 @@ async def test_rtu_frames_are_answered_with_rtu_frames() -> None:
             )
 
 
+@on_virtual_clock
 async def test_a_bad_crc_is_dropped_and_the_connection_goes_on() -> None:
-    async with line(listen=BOTH) as bench:
-        port = bench.gateway.local_addresses[1][1]
-        async with await anyio.connect_tcp("127.0.0.1", port) as stream:
-            frame = bytearray(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
-            frame[-1] ^= 0xFF
-            await stream.send(bytes(frame))
-            assert await _reply(stream, wait=0.3) is None
-            assert bench.messages == 0
-            await stream.send(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
-            assert await _reply(stream) == encode_frame(UNIT, bytes.fromhex("03 02 1234"))
+    async with line(listen=()) as bench, memory_stream(bench.gateway, rtu_framing=True) as stream:
+        frame = bytearray(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
+        frame[-1] ^= 0xFF
+        await stream.send(bytes(frame))
+        assert await _reply(stream, wait=10) is None
+        assert bench.messages == 0
+        await stream.send(encode_frame(UNIT, bytes.fromhex("03 0000 0001")))
+        assert await _reply(stream) == encode_frame(UNIT, bytes.fromhex("03 02 1234"))
 
 
 READ = bytes.fromhex("03 0000 0001")

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import time
+
 import anyio
+import anyio.lowlevel
 import pytest
 
-from aiortu.line import native_waits
+from aiortu.line import loop_clock, native_waits
+from tests.virtual_clock import on_virtual_clock
 
 BACKENDS = ("asyncio", "trio")
 
@@ -63,3 +67,33 @@ def test_a_wait_can_be_cancelled(backend: str) -> None:
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_timed_callbacks_exist_only_where_the_loop_has_them(backend: str) -> None:
     anyio.run(_timed_callbacks_only_on_asyncio, backend, backend=backend)
+
+
+def test_the_loop_clock_of_asyncio_s_own_loops_is_time_monotonic() -> None:
+    async def clock() -> object:
+        return loop_clock()
+
+    assert anyio.run(clock, backend="asyncio") is time.monotonic
+
+
+@on_virtual_clock
+async def test_the_loop_clock_tells_the_backend_s_time_virtual_or_not() -> None:
+    clock = loop_clock()
+    assert clock is not time.monotonic  # the virtual loop tells time of its own
+    start = clock()
+    assert start == anyio.current_time()
+    await anyio.sleep(1000)  # no real time: the clock jumps
+    assert clock() - start == 1000
+    assert clock() == anyio.current_time()
+
+
+def test_the_loop_clock_reads_the_running_loop_unless_given_its_token() -> None:
+    with pytest.raises(RuntimeError):
+        loop_clock()  # no event loop runs
+
+    async def clocks() -> tuple[object, object]:
+        token = anyio.lowlevel.current_token()
+        return loop_clock(token), loop_clock()
+
+    given, running = anyio.run(clocks, backend="trio")
+    assert given == running

@@ -225,6 +225,7 @@ async def test_the_poll_command_redraws_its_table_in_place_on_a_terminal() -> No
     assert second.startswith("5F\x1b[J")
 
 
+@on_virtual_clock
 async def test_dead_units_take_turns_for_one_probe_per_cycle() -> None:
     # Only dead units: no reply is due, so the short timeout cannot turn a slow reply into
     # one more offline unit taking its turn.

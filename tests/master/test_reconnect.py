@@ -1,11 +1,19 @@
-"""Reconnecting: the port disappears under a running master (a pty closed, like a USB
-adapter unplugged) and comes back under the same name (a symlink we re-point)."""
+"""Reconnecting: the port disappears under a running master (a USB adapter unplugged) and
+comes back under the same name.
+
+The scenarios run on a virtual clock (`tests/virtual_clock.py`), on a port of virtual lines
+that the test plugs in and out: each time is exact, the back-off's included, and none is
+waited in real time. One test runs `open_master` on a pty whose name (a symlink) is re-pointed,
+in real time: the opener that reopens a device path by its name is the part it checks, and
+a pty's bytes come in real time."""
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import logging
 import os
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import anyio
@@ -14,19 +22,198 @@ import pytest
 
 import aiortu
 from aiortu.core.pdu import Request
-from aiortu.testing import make_raw
+from aiortu.core.serial import LineSettings
+from aiortu.testing import VirtualEndpoint, make_raw, virtual_pair
 from aiortu.transport import FileDescriptorStream
+from tests.virtual_clock import on_virtual_clock
 
 from .fakes import FakeSlave, answer, register_value
 
 pytestmark = pytest.mark.timeout(30)
 
 LINE = {"baudrate": 19200, "parity": "N", "stopbits": 2}
+DELAY = (0.05, 0.2)
+"""The reconnect back-off of these tests: 50 ms, doubling up to 200 ms."""
 
 
 async def hold(fake: FakeSlave, unit: int, request: Request) -> None:
     """A step that answers too late for any request of these tests."""
     await anyio.sleep(10)
+
+
+class Port:
+    """A serial port that the test plugs in and out: each plug is a new virtual line with a
+    fake slave on its far end; `open` is the master's opener, and notes when it was called."""
+
+    def __init__(self, tasks: anyio.abc.TaskGroup) -> None:
+        self.tasks = tasks
+        self.opened: list[float] = []
+        """When the port was opened or tried (first by the test, then by the master)."""
+        self.fake: FakeSlave | None = None
+        self._near: VirtualEndpoint | None = None
+        self._scope = anyio.CancelScope()
+
+    async def open(self) -> anyio.abc.ByteStream:
+        self.opened.append(anyio.current_time())
+        near, self._near = self._near, None  # one open per plug
+        if near is None:
+            raise FileNotFoundError(errno.ENOENT, "No such file or directory", "/dev/ttyUSB9")
+        return near
+
+    def plug(self, *, slow: bool = False) -> None:
+        near, far = virtual_pair()
+        self._near = near
+        fake = self.fake = FakeSlave(far, default=hold if slow else answer)
+        scope = self._scope = anyio.CancelScope()
+
+        async def run() -> None:
+            with scope:
+                await fake.run()
+
+        self.tasks.start_soon(run)
+
+    def unplug(self) -> None:
+        assert self.fake is not None
+        self._scope.cancel()
+        self._near = None
+        self.fake.stream.close()  # the master's end sees its line end now
+
+
+@contextlib.asynccontextmanager
+async def plugged_master(**options: object) -> AsyncIterator[tuple[aiortu.Master, Port]]:
+    """A master on a plugged-in `Port`, with the port's opener; the port's tasks end with it."""
+    async with anyio.create_task_group() as tasks:
+        port = Port(tasks)
+        port.plug()
+        stream = await port.open()
+        master = aiortu.Master(stream, LineSettings(**LINE), opener=port.open, **options)  # type: ignore[arg-type]
+        async with master:
+            await anyio.sleep(0.05)  # both receivers past their first silence
+            yield master, port
+        tasks.cancel_scope.cancel()
+
+
+@contextlib.contextmanager
+def warnings_of_aiortu() -> Iterator[list[str]]:
+    """The messages of the warnings aiortu logs meanwhile."""
+    messages: list[str] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            messages.append(record.getMessage())
+
+    logger = logging.getLogger("aiortu")
+    handler, level = Keep(logging.WARNING), logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.WARNING)
+    try:
+        yield messages
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
+def back_off_times(first: float, count: int) -> list[float]:
+    """When the reopen attempts after a failure at `first` go out, by the policy `DELAY`."""
+    times, delay, now = [], DELAY[0], first
+    for _ in range(count):
+        now += delay
+        times.append(now)
+        delay = min(2 * delay, DELAY[1])
+    return times
+
+
+@on_virtual_clock
+async def test_requests_fail_while_the_port_is_gone_then_recover() -> None:
+    expected = [register_value(1, 5), register_value(1, 6)]
+    options = {"timeout": 0.3, "retries": 0, "reconnect_delay": DELAY}
+    async with plugged_master(**options) as (master, port):
+        assert await master.read_holding_registers(1, 5, 2) == expected
+        # Pulled between requests: the master sees it at once, and reopens by the back-off.
+        gone = anyio.current_time()
+        port.unplug()
+        await anyio.sleep(0.5)
+        assert not master.connected
+        assert port.opened[1:] == pytest.approx(back_off_times(gone, 3))  # 50, 150, 350 ms
+        # The slow device: reconnected at the next attempt, then pulled mid-request.
+        port.plug(slow=True)
+        await master.connection.wait_connected()
+        assert anyio.current_time() == pytest.approx(back_off_times(gone, 4)[-1])  # 550 ms
+        failures: list[float] = []
+
+        async def in_flight() -> None:
+            with pytest.raises(aiortu.ConnectionLost):
+                await master.read_holding_registers(1, 5, 2, timeout=5.0)
+            failures.append(anyio.current_time())
+
+        port.tasks.start_soon(in_flight)
+        await anyio.sleep(0.1)
+        assert port.fake is not None
+        assert len(port.fake.seen) == 1  # on the wire, unanswered
+        pulled = anyio.current_time()
+        port.unplug()
+        await anyio.sleep(0.01)
+        # A request in flight when the port disappears fails at once, not at its timeout.
+        assert failures == [pulled]
+        assert not master.connected
+        # Requests made while it is gone wait their own timeout for it, then fail.
+        start = anyio.current_time()
+        with pytest.raises(aiortu.ConnectionLost, match=r"did not come back within 0\.3 s"):
+            await master.read_holding_registers(1, 5, 2)
+        assert anyio.current_time() - start == pytest.approx(0.3)
+        # Plugged back in: a waiting request goes through at the next attempt.
+        attempts = len(port.opened)
+        plugged = anyio.current_time()
+        port.plug()
+        assert await master.read_holding_registers(1, 5, 2, timeout=3.0) == expected
+        assert len(port.opened) == attempts + 1
+        assert port.opened[-1] - plugged <= DELAY[1]
+        assert master.connected
+        connection = master.connection
+        assert (connection.reconnects, connection.disconnects) == (2, 2)
+        assert connection.failed_attempts == len(port.opened) - 1 - 2
+        assert await master.read_holding_registers(1, 7, 1) == [register_value(1, 7)]
+
+
+@on_virtual_clock
+async def test_fail_fast_while_reconnecting() -> None:
+    options = {"timeout": 2.0, "reconnect_delay": DELAY, "reconnect_fail_fast": True}
+    with warnings_of_aiortu() as warnings:
+        async with plugged_master(**options) as (master, port):
+            assert await master.read_coils(1, 0, 3)
+            port.unplug()
+            await anyio.sleep(0.1)
+            start = anyio.current_time()
+            with pytest.raises(aiortu.ConnectionLost, match="fail fast"):
+                await master.read_coils(1, 0, 3)
+            assert anyio.current_time() == start  # at once, not at its timeout
+            port.plug()
+            await master.connection.wait_connected()
+            assert len(await master.read_coils(1, 0, 3)) == 3
+            port.unplug()
+            await anyio.sleep(0.01)
+    # A warning each time the port went, worded once: why it failed, then what happens.
+    reopening = [message for message in warnings if "reopening" in message]
+    assert len(reopening) == 2, reopening
+    for message in reopening:
+        assert message.startswith("the line failed: ")
+        assert message.endswith("; reopening it")
+        assert message.count("the line failed") == 1
+
+
+@on_virtual_clock
+async def test_without_reconnect_the_master_stays_failed() -> None:
+    async with plugged_master(reconnect=False, reconnect_delay=DELAY) as (master, port):
+        await master.read_coils(1, 0, 3)
+        port.unplug()
+        port.plug()
+        await anyio.sleep(1.0)
+        start = anyio.current_time()
+        with pytest.raises(aiortu.ConnectionLost):
+            await master.read_coils(1, 0, 3)
+        assert anyio.current_time() == start
+        assert len(port.opened) == 1  # the test's own open: the master never tried
+        assert master.connection.reconnects == 0
 
 
 class Device:
@@ -39,7 +226,7 @@ class Device:
         self._scope: anyio.CancelScope | None = None
         self._slave_fd: int | None = None
 
-    async def plug(self, *, slow: bool = False) -> None:
+    async def plug(self) -> None:
         master_fd, slave_fd = os.openpty()
         make_raw(slave_fd)
         temporary = self.link.with_suffix(".tmp")
@@ -47,7 +234,7 @@ class Device:
         temporary.symlink_to(os.ttyname(slave_fd))
         os.replace(temporary, self.link)
         self._slave_fd = slave_fd
-        self.fake = FakeSlave(FileDescriptorStream(master_fd), default=hold if slow else answer)
+        self.fake = FakeSlave(FileDescriptorStream(master_fd))
         self._scope = anyio.CancelScope()
         scope, fake = self._scope, self.fake
 
@@ -70,95 +257,24 @@ class Device:
         self.link.unlink(missing_ok=True)
 
 
-async def test_requests_fail_while_the_port_is_gone_then_recover(tmp_path: Path) -> None:
-    expected = [register_value(1, 5), register_value(1, 6)]
+async def test_open_master_reopens_a_port_by_its_name(tmp_path: Path) -> None:
+    # Real time: a pty's bytes are the operating system's.
     async with anyio.create_task_group() as tasks:
         device = Device(tmp_path / "ttyRTU", tasks)
         await device.plug()
-        options = {"timeout": 0.3, "retries": 0, "reconnect_delay": (0.05, 0.2)}
+        options = {"timeout": 0.3, "retries": 0, "reconnect_delay": DELAY}
         async with aiortu.open_master(str(device.link), **LINE, **options) as master:
-            assert await master.read_holding_registers(1, 5, 2) == expected
+            assert await master.read_holding_registers(1, 5, 1) == [register_value(1, 5)]
             await device.unplug()
-            await device.plug(slow=True)
-            # A request in flight when the port disappears fails at once, not at its
-            # timeout.
-            failures: list[float] = []
-
-            async def in_flight() -> None:
-                with pytest.raises(aiortu.ConnectionLost):
-                    await master.read_holding_registers(1, 5, 2, timeout=5.0)
-                failures.append(anyio.current_time())
-
-            # The slow device first: reconnect to it, then pull it mid-request.
             with anyio.fail_after(3):
-                await master.connection.wait_connected()
-            tasks.start_soon(in_flight)
-            await anyio.sleep(0.1)
-            pulled = anyio.current_time()
-            await device.unplug()
-            await anyio.sleep(0.1)
-            assert failures
-            assert failures[0] - pulled < 0.1
-            assert not master.connected
-            # Requests made while it is gone wait within their own timeout, then fail.
-            start = anyio.current_time()
+                while master.connected:  # noqa: ASYNC110  # the read of the pty ends soon
+                    await anyio.sleep(0.01)
             with pytest.raises(aiortu.ConnectionLost):
-                await master.read_holding_registers(1, 5, 2)
-            assert 0.25 < anyio.current_time() - start < 1.0
-            # Plugged back in under the same name: a waiting request goes through.
-            async with anyio.create_task_group() as plugging:
-                plugging.start_soon(device.plug)
-                with anyio.fail_after(4):
-                    assert await master.read_holding_registers(1, 5, 2, timeout=3.0) == expected
-            assert master.connected
-            assert master.connection.reconnects == 2
-            assert master.connection.disconnects == 2
-            assert await master.read_holding_registers(1, 7, 1) == [register_value(1, 7)]
-            await device.unplug()
-        tasks.cancel_scope.cancel()
-
-
-async def test_fail_fast_while_reconnecting(
-    tmp_path: Path, caplog: pytest.LogCaptureFixture
-) -> None:
-    caplog.set_level(logging.WARNING, logger="aiortu")
-    async with anyio.create_task_group() as tasks:
-        device = Device(tmp_path / "ttyRTU", tasks)
-        await device.plug()
-        options = {"timeout": 2.0, "reconnect_delay": (0.05, 0.1), "reconnect_fail_fast": True}
-        async with aiortu.open_master(str(device.link), **LINE, **options) as master:
-            assert await master.read_coils(1, 0, 3)
-            await device.unplug()
-            await anyio.sleep(0.1)
-            with anyio.fail_after(0.5), pytest.raises(aiortu.ConnectionLost):
-                await master.read_coils(1, 0, 3)
-            await device.plug()
+                await master.read_holding_registers(1, 5, 1)
+            await device.plug()  # a new pty, under the same name
             with anyio.fail_after(3):
                 await master.connection.wait_connected()
-            assert len(await master.read_coils(1, 0, 3)) == 3
-            await device.unplug()
-        tasks.cancel_scope.cancel()
-    # A warning each time the port went (the last unplug may come too late to be seen),
-    # worded once: why it failed, then what happens.
-    reopening = [r.getMessage() for r in caplog.records if "reopening" in r.getMessage()]
-    assert 1 <= len(reopening) <= 2, reopening
-    for message in reopening:
-        assert message.startswith("the line failed: ")
-        assert message.endswith("; reopening it")
-        assert message.count("the line failed") == 1
-
-
-async def test_without_reconnect_the_master_stays_failed(tmp_path: Path) -> None:
-    async with anyio.create_task_group() as tasks:
-        device = Device(tmp_path / "ttyRTU", tasks)
-        await device.plug()
-        async with aiortu.open_master(str(device.link), **LINE, reconnect=False) as master:
-            await master.read_coils(1, 0, 3)
-            await device.unplug()
-            await device.plug()
-            await anyio.sleep(0.3)
-            with anyio.fail_after(0.5), pytest.raises(aiortu.ConnectionLost):
-                await master.read_coils(1, 0, 3)
-            assert master.connection.reconnects == 0
+            assert await master.read_holding_registers(1, 7, 1) == [register_value(1, 7)]
+            assert (master.connection.reconnects, master.connection.disconnects) == (1, 1)
             await device.unplug()
         tasks.cancel_scope.cancel()

@@ -36,7 +36,7 @@ def device() -> MemoryStore:
 class TcpClient:
     """Sends raw requests over one connection and reads the replies as ADUs."""
 
-    def __init__(self, stream: anyio.abc.SocketStream) -> None:
+    def __init__(self, stream: anyio.abc.ByteStream) -> None:
         self.stream = stream
         self._decoder = AduDecoder()
         self._ready: deque[Adu] = deque()

@@ -1,15 +1,18 @@
 """The one accept loop (`serve_listener`) and the server framings, on loopback: the limit and
-its log, back-pressure from the first byte, accept errors, Unix socket modes, and the RTU
-framing's bounded buffer."""
+its log, back-pressure from the first byte, accept errors (on a virtual clock, the back-off's
+times exact), Unix socket modes, and the RTU framing's bounded buffer."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import itertools
 import logging
 import os
 import random
 import socket
 import stat
+from collections.abc import Iterator
 from pathlib import Path
 
 import anyio
@@ -19,6 +22,7 @@ import pytest
 from aiortu.core.pdu import ExceptionPDU, encode_exception
 from aiortu.core.rtu import MAX_FRAME_LENGTH, crc16, encode_frame
 from aiortu.errors import InvalidValue, PortNotFound
+from aiortu.testing import virtual_pair
 from aiortu.transport import (
     ConnectionLimit,
     RtuFraming,
@@ -28,6 +32,7 @@ from aiortu.transport import (
     parse_unix_url,
     serve_listener,
 )
+from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -128,48 +133,76 @@ def _stream_until_blocked(port: int, most: int) -> int:
     return sent
 
 
-async def test_an_accept_error_backs_off_is_logged_once_and_the_loop_goes_on(
-    caplog: pytest.LogCaptureFixture,
-) -> None:
-    class Failing(anyio.abc.SocketListener):
-        """A listener whose first accepts fail as a process out of descriptors sees."""
+class _FailingListener(anyio.abc.SocketListener):
+    """A listener whose accepts fail as a process out of descriptors sees, `failures[0]` times,
+    then hands over `stream`, then fail `failures[1]` times more, then wait. It notes when
+    each accept was called."""
 
-        def __init__(self, inner: anyio.abc.SocketListener) -> None:
-            self.inner, self.failures = inner, 5
+    def __init__(self, stream: anyio.abc.ByteStream, failures: tuple[int, int]) -> None:
+        self.stream: anyio.abc.ByteStream | None = stream
+        self.failures = list(failures)
+        self.calls: list[float] = []
 
-        async def accept(self) -> anyio.abc.SocketStream:
-            if self.failures:
-                self.failures -= 1
-                raise OSError(errno.EMFILE, "Too many open files")
-            return await self.inner.accept()
+    async def accept(self) -> anyio.abc.SocketStream:
+        self.calls.append(anyio.current_time())
+        if self.failures[0] or (self.stream is None and self.failures[1]):
+            self.failures[0 if self.failures[0] else 1] -= 1
+            raise OSError(errno.EMFILE, "Too many open files")
+        if self.stream is None:
+            await anyio.sleep_forever()
+        stream, self.stream = self.stream, None
+        return stream  # type: ignore[return-value]  # any byte stream serves
 
-        async def aclose(self) -> None:
-            await self.inner.aclose()
+    async def aclose(self) -> None:
+        pass
 
-        @property
-        def _raw_socket(self) -> socket.socket:
-            return self.inner.extra(anyio.abc.SocketAttribute.raw_socket)
+    @property
+    def _raw_socket(self) -> socket.socket:
+        raise NotImplementedError
 
-    inner = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
-    (socket_listener,) = inner.listeners
-    assert isinstance(socket_listener, anyio.abc.SocketListener)
-    port = socket_listener.extra(anyio.abc.SocketAttribute.local_port)
+
+@on_virtual_clock
+async def test_an_accept_error_backs_off_is_logged_once_and_the_loop_goes_on() -> None:
+    near, far = virtual_pair()
+    listener = _FailingListener(far, (9, 2))
     limit = ConnectionLimit("test server", 4)
 
     async def echo(stream: anyio.abc.ByteStream) -> None:
         await stream.send(await stream.receive())
 
-    with caplog.at_level(logging.WARNING, logger="aiortu.transport"):
+    with _logged("aiortu.transport") as messages:
         async with anyio.create_task_group() as tasks:
-            tasks.start_soon(serve_listener, Failing(socket_listener), echo, limit)
-            async with await anyio.connect_tcp("127.0.0.1", port) as client:
-                await client.send(b"ping")
-                with anyio.fail_after(5):
-                    assert await client.receive() == b"ping"
+            tasks.start_soon(serve_listener, listener, echo, limit)
+            await near.send(b"ping")
+            assert await near.receive() == b"ping"
+            await anyio.sleep(10)
             tasks.cancel_scope.cancel()
-    assert limit.accept_failures == 5
-    failures = [r for r in caplog.records if "cannot accept" in r.getMessage()]
-    assert len(failures) == 1
+    # 10 ms, doubling up to 1 s; from 10 ms again after a connection was accepted.
+    backed_off = [later - earlier for earlier, later in itertools.pairwise(listener.calls)]
+    assert backed_off == pytest.approx(
+        [0.01, 0.02, 0.04, 0.08, 0.16, 0.32, 0.64, 1, 1, 0, 0.01, 0.02]
+    )
+    assert limit.accept_failures == 11
+    failures = [message for message in messages if "cannot accept" in message]
+    assert len(failures) == 2  # once until a connection is accepted, then once again
+
+
+@contextlib.contextmanager
+def _logged(name: str) -> Iterator[list[str]]:
+    """The messages that logger `name` gives meanwhile at WARNING or above."""
+    messages: list[str] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            messages.append(record.getMessage())
+
+    logger = logging.getLogger(name)
+    handler = Keep(logging.WARNING)
+    logger.addHandler(handler)
+    try:
+        yield messages
+    finally:
+        logger.removeHandler(handler)
 
 
 def test_unix_urls_take_a_mode_and_a_group() -> None:

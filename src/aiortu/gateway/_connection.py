@@ -20,7 +20,6 @@
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from collections.abc import Callable
 from functools import partial
@@ -30,6 +29,7 @@ import anyio
 import anyio.abc
 
 from aiortu.core.mbap import Adu
+from aiortu.line import loop_clock
 from aiortu.transport import Framing, PushServerStream, RoleRules, write_now
 
 __all__ = ("GONE", "Connection", "Turns")
@@ -82,8 +82,10 @@ class Connection(Generic[R]):
         """Whether a refused request of this connection was logged as a warning."""
         self.in_flight = 0
         """Requests started and not answered yet."""
-        self.heard = time.monotonic()
-        """When the client last sent bytes or was answered (`time.monotonic()`)."""
+        self.clock = loop_clock()
+        """Reads the event loop's time in seconds (a connection is made in the loop)."""
+        self.heard = self.clock()
+        """When the client last sent bytes or was answered (on `clock`)."""
         self.open = True
         self.tasks: anyio.abc.TaskGroup | None = None
         """The connection's requests (set while it is served)."""
@@ -119,7 +121,7 @@ class Connection(Generic[R]):
     def done(self) -> None:
         """A request is answered (or dropped): its place in the window is free."""
         self.in_flight -= 1
-        self.heard = time.monotonic()
+        self.heard = self.clock()
         freed = self._freed
         if freed is not None:
             self._freed = None

@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import ssl
-import time
 from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -195,7 +194,7 @@ async def gateway(
     default_unit: int | None = None,
     coalesce: bool = True,
     cache_ms: float = 0,
-    clock: Callable[[], float] = time.monotonic,
+    clock: Callable[[], float] | None = None,
     metrics: str | None = None,
     client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     tls: ssl.SSLContext | None = None,

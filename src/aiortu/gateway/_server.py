@@ -81,6 +81,7 @@ from aiortu.gateway._forward import (
 )
 from aiortu.gateway._lines import GatewayLine, check_lines, line_names
 from aiortu.gateway._stats import DEFAULT_CLIENT_STATISTICS, GatewayStatistics, LineStatistics
+from aiortu.line import loop_clock
 from aiortu.master import Master
 from aiortu.transport import (
     RTU_SILENCE,
@@ -214,7 +215,8 @@ class Gateway:
     id, and a unit no line serves gets exception 0A (gateway path unavailable: the spec's code
     for a gateway with no path to the target, as a misconfiguration). With `cache_ms`, a read
     (01 to 04) of the same unit and block as one answered at most that many milliseconds ago is
-    answered again without the line; `clock` gives the cache's time in seconds.
+    answered again without the line; `clock` gives the cache's time in seconds (None: the event
+    loop's, read where the gateway is made; `time.monotonic` if it is made outside one).
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a `max_in_flight`,
     `max_connections` or `client_statistics` below 1, an `idle_timeout` that is not positive, a
@@ -231,7 +233,7 @@ class Gateway:
         default_unit: int | None = None,
         coalesce: bool = True,
         cache_ms: float = 0,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] | None = None,
         client_statistics: int = DEFAULT_CLIENT_STATISTICS,
     ) -> None:
         lines = [GatewayLine(master)] if isinstance(master, Master) else list(master)
@@ -251,7 +253,7 @@ class Gateway:
             _Line(
                 line,
                 name,
-                ReadCache(cache_ms / 1000, clock) if cache_ms else None,
+                ReadCache(cache_ms / 1000, _cache_clock(clock)) if cache_ms else None,
                 self.statistics.line(name),
             )
             for line, name in zip(lines, line_names(lines), strict=True)
@@ -384,11 +386,16 @@ class Gateway:
         """Close `connection` once it has been silent for `idle_timeout` with nothing waiting:
         one timer per connection, not a deadline per read (the reader only notes the time)."""
         while True:
-            quiet = time.monotonic() - connection.heard
-            if quiet >= self.idle_timeout and not connection.in_flight:
+            heard = connection.heard
+            # Until a time, not for a time left: a remainder below the clock's resolution
+            # (a virtual clock's) would never pass.
+            await anyio.sleep_until(heard + self.idle_timeout)
+            if connection.heard != heard:
+                continue  # heard from meanwhile: silent since then
+            if not connection.in_flight:
                 self._idle(connection, "idle")
                 return
-            await anyio.sleep(max(self.idle_timeout - quiet, 0.0) or self.idle_timeout)
+            await anyio.sleep(self.idle_timeout)  # a request waits for the line
 
     async def _read(self, connection: _Client) -> None:
         """Read and start the connection's requests, each once its window has room, until the
@@ -406,11 +413,11 @@ class Gateway:
             if framing.waiting_for_silence():
                 with anyio.move_on_after(RTU_SILENCE):
                     data = await stream.receive(_READ_SIZE)
-                    connection.heard = time.monotonic()
+                    connection.heard = connection.clock()
                     return framing.feed(data)
                 return framing.silence()
             data = await stream.receive(_READ_SIZE)
-            connection.heard = time.monotonic()
+            connection.heard = connection.clock()
         except anyio.EndOfStream:
             return None
         except GONE:
@@ -478,7 +485,7 @@ class Gateway:
         adu = accepted_in_callback(connection, chunk)
         if adu is None:
             return False
-        connection.heard = time.monotonic()
+        connection.heard = connection.clock()
         reply = self._admit(connection, adu)
         if reply is not None:  # as `_answer`, without a task: a reply not sent holds a place
             self.statistics.client(connection.client).replies += 1
@@ -835,3 +842,14 @@ def _host(stream: anyio.abc.ByteStream) -> str | None:
     if isinstance(address, tuple):
         return str(address[0])
     return "unix" if isinstance(address, str) else "local"
+
+
+def _cache_clock(clock: Callable[[], float] | None) -> Callable[[], float]:
+    """`clock`, or the event loop's where the gateway is made in one. (Not `anyio.current_time`:
+    the cache is also read from the loop's callbacks, where no task runs to tell the backend.)"""
+    if clock is not None:
+        return clock
+    try:
+        return loop_clock()
+    except RuntimeError:  # no event loop runs here: asyncio's clock
+        return time.monotonic

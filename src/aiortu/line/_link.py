@@ -48,10 +48,7 @@ when it has to wait (for the silence, for another sender, or for the stream).
 
 from __future__ import annotations
 
-import contextlib
 import math
-import sys
-import time
 from collections import Counter
 from collections.abc import Callable, Container, Iterable
 from types import TracebackType
@@ -72,7 +69,7 @@ from aiortu.core.rtu import (
 )
 from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost
-from aiortu.line._native import NativeWaits, native_waits
+from aiortu.line._native import NativeWaits, loop_clock, native_waits
 from aiortu.line._push_reader import PushReader, ReplyTap, RequestTap
 from aiortu.line._sender import LineActivity, SendTurns, SilenceWaits
 from aiortu.transport import FramedStream, PushStream
@@ -91,25 +88,6 @@ _STREAM_ERRORS = (
     anyio.ClosedResourceError,
     OSError,
 )
-
-
-def _loop_clock(token: anyio.lowlevel.EventLoopToken) -> Callable[[], float]:
-    """The running backend's clock, as cheap to read as it gets: `time.monotonic`
-    under asyncio's own event loops (which tell that time), else the event loop's own
-    `time` method where the loop has one that tells the backend's time, else the
-    backend's `current_time`."""
-    backend_time = token.backend_class.current_time
-    native = token.native_token
-    loop_time = getattr(native, "time", None)
-    base_loop = getattr(sys.modules.get("asyncio"), "BaseEventLoop", None)
-    if base_loop is not None and getattr(type(native), "time", None) is base_loop.time:
-        # asyncio's own loops tell time.monotonic(): read it without the method call.
-        return time.monotonic
-    if callable(loop_time):
-        with contextlib.suppress(Exception):
-            if abs(float(loop_time()) - backend_time()) < 0.1:
-                return cast(Callable[[], float], loop_time)
-    return backend_time
 
 
 def _describe(error: BaseException) -> str:
@@ -263,7 +241,7 @@ class Link:
         token = anyio.lowlevel.current_token()
         backend = self.backend = token.backend_class
         if self.clock is anyio.current_time:
-            self.clock = _loop_clock(token)
+            self.clock = loop_clock(token)
             self.backend_clock = True
         else:
             self.backend_clock = self.clock == backend.current_time

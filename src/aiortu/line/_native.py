@@ -1,4 +1,4 @@
-"""The waits the line layer needs, in the running backend's cheapest form.
+"""The waits and the clock the line layer needs, in the running backend's cheapest form.
 
 A wake-up that a callback sets and a task awaits, a callback soon, and, where the event loop
 has them, callbacks at a time. Under asyncio they are the event loop's own (a future,
@@ -8,19 +8,23 @@ other backend (trio) the wake-up is an anyio event and "soon" is the backend's o
 waits for its deadlines with cancel scopes instead.
 
 Ask [`native_waits`][aiortu.line.native_waits] once, from inside the event loop, and keep what
-it returns.
+it returns. [`loop_clock`][aiortu.line.loop_clock] is the backend's clock in its cheapest form, for
+those that read the time once per frame or per request (the link, the line server).
 """
 
 from __future__ import annotations
 
+import contextlib
+import sys
+import time
 from collections.abc import Callable, Generator
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import anyio
 import anyio.lowlevel
 
-__all__ = ("NativeWaits", "Waiter", "native_waits")
+__all__ = ("NativeWaits", "Waiter", "loop_clock", "native_waits")
 
 
 class Waiter(Protocol):
@@ -81,3 +85,25 @@ def native_waits() -> NativeWaits:
     # trio's token runs a function soon from anywhere, its own thread included.
     run_sync_soon = native.run_sync_soon
     return NativeWaits(_EventWaiter, run_sync_soon, anyio.current_time)
+
+
+def loop_clock(token: anyio.lowlevel.EventLoopToken | None = None) -> Callable[[], float]:
+    """The clock of the running backend (the time `anyio.current_time` tells: virtual on an event
+    loop or trio clock that is), as cheap to read as it gets: `time.monotonic` under asyncio's own
+    event loops (which tell that time), else the event loop's own `time` method where the loop has
+    one that tells the backend's time, else the backend's `current_time`. Call it in the event
+    loop (`token`: that of the running loop by default) and keep what it returns."""
+    if token is None:
+        token = anyio.lowlevel.current_token()
+    backend_time = token.backend_class.current_time
+    native = token.native_token
+    loop_time = getattr(native, "time", None)
+    base_loop = getattr(sys.modules.get("asyncio"), "BaseEventLoop", None)
+    if base_loop is not None and getattr(type(native), "time", None) is base_loop.time:
+        # asyncio's own loops tell time.monotonic(): read it without the method call.
+        return time.monotonic
+    if callable(loop_time):
+        with contextlib.suppress(Exception):
+            if abs(float(loop_time()) - backend_time()) < 0.1:
+                return cast(Callable[[], float], loop_time)
+    return backend_time

@@ -434,13 +434,15 @@ class Poller(BackgroundPoll[Sample]):
         """The offline units this cycle may probe: those due, longest waiting first."""
         if self.max_probes_per_cycle is None:
             return None
+        # Ties (a unit gone offline at the instant another was probed) go to the unit this
+        # poller probed longest ago, so the dead take turns whatever the clock's resolution.
         due = sorted(
-            (next_probe, unit)
+            (next_probe, self._last_probe.get(unit, -math.inf), unit)
             for unit in {read.unit for read in group.reads}
             if (next_probe := self._next_probe(unit, self.master.unit_stats(unit))) is not None
             and now >= next_probe
         )
-        return {unit for _, unit in due[: self.max_probes_per_cycle]}
+        return {unit for _, _, unit in due[: self.max_probes_per_cycle]}
 
     def _gate(self, unit: int) -> UnitSkipped | None:
         """None if a read of `unit` may go now (online, or due for a probe), else why not."""
