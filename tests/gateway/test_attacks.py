@@ -97,11 +97,16 @@ async def test_a_departed_clients_requests_behind_another_clients_never_reach_th
 
 
 async def test_a_half_closed_client_still_gets_its_reply() -> None:
+    gate = Gate()  # the reply comes after the gateway has seen the end of stream
     async with line() as bench:
+        bench.slave.before_request(gate)
         async with await anyio.connect_tcp("127.0.0.1", bench.gateway.port) as stream:
             tcp = TcpClient(stream)
             await tcp.send("06 0005 0042", UNIT, 7)
             await stream.send_eof()
+            await _until(lambda: gate.held == 1)
+            await anyio.sleep(0.05)
+            gate.opened.set()
             reply = await tcp.receive()
             assert reply is not None
             assert (reply.transaction_id, reply.pdu.hex(" ")) == (7, "06 00 05 00 42")
