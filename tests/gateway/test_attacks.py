@@ -227,3 +227,22 @@ async def test_a_pipelining_client_that_never_reads_is_held_back_by_tcp(server: 
                 sock.sendall(read[:65536])
                 sent = await anyio.to_thread.run_sync(_send_until_blocked, sock, read)
     assert 0 < sent <= bound, f"{sent} bytes taken, more than the {bound} TCP can hold"
+
+
+async def test_a_read_in_the_same_segment_as_a_write_sees_the_write() -> None:
+    # The write goes to a worker, which hands it to the engine only when it runs; the read
+    # behind it, on an idle line, must not go out first.
+    async with line() as bench, await anyio.connect_tcp("127.0.0.1", bench.gateway.port) as stream:
+        tcp = TcpClient(stream)
+        for value in (0x42, 0x43, 0x44):
+            write = encode_adu(1, UNIT, bytes.fromhex(f"06 0005 {value:04X}"))
+            await stream.send(write + encode_adu(2, UNIT, bytes.fromhex("03 0005 0001")))
+            replies = {}
+            for _ in range(2):
+                reply = await tcp.receive()
+                assert reply is not None
+                replies[reply.transaction_id] = reply.pdu.hex()
+            assert replies == {
+                1: f"06 0005 {value:04x}".replace(" ", ""),
+                2: f"0302{value:04x}",
+            }
