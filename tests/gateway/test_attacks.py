@@ -97,11 +97,16 @@ async def test_a_departed_clients_requests_behind_another_clients_never_reach_th
 
 
 async def test_a_half_closed_client_still_gets_its_reply() -> None:
+    gate = Gate()  # the reply comes after the gateway has seen the end of stream
     async with line() as bench:
+        bench.slave.before_request(gate)
         async with await anyio.connect_tcp("127.0.0.1", bench.gateway.port) as stream:
             tcp = TcpClient(stream)
             await tcp.send("06 0005 0042", UNIT, 7)
             await stream.send_eof()
+            await _until(lambda: gate.held == 1)
+            await anyio.sleep(0.05)
+            gate.opened.set()
             reply = await tcp.receive()
             assert reply is not None
             assert (reply.transaction_id, reply.pdu.hex(" ")) == (7, "06 00 05 00 42")
@@ -222,3 +227,22 @@ async def test_a_pipelining_client_that_never_reads_is_held_back_by_tcp(server: 
                 sock.sendall(read[:65536])
                 sent = await anyio.to_thread.run_sync(_send_until_blocked, sock, read)
     assert 0 < sent <= bound, f"{sent} bytes taken, more than the {bound} TCP can hold"
+
+
+async def test_a_read_in_the_same_segment_as_a_write_sees_the_write() -> None:
+    # The write goes to a worker, which hands it to the engine only when it runs; the read
+    # behind it, on an idle line, must not go out first.
+    async with line() as bench, await anyio.connect_tcp("127.0.0.1", bench.gateway.port) as stream:
+        tcp = TcpClient(stream)
+        for value in (0x42, 0x43, 0x44):
+            write = encode_adu(1, UNIT, bytes.fromhex(f"06 0005 {value:04X}"))
+            await stream.send(write + encode_adu(2, UNIT, bytes.fromhex("03 0005 0001")))
+            replies = {}
+            for _ in range(2):
+                reply = await tcp.receive()
+                assert reply is not None
+                replies[reply.transaction_id] = reply.pdu.hex()
+            assert replies == {
+                1: f"06 0005 {value:04x}".replace(" ", ""),
+                2: f"0302{value:04x}",
+            }

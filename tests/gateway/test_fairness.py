@@ -183,15 +183,16 @@ async def test_reads_on_a_line_with_an_event_loop_run_on_no_task(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     # The engine runs each read itself (the fast path, or its line task) and completes a
-    # future: the gateway answers from its done-callback, and no worker is ever started.
+    # future: the gateway answers from its done-callback, and no worker awaits a request (a
+    # pushed connection keeps one parked, for the requests its read callback hands on).
     workers: list[object] = []
-    worker = Gateway._worker
+    request = Gateway._request
 
     async def spied(self: Gateway, *args: object) -> None:
         workers.append(args)
-        await worker(self, *args)  # type: ignore[arg-type]
+        await request(self, *args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(Gateway, "_worker", spied)
+    monkeypatch.setattr(Gateway, "_request", spied)
     async with line(max_in_flight=3) as bench:
         async with client(bench.gateway) as a, client(bench.gateway) as b:
             for _ in range(5):
@@ -317,3 +318,24 @@ async def test_a_read_that_joined_another_is_not_answered_once_its_client_reset(
         (unit,) = statistics.units.values()
         assert (unit.requests, unit.replies) == (2, 1)
         assert statistics.clients["127.0.0.1"].replies == 1
+
+
+async def test_requests_sent_one_by_one_never_overfill_the_window() -> None:
+    # The line is held; the client sends six reads, each in a segment of its own, which a
+    # pushed connection's read callback sees one by one: the gateway takes three (its window)
+    # and reads nothing more until one is answered.
+    gate = Gate()
+    async with line(max_in_flight=3, coalesce=False, master_options={"timeout": 10.0}) as bench:
+        bench.slave.before_request(gate)
+        async with client(bench.gateway) as tcp:
+            gate.close()
+            for transaction_id in range(6):
+                await tcp.send(f"03 {transaction_id:04X} 0001", UNIT, transaction_id)
+                await anyio.sleep(0.02)  # a segment of its own (at least, most likely)
+            await _until(lambda: bench.gateway.counters.requests == 3)
+            await anyio.sleep(0.1)  # time to take more, were the window not kept
+            assert bench.gateway.counters.requests == 3
+            gate.opened.set()
+            replies = [await tcp.receive() for _ in range(6)]
+            assert sorted(reply.transaction_id for reply in replies if reply) == list(range(6))
+        assert bench.gateway.counters.requests == 6

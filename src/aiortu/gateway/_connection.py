@@ -21,6 +21,8 @@
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
+from functools import partial
 from typing import Any, Final, Generic, TypeVar
 
 import anyio
@@ -28,7 +30,7 @@ import anyio.abc
 
 from aiortu.core.mbap import Adu
 from aiortu.line import loop_clock
-from aiortu.transport import Framing, RoleRules, write_now
+from aiortu.transport import Framing, PushServerStream, RoleRules, write_now
 
 __all__ = ("GONE", "Connection", "Turns")
 
@@ -63,6 +65,10 @@ class Connection(Generic[R]):
         role: str | None = None,
     ) -> None:
         self.stream = stream
+        self._write_now: Callable[[bytes], bool] = (
+            stream.write_now if isinstance(stream, PushServerStream) else partial(write_now, stream)
+        )
+        """Write at once where the stream takes bytes without a wait (False: nothing written)."""
         self.priority = priority
         self.window = window
         self.framing = framing
@@ -130,6 +136,11 @@ class Connection(Generic[R]):
         self._parked.pop().set()
         return True
 
+    @property
+    def parked(self) -> bool:
+        """Whether a worker waits in `park` (`put` hands it the next request)."""
+        return bool(self._parked)
+
     async def park(self) -> None:
         """Wait, as a worker with nothing to do, until `put` queues a request."""
         worker = anyio.Event()
@@ -144,7 +155,7 @@ class Connection(Generic[R]):
             return True
         if self._send_lock.locked() or self.unsent:
             return False
-        return write_now(self.stream, self.framing.encode(request, reply))
+        return self._write_now(self.framing.encode(request, reply))
 
     def send_later(self, request: Adu, reply: bytes) -> None:
         """Have the connection's writer send `reply` (from a callback, where no task can)."""
@@ -164,7 +175,7 @@ class Connection(Generic[R]):
         if not self.open:
             return True
         data = self.framing.encode(request, reply)
-        if not self._send_lock.locked() and write_now(self.stream, data):
+        if not self._send_lock.locked() and self._write_now(data):
             return True
         with anyio.move_on_after(self.idle_timeout):
             async with self._send_lock:

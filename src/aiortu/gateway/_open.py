@@ -41,6 +41,8 @@ from aiortu.transport import (
     load_rules,
     parse_listen_url,
     parse_unix_url,
+    push_listener,
+    pushed_listener,
     remove_socket,
 )
 
@@ -163,9 +165,16 @@ async def _listener(
                 raise InvalidValue(
                     "certfile", None, "given", message=f"{url}: give certfile, keyfile and cafile"
                 )
-            listener = TlsListener(
-                listener, tls, standard_compatible=False, handshake_timeout=_HANDSHAKE_TIMEOUT
-            )
+            if push_listener(listener):  # read from the loop's callback
+                listener = pushed_listener(
+                    listener, tls, standard_compatible=False, handshake_timeout=_HANDSHAKE_TIMEOUT
+                )
+            else:
+                listener = TlsListener(
+                    listener, tls, standard_compatible=False, handshake_timeout=_HANDSHAKE_TIMEOUT
+                )
+        elif address.scheme == MODBUS_TCP_SCHEME and push_listener(listener):
+            listener = pushed_listener(listener)  # read from the loop's callback
     stack.push_async_callback(listener.aclose)
     return listener
 

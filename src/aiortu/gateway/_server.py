@@ -62,8 +62,8 @@ from anyio.streams.tls import TLSAttribute
 
 from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
-from aiortu.core.mbap import Adu, MalformedHeader
-from aiortu.errors import InvalidValue
+from aiortu.core.mbap import Adu, MalformedHeader, decode_adu
+from aiortu.errors import FrameError, InvalidValue
 from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._connection import GONE, Connection, Turns
 from aiortu.gateway._forward import (
@@ -89,6 +89,7 @@ from aiortu.transport import (
     ConnectionLimit,
     Framing,
     MbapFraming,
+    PushServerStream,
     RoleRules,
     RtuFraming,
     certificate_role,
@@ -365,6 +366,9 @@ class Gateway:
         try:
             async with anyio.create_task_group() as tasks:
                 connection.tasks = tasks
+                if isinstance(stream, PushServerStream):
+                    stream.tap = functools.partial(self._tap, connection)
+                    tasks.start_soon(self._worker, connection, name=_WORKER_TASK)  # parks
                 tasks.start_soon(self._watch_idle, connection)
                 tasks.start_soon(self._writer, connection)
                 await self._read(connection)
@@ -374,6 +378,8 @@ class Gateway:
                 tasks.cancel_scope.cancel()  # the watch and the writer
         finally:
             connection.leave()  # what is still on the line is dropped
+            if isinstance(stream, PushServerStream):
+                stream.tap = None
             await stream.aclose()
 
     async def _watch_idle(self, connection: _Client) -> None:
@@ -440,30 +446,53 @@ class Gateway:
         connection.leave()
 
     async def _accept(self, connection: _Client, adu: Adu) -> None:
-        """Start `adu` on its line, or answer it at once: from the cache, or with an exception
-        when its unit id names no unit (0B) or a unit no line serves (0A)."""
+        """Start `adu` on its line, or answer it at once (see `_admit`)."""
+        reply = self._admit(connection, adu)
+        if reply is not None:
+            await self._answer(connection, adu, reply)
+
+    def _admit(self, connection: _Client, adu: Adu) -> bytes | None:
+        """Start `adu` on its line (None), or return the reply that answers it at once: from
+        the cache, or an exception when the rules refuse it (01), its unit id names no unit
+        (0B) or a unit no line serves (0A)."""
         self.counters.requests += 1
         self.statistics.client(connection.client).requests += 1
         unit = adu.unit
         if unit == _ALL_UNITS and self.default_unit is not None:
             unit = self.default_unit
         if connection.rules is not None and self._refused(connection, unit, adu.pdu):
-            await self._answer(connection, adu, exception_reply(adu.pdu, _REFUSED))
-            return
+            return exception_reply(adu.pdu, _REFUSED)
         line = self._route(unit)
         code = self._refused_unit(line, unit, adu.pdu)
         if code is not None:
             self.counters.refused_units += 1
-            await self._answer(connection, adu, exception_reply(adu.pdu, code))
-            return
+            return exception_reply(adu.pdu, code)
         assert line is not None
         self.statistics.unit(line.name, unit).requests += 1
         cached = self._cached(line, unit, adu.pdu)
         if cached is not None:
             self.statistics.answered(line.name, unit, cached)
-            await self._answer(connection, adu, cached)
-            return
+            return cached
         self._start(_Request(connection, adu, unit, line, connection.turn(line)))
+        return None
+
+    def _tap(self, connection: _Client, chunk: bytes) -> bool:
+        """The tap of a pushed connection ([`PushServerStream`][aiortu.transport.PushServerStream],
+        which offers it a chunk only while the reader waits with nothing unread and the client
+        reads its replies): take `chunk` in the read callback that got it, with no task wake-up,
+        as the reader would (`_admit`), and return True, when `accepted_in_callback` allows it;
+        else return False, nothing done: the reader takes it."""
+        adu = accepted_in_callback(connection, chunk)
+        if adu is None:
+            return False
+        connection.heard = connection.clock()
+        reply = self._admit(connection, adu)
+        if reply is not None:  # as `_answer`, without a task: a reply not sent holds a place
+            self.statistics.client(connection.client).replies += 1
+            if not connection.send_now(adu, reply):
+                connection.in_flight += 1
+                connection.send_later(adu, reply)  # `_writer` frees its place
+        return True
 
     @staticmethod
     def _refused_unit(line: _Line | None, unit: int, pdu: bytes) -> ExceptionCode | None:
@@ -587,6 +616,15 @@ class Gateway:
         path sent), else from a worker; `_end` ends it either way."""
         pdu, unit, line = request.adu.pdu, request.unit, request.line
         request.shared = None
+        connection = request.connection
+        if connection.pending:
+            # A request handed to a worker reaches the engine only once the worker runs: this
+            # read must not pass it on the line, so the worker that takes it takes this read
+            # next (no task started: this may run in a callback).
+            self._count_transaction(line)
+            request.awaitable = forward(line.master, unit, pdu, connection.priority, request.turn)
+            connection.pending.append(request)
+            return
         if self.coalesce:
             key = (unit, pdu)
             shared = line.shared.get(key)
@@ -601,9 +639,7 @@ class Gateway:
             request.generation = cache.generation(unit)
         self._count_transaction(line)
         try:
-            awaitable = start_forward(
-                line.master, unit, pdu, request.connection.priority, request.turn
-            )
+            awaitable = start_forward(line.master, unit, pdu, connection.priority, request.turn)
         except Exception:
             _log.exception("gateway: forwarding a request failed; answered with exception 0B")
             self._end(request, exception_reply(pdu, _NO_RESPONSE))
@@ -725,6 +761,32 @@ def answered_from_callback(awaitable: object) -> TypeGuard[asyncio.Future[Any]]:
     read the engine runs on its caller's task) a worker awaits it. Both end in
     `Gateway._end`."""
     return isinstance(awaitable, asyncio.Future)
+
+
+def accepted_in_callback(connection: _Client, chunk: bytes) -> Adu | None:
+    """The pushed read's predicate: the request in `chunk`, which a pushed connection's tap
+    offers, for the read callback to take (`Gateway._tap`), or None for the reader task
+    (`Gateway._read`); both take a request through `Gateway._admit`. The callback takes it when:
+
+    - the connection is open and speaks Modbus TCP (RTU frames may wait for a silence, which
+      only the reader times), and its framing holds nothing of an earlier request (that
+      comes first, through the reader);
+    - its window has room (else the reader waits for room, and TCP holds the client back);
+    - one of its workers is parked (a write, or a read the engine runs on its caller's task,
+      is handed to it: a callback cannot start a task);
+    - `chunk` is exactly one well-formed MBAP request (several, a part of one or a malformed
+      header go to the framing, which splits them or closes the connection).
+    """
+    if not connection.open or not isinstance(connection.framing, MbapFraming):
+        return None
+    if connection.framing.buffered or connection.in_flight >= connection.window:
+        return None
+    if not connection.parked:
+        return None  # a request may need a worker, and a callback cannot start a task
+    try:
+        return decode_adu(chunk)
+    except FrameError:
+        return None
 
 
 def _outcome(future: asyncio.Future[Any]) -> tuple[Any, BaseException | None]:

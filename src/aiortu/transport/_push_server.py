@@ -58,8 +58,14 @@ class _Protocol(asyncio.Protocol):
         self.stream.data(data)
 
     def eof_received(self) -> bool:
+        # A half-closed client still reads its replies: the server closes once it is done
+        # (over TLS, asyncio closes the transport whatever this returns).
+        if self.stream.half_close:
+            self.stream.ended = True
+            self.stream.wake()
+            return True
         self.stream.lost(anyio.EndOfStream())
-        return False  # close the transport
+        return False
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.stream.lost(anyio.BrokenResourceError(str(exc)) if exc else anyio.EndOfStream())
@@ -86,6 +92,11 @@ class PushServerStream(anyio.abc.SocketStream):
         """The server's function that may answer a chunk at once (see the module docstring)."""
         self.writable = True
         """Whether the transport's write buffer is below its high-water mark."""
+        self.half_close = False
+        """Whether the transport stays open for the replies after the client's end of stream
+        (plain TCP only)."""
+        self.ended = False
+        """Whether the client ended its stream (half-closed: replies may still be sent)."""
         self._kept = bytearray()
         self._error: BaseException | None = None
         self._waiter: asyncio.Future[None] | None = None
@@ -99,6 +110,7 @@ class PushServerStream(anyio.abc.SocketStream):
             lambda: _Protocol(self), self._socket, ssl=context
         )
         self.transport = transport
+        self.half_close = context is None
         self.transport.pause_reading()  # until the first receive()
 
     @property
@@ -139,16 +151,17 @@ class PushServerStream(anyio.abc.SocketStream):
         self._kept += data
         if self.transport is not None:
             self.transport.pause_reading()
-        self._wake()
+        self.wake()
 
     def lost(self, error: BaseException) -> None:
         """The connection ended with `error` (the first one counts)."""
         if self._error is None:
             self._error = error
-        self._wake()
+        self.wake()
         self.resume_writing()  # a writer waiting for the drain sees the end instead
 
-    def _wake(self) -> None:
+    def wake(self) -> None:
+        """Wake the task waiting in `receive()`."""
         waiter = self._waiter
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
@@ -160,6 +173,8 @@ class PushServerStream(anyio.abc.SocketStream):
         while not self._kept:
             if self._error is not None:
                 raise self._error
+            if self.ended:
+                raise anyio.EndOfStream()
             if self.transport is None:
                 raise anyio.ClosedResourceError()
             self.transport.resume_reading()
