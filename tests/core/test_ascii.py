@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import random
 import re
+from dataclasses import replace
 
 import pytest
 from hypothesis import given, settings
@@ -170,8 +171,8 @@ def test_a_pair_missing_from_the_table_raises() -> None:
         receiver._fire(AsciiEvent.TIMEOUT, b"", 0, 0.0)
 
 
-def test_every_event_goes_through_the_table() -> None:
-    receiver = AsciiReceiver()
+def _spied(receiver: AsciiReceiver) -> list[tuple[AsciiState, AsciiEvent]]:
+    """The (state, event) pairs the receiver fires from now on, in order."""
     seen: list[tuple[AsciiState, AsciiEvent]] = []
     original = receiver._fire
 
@@ -180,14 +181,97 @@ def test_every_event_goes_through_the_table() -> None:
         return original(event, data, position, now)
 
     receiver._fire = spy  # type: ignore[method-assign]
+    return seen
+
+
+def test_every_event_goes_through_the_table() -> None:
+    # A frame fed whole is one event, FRAME; fed in two pieces, the spec's four.
+    receiver = AsciiReceiver()
+    seen = _spied(receiver)
     assert _frames(receiver.feed(READ, 0.0)) == [bytes.fromhex("010300000001FB")]
+    assert seen == [(AsciiState.IDLE, AsciiEvent.FRAME)]
+    seen.clear()
+    assert receiver.feed(READ[:5], 1.0) == []
+    assert _frames(receiver.feed(READ[5:], 1.01)) == [bytes.fromhex("010300000001FB")]
     assert seen == [
         (AsciiState.IDLE, AsciiEvent.START),
+        (AsciiState.RECEPTION, AsciiEvent.CHARS),
         (AsciiState.RECEPTION, AsciiEvent.CHARS),
         (AsciiState.RECEPTION, AsciiEvent.CR),
         (AsciiState.WAITING_END, AsciiEvent.END),
     ]
     assert receiver.state is AsciiState.IDLE
+
+
+@pytest.mark.parametrize(
+    ("chunk", "events"),
+    [
+        # Noise, then two whole frames: noise, FRAME, FRAME.
+        (b"xy" + READ + READ, ["CHARS", "FRAME", "FRAME"]),
+        # A ':' inside: the first ':' is no whole frame, the second begins one.
+        (b":01" + READ, ["START", "CHARS", "START", "CHARS", "CR", "END"]),
+        # A CR inside, not followed by the delimiter: NO_END, then noise.
+        (READ[:5] + b"\r" + READ[5:], ["START", "CHARS", "CR", "CHARS", "CHARS"]),
+        # The end missing, or another character in place of the delimiter.
+        (READ[:-1], ["START", "CHARS", "CR"]),
+        (READ[:-1] + b"!", ["START", "CHARS", "CR", "CHARS"]),
+        # 511 characters between ':' and CR: one too many for a frame.
+        (b":" + b"0" * 511 + b"\r\n", ["START", "CHARS", "OVERLONG", "CHARS"]),
+        # 510: the longest frame, whole (its LRC fails: reported by FRAME's check).
+        (b":" + b"0" * 508 + b"01\r\n", ["FRAME"]),
+    ],
+)
+def test_only_an_uninterrupted_frame_is_one_event(chunk: bytes, events: list[str]) -> None:
+    receiver = AsciiReceiver()
+    seen = _spied(receiver)
+    receiver.feed(chunk, 0.0)
+    assert [event.name for _, event in seen] == events
+
+
+def test_a_whole_frame_with_a_bad_check_is_discarded_as_in_four_steps() -> None:
+    for chunk, reason in [
+        (READ[:-4] + b"FC\r\n", AsciiDiscardReason.LRC),
+        (READ[:5] + b"g" + READ[6:], AsciiDiscardReason.MALFORMED),
+        (b":\r\n", AsciiDiscardReason.MALFORMED),
+    ]:
+        (whole,) = AsciiReceiver().feed(chunk, 2.0)
+        split = AsciiReceiver()
+        (steps,) = split.feed(chunk[:2], 2.0 - (len(chunk) - 2) * split.char_time) + split.feed(
+            chunk[2:], 2.0
+        )
+        assert isinstance(whole, AsciiFrameDiscarded)
+        assert whole.reason is reason
+        _assert_same([whole], [steps])
+
+
+def _merge_noise(outputs: list[AsciiReceiverOutput]) -> list[AsciiReceiverOutput]:
+    """The outputs with each run of noise discards as one (a run of noise is reported once per
+    chunk it arrived in)."""
+    merged: list[AsciiReceiverOutput] = []
+    for out in outputs:
+        last = merged[-1] if merged else None
+        if (
+            isinstance(out, AsciiFrameDiscarded)
+            and out.reason is AsciiDiscardReason.NOISE
+            and isinstance(last, AsciiFrameDiscarded)
+            and last.reason is AsciiDiscardReason.NOISE
+        ):
+            merged[-1] = AsciiFrameDiscarded(
+                last.data + out.data, out.reason, last.start, out.end, out.detail
+            )
+        else:
+            merged.append(out)
+    return merged
+
+
+def _assert_same(got: list[AsciiReceiverOutput], expected: list[AsciiReceiverOutput]) -> None:
+    """The same outputs, noise runs merged, times to the nanosecond (computed in other orders)."""
+    got, expected = _merge_noise(got), _merge_noise(expected)
+    assert [replace(out, start=0.0, end=0.0) for out in got] == [
+        replace(out, start=0.0, end=0.0) for out in expected
+    ]
+    times = [time for out in got for time in (out.start, out.end)]
+    assert times == pytest.approx([t for out in expected for t in (out.start, out.end)], abs=1e-9)
 
 
 # -- framing --------------------------------------------------------------------------
@@ -368,3 +452,91 @@ def test_cr_may_be_the_delimiter() -> None:
     receiver = AsciiReceiver(delimiter=0x0D)
     outputs = receiver.feed(READ[:-1] + b"\r", 0.0)
     assert _frames(outputs) == [bytes.fromhex("010300000001FB")]
+
+
+# -- a frame in one event against the four steps ------------------------------------------
+
+DELIMITERS = (0x0A, 0x0D, ord("!"), ord("A"))
+
+
+@st.composite
+def _pieces(draw: st.DrawFn, delimiter: int) -> bytes:
+    """A frame (good, lower case, cut short, one character changed, too long) or line noise
+    rich in ':', CR and delimiters."""
+    frame = encode_ascii_frame(draw(units), draw(pdus.filter(lambda p: len(p) < 40)), delimiter)
+    kind = draw(st.sampled_from(["good", "lower", "short", "changed", "long", "noise"]))
+    if kind == "lower":
+        return frame.lower()
+    if kind == "short":
+        return frame[: draw(st.integers(0, len(frame) - 1))]
+    if kind == "changed":
+        index = draw(st.integers(0, len(frame) - 1))
+        return frame[:index] + bytes((draw(st.integers(0, 255)),)) + frame[index + 1 :]
+    if kind == "long":
+        return b":" + b"0" * draw(st.integers(508, 513)) + bytes((0x0D, delimiter))
+    alphabet = st.sampled_from(b":\r\n!A0F") | st.integers(0, 255)
+    return bytes(draw(st.lists(alphabet, max_size=12)))
+
+
+@st.composite
+def _segments(draw: st.DrawFn, delimiter: int) -> list[tuple[bytes, float, bool]]:
+    """Runs of back-to-back characters, each with the silence before it in timeouts (none,
+    half, two) and whether the receiver is told the time before it arrives."""
+    return draw(
+        st.lists(
+            st.tuples(
+                st.lists(_pieces(delimiter), min_size=1, max_size=5).map(b"".join),
+                st.sampled_from([0.0, 0.5, 2.0]),
+                st.booleans(),
+            ),
+            min_size=1,
+            max_size=4,
+        )
+    )
+
+
+@settings(max_examples=400, print_blob=True)
+@given(st.sampled_from(DELIMITERS), st.data())
+def test_chunks_give_what_characters_one_by_one_give(delimiter: int, data: st.DataObject) -> None:
+    # Fed one character at a time, a frame always takes the four steps; fed in chunks cut at
+    # random points, whole frames take FRAME. Both give the same frames, the same discards
+    # (and so the same counts by reason), at the same times, in the same state.
+    segments = data.draw(_segments(delimiter))
+    whole = AsciiReceiver(timeout=0.5, delimiter=delimiter)
+    single = AsciiReceiver(timeout=0.5, delimiter=delimiter)
+    char = whole.char_time
+    start = 10.0
+    for stream, silence, tell in segments:
+        start += silence * whole.timeout
+        if tell:
+            _assert_same(whole.expire(start), single.expire(start))
+        got: list[AsciiReceiverOutput] = []
+        expected: list[AsciiReceiverOutput] = []
+        cuts = data.draw(st.lists(st.integers(0, len(stream)), max_size=6))
+        for chunk_start, chunk in zip(
+            _chunk_starts(stream, cuts), _split(stream, cuts), strict=True
+        ):
+            got += whole.feed(chunk, start + (chunk_start + len(chunk) - 1) * char)
+        for index in range(len(stream)):
+            expected += single.feed(stream[index : index + 1], start + index * char)
+        _assert_same(got, expected)
+        assert whole.state is single.state
+        assert whole._buffer == single._buffer
+        assert whole.next_deadline() == pytest.approx(single.next_deadline(), abs=1e-9)
+        start += len(stream) * char
+
+
+def _chunk_starts(stream: bytes, cuts: list[int]) -> list[int]:
+    """Where each of `_split(stream, cuts)`'s chunks begins in `stream`."""
+    points = sorted({cut % (len(stream) + 1) for cut in cuts})
+    edges = [0, *points, len(stream)]
+    return [a for a, b in itertools.pairwise(edges) if b > a]
+
+
+def test_the_differential_streams_take_the_whole_frame_step() -> None:
+    # The differential test above is worth something only if its chunks take FRAME.
+    receiver = AsciiReceiver(delimiter=ord("A"))
+    seen = _spied(receiver)
+    bang = encode_ascii_frame(1, b"\x03\x00\x00\x00\x01", delimiter=ord("A"))
+    assert len(_frames(receiver.feed(b"\x00" + bang + bang[:4], 0.0))) == 1
+    assert [event for _, event in seen].count(AsciiEvent.FRAME) == 1

@@ -27,6 +27,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     directory = tmp_path_factory.mktemp("cli-tls")
     ca = Authority(directory)
     server, operator = ca.issue("server", server=True), ca.issue("operator", role="operator")
+    expired = ca.issue("expired", role="operator", expired=True)
     config = directory / "device.toml"
     config.write_text(DEVICE, encoding="utf-8")
     rules = directory / "rules.toml"
@@ -36,6 +37,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "rules": str(rules),
         "server": ["--certfile", str(server.certfile), "--keyfile", str(server.keyfile)],
         "client": ["--certfile", str(operator.certfile), "--keyfile", str(operator.keyfile)],
+        "expired": ["--certfile", str(expired.certfile), "--keyfile", str(expired.keyfile)],
         "ca": ["--cafile", str(ca.cafile)],
         "directory": directory,
     }
@@ -70,6 +72,25 @@ def test_serve_and_read_over_tls_with_a_role(files: dict[str, Any]) -> None:
         assert write.returncode == 4
         assert "ILLEGAL_FUNCTION" in write.stderr
         assert len(write.stderr.strip().splitlines()) == 1
+
+
+def test_read_with_a_refused_client_certificate_is_one_line(files: dict[str, Any]) -> None:
+    with serving(
+        "tls://127.0.0.1:0", "--config", files["config"], "--rules", files["rules"],
+        *files["server"], *files["ca"],
+    ) as (_, first):  # fmt: skip
+        found = re.search(r"\(port (\d+)\)", first)
+        assert found, first
+        read = run_aiortu(
+            "read", f"tls://127.0.0.1:{found[1]}", *READ, *files["expired"], *files["ca"]
+        )
+    assert read.returncode == 1
+    assert read.stdout == ""
+    assert read.stderr.strip().splitlines() == [
+        f"aiortu read: the line failed: the port is gone (tls://127.0.0.1:{found[1]}: the server"
+        " closed the connection before its first reply; it may have refused this client's"
+        " certificate)"
+    ]
 
 
 @pytest.mark.parametrize(

@@ -404,3 +404,156 @@ def test_modbus_tls_runs_on_both_backends(pki: dict[str, Any], backend: str) -> 
                     await master.write_register(1, 0, 5)
 
     anyio.run(scenario, backend=backend)
+
+
+# -- a client certificate the server refuses after the handshake --------------------------
+
+
+@contextlib.contextmanager
+def _alerting_server(pki: dict[str, Any], replies: int = 0) -> Any:
+    """A bare TLS 1.3 server on a thread for one connection: it refuses a bad client
+    certificate with the alert saying why (the blocking ssl module sends it), or answers
+    `replies` reads with [7] and closes; yields its port."""
+    import socket
+    import threading
+
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH, cafile=str(pki["ca"].cafile))
+    context.load_cert_chain(pki["server"].certfile, pki["server"].keyfile)
+    context.verify_mode = ssl.CERT_REQUIRED
+    listener = socket.create_server(("127.0.0.1", 0))
+    listener.settimeout(10)
+
+    def serve() -> None:
+        with contextlib.suppress(OSError), listener.accept()[0] as raw:
+            raw.settimeout(10)
+            tls = context.wrap_socket(raw, server_side=True, do_handshake_on_connect=False)
+            with tls:
+                with contextlib.suppress(ssl.SSLError):
+                    tls.do_handshake()
+                    for _ in range(replies):
+                        transaction = decode_adu(tls.recv(260)).transaction_id
+                        tls.sendall(encode_adu(transaction, 1, bytes.fromhex("03 02 0007")))
+                # Read the client's request before closing: no reset overtakes the alert.
+                tls.shutdown(socket.SHUT_WR)
+                while tls.recv(4096):
+                    pass
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield listener.getsockname()[1]
+    finally:
+        listener.close()
+        thread.join(10)
+
+
+async def _first_request(pki: dict[str, Any], port: int, who: str) -> BaseException:
+    with anyio.fail_after(10):
+        try:
+            async with aiortu.open_master(
+                f"tls://127.0.0.1:{port}", timeout=2.0, retries=0, **_client_options(pki, who)
+            ) as master:
+                await master.read_holding_registers(1, 0, 1)
+        except Exception as error:  # the test looks at what came out
+            return error
+    raise AssertionError("the request succeeded")
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+@pytest.mark.parametrize(
+    ("who", "words"),
+    [
+        ("expired", "the server refused this client's certificate: it has expired"),
+        ("untrusted", "the server refused this client's certificate: it was signed by a CA "
+                      "the server does not trust"),
+    ],
+)  # fmt: skip
+def test_a_refused_client_certificate_is_one_sentence_with_the_alerts_reason(
+    pki: dict[str, Any], backend: str, who: str, words: str
+) -> None:
+    async def scenario() -> BaseException:
+        with _alerting_server(pki) as port:
+            return await _first_request(pki, port, who)
+
+    error = anyio.run(scenario, backend=backend)
+    assert type(error) is aiortu.ConnectionLost, repr(error)
+    assert str(error).startswith("the line failed: the port is gone (tls://127.0.0.1:")
+    assert str(error).endswith(f": {words})"), str(error)
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+@pytest.mark.parametrize("who", ["expired", "untrusted"])
+def test_a_client_certificate_refused_by_closing_is_one_sentence(
+    pki: dict[str, Any], backend: str, who: str
+) -> None:
+    async def scenario() -> BaseException:
+        async with tls_server(pki) as server:
+            return await _first_request(pki, server.port, who)
+
+    error = anyio.run(scenario, backend=backend)
+    assert type(error) is aiortu.ConnectionLost, repr(error)
+    assert str(error).endswith(
+        ": the server closed the connection before its first reply; it may have refused this"
+        " client's certificate)"
+    ), str(error)
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_a_master_without_a_client_certificate_is_told_before_connecting(
+    pki: dict[str, Any], backend: str
+) -> None:
+    async def scenario() -> None:
+        with pytest.raises(InvalidValue) as caught:
+            async with aiortu.open_master("tls://127.0.0.1:1", cafile=pki["ca"].cafile):
+                pass
+        assert str(caught.value) == (
+            "certfile is missing: Modbus/TCP Security needs the client's certificate and"
+            " private key"
+        )
+
+    anyio.run(scenario, backend=backend)
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_an_error_in_a_masters_body_comes_out_unwrapped(pki: dict[str, Any], backend: str) -> None:
+    async def scenario() -> None:
+        async with tls_server(pki) as server:
+            with pytest.raises(aiortu.ExceptionResponse):
+                async with tls_master(pki, server, "viewer") as master:
+                    await master.write_register(1, 0, 5)
+
+    anyio.run(scenario, backend=backend)
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_a_server_that_goes_away_after_replying_is_no_refusal(
+    pki: dict[str, Any], backend: str
+) -> None:
+    async def scenario() -> str:
+        with anyio.fail_after(10), _alerting_server(pki, replies=1) as port:
+            async with aiortu.open_master(
+                f"tls://127.0.0.1:{port}", timeout=2.0, retries=0,
+                **_client_options(pki, "operator"),
+            ) as master:  # fmt: skip
+                assert await master.read_holding_registers(1, 0, 1) == [7]
+                with pytest.raises(aiortu.ConnectionLost) as caught:
+                    await master.read_holding_registers(1, 0, 1)
+                return str(caught.value)
+
+    message = anyio.run(scenario, backend=backend)
+    assert "certificate" not in message, message
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_a_stream_closed_by_the_master_is_no_refusal(pki: dict[str, Any], backend: str) -> None:
+    async def scenario() -> None:
+        with anyio.fail_after(10):
+            async with tls_server(pki) as server:
+                stream = await aiortu.transport.open_stream(
+                    f"tls://127.0.0.1:{server.port}", **_client_options(pki, "operator")
+                )
+                await stream.aclose()
+                with pytest.raises(anyio.ClosedResourceError):
+                    await stream.receive()
+
+    anyio.run(scenario, backend=backend)

@@ -239,7 +239,9 @@ class Master(Operations):
                 " in one statement, or aiortu.blocking, whose masters close from any thread"
             )
         stack, self._exit_stack = self._exit_stack, None
-        return await stack.__aexit__(exc_type, exc, traceback)
+        # The body's own exception propagates as it is, not wrapped in an ExceptionGroup.
+        await stack.__aexit__(None, None, None)
+        return None
 
     @property
     def engine(self) -> LineEngine:

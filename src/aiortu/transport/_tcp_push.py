@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import ssl
+from collections.abc import Callable
 from typing import Any
 
 import anyio
@@ -61,7 +62,12 @@ class _Protocol(asyncio.Protocol):
         return False  # close the transport
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self.stream.lost(anyio.BrokenResourceError(str(exc)) if exc else anyio.EndOfStream())
+        if exc is None:
+            self.stream.lost(anyio.EndOfStream())
+            return
+        broken = anyio.BrokenResourceError(str(exc))
+        broken.__cause__ = exc  # a TLS alert's reason, for one
+        self.stream.lost(broken)
 
     def pause_writing(self) -> None:
         self.stream.writable = False
@@ -85,6 +91,9 @@ class PushConnectionStream(PushedMbap):
         """Whether the transport's write buffer is below its high-water mark."""
         self._drained: asyncio.Future[None] | None = None
         self._decoder = AduDecoder()
+        self.refusal: Callable[[BaseException], BaseException] | None = None
+        """What an end before the server's first byte means (set on a TLS connection, whose
+        server may refuse the client's certificate only after the handshake)."""
 
     @property
     def extra_attributes(self) -> Any:
@@ -98,6 +107,7 @@ class PushConnectionStream(PushedMbap):
 
     def data(self, data: bytes) -> None:
         """The protocol's callback: decode `data`, and hand on the reply it completes."""
+        self.refusal = None  # the server spoke: it took the certificate
         try:
             adus = self._decoder.feed(data)
         except MalformedHeader as error:
@@ -117,6 +127,8 @@ class PushConnectionStream(PushedMbap):
             drained.set_result(None)
 
     def lost(self, error: BaseException) -> None:
+        if self.refusal is not None and not isinstance(error, anyio.ClosedResourceError):
+            error = self.refusal(error)
         super().lost(error)
         self.resume_writing()  # a writer waiting for the drain sees the end instead
 

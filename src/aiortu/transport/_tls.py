@@ -19,6 +19,8 @@ UTF8String; the server grants rights by role (see
 
 Every setting error is one sentence naming what is missing or wrong: a certificate or key that
 cannot be read, a TLS port given without a key.
+A server that refuses the master's certificate after a TLS 1.3 handshake is told at the first
+request, in one sentence with the alert's reason (see `server_refusal`), not as a bare reset.
 """
 
 from __future__ import annotations
@@ -240,6 +242,56 @@ def describe_tls_failure(error: BaseException) -> str:
     return f"the TLS handshake failed ({reason or error})"
 
 
+_REFUSALS: Final = {
+    "SSLV3_ALERT_CERTIFICATE_EXPIRED": "it has expired",
+    "TLSV1_ALERT_UNKNOWN_CA": "it was signed by a CA the server does not trust",
+    "TLSV13_ALERT_CERTIFICATE_REQUIRED": "the server requires one",
+    "SSLV3_ALERT_CERTIFICATE_REVOKED": "it was revoked",
+    "SSLV3_ALERT_BAD_CERTIFICATE": "the server found it bad",
+    "SSLV3_ALERT_UNSUPPORTED_CERTIFICATE": "the server does not support its kind",
+    "SSLV3_ALERT_CERTIFICATE_UNKNOWN": "the server could not accept it",
+    "TLSV1_ALERT_ACCESS_DENIED": "the server denies it access",
+}
+
+
+def server_refusal(where: str, error: BaseException) -> anyio.BrokenResourceError:
+    """What a TLS connection to `where` ending with `error` before the server's first byte
+    means: under TLS 1.3 a server refuses the client's certificate only after the handshake,
+    with an alert (whose reason is given when the TLS library passes it on) or by closing."""
+    tls_error = error if isinstance(error, ssl.SSLError) else error.__cause__
+    reason = getattr(tls_error, "reason", None)
+    if reason in _REFUSALS:
+        why = f"the server refused this client's certificate: {_REFUSALS[reason]}"
+    elif isinstance(tls_error, ssl.SSLError) and reason:
+        why = f"the server ended the TLS session ({reason})"
+    else:
+        why = (
+            "the server closed the connection before its first reply;"
+            " it may have refused this client's certificate"
+        )
+    refused = anyio.BrokenResourceError(f"{where}: {why}")
+    refused.__cause__ = error
+    return refused
+
+
+class _ClientTlsStream(TLSStream):
+    """anyio's TLS stream for a master: an end before the server's first byte is told as
+    `server_refusal` says."""
+
+    where = ""
+    heard = False
+
+    async def receive(self, max_bytes: int = 65536) -> bytes:
+        if self.heard:
+            return await super().receive(max_bytes)
+        try:
+            data = await super().receive(max_bytes)
+        except (anyio.EndOfStream, anyio.BrokenResourceError, ssl.SSLError) as error:
+            raise server_refusal(self.where, error) from error
+        self.heard = True
+        return data
+
+
 class TlsListener(TLSListener):
     """anyio's TLS listener that logs a failed handshake in one sentence (who, and why), not
     with a traceback, and passes on the listening address of the listener it wraps.
@@ -304,12 +356,15 @@ async def open_modbus_tls(
         )
         async with _handshake(where, connect_timeout, pushed):
             await pushed.start_tls(context, host)
+        pushed.refusal = lambda error: server_refusal(where, error)
         return pushed
     stream = await open_tcp_connection(host, port, connect_timeout=connect_timeout, scheme="tls")
     async with _handshake(where, connect_timeout, stream):
-        tls = await TLSStream.wrap(
+        tls = await _ClientTlsStream.wrap(
             stream, hostname=host, ssl_context=context, standard_compatible=False
         )
+    assert isinstance(tls, _ClientTlsStream)  # wrap() makes its own class
+    tls.where = where
     return ModbusTcpStream(tls, counters)
 
 
