@@ -83,7 +83,7 @@ def _fast_path(
     """A fast-path read of 2 registers from unit 7 (sent 1.001 to 1.005)."""
     wire_timed = min_turnaround is not None
     config = aiortu.MasterConfig.of(min_turnaround=min_turnaround or 0.0, retries=0)
-    engine = LineEngine(cast("Link", _Line(loop, wire_timed)), config)
+    engine = LineEngine(cast("Link", _Line(loop, wire_timed)), config, can_reconnect=False)
     engine.open = True
     transaction = Transaction(7, ReadHoldingRegistersRequest(0, 2), 0.5, RetryPolicy(0))
     future = engine.submit(transaction)

@@ -328,7 +328,7 @@ def _engine(**changes: object) -> LineEngine:
     """An engine whose fast path may run, but for *changes* to it (`link`, `open`,
     `busy`, `guard_until`, `health`, `machine`, `enabled`)."""
     config = MasterConfig(fast_path=bool(changes.pop("enabled", True)))
-    engine = LineEngine(_Link(), config)  # type: ignore[arg-type]
+    engine = LineEngine(_Link(), config, can_reconnect=False)  # type: ignore[arg-type]
     engine.open = bool(changes.pop("open", True))
     engine.queue.busy = bool(changes.pop("busy", False))
     engine.attempts.guard_until = changes.pop("guard_until", NO_GUARD)  # type: ignore[assignment]
@@ -546,3 +546,57 @@ async def test_closing_the_engine_fails_a_request_waiting_for_the_gap() -> None:
         assert not master.engine.fast.waiting
         await anyio.sleep(GAP * 2)
         assert await _drain(pty) == b""  # the timer sent nothing
+
+
+class _QuietLink:
+    """A link on a fixed clock whose line falls quiet at `quiet`: it records what the fast
+    path sends and the callback it leaves for the silence."""
+
+    sends_at_once = True
+    char_time = 0.001
+    wire_timed = False
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, now: float, quiet: float) -> None:
+        self.loop, self._now, self._quiet = loop, now, quiet
+        self.sent: list[bytes] = []
+        self.when_quiet: list[Callable[[], object]] = []
+
+    def clock(self) -> float:
+        return self._now
+
+    def quiet_at(self) -> float:
+        return self._quiet
+
+    def call_when_quiet(self, callback: Callable[[], object]) -> None:
+        self.when_quiet.append(callback)
+
+    def send_now(self, frame: bytes) -> float:
+        self.sent.append(frame)
+        return self._now + len(frame) * self.char_time
+
+    def call_at(self, when: float, callback: Callable[[], object]) -> asyncio.TimerHandle:
+        return self.loop.call_at(when + 3600.0, callback)  # never fires in the test
+
+    def expect(self, tap: object) -> None:
+        pass
+
+
+@pytest.mark.parametrize(("quiet", "waits"), [(5.0, False), (5.0 + 1e-9, True)])
+async def test_a_request_goes_out_at_once_from_the_instant_the_line_is_quiet(
+    quiet: float, waits: bool
+) -> None:
+    # The line quiet at this very instant: the request goes out now, not from a callback;
+    # quiet a moment later: it waits, then goes out, and no longer holds the line waiting.
+    link = _QuietLink(asyncio.get_running_loop(), 5.0, quiet)
+    engine = LineEngine(link, MasterConfig(), can_reconnect=False)  # type: ignore[arg-type]
+    engine.open = True
+    future = engine.fast.start(Transaction(1, ReadHoldingRegistersRequest(0, 2), 1.0))
+    try:
+        assert future is not None
+        assert (link.sent, len(link.when_quiet)) == (([], 1) if waits else ([REQUEST], 0))
+        assert engine.fast.waiting is waits
+        for callback in link.when_quiet:
+            callback()
+        assert (link.sent, engine.fast.waiting, engine.fast.on_wire) == ([REQUEST], False, True)
+    finally:
+        engine.attempts.stop_timer()

@@ -67,7 +67,7 @@ class LineEngine(LineState):
     """
 
     def __init__(
-        self, link: Link, config: MasterConfig | None = None, *, can_reconnect: bool = False
+        self, link: Link, config: MasterConfig | None = None, *, can_reconnect: bool
     ) -> None:
         super().__init__(link, config if config is not None else MasterConfig())
         self._wait_for_reconnect = can_reconnect

@@ -183,9 +183,7 @@ class FastPath:
             self._stale_before = end + delay + (shape[1] - 1) * char_time
         else:
             self._stale_before = -math.inf
-        deadline = attempts.deadline = end + transaction.timeout
-        if deadline < attempts.timer_at:
-            attempts.arm(deadline)
+        attempts.arm(end + transaction.timeout)  # it keeps an earlier timer
         tap = self._taps.get(shape)
         if tap is None:
             tap = self._taps[shape] = ReplyTap(shape[0], shape[1], self.on_reply, None)
