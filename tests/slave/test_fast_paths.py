@@ -79,3 +79,28 @@ async def test_fast_paths_answer_as_the_handlers_do() -> None:
         assert [b.values for b in fast_store.blocks(table)] == [
             b.values for b in slow_store.blocks(table)
         ]
+
+
+def test_fast_paths_reach_the_end_of_the_address_space_and_the_shortest_write() -> None:
+    # Declining would still be answered right (by the general route), but not at once: the
+    # fast paths serve every well-formed request up to the last address.
+    store = MemoryStore(
+        coils=Block(0xFFF8, 8, [1, 0] * 4),
+        discrete_inputs=Block(0xFFF8, 8, [0, 1] * 4),
+        holding_registers=Block(0xFFF8, 8, range(8)),
+    )
+    answers = {
+        "01 FF F8 00 08": "01 01 55",
+        "01 FF FF 00 01": "01 01 00",
+        "02 FF F8 00 08": "02 01 AA",
+        "02 FF FF 00 01": "02 01 01",
+        "03 FF FF 00 01": "03 02 00 07",
+        "10 FF FF 00 01 02 12 34": "10 FF FF 00 01",  # one register: the shortest PDU
+        "10 FF FE 00 02 04 00 01 00 02": "10 FF FE 00 02",
+    }
+    for request, expected in answers.items():
+        pdu = bytes.fromhex(request)
+        reply = FAST_PATHS[pdu[0]][1](store, pdu)
+        assert reply is not None, request
+        assert reply.hex(" ").upper() == expected, request
+    assert store.get(Table.HOLDING_REGISTERS, 0xFFFE, 2) == [1, 2]

@@ -197,3 +197,41 @@ async def test_range_handler_failure_answers_04_and_serving_goes_on() -> None:
         slave.route(Table.INPUT_REGISTERS, range(8, 9), broken)
         assert await master.request(UNIT, "04 00 08 00 01") == "84 04"
         assert await master.request(UNIT, "03 00 6B 00 01") == "03 02 AE 41"
+
+
+async def test_a_broadcast_reaches_each_store_flagged_as_broadcast() -> None:
+    seen: list[tuple[int, bool]] = []
+
+    def record(request: object, context: RequestContext) -> None:
+        seen.append((context.unit, context.broadcast))
+
+    stores = {unit: MemoryStore(holding_registers={1: [0]}) for unit in (3, 4)}
+    async with slave_line(stores) as (master, slave):
+        slave.set_handler(0x06, record)
+        await master.send_request(0, "06 00 01 00 07")
+        # A read answered after it: the broadcast has run by then.
+        assert await master.request(3, "03 00 01 00 01") == "03 02 00 00"
+        assert seen == [(3, True), (4, True)]
+
+
+async def test_a_frame_for_another_unit_while_busy_is_only_counted() -> None:
+    release = anyio.Event()
+
+    async def held(request: object, context: RequestContext) -> ReadHoldingRegistersResponse:
+        await release.wait()
+        return ReadHoldingRegistersResponse((5,))
+
+    async with slave_line({3: MemoryStore(holding_registers={0: [1]})}) as (master, slave):
+        slave.set_handler(0x03, held)
+        await master.send_request(3, "03 00 00 00 01")
+        await anyio.sleep(0.03)
+        # The serve loop is busy: the frame for unit 5 is queued, then taken by it.
+        await master.send_request(5, "03 00 00 00 01")
+        await anyio.sleep(0.03)
+        release.set()
+        frame = await master.receive_frame()
+        assert frame is not None
+        assert frame[0] == 3, frame
+        assert await master.receive_frame(0.1) is None  # nothing for unit 5
+        assert await master.request(3, "03 00 00 00 01") == "03 02 00 05"
+    assert slave.counters.other_unit_count == 1
