@@ -21,6 +21,7 @@ import pytest
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import InvalidValue
 from aiortu.gateway import Gateway, GatewayLine, gateway
+from aiortu.gateway._metrics import parse_metrics_url
 from aiortu.slave import MemoryStore, RequestContext
 from tests.gateway.helpers import (
     UNIT,
@@ -407,3 +408,10 @@ async def test_a_connection_served_directly_speaks_modbus_tcp_by_default() -> No
             with anyio.fail_after(5):
                 assert await TcpClient(stream).request("03 0000 0001") == "03 02 12 34"
         tasks.cancel_scope.cancel()
+
+
+def test_a_metrics_url_takes_every_port_up_to_65535() -> None:
+    assert parse_metrics_url("http://127.0.0.1:65535/metrics").port == 65535
+    assert parse_metrics_url("http://[::1]:0").port == 0
+    with pytest.raises(InvalidValue, match=re.escape("the port '65536' is not in 0..65535")):
+        parse_metrics_url("http://127.0.0.1:65536/metrics")
