@@ -150,3 +150,19 @@ async def test_a_negative_cache_ms_is_refused_in_one_sentence() -> None:
         with pytest.raises(InvalidValue) as raised:
             Gateway(bench.master, cache_ms=-1)
     assert str(raised.value) == "cache_ms must be a number of milliseconds, 0 or more, not -1"
+
+
+@pytest.mark.parametrize(
+    ("read", "write"),
+    [
+        ("03 0001 0003", "06 0000 0009"),  # a register
+        ("01 0001 0003", "05 0000 FF00"),  # a coil
+    ],
+)
+def test_a_single_write_just_before_a_block_leaves_it(read: str, write: str) -> None:
+    cache, _ = _cache()
+    pdu = bytes.fromhex(read)
+    reply = bytes.fromhex("03 06 1234 ABCD 0007" if read[:2] == "03" else "01 01 05")
+    cache.put(UNIT, pdu, reply, cache.generation(UNIT))
+    cache.invalidate(UNIT, bytes.fromhex(write))  # one address, the block's first minus one
+    assert cache.get(UNIT, pdu) == reply

@@ -19,7 +19,15 @@ import pytest
 from aiortu.errors import InvalidValue
 from aiortu.gateway import Gateway, Listen, gateway
 from aiortu.slave import RequestContext
-from tests.gateway.helpers import UNIT, Line, TcpClient, client, line, memory_client
+from tests.gateway.helpers import (
+    UNIT,
+    Line,
+    TcpClient,
+    client,
+    line,
+    memory_client,
+    memory_stream,
+)
 from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(30)
@@ -339,3 +347,28 @@ async def test_requests_sent_one_by_one_never_overfill_the_window() -> None:
             replies = [await tcp.receive() for _ in range(6)]
             assert sorted(reply.transaction_id for reply in replies if reply) == list(range(6))
         assert bench.gateway.counters.requests == 6
+
+
+async def test_a_connection_served_without_a_priority_goes_before_priority_1() -> None:
+    gate = Gate()
+    slow = {"timeout": 10.0}
+    async with line(listen=(), max_in_flight=8, coalesce=False, master_options=slow) as bench:
+        bench.slave.before_request(gate)
+        async with (
+            memory_client(bench.gateway) as busy,
+            memory_stream(bench.gateway, priority=1) as far,
+        ):
+            late = TcpClient(far)
+            gate.close()
+            for transaction_id in range(8):
+                await busy.send(f"03 {transaction_id:04X} 0001", UNIT, transaction_id)
+            await _until(lambda: gate.held == 1 and bench.gateway.counters.requests == 8)
+            await late.send("03 000F 0001", UNIT, 99)
+            await _until(lambda: bench.gateway.counters.requests == 9)
+            before = len(_requests_on_wire(bench))
+            gate.opened.set()
+            assert (await late.receive()) is not None
+            wire = _requests_on_wire(bench)
+            # The default priority is 0: the seven queued requests of the connection served
+            # without one all go before the priority-1 request, fair turns notwithstanding.
+            assert next(i for i in range(before, len(wire)) if wire[i][3] == 0x0F) == before + 7

@@ -21,6 +21,7 @@ import pytest
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import InvalidValue
 from aiortu.gateway import Gateway, GatewayLine, gateway
+from aiortu.gateway._metrics import parse_metrics_url
 from aiortu.slave import MemoryStore, RequestContext
 from tests.gateway.helpers import (
     UNIT,
@@ -407,3 +408,32 @@ async def test_a_connection_served_directly_speaks_modbus_tcp_by_default() -> No
             with anyio.fail_after(5):
                 assert await TcpClient(stream).request("03 0000 0001") == "03 02 12 34"
         tasks.cancel_scope.cancel()
+
+
+def test_a_metrics_url_takes_every_port_up_to_65535() -> None:
+    assert parse_metrics_url("http://127.0.0.1:65535/metrics").port == 65535
+    assert parse_metrics_url("http://[::1]:0").port == 0
+    with pytest.raises(InvalidValue, match=re.escape("the port '65536' is not in 0..65535")):
+        parse_metrics_url("http://127.0.0.1:65536/metrics")
+
+
+@on_virtual_clock
+async def test_a_read_that_asks_again_keeps_its_place_in_its_connections_window() -> None:
+    async with line(master_options=HELD, listen=()) as bench:
+        hold = Hold()
+        bench.slave.before_request(hold)
+        async with memory_client(bench.gateway) as follower:
+            async with memory_client(bench.gateway) as leader:
+                await leader.send("03 0000 0001", UNIT, 0)
+                await _until(lambda: bench.gateway.counters.requests == 1)
+                await follower.send("03 0000 0001", UNIT, 0)  # joins the leader's read
+                await _until(lambda: bench.gateway.counters.requests == 2)
+            # The leader left: the follower's read asks again, still one of its four places.
+            for transaction_id in range(1, 6):
+                await follower.send(f"03 {transaction_id:04X} 0001", UNIT, transaction_id)
+            await _until(lambda: bench.gateway.counters.requests >= 5)
+            await anyio.sleep(5)  # time for a fifth of its own to be read, were it allowed
+            assert bench.gateway.counters.requests == 5
+            hold.release()
+            replies = [await follower.receive() for _ in range(6)]
+            assert sorted(reply.transaction_id for reply in replies if reply) == list(range(6))
