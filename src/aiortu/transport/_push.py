@@ -81,3 +81,34 @@ class PushStream(Protocol):
         raises why.
         """
         ...
+
+
+class WriteGate:
+    """An asyncio transport's write flow control, for a pushed stream: whether its buffer is
+    below the high-water mark (`open`), and a wait until it drains."""
+
+    __slots__ = ("_drained", "open")
+
+    def __init__(self) -> None:
+        self.open = True
+        self._drained: asyncio.Future[None] | None = None
+
+    def pause(self) -> None:
+        """The transport's buffer went above its high-water mark."""
+        self.open = False
+
+    def resume(self) -> None:
+        """The buffer drained below its low-water mark, or the connection ended: a writer
+        waiting sees which."""
+        self.open = True
+        drained = self._drained
+        if drained is not None and not drained.done():
+            drained.set_result(None)
+
+    async def drained(self) -> None:
+        """Wait for the next `resume`."""
+        self._drained = asyncio.get_running_loop().create_future()
+        try:
+            await self._drained
+        finally:
+            self._drained = None

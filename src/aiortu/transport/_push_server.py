@@ -35,7 +35,7 @@ import anyio.lowlevel
 from anyio.streams.stapled import MultiListener
 from anyio.streams.tls import TLSAttribute
 
-from aiortu.transport._push import loop_pushes
+from aiortu.transport._push import WriteGate, loop_pushes
 from aiortu.transport._tls import TlsListener
 
 __all__ = (
@@ -71,7 +71,7 @@ class _Protocol(asyncio.Protocol):
         self.stream.lost(anyio.BrokenResourceError(str(exc)) if exc else anyio.EndOfStream())
 
     def pause_writing(self) -> None:
-        self.stream.writable = False
+        self.stream.gate.pause()
 
     def resume_writing(self) -> None:
         self.stream.resume_writing()
@@ -90,8 +90,7 @@ class PushServerStream(anyio.abc.SocketStream):
         self.transport: asyncio.Transport | None = None
         self.tap: Tap | None = None
         """The server's function that may answer a chunk at once (see the module docstring)."""
-        self.writable = True
-        """Whether the transport's write buffer is below its high-water mark."""
+        self.gate = WriteGate()
         self.half_close = False
         """Whether the transport stays open for the replies after the client's end of stream
         (plain TCP only)."""
@@ -100,7 +99,6 @@ class PushServerStream(anyio.abc.SocketStream):
         self._kept = bytearray()
         self._error: BaseException | None = None
         self._waiter: asyncio.Future[None] | None = None
-        self._drained: asyncio.Future[None] | None = None
 
     async def connect(self, context: ssl.SSLContext | None = None) -> None:
         """Make the transport, over TLS with `context` (whose handshake's errors raise: the
@@ -144,7 +142,7 @@ class PushServerStream(anyio.abc.SocketStream):
             tap is not None
             and self._waiter is not None
             and not self._kept
-            and self.writable
+            and self.gate.open
             and tap(data)
         ):
             return
@@ -191,16 +189,13 @@ class PushServerStream(anyio.abc.SocketStream):
 
     def resume_writing(self) -> None:
         """The transport's buffer drained below its low-water mark."""
-        self.writable = True
-        drained = self._drained
-        if drained is not None and not drained.done():
-            drained.set_result(None)
+        self.gate.resume()
 
     def write_now(self, data: bytes) -> bool:
         """Write `data` at once where the client reads its replies; False (nothing written)
         while the write buffer is above its high-water mark, or the connection is gone."""
         transport = self.transport
-        if transport is None or self._error is not None or not self.writable:
+        if transport is None or self._error is not None or not self.gate.open:
             return False
         transport.write(data)
         return True
@@ -211,11 +206,7 @@ class PushServerStream(anyio.abc.SocketStream):
         while not self.write_now(item):
             if self._error is not None or self.transport is None:
                 raise self._error or anyio.ClosedResourceError()
-            self._drained = asyncio.get_running_loop().create_future()
-            try:
-                await self._drained
-            finally:
-                self._drained = None
+            await self.gate.drained()
 
     async def send_eof(self) -> None:
         if self.transport is not None and self.transport.can_write_eof():

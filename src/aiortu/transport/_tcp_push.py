@@ -35,7 +35,7 @@ from aiortu._log import get_logger
 from aiortu.core.mbap import AduDecoder, MalformedHeader
 from aiortu.transport._mbap_push import PushedMbap
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
-from aiortu.transport._push import loop_pushes
+from aiortu.transport._push import WriteGate, loop_pushes
 from aiortu.transport._tcp import connect_protocol, open_tcp_connection
 from aiortu.transport._url import MODBUS_TCP_SCHEME, format_tcp_url
 
@@ -70,7 +70,7 @@ class _Protocol(asyncio.Protocol):
         self.stream.lost(broken)
 
     def pause_writing(self) -> None:
-        self.stream.writable = False
+        self.stream.gate.pause()
 
     def resume_writing(self) -> None:
         self.stream.resume_writing()
@@ -87,9 +87,7 @@ class PushConnectionStream(PushedMbap):
         self.transport: asyncio.Transport | None = None
         self.protocol = _Protocol(self)
         """The asyncio protocol that feeds this stream (for `loop.create_connection`)."""
-        self.writable = True
-        """Whether the transport's write buffer is below its high-water mark."""
-        self._drained: asyncio.Future[None] | None = None
+        self.gate = WriteGate()
         self._decoder = AduDecoder()
         self.refusal: Callable[[BaseException], BaseException] | None = None
         """What an end before the server's first byte means (set on a TLS connection, whose
@@ -121,10 +119,7 @@ class PushConnectionStream(PushedMbap):
 
     def resume_writing(self) -> None:
         """The transport's buffer drained below its low-water mark."""
-        self.writable = True
-        drained = self._drained
-        if drained is not None and not drained.done():
-            drained.set_result(None)
+        self.gate.resume()
 
     def lost(self, error: BaseException) -> None:
         if self.refusal is not None and not isinstance(error, anyio.ClosedResourceError):
@@ -136,7 +131,7 @@ class PushConnectionStream(PushedMbap):
         """The push extension: write the RTU frame `item` as one ADU now, unless the server
         has left earlier requests unread (the buffer above its high-water mark)."""
         transport = self.transport
-        if transport is None or self._error is not None or not self.writable:
+        if transport is None or self._error is not None or not self.gate.open:
             return False
         transport.write(self.request(item))
         return True
@@ -148,11 +143,7 @@ class PushConnectionStream(PushedMbap):
         while not self.send_nowait(item):
             if self._error is not None or self.transport is None:
                 raise self._error or anyio.ClosedResourceError()
-            self._drained = asyncio.get_running_loop().create_future()
-            try:
-                await self._drained
-            finally:
-                self._drained = None
+            await self.gate.drained()
 
     async def send_eof(self) -> None:
         if self.transport is not None and self.transport.can_write_eof():
