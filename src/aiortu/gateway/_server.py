@@ -65,6 +65,7 @@ from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
 from aiortu.core.mbap import Adu, MalformedHeader, decode_adu
 from aiortu.errors import FrameError, InvalidValue
+from aiortu.gateway._as_bytes import ReadsAsBytes
 from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._connection import GONE, Connection, Turns
 from aiortu.gateway._forward import (
@@ -172,6 +173,8 @@ class _Line(Turns):
         self.shared: dict[tuple[int, bytes], _Shared] = {}
         self.cache = cache
         self.stats = stats
+        self.as_bytes = ReadsAsBytes(self.master)
+        """The line's byte shortcut for reads."""
         self.listen_only: set[int] = set()
         """Units the gateway put in listen-only mode (08/04), until an 08/01 to them."""
 
@@ -647,7 +650,9 @@ class Gateway:
             request.generation = cache.generation(unit)
         self._count_transaction(line)
         try:
-            awaitable = start_forward(line.master, unit, pdu, connection.priority, request.turn)
+            awaitable = start_forward(
+                line.master, unit, line.as_bytes.request(pdu), connection.priority, request.turn
+            )
         except Exception:
             _log.exception("gateway: forwarding a request failed; answered with exception 0B")
             self._end(request, exception_reply(pdu, _NO_RESPONSE))
