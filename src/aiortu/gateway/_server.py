@@ -672,8 +672,10 @@ class Gateway:
         reply: bytes | None = None
         if not future.cancelled():
             pdu = request.adu.pdu
+            error = future.exception()
             try:
-                reply = reply_pdu(pdu, request.unit, *_outcome(future))
+                result = None if error is not None else future.result()
+                reply = reply_pdu(pdu, request.unit, result, error)
             except Exception:
                 _log.exception("gateway: forwarding a request failed; answered with exception 0B")
                 reply = exception_reply(pdu, _NO_RESPONSE)
@@ -811,12 +813,6 @@ def _drop_unstarted(connection: _Client) -> None:
         if inspect.iscoroutine(submitted):
             submitted.close()
     connection.pending.clear()
-
-
-def _outcome(future: asyncio.Future[Any]) -> tuple[Any, BaseException | None]:
-    """The result and the error of done, not cancelled, `future`."""
-    error = future.exception()
-    return (None, error) if error is not None else (future.result(), None)
 
 
 def _check_options(
