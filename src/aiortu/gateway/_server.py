@@ -193,7 +193,7 @@ class _Request:
     from a callback). A coroutine is made only by the worker that will await it."""
     submitted: Awaitable[Any] | None = None
     """The line's awaitable of a read handed to the line before a worker took it: closed
-    when none ever does (see `Gateway._drop_unstarted`)."""
+    when none ever does (see `_drop_unstarted`)."""
     shared: _Shared | None = None
     """The shared read it leads (see `Gateway._start_read`)."""
     generation: tuple[int, int] | None = None
