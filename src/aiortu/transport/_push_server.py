@@ -37,6 +37,7 @@ from anyio.streams.tls import TLSAttribute
 
 from aiortu.transport._push import WriteGate, loop_pushes
 from aiortu.transport._tls import TlsListener
+from aiortu.transport._tls_bio import TlsBioTransport
 
 __all__ = (
     "PushListener",
@@ -104,11 +105,16 @@ class PushServerStream(anyio.abc.SocketStream):
         """Make the transport, over TLS with `context` (whose handshake's errors raise: the
         caller bounds its time); reading waits for the first `receive()`."""
         loop = asyncio.get_running_loop()
-        transport, _ = await loop.connect_accepted_socket(
-            lambda: _Protocol(self), self._socket, ssl=context
-        )
-        self.transport = transport
-        self.half_close = context is None
+        if context is None:
+            self.transport, _ = await loop.connect_accepted_socket(
+                lambda: _Protocol(self), self._socket
+            )
+            self.half_close = True
+        else:
+            tls = TlsBioTransport(context, _Protocol(self), server_side=True)
+            await loop.connect_accepted_socket(lambda: tls, self._socket)
+            self.transport = tls  # what aclose() closes from now on, the socket with it
+            await tls.handshake()
         self.transport.pause_reading()  # until the first receive()
 
     @property

@@ -23,7 +23,6 @@ the same exchanges through both.
 from __future__ import annotations
 
 import asyncio
-import ssl
 from collections.abc import Callable
 from typing import Any
 
@@ -154,20 +153,6 @@ class PushConnectionStream(PushedMbap):
             self.transport.close()
         self.lost(anyio.ClosedResourceError())
         await anyio.lowlevel.checkpoint()
-
-    async def start_tls(self, context: ssl.SSLContext, hostname: str) -> None:
-        """Replace the plain transport by a TLS one over it (the handshake's errors raise;
-        the caller bounds its time)."""
-        assert self.transport is not None
-        loop = asyncio.get_running_loop()
-        tls = await loop.start_tls(
-            self.transport,
-            self.protocol,
-            context,
-            server_hostname=hostname,
-        )
-        assert tls is not None
-        self.transport = tls
 
 
 async def open_pushed(
