@@ -6,8 +6,9 @@ general-purpose layer in pure Python: a pushed master or server paid about half 
 TLS cost in it. [`TlsBioTransport`][aiortu.transport.TlsBioTransport] does only what a Modbus
 connection needs. It is the plain transport's protocol and the stream's transport at once:
 
-- bytes received go into the incoming BIO, and each record's plaintext out of `read()` goes to
-  the stream's protocol (`data_received`), until the BIO holds no whole record;
+- bytes received (into a buffer of its own: `asyncio.BufferedProtocol`, no bytes object made
+  per receive) go into the incoming BIO, and each record's plaintext out of `read()` goes to the
+  stream's protocol (`data_received`), until the BIO holds no whole record;
 - a write is `SSLObject.write`, and the outgoing BIO's bytes go to the plain transport in one
   `write`; flow control (`pause_writing`, `resume_writing`) and `pause_reading` pass through.
 
@@ -40,6 +41,10 @@ __all__ = ("TlsBioTransport",)
 
 _RECORD: Final = 16384
 """The most plaintext one TLS record holds: what one `read()` asks for."""
+
+_RECEIVE: Final = 65536
+"""The buffer the plain transport receives into (asyncio's `BufferedProtocol`: no bytes object
+made per receive)."""
 
 
 class _State(enum.Enum):
@@ -74,7 +79,7 @@ _NEXT: Final[dict[tuple[_State, _Event], _State]] = {
 """Every move of a TLS connection; a (state, event) pair not here is a bug (`RuntimeError`)."""
 
 
-class TlsBioTransport(asyncio.Transport, asyncio.Protocol):
+class TlsBioTransport(asyncio.Transport, asyncio.BufferedProtocol):
     """A TLS connection over a plain asyncio transport (see the module docstring): give it as
     the protocol of the plain connection, then await
     [`handshake`][aiortu.transport.TlsBioTransport.handshake]; `app` is the protocol that gets
@@ -96,6 +101,7 @@ class TlsBioTransport(asyncio.Transport, asyncio.Protocol):
             self._incoming, self._outgoing, server_side=server_side,
             server_hostname=server_hostname,
         )  # fmt: skip
+        self._buffer = memoryview(bytearray(_RECEIVE))
         self._app = app
         self._app_lost = False
         self._state = _HANDSHAKING
@@ -150,13 +156,17 @@ class TlsBioTransport(asyncio.Transport, asyncio.Protocol):
         self._plain = transport
         self._step_handshake()
 
-    def data_received(self, data: bytes) -> None:
+    def get_buffer(self, sizehint: int) -> memoryview:
+        return self._buffer
+
+    def buffer_updated(self, nbytes: int) -> None:
+        """`nbytes` came into the buffer: into the incoming BIO with them."""
         state = self._state
         if state is _OPEN:
-            self._incoming.write(data)
+            self._incoming.write(self._buffer[:nbytes])
             self._read()
         elif state is _HANDSHAKING:
-            self._incoming.write(data)
+            self._incoming.write(self._buffer[:nbytes])
             self._step_handshake()
         # CLOSED: dropped unread (see the module docstring)
 
