@@ -15,7 +15,7 @@ import pytest
 from aiortu.transport import client_tls_context, server_tls_context
 from aiortu.transport._tls import server_refusal
 from aiortu.transport._tls_bio import _NEXT, TlsBioTransport, _Event, _State
-from tests.transport.test_tls import pki
+from tests.transport.test_tls import pki, tls_master, tls_server
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -262,3 +262,32 @@ async def test_the_state_table_refuses_a_move_it_does_not_have(pki: dict[str, An
     layer.close()
     with pytest.raises(RuntimeError, match="no move from closed on the handshake finished"):
         layer._move(_Event.HANDSHAKE_DONE)
+
+
+async def test_a_client_asking_to_renegotiate_is_refused(pki: dict[str, Any]) -> None:
+    """OpenSSL's own client (TLS 1.2, the last version with renegotiation) asks for it once the
+    session is up; the server refuses, and serves the next client as usual."""
+    operator = pki["operator"]
+    async with tls_server(pki) as server:
+        client = await asyncio.create_subprocess_exec(
+            "openssl", "s_client", "-tls1_2", "-connect", f"127.0.0.1:{server.port}",
+            "-cert", str(operator.certfile), "-key", str(operator.keyfile),
+            "-CAfile", str(pki["ca"].cafile),
+            stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.STDOUT,
+        )  # fmt: skip
+        assert client.stdin is not None
+        assert client.stdout is not None
+        said = b""
+        async with asyncio.timeout(10):
+            while b"Verify return code" not in said:  # the session is up
+                line = await client.stdout.readline()
+                assert line, said.decode(errors="replace")
+                said += line
+            client.stdin.write(b"R\n")  # s_client's command: renegotiate
+            said += await client.stdout.read()  # until the server ends the session
+            await client.wait()
+        assert b"RENEGOTIATING" in said
+        assert b"no renegotiation" in said, said.decode(errors="replace")[-500:]
+        async with tls_master(pki, server, "operator") as master:
+            assert await master.read_holding_registers(1, 0, 2) == [1, 2]

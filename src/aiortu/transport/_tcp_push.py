@@ -4,11 +4,12 @@ event loop's callback.
 Where the event loop is asyncio, [`open_modbus_tcp`][aiortu.transport.open_modbus_tcp] and
 [`open_modbus_tls`][aiortu.transport.open_modbus_tls] return this stream rather than a
 [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over anyio's socket (and TLS) stream read
-by a task: an `asyncio.Protocol` on asyncio's own transport (its TLS transport for `tls://`)
-feeds each chunk to the MBAP decoder in the loop's read callback, and the stream implements the
-push extension ([`PushStream`][aiortu.transport.PushStream]), so the
-[`Link`][aiortu.line.Link] gets each reply without a task wake-up and writes each request
-without a yield, and the master's usual exchange runs as it does on a serial port.
+by a task: an `asyncio.Protocol` on asyncio's own transport (for `tls://` behind the
+connection's own TLS layer, `TlsBioTransport` in `_tls_bio.py`) feeds each chunk to the MBAP
+decoder in the loop's read callback, and the stream implements the push extension
+([`PushStream`][aiortu.transport.PushStream]), so the [`Link`][aiortu.line.Link] gets each reply
+without a task wake-up and writes each request without a yield, and the master's usual exchange
+runs as it does on a serial port.
 
 It decodes and matches replies as the general path does, with the same functions: a reply
 whose transaction id is not the one outstanding is dropped and counted (`reply_frame`, through

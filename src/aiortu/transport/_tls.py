@@ -341,8 +341,9 @@ async def open_modbus_tls(
     """Connect to the Modbus/TCP Security server at `host`:`port` with the client certificate
     `certfile` and its key `keyfile`, trusting the CAs in `cafile`; return a stream of RTU
     frames, as [`open_modbus_tcp`][aiortu.transport.open_modbus_tcp] does (on asyncio a
-    [`PushConnectionStream`][aiortu.transport.PushConnectionStream] on asyncio's TLS transport,
-    elsewhere a [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over anyio's TLS stream).
+    [`PushConnectionStream`][aiortu.transport.PushConnectionStream] with its own TLS layer on
+    asyncio's plain transport, elsewhere a
+    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over anyio's TLS stream).
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a missing or unreadable file,
     [`PortNotFound`][aiortu.errors.PortNotFound] when the server cannot be reached, and

@@ -3,8 +3,8 @@
 
 asyncio's own TLS transport (`loop.start_tls`, `ssl=` of `connect_accepted_socket`) is a
 general-purpose layer in pure Python: a pushed master or server paid about half of a request's
-TLS cost in it. [`TlsBioTransport`][aiortu.transport.TlsBioTransport] does only what a Modbus
-connection needs. It is the plain transport's protocol and the stream's transport at once:
+TLS cost in it. `TlsBioTransport` does only what a Modbus connection needs. It is the plain
+transport's protocol and the stream's transport at once:
 
 - bytes received (into a buffer of its own: `asyncio.BufferedProtocol`, no bytes object made
   per receive) go into the incoming BIO, and each record's plaintext out of `read()` goes to the
@@ -19,11 +19,11 @@ Its states (`_State`) and their moves are one table, `_NEXT`:
   peer can name the reason; the caller bounds the handshake's time (`handshake()`);
 - OPEN while records flow; an error in a record (an alert received, a bad record) ends it with
   the `ssl.SSLError`, the alert written first;
-- CLOSED after the peer's close_notify or end of stream (a stream ended without close_notify is
-  taken as an end, as asyncio's and anyio's non-strict TLS streams take it: a Modbus ADU carries
-  its own length, so a cut reply is still seen), after an error, or after `close()`, which sends
-  close_notify first. Bytes that come in after it are dropped unread: a peer flooding a refused
-  connection costs nothing.
+- CLOSED after the peer's close_notify or end of stream (a stream ended without close_notify
+  is taken as an end, as asyncio's and anyio's non-strict TLS streams take it: a Modbus ADU
+  carries its own length, so a cut one is never taken for whole), after an error, or after
+  `close()`, which sends close_notify first. Bytes that come in after it are dropped unread: a
+  peer flooding a refused connection costs nothing.
 
 Renegotiation is refused by the contexts (`ssl.OP_NO_RENEGOTIATION`, see `_tls.py`); OpenSSL
 answers a request for it with its alert, which goes out like any other bytes of the outgoing BIO.
@@ -81,8 +81,7 @@ _NEXT: Final[dict[tuple[_State, _Event], _State]] = {
 
 class TlsBioTransport(asyncio.Transport, asyncio.BufferedProtocol):
     """A TLS connection over a plain asyncio transport (see the module docstring): give it as
-    the protocol of the plain connection, then await
-    [`handshake`][aiortu.transport.TlsBioTransport.handshake]; `app` is the protocol that gets
+    the protocol of the plain connection, then await `handshake()`; `app` is the protocol that gets
     the plaintext. `server_hostname` is the name a client checks the server's certificate
     against (None on a server's side)."""
 
