@@ -40,7 +40,8 @@ from typing import Any, Final
 __all__ = ("TlsBioTransport",)
 
 _RECORD: Final = 16384
-"""The most plaintext one TLS record holds: what one `read()` asks for."""
+"""The most plaintext one TLS record holds: what one `read()` asks for, so that it takes a whole
+record's and the SSLObject keeps none (its `pending()` need not be asked)."""
 
 _RECEIVE: Final = 65536
 """The buffer the plain transport receives into (asyncio's `BufferedProtocol`: no bytes object
@@ -171,7 +172,7 @@ class TlsBioTransport(asyncio.Transport, asyncio.BufferedProtocol):
 
     def _read(self) -> None:
         """Hand each record's plaintext in the incoming BIO to the app, in order."""
-        read, incoming, pending = self._sslobj.read, self._incoming, self._sslobj.pending
+        read, incoming = self._sslobj.read, self._incoming
         while True:
             try:
                 chunk = read(_RECORD)
@@ -189,7 +190,7 @@ class TlsBioTransport(asyncio.Transport, asyncio.BufferedProtocol):
             self._app.data_received(chunk)
             if self._state is not _OPEN:  # the app closed the connection
                 return
-            if not incoming.pending and not pending():
+            if not incoming.pending:  # read() took the whole record: nothing left in the SSLObject
                 break
         if self._outgoing.pending:  # OpenSSL's answer to a post-handshake message
             self._flush()
