@@ -5,6 +5,8 @@ close_notify and a bare end of stream, a plaintext flood dropped unread, and its
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import logging
 import os
 import random
 import ssl
@@ -12,6 +14,8 @@ from typing import Any
 
 import pytest
 
+from aiortu.slave import _tls_server as tls_server_module
+from aiortu.transport import _push_server as push_server_module
 from aiortu.transport import client_tls_context, server_tls_context
 from aiortu.transport._tls import server_refusal
 from aiortu.transport._tls_bio import _NEXT, TlsBioTransport, _Event, _State
@@ -291,3 +295,32 @@ async def test_a_client_asking_to_renegotiate_is_refused(pki: dict[str, Any]) ->
         assert b"no renegotiation" in said, said.decode(errors="replace")[-500:]
         async with tls_master(pki, server, "operator") as master:
             assert await master.read_holding_registers(1, 0, 2) == [1, 2]
+
+
+@pytest.mark.parametrize("pushed", [True, False])
+async def test_a_handshake_left_unfinished_is_closed_in_time(
+    pki: dict[str, Any],
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+    pushed: bool,
+) -> None:
+    """A slow client (half a record header, then nothing) holds a connection no longer than the
+    handshake's time bound, on the pushed path and on anyio's."""
+    monkeypatch.setattr(tls_server_module, "HANDSHAKE_TIMEOUT", 0.3)
+    monkeypatch.setattr(push_server_module, "loop_pushes", lambda: pushed)
+    caplog.set_level(logging.WARNING, logger="aiortu")
+    async with tls_server(pki) as server:
+        reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+        writer.write(b"\x16\x03")  # the start of a handshake record, and no more
+        loop = asyncio.get_running_loop()
+        started = loop.time()
+        async with asyncio.timeout(5):
+            with contextlib.suppress(ConnectionError):
+                assert await reader.read() == b""  # the server closed it
+        assert loop.time() - started < 3
+        writer.close()
+        assert server.handshake_failures == 1
+    (line,) = [
+        r.getMessage() for r in caplog.records if "closed the connection of" in r.getMessage()
+    ]
+    assert line.endswith(": the TLS handshake did not finish in time"), line
