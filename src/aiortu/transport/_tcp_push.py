@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Final
 
 import anyio
 import anyio.abc
@@ -50,9 +50,27 @@ def push_connections() -> bool:
     return loop_pushes()
 
 
-class _Protocol(asyncio.Protocol):
+_RECEIVE: Final = 4096
+"""The buffer a plain connection receives into: replies are at most 260 bytes each."""
+
+
+class _Protocol(asyncio.BufferedProtocol):
+    """A plain connection receives into a buffer of its own, not into a new bytes object of
+    asyncio's `max_size` (256 KiB) per read, whose cost moves with the process's heap; over TLS
+    the TLS layer calls `data_received` with each record's plaintext."""
+
     def __init__(self, stream: PushConnectionStream) -> None:
         self.stream = stream
+        self._buffer: memoryview | None = None
+
+    def get_buffer(self, sizehint: int) -> memoryview:
+        buffer = self._buffer
+        if buffer is None:
+            buffer = self._buffer = memoryview(bytearray(_RECEIVE))
+        return buffer
+
+    def buffer_updated(self, nbytes: int) -> None:
+        self.stream.data(bytes(self._buffer[:nbytes]))  # type: ignore[index]  # got it first
 
     def data_received(self, data: bytes) -> None:
         self.stream.data(data)

@@ -35,17 +35,18 @@ import asyncio
 import contextlib
 import enum
 import ssl
-from typing import Any, Final
+from typing import Any, Final, Protocol
 
-__all__ = ("TlsBioTransport",)
+__all__ = ("PlaintextProtocol", "TlsBioTransport")
 
 _RECORD: Final = 16384
 """The most plaintext one TLS record holds: what one `read()` asks for, so that it takes a whole
 record's and the SSLObject keeps none (its `pending()` need not be asked)."""
 
-_RECEIVE: Final = 65536
+_RECEIVE: Final = 5 + 16384 + 2048
 """The buffer the plain transport receives into (asyncio's `BufferedProtocol`: no bytes object
-made per receive)."""
+made per receive), as long as the longest record on the wire (header, plaintext, TLS 1.2's most
+expansion): what a connection holds for it, however many a server has."""
 
 
 class _State(enum.Enum):
@@ -80,6 +81,17 @@ _NEXT: Final[dict[tuple[_State, _Event], _State]] = {
 """Every move of a TLS connection; a (state, event) pair not here is a bug (`RuntimeError`)."""
 
 
+class PlaintextProtocol(Protocol):
+    """What a `TlsBioTransport` hands the plaintext and the connection's events to: the methods
+    of an `asyncio.Protocol` (any protocol, buffered or not, that also has `data_received`)."""
+
+    def data_received(self, data: bytes) -> None: ...
+    def eof_received(self) -> bool | None: ...
+    def connection_lost(self, exc: Exception | None) -> None: ...
+    def pause_writing(self) -> None: ...
+    def resume_writing(self) -> None: ...
+
+
 class TlsBioTransport(asyncio.Transport, asyncio.BufferedProtocol):
     """A TLS connection over a plain asyncio transport (see the module docstring): give it as
     the protocol of the plain connection, then await `handshake()`; `app` is the protocol that gets
@@ -89,7 +101,7 @@ class TlsBioTransport(asyncio.Transport, asyncio.BufferedProtocol):
     def __init__(
         self,
         context: ssl.SSLContext,
-        app: asyncio.Protocol,
+        app: PlaintextProtocol,
         *,
         server_side: bool = False,
         server_hostname: str | None = None,
