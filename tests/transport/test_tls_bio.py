@@ -249,6 +249,21 @@ async def test_a_handshake_out_of_time_drops_the_connection(pki: dict[str, Any])
     assert layer.state == "closed"
 
 
+async def test_a_close_in_the_handshake_ends_the_wait_for_it(pki: dict[str, Any]) -> None:
+    app = _App()
+    layer = TlsBioTransport(_contexts(pki, "operator")[1], app, server_side=True)
+    wire = _Wire()
+    layer.connection_made(wire)
+    waiting = asyncio.ensure_future(layer.handshake())
+    await asyncio.sleep(0)
+    layer.close()
+    with pytest.raises(ConnectionAbortedError, match="closed during the handshake"):
+        await asyncio.wait_for(waiting, 1)
+    assert wire.calls == ["close"]
+    layer.connection_lost(None)
+    assert app.lost == [], "the app never had the connection"
+
+
 async def test_writing_before_the_handshake_is_refused(pki: dict[str, Any]) -> None:
     layer = TlsBioTransport(_contexts(pki, "operator")[0], _App(), server_hostname="127.0.0.1")
     layer.connection_made(_Wire())

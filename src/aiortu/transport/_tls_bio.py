@@ -119,7 +119,6 @@ class TlsBioTransport(asyncio.Transport, asyncio.BufferedProtocol):
         self._state = _HANDSHAKING
         self._plain: asyncio.Transport | None = None
         self._handshake: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-        self._error: BaseException | None = None
 
     @property
     def state(self) -> str:
@@ -283,17 +282,28 @@ class TlsBioTransport(asyncio.Transport, asyncio.BufferedProtocol):
             self._move(_Event.CLOSE)
             self._shutdown()
         elif self._state is _HANDSHAKING:
-            self._move(_Event.CLOSE)
-            self._app_lost = True
+            self._give_up()
         if self._plain is not None:
             self._plain.close()
 
     def abort(self) -> None:
         """Drop the connection at once, unsent bytes and all."""
-        if self._state is not _CLOSED:
+        if self._state is _HANDSHAKING:
+            self._give_up()
+        elif self._state is _OPEN:
             self._move(_Event.CLOSE)
         if self._plain is not None:
             self._plain.abort()
+
+    def _give_up(self) -> None:
+        """Closed in the handshake: whoever waits for it is told, the app never had it."""
+        self._move(_Event.CLOSE)
+        self._app_lost = True
+        if not self._handshake.done():
+            self._handshake.set_exception(
+                ConnectionAbortedError("the connection was closed during the handshake")
+            )
+            self._handshake.exception()  # told if awaited, never logged as unretrieved
 
     def is_closing(self) -> bool:
         return self._state is _CLOSED
