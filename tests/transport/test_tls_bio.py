@@ -63,6 +63,7 @@ class _App(asyncio.Protocol):
         self.data = bytearray()
         self.eofs = 0
         self.lost: list[BaseException | None] = []
+        self.flow: list[str] = []
 
     def data_received(self, data: bytes) -> None:
         self.data += data
@@ -73,6 +74,12 @@ class _App(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.lost.append(exc)
+
+    def pause_writing(self) -> None:
+        self.flow.append("pause")
+
+    def resume_writing(self) -> None:
+        self.flow.append("resume")
 
 
 def _feed(layer: TlsBioTransport, data: bytes, rng: random.Random | None = None) -> None:
@@ -262,6 +269,20 @@ async def test_a_close_in_the_handshake_ends_the_wait_for_it(pki: dict[str, Any]
     assert wire.calls == ["close"]
     layer.connection_lost(None)
     assert app.lost == [], "the app never had the connection"
+
+
+async def test_back_pressure_passes_through_both_ways(pki: dict[str, Any]) -> None:
+    """The plain transport's full write buffer reaches the app (the stream's write gate), and
+    the app's pause of reading reaches the plain transport (a server's unread requests)."""
+    pair = _Pair(*_contexts(pki, "operator"))
+    pair.pump()
+    pair.server.pause_writing()
+    pair.server.resume_writing()
+    assert pair.server_app.flow == ["pause", "resume"]
+    pair.server.pause_reading()
+    assert not pair.server_wire.reading
+    pair.server.resume_reading()
+    assert pair.server_wire.reading
 
 
 async def test_writing_before_the_handshake_is_refused(pki: dict[str, Any]) -> None:
