@@ -91,6 +91,8 @@ class Slave(Dispatcher):
     function code outside 1..127.
     """
 
+    _at_once: LineAnswerAtOnce
+
     def __init__(
         self,
         stream: anyio.abc.ByteStream,
@@ -147,13 +149,6 @@ class Slave(Dispatcher):
         self._waiter: Waiter | None = None
         """What the serve loop waits on while its queue is empty."""
         self._link_closed = False
-
-    def _configured(
-        self,
-        handlers: Mapping[int, Handler],
-        stores: Mapping[int, DataStore | AsyncDataStore],
-    ) -> None:
-        self._at_once.configure(handlers, stores)
 
     @property
     def trace(self) -> TraceCallback | None:
