@@ -74,7 +74,6 @@ TraceCallback = Callable[[str, bytes], object]
 unit), `("sent", frame)` for every reply, `("discarded", data)` for bytes dropped."""
 
 _UNIT_RANGE = range(1, 248)
-_FUNCTION_CODE_RANGE = range(1, 128)
 
 
 class Slave(Dispatcher):
