@@ -291,6 +291,58 @@ async def test_unit_ids_255_and_0_are_unicasts_over_modbus_tcp() -> None:
         await master.broadcast.write_register(3, 9)
 
 
+@asynccontextmanager
+async def silent_server(scheme: str) -> AsyncIterator[tuple[str, list[bytes]]]:
+    """A Modbus TCP or UDP server on loopback that reads every request and answers none:
+    its URL, and the chunks (TCP) or datagrams (UDP) it received."""
+    received: list[bytes] = []
+    async with anyio.create_task_group() as tasks:
+        if scheme == "tcp":
+            listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+            port = listener.extra(anyio.abc.SocketAttribute.local_port)
+
+            async def read(stream: anyio.abc.SocketStream) -> None:
+                async for chunk in stream:
+                    received.append(chunk)
+
+            tasks.start_soon(listener.serve, read)
+        else:
+            socket = await anyio.create_udp_socket(local_host="127.0.0.1")
+            port = socket.extra(anyio.abc.SocketAttribute.local_port)
+
+            async def read_datagrams() -> None:
+                async for datagram, _ in socket:
+                    received.append(datagram)
+
+            tasks.start_soon(read_datagrams)
+        yield f"{scheme}://127.0.0.1:{port}", received
+        tasks.cancel_scope.cancel()
+
+
+@pytest.mark.parametrize("scheme", ["tcp", "udp"])
+async def test_unit_0_over_mbap_goes_offline_and_fails_fast_like_any_unit(scheme: str) -> None:
+    # Over Modbus TCP and UDP unit 0 is an ordinary id (its reply awaited), so the unit
+    # health counts it, marks it offline and refuses it, as any other; a broadcast asked
+    # for awaits no reply and still goes.
+    options = {"timeout": 0.05, "retries": 0, "offline_after": 2, "late_reply_guard": 0.001}
+    async with (
+        silent_server(scheme) as (address, received),
+        aiortu.open_master(address, fail_fast_offline=True, **options) as master,
+    ):
+        for _ in range(2):
+            with pytest.raises(ResponseTimeout):
+                await master.read_holding_registers(0, 0, 1)
+        await until(lambda: len(b"".join(received)) == 2 * 12)
+        assert not master.is_online(0)
+        with pytest.raises(aiortu.UnitOffline):
+            await master.read_holding_registers(0, 0, 1)
+        assert master.unit_stats(0).requests == 2
+        assert master.is_online(1)
+        await master.broadcast.write_register(3, 9)
+        await until(lambda: len(b"".join(received)) == 3 * 12)
+        assert master.unit_stats(0).failures == 2
+
+
 async def test_a_serial_line_master_keeps_units_1_to_247() -> None:
     from aiortu.testing import PtyBus
 
