@@ -5,6 +5,7 @@ from __future__ import annotations
 from aiortu.core.codes import (
     MBAP_UNIT_IDS,
     SERIAL_UNIT_IDS,
+    UNIT_ADDRESSES,
     USER_DEFINED_FUNCTION_CODES,
     DeviceIdObject,
     ExceptionCode,
@@ -81,3 +82,7 @@ def test_the_unit_ids_of_each_framing() -> None:
     assert SERIAL_UNIT_IDS.unicast == range(1, 248)
     assert (MBAP_UNIT_IDS.ids, MBAP_UNIT_IDS.broadcast) == (range(256), None)
     assert MBAP_UNIT_IDS.unicast == range(256)
+
+
+def test_a_device_takes_the_addresses_1_to_247() -> None:
+    assert (UNIT_ADDRESSES[0], UNIT_ADDRESSES[-1], len(UNIT_ADDRESSES)) == (1, 247, 247)

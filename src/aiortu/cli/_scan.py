@@ -35,7 +35,7 @@ import anyio.abc
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
 from aiortu.cli._arguments import is_pty, plural
 from aiortu.cli._messages import port_failure
-from aiortu.core.codes import EXCEPTION_BIT, ExceptionCode, FunctionCode
+from aiortu.core.codes import EXCEPTION_BIT, UNIT_ADDRESSES, ExceptionCode, FunctionCode
 from aiortu.core.pdu import (
     ExceptionPDU,
     ReadHoldingRegistersRequest,
@@ -257,7 +257,7 @@ def register(subparsers: Subparsers) -> None:
         help="stop bits (default: 2 with parity N, 1 with E or O, as the spec says)",
     )
     parser.add_argument(
-        "--units", type=parse_units, default=list(range(1, 248)), help="units to probe (1-247)"
+        "--units", type=parse_units, default=list(UNIT_ADDRESSES), help="units to probe (1-247)"
     )
     parser.add_argument(
         "--timeout",

@@ -30,6 +30,7 @@ from aiortu.cli._arguments import (
 )
 from aiortu.cli._messages import invalid_value, library_warnings_on_stderr, port_failure
 from aiortu.cli._transport_options import add_transport_options, transport_options
+from aiortu.core.codes import UNIT_ADDRESSES
 from aiortu.core.pdu import Request, decode_request
 from aiortu.core.rtu import describe_frame, encode_frame
 from aiortu.errors import ConnectionLost, InvalidValue, ModbusError, PortError
@@ -296,7 +297,7 @@ def unit_alias(text: str) -> tuple[int, int]:
         pair = int(alias, 0), int(unit, 0)
     except ValueError:
         pair = (-1, -1)
-    if not equals or pair[0] not in range(256) or pair[1] not in range(1, 248):
+    if not equals or pair[0] not in range(256) or pair[1] not in UNIT_ADDRESSES:
         raise argparse.ArgumentTypeError(
             f"must be ID=UNIT, a unit id 0..255 and a served unit 1..247 (255=17), not {text}"
         )

@@ -22,6 +22,7 @@ __all__ = (
     "MBAP_UNIT_IDS",
     "MEI_READ_DEVICE_IDENTIFICATION",
     "SERIAL_UNIT_IDS",
+    "UNIT_ADDRESSES",
     "USER_DEFINED_FUNCTION_CODES",
     "UnitIds",
     "is_user_defined",
@@ -55,6 +56,10 @@ MBAP_UNIT_IDS = UnitIds(range(256), broadcast=None)
 """An MBAP header (Modbus TCP, UDP and TLS): any byte, each a unit whose reply is awaited;
 on TCP unit 0 addresses the server itself, and a gateway gives 0 its serial meaning only
 when it forwards to a line."""
+
+UNIT_ADDRESSES: range = SERIAL_UNIT_IDS.unicast
+"""The addresses a device may take, 1..247: a serial line's unicast ids, and what a slave,
+a server's unit, a gateway's line or a poll plan's device may be set to."""
 
 EXCEPTION_BIT = 0x80
 """Set in the function code of an exception response."""

@@ -6,12 +6,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from aiortu.core.codes import UNIT_ADDRESSES
 from aiortu.errors import InvalidValue
 from aiortu.master import Master
 
 __all__ = ("ALL_UNITS", "GatewayLine", "check_lines", "line_names")
 
-ALL_UNITS = range(1, 248)
+ALL_UNITS = UNIT_ADDRESSES
 """The unit ids a line serves unless told otherwise."""
 
 

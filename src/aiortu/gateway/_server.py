@@ -62,7 +62,7 @@ import anyio.abc
 from anyio.streams.tls import TLSAttribute
 
 from aiortu._log import get_logger
-from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
+from aiortu.core.codes import BROADCAST_UNIT, UNIT_ADDRESSES, ExceptionCode
 from aiortu.core.mbap import Adu, MalformedHeader, decode_adu
 from aiortu.errors import FrameError, InvalidValue
 from aiortu.gateway._as_bytes import ReadsAsBytes
@@ -120,7 +120,6 @@ DEFAULT_IDLE_TIMEOUT: Final = 120.0
 
 _READ_SIZE = 4096
 _WORKER_TASK = "gateway requests"  # named here: anyio would work a name out per task
-_UNIT_RANGE = range(1, 248)
 _ALL_UNITS = 0xFF
 _NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
 _NO_PATH = ExceptionCode.GATEWAY_PATH_UNAVAILABLE
@@ -510,7 +509,7 @@ class Gateway:
         (it answers nothing but 08/01), 01 for a request to unit 0 that may not be broadcast
         (a read: no device answers a broadcast, and the client would wait for nothing)."""
         if line is None:
-            return _NO_PATH if unit in _UNIT_RANGE else _NO_RESPONSE
+            return _NO_PATH if unit in UNIT_ADDRESSES else _NO_RESPONSE
         if unit == BROADCAST_UNIT:
             return None if request_of(pdu).broadcastable else _REFUSED
         if line.listen_only and unit in line.listen_only and not pdu.startswith(RESTART):
@@ -836,8 +835,8 @@ def _check_options(
             raise InvalidValue(name, value, "an int of at least 1")
     if not (isinstance(idle_timeout, (int, float)) and idle_timeout > 0):
         raise InvalidValue("idle_timeout", idle_timeout, "a positive number of seconds")
-    if default_unit is not None and default_unit not in _UNIT_RANGE:
-        raise InvalidValue("default_unit", default_unit, _UNIT_RANGE)
+    if default_unit is not None and default_unit not in UNIT_ADDRESSES:
+        raise InvalidValue("default_unit", default_unit, UNIT_ADDRESSES)
 
 
 def certificate_role_of(stream: anyio.abc.ByteStream) -> str | None:

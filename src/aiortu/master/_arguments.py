@@ -13,13 +13,12 @@ import math
 from collections.abc import Collection, Iterable, Sequence
 from typing import Final
 
-from aiortu.core.codes import BROADCAST_UNIT, SERIAL_UNIT_IDS
+from aiortu.core.codes import BROADCAST_UNIT, UNIT_ADDRESSES
 from aiortu.core.errors import InvalidRequest, InvalidValue
 from aiortu.core.machines import Failure
 from aiortu.core.pdu import REGISTER_RANGE
 
 __all__ = (
-    "UNIT_RANGE",
     "check_at_least",
     "check_bool",
     "check_coil",
@@ -36,9 +35,6 @@ __all__ = (
     "check_unit",
     "is_int",
 )
-
-UNIT_RANGE: Final = SERIAL_UNIT_IDS.unicast
-"""The unit addresses a unicast request may go to on a serial line."""
 
 _TEXT_TYPES: Final = (str, bytes, bytearray, memoryview)
 """Iterables that are never a sequence of values: text, and bytes (each byte an int)."""
@@ -59,7 +55,7 @@ def check_int(name: str, value: object, allowed: range, error: type[InvalidValue
     return value
 
 
-def check_unit(unit: object, allowed: range = UNIT_RANGE) -> int:
+def check_unit(unit: object, allowed: range = UNIT_ADDRESSES) -> int:
     """Return `unit` if a unicast may go to it (`allowed`: the framing's unit ids), else
     raise InvalidRequest."""
     if type(unit) is int and unit in allowed:

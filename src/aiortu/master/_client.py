@@ -37,7 +37,7 @@ from typing import Any, Self, TypeVar
 import anyio
 import anyio.abc
 
-from aiortu.core.codes import BROADCAST_UNIT, SERIAL_UNIT_IDS, UnitIds
+from aiortu.core.codes import BROADCAST_UNIT, SERIAL_UNIT_IDS, UNIT_ADDRESSES, UnitIds
 from aiortu.core.machines import RetryPolicy, Transaction
 from aiortu.core.pdu import (
     ExceptionPDU,
@@ -51,7 +51,6 @@ from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidRequest, InvalidValue, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
-    UNIT_RANGE,
     check_at_least,
     check_int,
     check_priority,
@@ -338,7 +337,7 @@ class Master(Operations):
         if type(unit) is int and unit == BROADCAST_UNIT:
             if not pdu.broadcastable:
                 raise InvalidRequest(
-                    "unit", unit, UNIT_RANGE, f"{type(pdu).__name__} may not be broadcast"
+                    "unit", unit, UNIT_ADDRESSES, f"{type(pdu).__name__} may not be broadcast"
                 )
         else:
             check_unit(unit, self.unit_range)

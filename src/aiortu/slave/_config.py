@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from aiortu.core.codes import DeviceIdObject, ExceptionCode
+from aiortu.core.codes import UNIT_ADDRESSES, DeviceIdObject, ExceptionCode
 from aiortu.core.model import ServerId, Table, TomlReader
 from aiortu.errors import ConfigError, InvalidValue
 from aiortu.slave._store import Block, MemoryStore
@@ -189,7 +189,7 @@ def _modbus_tcp(reader: _Reader, value: object, units: Mapping[int, MemoryStore]
                 unit_id = -1
             if unit_id not in range(256):
                 raise reader.fail(key, f"must be a unit id 0..255, not {alias}")
-            aliases[unit_id] = reader.int_value(unit, key, range(1, 248))
+            aliases[unit_id] = reader.int_value(unit, key, UNIT_ADDRESSES)
             if aliases[unit_id] not in units:
                 described = ", ".join(map(str, sorted(units)))
                 raise reader.fail(key, f"unit {unit} is not described (units: {described})")
@@ -201,11 +201,11 @@ def _units(reader: _Reader, entry: dict[str, Any], key: str) -> list[int]:
     if "unit" in entry and "units" in entry:
         raise reader.fail(f"{key}.units", "give unit or units, not both")
     if "units" in entry:
-        found = reader.ints(entry["units"], f"{key}.units", range(1, 248))
+        found = reader.ints(entry["units"], f"{key}.units", UNIT_ADDRESSES)
         if not found:
             raise reader.fail(f"{key}.units", "must name at least one unit")
         return found
-    return [reader.integer(entry, "unit", key, range(1, 248))]
+    return [reader.integer(entry, "unit", key, UNIT_ADDRESSES)]
 
 
 def _store(reader: _Reader, entry: dict[str, Any], key: str) -> MemoryStore:

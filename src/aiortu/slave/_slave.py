@@ -53,7 +53,7 @@ import anyio.abc
 import anyio.lowlevel
 
 from aiortu._log import get_logger
-from aiortu.core.codes import BROADCAST_UNIT
+from aiortu.core.codes import BROADCAST_UNIT, UNIT_ADDRESSES
 from aiortu.core.machines import SerialLineCounters, SlaveMachine, SlaveState
 from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.rtu import DiscardReason, FrameReceived, Role, TimingMode, encode_frame
@@ -72,8 +72,6 @@ _log = get_logger(__name__)
 TraceCallback = Callable[[str, bytes], object]
 """Sees the line: `("received", frame)` for every frame whose CRC checks (for any
 unit), `("sent", frame)` for every reply, `("discarded", data)` for bytes dropped."""
-
-_UNIT_RANGE = range(1, 248)
 
 
 class Slave(Dispatcher):
@@ -106,8 +104,8 @@ class Slave(Dispatcher):
         trace: TraceCallback | None = None,
     ) -> None:
         for unit in units:
-            if unit not in _UNIT_RANGE:
-                raise InvalidValue("unit", unit, _UNIT_RANGE)
+            if unit not in UNIT_ADDRESSES:
+                raise InvalidValue("unit", unit, UNIT_ADDRESSES)
         stores: dict[int, DataStore | AsyncDataStore] = dict(units)
         if isinstance(stream, AsciiStream):
             stream.answering = True  # 08/03 changes this end's input delimiter

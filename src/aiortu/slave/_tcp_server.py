@@ -47,7 +47,7 @@ import anyio
 import anyio.abc
 
 from aiortu._log import get_logger
-from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode, FunctionCode
+from aiortu.core.codes import BROADCAST_UNIT, UNIT_ADDRESSES, ExceptionCode, FunctionCode
 from aiortu.core.machines import SlaveMachine
 from aiortu.core.mbap import Adu, MalformedHeader
 from aiortu.core.model import AsyncDataStore, DataStore
@@ -101,7 +101,6 @@ SERIAL_LINE_ONLY: Final = frozenset(
 )
 """The function codes the spec defines for serial lines only: 07, 08, 0B, 0C, 11."""
 
-_UNIT_RANGE = range(1, 248)
 _ID_RANGE = range(256)
 _GATEWAY_NO_RESPONSE = ExceptionCode.GATEWAY_TARGET_DEVICE_FAILED_TO_RESPOND
 
@@ -166,8 +165,8 @@ class ModbusTcpServer(Dispatcher):
         trace: Callable[[str, bytes], object] | None = None,
     ) -> None:
         for unit in units:
-            if unit not in _UNIT_RANGE:
-                raise InvalidValue("unit", unit, _UNIT_RANGE)
+            if unit not in UNIT_ADDRESSES:
+                raise InvalidValue("unit", unit, UNIT_ADDRESSES)
         if type(max_connections) is not int or max_connections < 1:
             raise InvalidValue("max_connections", max_connections, "an int of at least 1")
         if not (isinstance(idle_timeout, (int, float)) and idle_timeout > 0):

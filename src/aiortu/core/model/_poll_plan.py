@@ -25,6 +25,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
+from aiortu.core.codes import UNIT_ADDRESSES
 from aiortu.core.errors import InvalidValue
 from aiortu.core.model._addressing import ADDRESS_RANGE, Table, parse_reference
 from aiortu.core.model._values import Layout, ValueType, decode_value
@@ -43,8 +44,6 @@ MAX_READ_REGISTERS = 125
 
 MAX_READ_BITS = 2000
 """The most bits one read (01, 02) may ask for."""
-
-_UNIT_RANGE = range(1, 248)
 
 
 def _value_type(kind: ValueType | str) -> ValueType:
@@ -92,9 +91,9 @@ class Point:
         object.__setattr__(self, "type", _value_type(self.type))
         object.__setattr__(self, "layout", _layout(self.layout))
         if isinstance(self.unit, bool) or not isinstance(self.unit, int):
-            raise InvalidValue("unit", self.unit, _UNIT_RANGE)
-        if self.unit not in _UNIT_RANGE:
-            raise InvalidValue("unit", self.unit, _UNIT_RANGE)
+            raise InvalidValue("unit", self.unit, UNIT_ADDRESSES)
+        if self.unit not in UNIT_ADDRESSES:
+            raise InvalidValue("unit", self.unit, UNIT_ADDRESSES)
         if isinstance(self.address, bool) or not isinstance(self.address, int):
             raise InvalidValue("address", self.address, ADDRESS_RANGE)
         last = range(ADDRESS_RANGE.stop - self.width + 1)
