@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from aiortu._public import publish
 from aiortu.slave._config import ConfigError, DeviceConfig, load_config, parse_config
+from aiortu.slave._dispatch import TraceCallback
 from aiortu.slave._handlers import (
     BUILTIN_HANDLERS,
     Answer,
@@ -23,7 +24,7 @@ from aiortu.slave._profile_store import ProfileStore
 from aiortu.slave._routes import RangeAccess, RangeHandler, RoutedStore
 from aiortu.slave._rtu_over_tcp import RtuOverTcpServer
 from aiortu.slave._serve import Server, serve
-from aiortu.slave._slave import AfterHook, BeforeHook, Slave, TraceCallback
+from aiortu.slave._slave import AfterHook, BeforeHook, Slave
 from aiortu.slave._store import (
     AsyncDataStore,
     Block,

@@ -32,7 +32,7 @@ from aiortu.slave._handlers import (
 )
 from aiortu.slave._routes import RangeHandler, RoutedStore
 
-__all__ = ("RESTART_COMMUNICATIONS", "AfterHook", "BeforeHook", "Dispatcher")
+__all__ = ("RESTART_COMMUNICATIONS", "AfterHook", "BeforeHook", "Dispatcher", "TraceCallback")
 
 _log = get_logger(__name__)
 
@@ -45,6 +45,12 @@ AfterHook = Callable[[Any, RequestContext, HandlerResult], Answer]
 """Called after the handler with (request, context, its answer): `None` keeps the
 answer, anything else replaces it. May be async. Not called when the handler raised."""
 
+TraceCallback = Callable[[str, bytes], object]
+"""Sees what a server receives and sends. On a serial line: `("received", frame)` for every
+frame whose CRC checks (for any unit), `("sent", frame)` for every reply, `("discarded", data)`
+for bytes dropped. Over Modbus TCP: `("received", adu)` and `("sent", adu)` for every request
+and reply, MBAP header included."""
+
 _FUNCTION_CODE_RANGE = range(1, EXCEPTION_BIT)
 
 RESTART_COMMUNICATIONS = bytes((0x08, 0x00, 0x01))
@@ -55,8 +61,9 @@ class Dispatcher:
     """Units, their handlers, routes and hooks, and the general route of a request.
 
     A base class: a server sets it up with `_init_dispatch`, makes its shortcut
-    (`_at_once`), builds the contexts with `_build_contexts`, and calls `_answer` for
-    each request the machine let through.
+    (`_at_once`), sets `trace`, builds the contexts with `_build_contexts`, and calls
+    `_answer` for each request the machine let through (and `_traced` for what it shows the
+    trace).
     """
 
     units: dict[int, DataStore | AsyncDataStore]
@@ -84,6 +91,29 @@ class Dispatcher:
         self._misbehaved: dict[int, object] = {}
         """Handlers and hooks logged for returning what is not an answer, by id (kept, so
         that no other object takes their id)."""
+        self._trace: TraceCallback | None = None
+
+    @property
+    def trace(self) -> TraceCallback | None:
+        """The trace callback, or `None` (see [`TraceCallback`][aiortu.slave.TraceCallback]). One
+        that raises is logged and detached."""
+        return self._trace
+
+    @trace.setter
+    def trace(self, callback: TraceCallback | None) -> None:
+        self._trace = callback
+        self._at_once.trace_set = callback is not None
+
+    def _traced(self, kind: str, data: bytes) -> None:
+        """Show `data` to the trace callback; one that raises is logged and detached."""
+        trace = self._trace
+        if trace is None:
+            return
+        try:
+            trace(kind, data)
+        except Exception:
+            _log.exception("the trace callback failed; it is detached")
+            self.trace = None
 
     def _configured(
         self,

@@ -21,8 +21,8 @@ from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.rtu import TimingMode
 from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
+from aiortu.slave._dispatch import TraceCallback
 from aiortu.slave._handlers import Handler
-from aiortu.slave._slave import TraceCallback
 from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS, ModbusTcpServer
 from aiortu.transport import AsciiFraming, RtuFraming
 

@@ -13,9 +13,10 @@ from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.rtu import TimingMode
 from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
+from aiortu.slave._dispatch import TraceCallback
 from aiortu.slave._handlers import Handler
 from aiortu.slave._rtu_over_tcp import RtuOverTcpServer
-from aiortu.slave._slave import Slave, TraceCallback
+from aiortu.slave._slave import Slave
 from aiortu.slave._tcp_server import ModbusTcpServer
 from aiortu.slave._tls_server import ModbusTlsServer
 from aiortu.slave._udp_server import ModbusUdpServer

@@ -52,7 +52,6 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
-from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, UNIT_ADDRESSES
 from aiortu.core.machines import SerialLineCounters, SlaveMachine, SlaveState
 from aiortu.core.model import AsyncDataStore, DataStore
@@ -61,17 +60,17 @@ from aiortu.core.serial import LineSettings
 from aiortu.errors import ConnectionLost, InvalidValue
 from aiortu.line import Link, LinkEvent, Waiter
 from aiortu.slave._answer_at_once import LineAnswerAtOnce, Taken
-from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, AfterHook, BeforeHook, Dispatcher
+from aiortu.slave._dispatch import (
+    RESTART_COMMUNICATIONS,
+    AfterHook,
+    BeforeHook,
+    Dispatcher,
+    TraceCallback,
+)
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
 from aiortu.transport import AsciiStream
 
-__all__ = ("AfterHook", "BeforeHook", "Slave", "TraceCallback")
-
-_log = get_logger(__name__)
-
-TraceCallback = Callable[[str, bytes], object]
-"""Sees the line: `("received", frame)` for every frame whose CRC checks (for any
-unit), `("sent", frame)` for every reply, `("discarded", data)` for bytes dropped."""
+__all__ = ("AfterHook", "BeforeHook", "Slave")
 
 
 class Slave(Dispatcher):
@@ -135,7 +134,6 @@ class Slave(Dispatcher):
             serve_later=self._leave,
             to_listener=self._unanswered,
         )
-        self._trace: TraceCallback | None = None
         self.trace = trace
         self._build_contexts()
         for function_code, handler in (handlers or {}).items():
@@ -146,28 +144,6 @@ class Slave(Dispatcher):
         self._waiter: Waiter | None = None
         """What the serve loop waits on while its queue is empty."""
         self._link_closed = False
-
-    @property
-    def trace(self) -> TraceCallback | None:
-        """The trace callback, or `None` (see [`TraceCallback`][aiortu.slave.TraceCallback]). One
-        that raises is logged and detached."""
-        return self._trace
-
-    @trace.setter
-    def trace(self, callback: TraceCallback | None) -> None:
-        self._trace = callback
-        self._at_once.trace_set = callback is not None
-
-    def _traced(self, kind: str, data: bytes) -> None:
-        """Show `data` to the trace callback; one that raises is logged and detached."""
-        trace = self._trace
-        if trace is None:
-            return
-        try:
-            trace(kind, data)
-        except Exception:
-            _log.exception("the trace callback failed; it is detached")
-            self.trace = None
 
     # -- lifetime --------------------------------------------------------------------
 

@@ -54,7 +54,7 @@ from aiortu.core.model import AsyncDataStore, DataStore
 from aiortu.core.pdu import encode_exception
 from aiortu.errors import InvalidValue
 from aiortu.slave._answer_at_once import AnswerAtOnce
-from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher
+from aiortu.slave._dispatch import RESTART_COMMUNICATIONS, Dispatcher, TraceCallback
 from aiortu.slave._handlers import BUILTIN_HANDLERS, Handler, Reply
 from aiortu.slave._tcp_at_once import ConnectionTap, Permits
 from aiortu.transport import (
@@ -162,7 +162,7 @@ class ModbusTcpServer(Dispatcher):
         serial_line_codes: bool = False,
         max_connections: int = DEFAULT_MAX_CONNECTIONS,
         idle_timeout: float = DEFAULT_IDLE_TIMEOUT,
-        trace: Callable[[str, bytes], object] | None = None,
+        trace: TraceCallback | None = None,
     ) -> None:
         for unit in units:
             if unit not in UNIT_ADDRESSES:
@@ -218,17 +218,6 @@ class ModbusTcpServer(Dispatcher):
         Nothing on a connection: its stream offers the shortcut nothing while its task has
         bytes to read (a datagram server's backlog is another matter)."""
         return ()
-
-    @property
-    def trace(self) -> Callable[[str, bytes], object] | None:
-        """Sees every request and reply ADU, MBAP header included (see the class docstring);
-        one that raises is logged and detached."""
-        return self._trace
-
-    @trace.setter
-    def trace(self, callback: Callable[[str, bytes], object] | None) -> None:
-        self._trace = callback
-        self._at_once.trace_set = callback is not None
 
     @property
     def connections(self) -> int:
@@ -394,17 +383,6 @@ class ModbusTcpServer(Dispatcher):
         if self.trace is not None:
             self._traced("sent", adu)
         return _Outgoing(adu, delay)
-
-    def _traced(self, kind: str, data: bytes) -> None:
-        """Show `data` to the trace callback; one that raises is logged and detached."""
-        trace = self.trace
-        if trace is None:
-            return
-        try:
-            trace(kind, data)
-        except Exception:
-            _log.exception("the trace callback failed; it is detached")
-            self.trace = None
 
 
 def _aliases(stores: Mapping[int, object], aliases: Mapping[int, int] | None) -> dict[int, int]:
