@@ -68,6 +68,16 @@ _REGISTER_READ_CODES = range(
 _ADDRESS_COUNT = struct.Struct(">HH")
 
 
+def _count_mismatch(byte_count: int | None, count: int) -> MalformedPDU:
+    """The error of a reply to a read of `count` registers whose byte count is `byte_count`."""
+    return MalformedPDU(
+        "reply register count does not match the count asked",
+        field="byte_count",
+        value=byte_count,
+        allowed=range(2 * count, 2 * count + 1),
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class ReadHoldingRegistersResponse(Response):
     """Reply to read holding registers: 1..125 register values."""
@@ -125,12 +135,7 @@ class ReadHoldingRegistersRequest(Request):
         Request.check_response(self, response)
         assert isinstance(response, ReadHoldingRegistersResponse)
         if len(response.values) != self.count:
-            raise MalformedPDU(
-                "reply register count does not match the count asked",
-                field="byte_count",
-                value=2 * len(response.values),
-                allowed=range(2 * self.count, 2 * self.count + 1),
-            )
+            raise _count_mismatch(2 * len(response.values), self.count)
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,12 +176,7 @@ class RawRegisterRead(RawPDU):
         size = 2 * self.count
         byte_count = pdu[1] if len(pdu) > 1 else None
         if byte_count != size:
-            raise MalformedPDU(
-                "reply register count does not match the count asked",
-                field="byte_count",
-                value=byte_count,
-                allowed=range(size, size + 1),
-            )
+            raise _count_mismatch(byte_count, self.count)
         if len(pdu) != 2 + size:
             raise MalformedPDU(
                 "reply length does not match its byte count",
@@ -485,12 +485,7 @@ class ReadWriteMultipleRegistersRequest(Request):
         Request.check_response(self, response)
         assert isinstance(response, ReadWriteMultipleRegistersResponse)
         if len(response.values) != self.read_count:
-            raise MalformedPDU(
-                "reply register count does not match the count asked",
-                field="byte_count",
-                value=2 * len(response.values),
-                allowed=range(2 * self.read_count, 2 * self.read_count + 1),
-            )
+            raise _count_mismatch(2 * len(response.values), self.read_count)
 
 
 @dataclass(frozen=True, slots=True)
