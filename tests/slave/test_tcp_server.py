@@ -335,6 +335,24 @@ async def test_trace_sees_each_request_and_reply_adu() -> None:
     ]
 
 
+async def test_a_raising_trace_is_logged_and_detached_and_the_reply_still_goes(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    calls: list[str] = []
+
+    def trace(kind: str, data: bytes) -> None:
+        calls.append(kind)
+        raise RuntimeError("trace broke")
+
+    with caplog.at_level(logging.ERROR, logger="aiortu"):
+        async with tcp_server(trace=trace) as server, connect(server) as client:
+            assert await client.request("03 00 01 00 01") == "03 02 AB CD"
+            assert server.trace is None
+            assert await client.request("03 00 01 00 01") == "03 02 AB CD"
+    assert calls == ["received"]
+    assert "the trace callback failed; it is detached" in caplog.text
+
+
 async def test_a_port_in_use_is_one_port_error() -> None:
     from aiortu.errors import PortBusy
 
