@@ -10,10 +10,10 @@ import anyio
 
 from aiortu.core.model import DataStore
 from aiortu.core.rtu import CANNOT_KNOW, decode_frame, encode_frame, expected_response_length
-from aiortu.slave import Block, MemoryStore, Slave
+from aiortu.slave import Block, MemoryStore, Slave, TraceCallback
 from aiortu.testing import VirtualEndpoint, virtual_pair
 
-__all__ = ("UNIT", "RawMaster", "example_store", "slave_line")
+__all__ = ("UNIT", "RawMaster", "example_store", "raising_trace", "slave_line")
 
 UNIT = 17
 """The unit the slave under test serves."""
@@ -34,6 +34,16 @@ def example_store() -> MemoryStore:
         fifo_queues={0x04DE: [0x01B8, 0x1284]},
         exception_status=0x6D,
     )
+
+
+def raising_trace(calls: list[str]) -> TraceCallback:
+    """A trace callback that notes in `calls` each kind it is shown, then raises."""
+
+    def trace(kind: str, data: bytes) -> None:
+        calls.append(kind)
+        raise RuntimeError("trace broke")
+
+    return trace
 
 
 def _bits(packed: bytes, count: int) -> list[int]:

@@ -18,7 +18,7 @@ import pytest
 from aiortu.core.pdu import ExceptionPDU, RawPDU
 from aiortu.slave import Change, MemoryStore, Reply, Table
 
-from .helpers import UNIT, example_store, slave_line
+from .helpers import UNIT, example_store, raising_trace, slave_line
 
 OTHER_UNIT = 18
 
@@ -108,12 +108,7 @@ async def test_a_raising_trace_callback_is_logged_and_detached(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     calls: list[str] = []
-
-    def trace(kind: str, data: bytes) -> None:
-        calls.append(kind)
-        raise RuntimeError("trace broke")
-
-    async with slave_line(_units(), trace=trace) as (master, slave):
+    async with slave_line(_units(), trace=raising_trace(calls)) as (master, slave):
         assert await master.request(UNIT, "03 00 6B 00 01") == "03 02 AE 41"
         assert slave.trace is None
         assert await master.request(OTHER_UNIT, "03 00 00 00 01") == "03 02 00 2A"

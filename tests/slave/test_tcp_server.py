@@ -22,7 +22,7 @@ from aiortu.slave import (
     Table,
     serve,
 )
-from tests.slave.helpers import slave_line
+from tests.slave.helpers import raising_trace, slave_line
 from tests.slave.tcp_helpers import UNIT, connect, device, tcp_server
 
 pytestmark = pytest.mark.timeout(30)
@@ -339,13 +339,8 @@ async def test_a_raising_trace_is_logged_and_detached_and_the_reply_still_goes(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     calls: list[str] = []
-
-    def trace(kind: str, data: bytes) -> None:
-        calls.append(kind)
-        raise RuntimeError("trace broke")
-
     with caplog.at_level(logging.ERROR, logger="aiortu"):
-        async with tcp_server(trace=trace) as server, connect(server) as client:
+        async with tcp_server(trace=raising_trace(calls)) as server, connect(server) as client:
             assert await client.request("03 00 01 00 01") == "03 02 AB CD"
             assert server.trace is None
             assert await client.request("03 00 01 00 01") == "03 02 AB CD"
