@@ -124,13 +124,22 @@ class PushConnectionStream(PushedMbap):
     def data(self, data: bytes) -> None:
         """The protocol's callback: decode `data`, and hand on the reply it completes."""
         self.refusal = None  # the server spoke: it took the certificate
+        decoder = self._decoder
+        fresh = not decoder.buffered
+        # A chunk that starts where no ADU is under way may be the last lone reply again.
+        if fresh and self.repeated_reply(data):
+            return
         try:
-            adus = self._decoder.feed(data)
+            adus = decoder.feed(data)
         except MalformedHeader as error:
             _log.warning("%s: closing the Modbus TCP connection: %s", self.where, error)
+            self.forget_replies()
             self.lost(anyio.BrokenResourceError(str(error)))
             if self.transport is not None:
                 self.transport.abort()
+            return
+        if fresh and len(adus) == 1 and not decoder.buffered:
+            self.hand_on(adus[0], data)  # the chunk was this ADU alone
             return
         for adu in adus:
             self.hand_on(adu)
