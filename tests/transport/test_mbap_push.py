@@ -74,13 +74,14 @@ def _chunks(rng: random.Random, transaction_id: int, unit: int, datagrams: bool)
     """What a server sends after a request: the reply, with one turn of the script."""
     reply = _reply(rng, transaction_id, unit)
     stale = _reply(rng, (transaction_id - 1) & 0xFFFF, unit)
-    turn = rng.randrange(8)
+    unknown = _reply(rng, 0xBEEF, unit)
+    turn = rng.randrange(10)
     if turn == 0:
         return []  # lost
     if turn == 1:
         return [stale, reply]  # a late reply first, alone
     if turn == 2:
-        return [_reply(rng, 0xBEEF, unit), reply, reply]  # an id never sent; a duplicate
+        return [unknown, reply, reply]  # an id never sent; a duplicate
     if turn == 3 and not datagrams:
         cut = rng.randrange(1, len(reply))
         return [reply[:cut], reply[cut:]]  # split
@@ -89,6 +90,10 @@ def _chunks(rng: random.Random, transaction_id: int, unit: int, datagrams: bool)
     if turn == 5 and not datagrams:
         cut = rng.randrange(1, len(reply))
         return [stale[:cut], stale[cut:] + reply]  # the next chunk ends the one before
+    if turn == 7 and not datagrams:
+        return [reply + unknown[:3], unknown[3:]]  # the reply and the start of the next ADU
+    if turn == 8 and not datagrams:
+        return [unknown[: rng.randrange(1, 8)], reply]  # the reply while an ADU is under way
     if turn == 6 and rng.random() < 0.3:
         broken = bytes((transaction_id >> 8, transaction_id & 0xFF, 0, 7)) + reply[4:]
         return [broken, reply]  # a malformed header (protocol 7), then the reply again
