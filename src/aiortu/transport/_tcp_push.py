@@ -62,6 +62,9 @@ class _Protocol(asyncio.BufferedProtocol):
     def __init__(self, stream: PushConnectionStream) -> None:
         self.stream = stream
         self._buffer: memoryview | None = None
+        self.data_received: Callable[[bytes], None] = stream.data
+        """Where the TLS layer hands each record's plaintext: the stream's decoder, with no
+        call in between."""
 
     def get_buffer(self, sizehint: int) -> memoryview:
         buffer = self._buffer
@@ -71,9 +74,6 @@ class _Protocol(asyncio.BufferedProtocol):
 
     def buffer_updated(self, nbytes: int) -> None:
         self.stream.data(bytes(self._buffer[:nbytes]))  # type: ignore[index]  # got it first
-
-    def data_received(self, data: bytes) -> None:
-        self.stream.data(data)
 
     def eof_received(self) -> bool:
         self.stream.lost(anyio.EndOfStream())
