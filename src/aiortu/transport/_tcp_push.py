@@ -11,14 +11,16 @@ decoder in the loop's read callback, and the stream implements the push extensio
 without a task wake-up and writes each request without a yield, and the master's usual exchange
 runs as it does on a serial port.
 
-It decodes and matches replies as the general path does, with the same functions: a reply
-whose transaction id is not the one outstanding is dropped and counted (`reply_frame`, through
-`PushedMbap` in `_mbap_push.py`), and a malformed MBAP header closes the
-connection (`receive()` raises `anyio.BrokenResourceError`, which a master takes as a lost
-connection). A server that stops reading holds the master back: a request is written at once
-only while the transport's buffer is below its high-water mark, else `send()` waits for it to
-drain. `push_connections` is the one predicate that picks this path; the differential tests run
-the same exchanges through both.
+It decodes and matches replies as the general path does, with the same functions: a reply whose
+transaction id is not the one outstanding is dropped and counted (`reply_frame`, through
+`PushedMbap` in `_mbap_push.py`), and a malformed MBAP header closes the connection (`receive()`
+raises `anyio.BrokenResourceError`, which a master takes as a lost connection). A chunk that
+comes while no ADU is under way and is the last lone reply again, byte for byte after its
+transaction id (a poll's usual reply), is not decoded again (`PushedMbap.repeated_reply`). A
+server that stops reading holds the master back: a request is written at once only while the
+transport's buffer is below its high-water mark, else `send()` waits for it to drain.
+`push_connections` is the one predicate that picks this path; the differential tests run the
+same exchanges through both.
 """
 
 from __future__ import annotations
