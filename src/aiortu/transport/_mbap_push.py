@@ -9,6 +9,12 @@ common part: it matches each reply ADU to the transaction outstanding (`reply_fr
 [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] does), hands its RTU frame to the link's
 receiver (the push extension, [`PushStream`][aiortu.transport.PushStream]) or keeps it for
 `receive()`, and records how the stream ended. Each subclass says how a request is written.
+
+A poll sends the same request again and again, and mostly gets the same reply: the last request
+again reuses its ADU but for the transaction id (`next_adu`), and the last reply that came alone
+(a datagram, or a chunk that was one whole ADU) again, byte for byte after its transaction id,
+reuses the RTU frame made for it then, CRC and all (`repeated_reply`). Both give exactly what
+the general route gives; the differential tests feed the same bytes both ways.
 """
 
 from __future__ import annotations
@@ -29,7 +35,9 @@ from aiortu.transport._mbap_stream import (
     NONE_OUTSTANDING,
     ModbusTcpCounters,
     reply_frame,
+    reply_taken,
     request_adu,
+    take_transaction_id,
 )
 
 __all__ = ("PushedMbap",)
@@ -50,6 +58,14 @@ class PushedMbap(anyio.abc.ByteStream):
         self._kept: deque[bytes] = deque()
         self._waiter: asyncio.Future[None] | None = None
         self._error: BaseException | None = None
+        self._last_tail: bytes | None = None
+        """The last reply taken that came alone, after its transaction id (`repeated_reply`)."""
+        self._last_frame = b""
+        """Its RTU frame."""
+        self._last_request: bytes | None = None
+        """The last request's RTU frame (`next_adu`)."""
+        self._last_request_tail = b""
+        """Its ADU, after the transaction id."""
 
     @property
     def whole_frames(self) -> bool:
@@ -63,12 +79,30 @@ class PushedMbap(anyio.abc.ByteStream):
 
     # -- receiving -------------------------------------------------------------------
 
-    def hand_on(self, adu: Adu) -> None:
+    def hand_on(self, adu: Adu, alone: bytes | None = None) -> None:
         """Hand on the RTU frame of `adu` if it answers the request outstanding; drop it
-        (counted) if not."""
+        (counted) if not. `alone`: the bytes of `adu`, where they came by themselves (a
+        datagram, a chunk that was this one ADU), for `repeated_reply` to know them again."""
         frame = reply_frame(self.counters, self._outstanding, adu)
         if frame is not None:
+            if alone is not None:
+                self._last_tail, self._last_frame = alone[2:], frame
             self.deliver(frame)
+
+    def repeated_reply(self, data: bytes) -> bool:
+        """Whether `data`, a whole ADU by itself, is the last reply that came alone again, byte
+        for byte after its transaction id (a poll's usual reply): then it was checked and its
+        RTU frame made the first time, and it is handed on with that frame, or dropped (counted)
+        when its id is not the one outstanding, as `hand_on` would."""
+        if data[2:] != self._last_tail:
+            return False
+        if reply_taken(self.counters, self._outstanding, (data[0] << 8) | data[1]):
+            self.deliver(self._last_frame)
+        return True
+
+    def forget_replies(self) -> None:
+        """Know no reply again (the stream broke: what comes after it is not a reply)."""
+        self._last_tail = None
 
     def deliver(self, frame: bytes) -> None:
         """Hand on `frame`, the RTU frame of the reply to the request outstanding."""
@@ -125,10 +159,22 @@ class PushedMbap(anyio.abc.ByteStream):
 
     # -- sending ---------------------------------------------------------------------
 
+    def next_adu(self, item: bytes) -> tuple[int, bytes]:
+        """The transaction id and the ADU that carry the RTU frame `item`, the id taken and the
+        request counted (as `request_adu`); the last request again reuses its ADU but for the
+        id."""
+        counters = self.counters
+        if item == self._last_request:
+            transaction_id = take_transaction_id(counters)
+            return transaction_id, transaction_id.to_bytes(2, "big") + self._last_request_tail
+        transaction_id, adu = request_adu(counters, item)
+        self._last_request, self._last_request_tail = item, adu[2:]
+        return transaction_id, adu
+
     def request(self, item: bytes) -> bytes:
         """The ADU that carries the RTU frame `item`, with the next transaction id, now the
         one outstanding: nothing that came before answers it."""
-        transaction_id, adu = request_adu(self.counters, item)
+        transaction_id, adu = self.next_adu(item)
         self._outstanding = transaction_id
         self._kept.clear()
         return adu

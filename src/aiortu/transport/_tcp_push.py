@@ -11,14 +11,16 @@ decoder in the loop's read callback, and the stream implements the push extensio
 without a task wake-up and writes each request without a yield, and the master's usual exchange
 runs as it does on a serial port.
 
-It decodes and matches replies as the general path does, with the same functions: a reply
-whose transaction id is not the one outstanding is dropped and counted (`reply_frame`, through
-`PushedMbap` in `_mbap_push.py`), and a malformed MBAP header closes the
-connection (`receive()` raises `anyio.BrokenResourceError`, which a master takes as a lost
-connection). A server that stops reading holds the master back: a request is written at once
-only while the transport's buffer is below its high-water mark, else `send()` waits for it to
-drain. `push_connections` is the one predicate that picks this path; the differential tests run
-the same exchanges through both.
+It decodes and matches replies as the general path does, with the same functions: a reply whose
+transaction id is not the one outstanding is dropped and counted (`reply_frame`, through
+`PushedMbap` in `_mbap_push.py`), and a malformed MBAP header closes the connection (`receive()`
+raises `anyio.BrokenResourceError`, which a master takes as a lost connection). A chunk that
+comes while no ADU is under way and is the last lone reply again, byte for byte after its
+transaction id (a poll's usual reply), is not decoded again (`PushedMbap.repeated_reply`). A
+server that stops reading holds the master back: a request is written at once only while the
+transport's buffer is below its high-water mark, else `send()` waits for it to drain.
+`push_connections` is the one predicate that picks this path; the differential tests run the
+same exchanges through both.
 """
 
 from __future__ import annotations
@@ -62,6 +64,9 @@ class _Protocol(asyncio.BufferedProtocol):
     def __init__(self, stream: PushConnectionStream) -> None:
         self.stream = stream
         self._buffer: memoryview | None = None
+        self.data_received: Callable[[bytes], None] = stream.data
+        """Where the TLS layer hands each record's plaintext: the stream's decoder, with no
+        call in between."""
 
     def get_buffer(self, sizehint: int) -> memoryview:
         buffer = self._buffer
@@ -71,9 +76,6 @@ class _Protocol(asyncio.BufferedProtocol):
 
     def buffer_updated(self, nbytes: int) -> None:
         self.stream.data(bytes(self._buffer[:nbytes]))  # type: ignore[index]  # got it first
-
-    def data_received(self, data: bytes) -> None:
-        self.stream.data(data)
 
     def eof_received(self) -> bool:
         self.stream.lost(anyio.EndOfStream())
@@ -124,13 +126,22 @@ class PushConnectionStream(PushedMbap):
     def data(self, data: bytes) -> None:
         """The protocol's callback: decode `data`, and hand on the reply it completes."""
         self.refusal = None  # the server spoke: it took the certificate
+        decoder = self._decoder
+        fresh = not decoder.buffered
+        # A chunk that starts where no ADU is under way may be the last lone reply again.
+        if fresh and self.repeated_reply(data):
+            return
         try:
-            adus = self._decoder.feed(data)
+            adus = decoder.feed(data)
         except MalformedHeader as error:
             _log.warning("%s: closing the Modbus TCP connection: %s", self.where, error)
+            self.forget_replies()
             self.lost(anyio.BrokenResourceError(str(error)))
             if self.transport is not None:
                 self.transport.abort()
+            return
+        if fresh and len(adus) == 1 and not decoder.buffered:
+            self.hand_on(adus[0], data)  # the chunk was this ADU alone
             return
         for adu in adus:
             self.hand_on(adu)

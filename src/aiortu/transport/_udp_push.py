@@ -34,13 +34,7 @@ from aiortu.core.mbap import Adu
 from aiortu.errors import FrameError
 from aiortu.transport._datagram_socket import DatagramSocket
 from aiortu.transport._mbap_push import PushedMbap
-from aiortu.transport._mbap_stream import (
-    ModbusTcpCounters,
-    reply_frame,
-    reply_taken,
-    request_adu,
-    take_transaction_id,
-)
+from aiortu.transport._mbap_stream import ModbusTcpCounters
 from aiortu.transport._push import loop_pushes
 from aiortu.transport._url import MODBUS_UDP_SCHEME, format_tcp_url
 
@@ -81,14 +75,6 @@ class PushDatagramStream(PushedMbap):
         self.socket: DatagramSocket | None = None
         """The socket, once `open_push_datagrams`
         has opened it."""
-        self._last_tail: bytes | None = None
-        """The last reply taken, after its transaction id (see `datagram`)."""
-        self._last_frame = b""
-        """Its RTU frame."""
-        self._last_request: bytes | None = None
-        """The last request's RTU frame (see `send_nowait`)."""
-        self._last_request_tail = b""
-        """Its ADU, after the transaction id."""
 
     @property
     def extra_attributes(self) -> Any:
@@ -109,26 +95,15 @@ class PushDatagramStream(PushedMbap):
                 format_tcp_url(source[0], source[1], MODBUS_UDP_SCHEME),
             )
             return
-        frame: bytes | None
-        if data[2:] == self._last_tail:
-            # The last reply taken again, byte for byte after the transaction id (a poll's
-            # usual reply): checked then, its RTU frame made then.
-            taken = reply_taken(counters, self._outstanding, (data[0] << 8) | data[1])
-            frame = self._last_frame if taken else None
-        else:
-            try:
-                adu = self._check(data)
-            except FrameError as error:
-                counters.refused += 1
-                _log.log(
-                    log_level(counters.refused), "%s: refused a datagram: %s", self.where, error
-                )
-                return
-            frame = reply_frame(counters, self._outstanding, adu)
-            if frame is not None:
-                self._last_tail, self._last_frame = data[2:], frame
-        if frame is not None:
-            self.deliver(frame)
+        if self.repeated_reply(data):
+            return
+        try:
+            adu = self._check(data)
+        except FrameError as error:
+            counters.refused += 1
+            _log.log(log_level(counters.refused), "%s: refused a datagram: %s", self.where, error)
+            return
+        self.hand_on(adu, data)
 
     def closed(self) -> None:
         """The socket closed (by `aclose`)."""
@@ -143,13 +118,7 @@ class PushDatagramStream(PushedMbap):
         if sock is None or self._error is not None:
             return False
         counters = self.counters
-        if item == self._last_request:
-            # The last request again (a poll's): its ADU but for the transaction id is known.
-            transaction_id = take_transaction_id(counters)
-            adu = transaction_id.to_bytes(2, "big") + self._last_request_tail
-        else:
-            transaction_id, adu = request_adu(counters, item)
-            self._last_request, self._last_request_tail = item, adu[2:]
+        transaction_id, adu = self.next_adu(item)
         if not sock.sendto(adu, self.peer):
             # Not sent: the id and the count are taken back, for send() to try again.
             counters.requests -= 1
