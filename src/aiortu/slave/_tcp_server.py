@@ -33,8 +33,9 @@ to us, and what this server does:
 - **Limits.** At most `max_connections` at once: a connection over the limit is closed at
   once (logged once until the count drops). A connection that sends nothing for
   `idle_timeout` seconds is closed. A malformed MBAP header (protocol id not 0, a length
-  field outside 2..254) closes that connection only, logged once: nothing in the stream
-  marks where the next request would start.
+  field outside 2..254) closes that connection only: nothing in the stream marks where the
+  next request would start. The first is logged as a warning, the rest at debug level (all
+  counted in `connections_malformed`), so that a flood of them costs counts, not log lines.
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ from aiortu.transport import (
     MbapFraming,
     PushServerStream,
     listening_address,
+    log_level,
     peer_address,
     push_listener,
     pushed_listener,
@@ -112,7 +114,7 @@ class TcpServerCounters:
     [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]."""
 
     connections_accepted: int = 0
-    """Connections served."""
+    """Connections served (over TLS counted from the accept: the handshake takes a place)."""
     connections_refused: int = 0
     """Connections closed at once because *max_connections* were open."""
     connections_idle: int = 0
@@ -338,8 +340,12 @@ class ModbusTcpServer(Dispatcher):
             return framing.feed(data)
         except MalformedHeader as error:
             self.counters.connections_malformed += 1
-            _log.warning(
-                "%s: %s sent %s; connection closed", self._name, peer_address(stream), error
+            _log.log(
+                log_level(self.counters.connections_malformed),
+                "%s: %s sent %s; connection closed (logged at debug level after the first)",
+                self._name,
+                peer_address(stream),
+                error,
             )
             return None
 
