@@ -33,10 +33,11 @@ to us, and what this server does:
 - **Limits.** At most `max_connections` at once: a connection over the limit is closed at
   once (logged once until the count drops). A connection that sends nothing for
   `idle_timeout` seconds is closed, and so is one whose reply cannot be written for as long
-  (a client that sends requests and never reads the replies). A malformed MBAP header (protocol id not 0, a length
-  field outside 2..254) closes that connection only: nothing in the stream marks where the
-  next request would start. The first is logged as a warning, the rest at debug level (all
-  counted in `connections_malformed`), so that a flood of them costs counts, not log lines.
+  (a client that sends requests and never reads the replies). A malformed MBAP header
+  (protocol id not 0, a length field outside 2..254) closes that connection only: nothing in
+  the stream marks where the next request would start. The first is logged as a warning,
+  the rest at debug level (all counted in `connections_malformed`), so that a flood of them
+  costs counts, not log lines.
 """
 
 from __future__ import annotations
