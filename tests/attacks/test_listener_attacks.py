@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import anyio
 import pytest
@@ -533,3 +534,45 @@ async def test_a_tls_client_on_a_plain_port_gets_no_handshake(name: str, tmp_pat
         if target.framing == "mbap":
             assert all(each.startswith("refused") for each in ended), ended
         _bounded(target, log)
+
+
+# -- the same attacks under trio, where the listeners' paths differ ------------------------
+
+UNDER_TRIO = {
+    "serve tcp": (
+        test_a_flood_of_good_requests_is_answered_in_full,
+        test_a_flood_of_garbage_costs_a_few_log_lines,
+        test_thousands_of_connections_beyond_the_limit_are_refused,
+        test_slowloris_is_one_connection_of_the_limit,
+        test_a_half_sent_request_is_closed_as_idle,
+    ),
+    "serve tls": (
+        test_a_flood_of_good_requests_is_answered_in_full,
+        test_malformed_frames_of_every_kind_cost_no_traceback,
+        test_thousands_of_connections_beyond_the_limit_are_refused,
+        test_a_plaintext_client_on_a_tls_port_is_closed_in_one_line,
+    ),
+    "serve udp": (
+        test_a_flood_of_datagrams_costs_datagrams_not_memory,
+        test_a_flood_of_garbage_costs_a_few_log_lines,
+    ),
+    "gateway tcp": (
+        test_a_flood_of_good_requests_is_answered_in_full,
+        test_a_pipelining_client_that_never_reads_is_held_back,
+    ),
+    "gateway tls": (
+        test_thousands_of_connections_beyond_the_limit_are_refused,
+        test_a_flood_of_garbage_costs_a_few_log_lines,
+    ),
+}
+"""The attacks run again under trio: on asyncio these listeners are pushed (answered from the
+event loop's callbacks); under trio they are anyio streams, or a task reading the socket."""
+
+
+@pytest.mark.parametrize(
+    ("name", "attack"),
+    [(name, attack) for name, attacks in UNDER_TRIO.items() for attack in attacks],
+    ids=lambda each: each if isinstance(each, str) else each.__name__.removeprefix("test_"),
+)
+def test_under_trio(name: str, attack: Callable[[str, Path], Any], tmp_path: Path) -> None:
+    anyio.run(attack, name, tmp_path, backend="trio")
