@@ -48,7 +48,7 @@ from aiortu.transport._listen import (
     write_now,
 )
 from aiortu.transport._mbap_stream import FramedStream, ModbusTcpCounters, ModbusTcpStream
-from aiortu.transport._push import PushStream
+from aiortu.transport._push import PushStream, loop_pushes
 from aiortu.transport._push_server import (
     PushListener,
     PushServerStream,
@@ -161,6 +161,7 @@ __all__ = (
     "listen_unix",
     "listening_address",
     "load_rules",
+    "loop_pushes",
     "open_modbus_tcp",
     "open_modbus_tls",
     "open_modbus_udp",
