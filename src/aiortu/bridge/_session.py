@@ -272,21 +272,24 @@ class BrokerSession:
 
     def _encode(self, messages: list[Message]) -> bytes:
         """The PUBLISH packets of `messages`, each QoS 1 one in flight from now on."""
-        packets = []
-        prepare, inflight, write = self.hooks.prepare, self._inflight, self._writer.packet
-        for message in messages:
-            number = 0
-            if message.qos:
-                number = self._next_id % 65535 + 1  # the next id, unless still in flight
-                if number in inflight:
-                    number = self._packet_id()
-                self._next_id = number
-                inflight[number] = message
-            else:
-                self.delivered += 1
-            payload = message.payload if message.metrics is None else prepare(message)
-            packets.append(write(message.topic, payload, message.qos, message.retain, number))
-        return b"".join(packets)
+        prepare, inflight, writer = self.hooks.prepare, self._inflight, self._writer
+        add = writer.add
+        try:
+            for message in messages:
+                number = 0
+                if message.qos:
+                    number = self._next_id % 65535 + 1  # the next id, unless still in flight
+                    if number in inflight:
+                        number = self._packet_id()
+                    self._next_id = number
+                    inflight[number] = message
+                else:
+                    self.delivered += 1
+                payload = message.payload if message.metrics is None else prepare(message)
+                add(message.topic, payload, message.qos, message.retain, number)
+        finally:
+            packets = writer.joined()  # and none left for the next batch if one failed
+        return packets
 
     async def _receive(self, stream: anyio.abc.ByteStream) -> None:
         answers = self._answers(self._early_packets())
@@ -351,9 +354,11 @@ class BrokerSession:
         return b"".join([reply for packet in packets if (reply := self._handle(packet))])
 
     def _acknowledged(self, packet_ids: tuple[int, ...]) -> None:
-        pop = self._inflight.pop
-        done = [pop(packet_id, None) for packet_id in packet_ids]
-        self.delivered += len(done) - done.count(None)
+        inflight = self._inflight
+        before, pop = len(inflight), inflight.pop
+        for packet_id in packet_ids:
+            pop(packet_id, None)
+        self.delivered += before - len(inflight)  # not done.count(None): Message's __eq__ each
         if self._acked is not None:
             self._acked.set()
 
