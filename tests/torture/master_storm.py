@@ -11,8 +11,11 @@ How long a call may take. A call ends (with a result, a typed aiortu error or it
 cancellation) once every call queued ahead of it has ended and its own attempts are
 over; in the worst case it waits for every other call. So its bound is the sum, over
 all calls, of one call's worst case: (retries + 1) x (its timeout + the wire time of a
-request and its reply + the t3.5 silences) + the late-reply guard + the broadcast
+request and its reply + the t3.5 silences + the late-reply guard) + the broadcast
 turnaround, plus for each unplug the time the port stays out and the reconnect delay.
+The guard is counted per attempt: every attempt may wait for the silence a failed attempt
+before it leaves, its own call's or the call's ahead of it, and on a noisy line bytes
+may start that silence again once, so there it counts twice.
 That bound is checked per call and, with a margin for a loaded machine, as a hard
 limit on the whole scenario: it catches hangs, not slowness.
 """
@@ -85,8 +88,9 @@ def _call_bound(scenario: MasterScenario, call: Call) -> float:
     timeout = call.timeout or scenario.timeout
     turnaround = _turnaround(scenario) if call.kind == "broadcast" else 0.0
     attempts = scenario.retries + 1
+    guard = scenario.late_reply_guard * (2 if scenario.faults is not None else 1)
     # SCHEDULING_SLACK: a loaded machine wakes a task late; a lost wake-up still costs seconds.
-    return attempts * (timeout + wire) + scenario.late_reply_guard + turnaround + SCHEDULING_SLACK
+    return attempts * (timeout + wire + guard) + turnaround + SCHEDULING_SLACK
 
 
 def _turnaround(scenario: MasterScenario) -> float:

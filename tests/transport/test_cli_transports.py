@@ -88,8 +88,7 @@ def test_read_with_a_refused_client_certificate_is_one_line(files: dict[str, Any
     assert read.stdout == ""
     assert read.stderr.strip().splitlines() == [
         f"aiortu read: the line failed: the port is gone (tls://127.0.0.1:{found[1]}: the server"
-        " closed the connection before its first reply; it may have refused this client's"
-        " certificate)"
+        " refused this client's certificate: it has expired)"
     ]
 
 

@@ -28,6 +28,7 @@ from aiortu.transport import (
     certificate_role,
     load_rules,
 )
+from aiortu.transport._tls import server_refusal
 from tests.transport.certificates import Authority, Issued, der_utf8
 
 pytestmark = pytest.mark.timeout(60)
@@ -481,21 +482,53 @@ def test_a_refused_client_certificate_is_one_sentence_with_the_alerts_reason(
     assert str(error).endswith(f": {words})"), str(error)
 
 
+_REFUSED = "the server refused this client's certificate: "
+_OWN_SERVER_WORDS = {
+    "expired": _REFUSED + "it has expired",
+    "untrusted": _REFUSED + "it was signed by a CA the server does not trust",
+}
+
+
 @pytest.mark.parametrize("backend", ["asyncio", "trio"])
 @pytest.mark.parametrize("who", ["expired", "untrusted"])
-def test_a_client_certificate_refused_by_closing_is_one_sentence(
+def test_aiortus_own_server_tells_the_master_why_it_refused_the_certificate(
     pki: dict[str, Any], backend: str, who: str
 ) -> None:
+    """On asyncio the server's TLS layer writes the alert before it closes, and the master
+    names the reason; anyio's TLS listener (trio) closes without it."""
+
     async def scenario() -> BaseException:
         async with tls_server(pki) as server:
             return await _first_request(pki, server.port, who)
 
     error = anyio.run(scenario, backend=backend)
     assert type(error) is aiortu.ConnectionLost, repr(error)
-    assert str(error).endswith(
-        ": the server closed the connection before its first reply; it may have refused this"
-        " client's certificate)"
-    ), str(error)
+    words = (
+        _OWN_SERVER_WORDS[who]
+        if backend == "asyncio"
+        else "the server closed the connection before its first reply; it may have refused this"
+        " client's certificate"
+    )
+    assert str(error).endswith(f": {words})"), str(error)
+
+
+async def test_aiortus_own_server_tells_a_client_without_a_certificate_why(
+    pki: dict[str, Any],
+) -> None:
+    """A client with no certificate at all (aiortu's master always has one) gets the alert
+    that names what is missing, in the sentence a master would give."""
+    async with tls_server(pki) as server:
+        stream = await anyio.connect_tcp("127.0.0.1", server.port)
+        async with stream:
+            with anyio.fail_after(5):
+                tls = await TLSStream.wrap(
+                    stream, hostname="127.0.0.1", ssl_context=_context(pki, None)
+                )
+                await tls.send(encode_adu(1, 1, bytes.fromhex("03 0000 0001")))
+                with pytest.raises(ssl.SSLError) as caught:
+                    await tls.receive()
+    refused = server_refusal("tls://server", caught.value)
+    assert str(refused) == "tls://server: " + _REFUSED + "the server requires one"
 
 
 @pytest.mark.parametrize("backend", ["asyncio", "trio"])

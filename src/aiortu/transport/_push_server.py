@@ -6,11 +6,12 @@ A Modbus TCP or Modbus/TCP Security server reads each connection in a task of it
 wake-up, anyio's socket stream and, over TLS, anyio's TLS stream on every request. Where
 `push_listener` allows it (the running loop is asyncio and the listener is anyio's TCP
 listener), `pushed_listener` puts the listener's sockets behind `PushListener`, whose
-connections are `PushServerStream`s: byte streams on asyncio's transport (its TLS transport
-behind `PushTlsListener`), read by the same task through `receive()` as any stream, and also
-offering the server a *tap*: a function that gets each chunk received while the task waits for
-bytes with nothing unread, and may answer it from the read callback. A chunk the tap declines
-is kept for `receive()`, as any other. Nothing else changes: the accept loop
+connections are `PushServerStream`s: byte streams on asyncio's transport (behind
+`PushTlsListener`, with the connection's own TLS layer, `TlsBioTransport` in `_tls_bio.py`),
+read by the same task through `receive()` as any stream, and also offering the server a *tap*: a
+function that gets each chunk received while the task waits for bytes with nothing unread, and
+may answer it from the read callback. A chunk the tap declines is kept for `receive()`, as any
+other. Nothing else changes: the accept loop
 ([`serve_listener`][aiortu.transport.serve_listener]) with its limits, the handshake's timeout
 and its one-sentence failures ([`TlsListener`][aiortu.transport.TlsListener]), the task's own
 idle timeout and framing.
@@ -37,6 +38,7 @@ from anyio.streams.tls import TLSAttribute
 
 from aiortu.transport._push import WriteGate, loop_pushes
 from aiortu.transport._tls import TlsListener
+from aiortu.transport._tls_bio import TlsBioTransport
 
 __all__ = (
     "PushListener",
@@ -104,11 +106,16 @@ class PushServerStream(anyio.abc.SocketStream):
         """Make the transport, over TLS with `context` (whose handshake's errors raise: the
         caller bounds its time); reading waits for the first `receive()`."""
         loop = asyncio.get_running_loop()
-        transport, _ = await loop.connect_accepted_socket(
-            lambda: _Protocol(self), self._socket, ssl=context
-        )
-        self.transport = transport
-        self.half_close = context is None
+        if context is None:
+            self.transport, _ = await loop.connect_accepted_socket(
+                lambda: _Protocol(self), self._socket
+            )
+            self.half_close = True
+        else:
+            tls = TlsBioTransport(context, _Protocol(self), server_side=True)
+            await loop.connect_accepted_socket(lambda: tls, self._socket)
+            self.transport = tls  # what aclose() closes from now on, the socket with it
+            await tls.handshake()
         self.transport.pause_reading()  # until the first receive()
 
     @property
@@ -253,8 +260,9 @@ class PushListener(anyio.abc.SocketListener):
 
 class PushTlsListener(TlsListener):
     """[`TlsListener`][aiortu.transport.TlsListener] over a
-    [`PushListener`][aiortu.transport.PushListener]: the handshake on asyncio's TLS transport,
-    its failures told and counted the same way."""
+    [`PushListener`][aiortu.transport.PushListener]: the handshake by the connection's own TLS
+    layer on asyncio's plain transport (which sends the alert of a refused one before it
+    closes), its failures told and counted the same way."""
 
     async def serve(  # type: ignore[override]
         self,

@@ -81,7 +81,7 @@ async def open_tcp_connection(
 async def connect_protocol(
     host: str,
     port: int,
-    protocol: asyncio.Protocol,
+    protocol: asyncio.BaseProtocol,
     *,
     connect_timeout: float,
     scheme: str,
@@ -94,7 +94,9 @@ async def connect_protocol(
     return transport
 
 
-async def _first_connection(host: str, port: int, protocol: asyncio.Protocol) -> asyncio.Transport:
+async def _first_connection(
+    host: str, port: int, protocol: asyncio.BaseProtocol
+) -> asyncio.Transport:
     """`protocol` on a connection to the first of `host`'s addresses that takes one, each tried
     in turn (anyio's `connect_tcp` races them); when none does, an `OSError` caused by each
     address's error, as anyio raises it, for `_describe_failure`."""

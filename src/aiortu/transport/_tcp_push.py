@@ -4,11 +4,12 @@ event loop's callback.
 Where the event loop is asyncio, [`open_modbus_tcp`][aiortu.transport.open_modbus_tcp] and
 [`open_modbus_tls`][aiortu.transport.open_modbus_tls] return this stream rather than a
 [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over anyio's socket (and TLS) stream read
-by a task: an `asyncio.Protocol` on asyncio's own transport (its TLS transport for `tls://`)
-feeds each chunk to the MBAP decoder in the loop's read callback, and the stream implements the
-push extension ([`PushStream`][aiortu.transport.PushStream]), so the
-[`Link`][aiortu.line.Link] gets each reply without a task wake-up and writes each request
-without a yield, and the master's usual exchange runs as it does on a serial port.
+by a task: an `asyncio.Protocol` on asyncio's own transport (for `tls://` behind the
+connection's own TLS layer, `TlsBioTransport` in `_tls_bio.py`) feeds each chunk to the MBAP
+decoder in the loop's read callback, and the stream implements the push extension
+([`PushStream`][aiortu.transport.PushStream]), so the [`Link`][aiortu.line.Link] gets each reply
+without a task wake-up and writes each request without a yield, and the master's usual exchange
+runs as it does on a serial port.
 
 It decodes and matches replies as the general path does, with the same functions: a reply
 whose transaction id is not the one outstanding is dropped and counted (`reply_frame`, through
@@ -23,9 +24,8 @@ the same exchanges through both.
 from __future__ import annotations
 
 import asyncio
-import ssl
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Final
 
 import anyio
 import anyio.abc
@@ -50,9 +50,27 @@ def push_connections() -> bool:
     return loop_pushes()
 
 
-class _Protocol(asyncio.Protocol):
+_RECEIVE: Final = 4096
+"""The buffer a plain connection receives into: replies are at most 260 bytes each."""
+
+
+class _Protocol(asyncio.BufferedProtocol):
+    """A plain connection receives into a buffer of its own, not into a new bytes object of
+    asyncio's `max_size` (256 KiB) per read, whose cost moves with the process's heap; over TLS
+    the TLS layer calls `data_received` with each record's plaintext."""
+
     def __init__(self, stream: PushConnectionStream) -> None:
         self.stream = stream
+        self._buffer: memoryview | None = None
+
+    def get_buffer(self, sizehint: int) -> memoryview:
+        buffer = self._buffer
+        if buffer is None:
+            buffer = self._buffer = memoryview(bytearray(_RECEIVE))
+        return buffer
+
+    def buffer_updated(self, nbytes: int) -> None:
+        self.stream.data(bytes(self._buffer[:nbytes]))  # type: ignore[index]  # got it first
 
     def data_received(self, data: bytes) -> None:
         self.stream.data(data)
@@ -154,20 +172,6 @@ class PushConnectionStream(PushedMbap):
             self.transport.close()
         self.lost(anyio.ClosedResourceError())
         await anyio.lowlevel.checkpoint()
-
-    async def start_tls(self, context: ssl.SSLContext, hostname: str) -> None:
-        """Replace the plain transport by a TLS one over it (the handshake's errors raise;
-        the caller bounds its time)."""
-        assert self.transport is not None
-        loop = asyncio.get_running_loop()
-        tls = await loop.start_tls(
-            self.transport,
-            self.protocol,
-            context,
-            server_hostname=hostname,
-        )
-        assert tls is not None
-        self.transport = tls
 
 
 async def open_pushed(

@@ -41,8 +41,9 @@ from aiortu.errors import InvalidValue, PortError
 from aiortu.transport import _tcp_push  # its predicate, looked up at each call
 from aiortu.transport._listen import peer_address
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
-from aiortu.transport._tcp import open_tcp_connection
-from aiortu.transport._tcp_push import PushConnectionStream, open_pushed
+from aiortu.transport._tcp import connect_protocol, open_tcp_connection
+from aiortu.transport._tcp_push import PushConnectionStream
+from aiortu.transport._tls_bio import TlsBioTransport
 from aiortu.transport._url import TLS_SCHEME, format_tcp_url
 
 __all__ = (
@@ -178,6 +179,7 @@ def _context(
         )
     context = ssl.create_default_context(purpose)
     context.minimum_version = ssl.TLSVersion.TLSv1_2
+    context.options |= ssl.OP_NO_RENEGOTIATION  # a session's keys and peers stay as agreed
     context.verify_mode = ssl.CERT_REQUIRED
     try:
         context.load_cert_chain(certfile, keyfile)
@@ -339,8 +341,9 @@ async def open_modbus_tls(
     """Connect to the Modbus/TCP Security server at `host`:`port` with the client certificate
     `certfile` and its key `keyfile`, trusting the CAs in `cafile`; return a stream of RTU
     frames, as [`open_modbus_tcp`][aiortu.transport.open_modbus_tcp] does (on asyncio a
-    [`PushConnectionStream`][aiortu.transport.PushConnectionStream] on asyncio's TLS transport,
-    elsewhere a [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over anyio's TLS stream).
+    [`PushConnectionStream`][aiortu.transport.PushConnectionStream] with its own TLS layer on
+    asyncio's plain transport, elsewhere a
+    [`ModbusTcpStream`][aiortu.transport.ModbusTcpStream] over anyio's TLS stream).
 
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a missing or unreadable file,
     [`PortNotFound`][aiortu.errors.PortNotFound] when the server cannot be reached, and
@@ -351,11 +354,14 @@ async def open_modbus_tls(
     where = format_tcp_url(host, port, TLS_SCHEME)
     counters = counters if counters is not None else ModbusTcpCounters()
     if _tcp_push.push_connections():
-        pushed = await open_pushed(
-            host, port, counters, connect_timeout=connect_timeout, scheme=TLS_SCHEME
+        pushed = PushConnectionStream(counters, where)
+        layer = TlsBioTransport(context, pushed.protocol, server_hostname=host)
+        pushed.transport = layer
+        await connect_protocol(
+            host, port, layer, connect_timeout=connect_timeout, scheme=TLS_SCHEME
         )
         async with _handshake(where, connect_timeout, pushed):
-            await pushed.start_tls(context, host)
+            await layer.handshake()
         pushed.refusal = lambda error: server_refusal(where, error)
         return pushed
     stream = await open_tcp_connection(host, port, connect_timeout=connect_timeout, scheme="tls")
