@@ -8,6 +8,7 @@ bytes are not MQTT, and a bug in a hook is raised, not taken for a lost connecti
 
 from __future__ import annotations
 
+import contextlib
 import random
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
@@ -347,3 +348,123 @@ async def test_a_bug_in_a_hook_is_raised_not_taken_for_a_lost_connection(
                 await session.run()
     assert [type(e) for e in _leaves(raised.value)] == [RuntimeError]
     assert session.connections == 1
+
+
+async def _until(check: Callable[[], bool], seconds: float = 10) -> None:
+    with anyio.fail_after(seconds):
+        while not check():  # noqa: ASYNC110 - a bounded wait
+            await anyio.sleep(0.01)
+
+
+async def test_a_poll_s_acknowledgements_are_read_at_once_on_linux() -> None:
+    """The broker acknowledges 40 messages one by one; the pushed session is woken once for
+    them all (where the kernel takes a receive mark), not once each."""
+    count = 40
+
+    async def broker(stream: anyio.abc.ByteStream) -> None:
+        reader = PacketReader()
+        while not reader.feed(await stream.receive()):  # CONNECT
+            pass
+        await stream.send(CONNACK)
+        got: list[Packet] = []
+        while len(got) < count:
+            got += reader.feed(await stream.receive())
+        for packet in got:
+            await stream.send(puback_packet(Publish.parse(packet).packet_id or 0))
+            await anyio.sleep(0.002)
+        await anyio.sleep_forever()
+
+    outbox = Outbox()
+    session, listener = await _connected(broker, outbox)
+    reads = []
+    pushed = session._pushed
+    session._pushed = lambda data: (reads.append(data), pushed(data))[1]  # type: ignore[method-assign]
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(listener.serve, broker)
+        tasks.start_soon(session.run)
+        await _until(lambda: session.connected)
+        outbox.put_all([Message("t", b"%d" % n, qos=1) for n in range(count)])
+        await _until(lambda: session.delivered == count)
+        tasks.cancel_scope.cancel()
+    assert b"".join(reads) == b"".join(puback_packet(n) for n in range(1, count + 1))
+    if _marks():
+        assert len(reads) == 1
+
+
+def _marks() -> bool:
+    from aiortu.bridge import _session_push
+
+    return _session_push._MARKS
+
+
+@pytest.mark.parametrize("seed", range(6))
+async def test_acknowledgements_and_commands_cut_anywhere_never_wait_for_more(seed: int) -> None:
+    """Whatever the broker sends in whatever pieces (PUBACKs and commands, a packet cut
+    between two reads), the session never waits for bytes the broker does not owe."""
+    rng = random.Random(seed)
+    count = rng.randint(1, 6)
+    commands = rng.randint(0, 3)
+
+    async def broker(stream: anyio.abc.ByteStream) -> None:
+        reader = PacketReader()
+        while not reader.feed(await stream.receive()):  # CONNECT
+            pass
+        await stream.send(CONNACK)
+        got: list[Packet] = []
+        while len(got) < count:
+            got += reader.feed(await stream.receive())
+        pieces = [puback_packet(Publish.parse(p).packet_id or 0) for p in got]
+        pieces += [publish_packet("c", b"", qos=1, packet_id=100 + n) for n in range(commands)]
+        rng.shuffle(pieces)
+        data = b"".join(pieces)
+        cuts = sorted(rng.sample(range(1, len(data)), min(3, len(data) - 1)))
+        for start, end in zip([0, *cuts], [*cuts, len(data)], strict=True):
+            await stream.send(data[start:end])
+            await anyio.sleep(0.01)
+        await anyio.sleep_forever()
+
+    outbox = Outbox()
+    heard: list[Publish] = []
+    session, listener = await _connected(broker, outbox, on_publish=heard.append)
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(listener.serve, broker)
+        tasks.start_soon(session.run)
+        await _until(lambda: session.connected)
+        outbox.put_all([Message("t", b"%d" % n, qos=1) for n in range(count)])
+        await _until(lambda: session.delivered == count and len(heard) == commands, 5)
+        tasks.cancel_scope.cancel()
+    assert not session._inflight, f"seed {seed}"
+
+
+async def test_a_broker_that_holds_its_acknowledgements_is_still_heard_by_the_keep_alive() -> None:
+    """Messages in flight that the broker never acknowledges do not silence it: after each
+    PINGREQ the session is woken by any byte, so the PINGRESPs keep the connection."""
+
+    async def broker(stream: anyio.abc.ByteStream) -> None:
+        reader = PacketReader()
+        while not reader.feed(await stream.receive()):  # CONNECT
+            pass
+        await stream.send(CONNACK)
+        with contextlib.suppress(anyio.EndOfStream):
+            while True:
+                for packet in reader.feed(await stream.receive()):
+                    if packet.type == PacketType.PINGREQ:
+                        await stream.send(bytes((0xD0, 0)))  # PINGRESP, never a PUBACK
+
+    outbox = Outbox()
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+    port = listener.extra(anyio.abc.SocketAttribute.local_port)
+    hooks = SessionHooks(will=lambda: None, subscriptions=list, on_connect=list,
+                         on_publish=lambda publish: None)  # fmt: skip
+    session = BrokerSession(Broker("127.0.0.1", port, keepalive=1), outbox, hooks,
+                            reconnect_delay=(0.05, 0.05))  # fmt: skip
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(listener.serve, broker)
+        tasks.start_soon(session.run)
+        await _until(lambda: session.connected)
+        outbox.put_all([Message("t", b"%d" % n, qos=1) for n in range(5)])
+        await anyio.sleep(3.2)
+        tasks.cancel_scope.cancel()
+    assert session.connections == 1
+    assert session.last_error is None
+    assert len(outbox) == 5  # never acknowledged: back in the outbox for the next connection

@@ -13,6 +13,7 @@ import struct
 from dataclasses import dataclass
 
 __all__ = (
+    "PUBACK_SIZE",
     "ConnectRefused",
     "Packet",
     "PacketReader",
@@ -98,6 +99,8 @@ class Publish:
 
 _PUBACK_FIRST = bytes((PacketType.PUBACK << 4,))
 _PUBACK_LENGTH = b"\x02"
+PUBACK_SIZE = 4
+"""The bytes of a PUBACK (MQTT 3.1.1, 3.4): what the broker sends for each QoS 1 PUBLISH."""
 
 _SHORT = struct.Struct(">H").pack
 """A two-byte big-endian integer (lengths and packet ids)."""
@@ -239,6 +242,11 @@ class PacketReader:
 
     def __init__(self) -> None:
         self._buffer = bytearray()
+
+    @property
+    def pending(self) -> int:
+        """The bytes held of a packet not yet whole."""
+        return len(self._buffer)
 
     def acknowledgements(self, data: bytes) -> tuple[int, ...] | None:
         """The packet ids of `data` if it is whole PUBACKs and nothing else, and no part of a

@@ -29,6 +29,7 @@ from aiortu._log import get_logger
 from aiortu.bridge._broker import Broker, BrokerError
 from aiortu.bridge._outbox import Message, Outbox
 from aiortu.bridge._packets import (
+    PUBACK_SIZE,
     ConnectRefused,
     Packet,
     PacketReader,
@@ -124,6 +125,7 @@ class BrokerSession:
         self._stream: anyio.abc.ByteStream | PushedLink | None = None
         self._link: PushedLink | None = None  # while a pushed connection is served
         self._holding = False  # while a pushed chunk is read: write after it
+        self._pinged = False  # a PINGREQ went, and the broker has said nothing since
         self._acked: anyio.Event | None = None
         self._heard = 0
         self._reader = PacketReader()
@@ -330,8 +332,15 @@ class BrokerSession:
         link, outbox = self._link, self.outbox
         if self._holding:
             return
-        while link is not None and link.writable and outbox and (room := self._room()) > 0:
+        if link is None:
+            return
+        while link.writable and outbox and (room := self._room()) > 0:
             link.write(self._encode(outbox.take(room)))
+        # Woken once for the PUBACKs of what is in flight, not once for each; by any byte
+        # while messages wait for room (each PUBACK makes some) and after a PINGREQ (the
+        # keep-alive hears the broker as it did).
+        wanted = PUBACK_SIZE * len(self._inflight) - self._reader.pending
+        link.expect(1 if self._pinged or outbox else wanted)
 
     def _early_packets(self) -> list[Packet]:
         """What came with the CONNACK (kept until the connection is served)."""
@@ -342,6 +351,7 @@ class BrokerSession:
         """Take `data` from the broker: the bulk, acknowledgements alone, without a packet
         each; return the answers to write."""
         self._heard += 1
+        self._pinged = False
         acknowledged = self._reader.acknowledgements(data)
         if acknowledged is not None:
             self._acknowledged(acknowledged)
@@ -389,6 +399,8 @@ class BrokerSession:
                 silent += 1
                 if silent >= 2:
                     raise TimeoutError(f"the broker said nothing in {self.broker.keepalive} s")
+            self._pinged = True
+            self._flush()  # a pushed link: woken by the PINGRESP, whatever else it waits for
             await self._write(stream, pingreq_packet())
 
     def _packet_id(self) -> int:
@@ -400,7 +412,7 @@ class BrokerSession:
 
     async def _drop(self) -> None:
         """The connection ended: its unacknowledged messages go back first, in order."""
-        self.connected = False
+        self.connected = self._pinged = False
         stream, self._stream = self._stream, None
         if stream is not None:
             await _abort(stream)

@@ -14,12 +14,25 @@ Before the session hands it a receiver, the link keeps what it receives for `rec
 CONNACK is read that way), and it writes only while the transport's buffer is below its
 high-water mark (`writable`): a broker that
 stops reading leaves the messages in the bounded outbox, not in the transport.
+
+A broker acknowledges a poll's messages one by one as it takes them, so the PUBACKs of one
+write come in as many reads as the broker was quick (up to one each, on an idle machine), each
+a turn of the event loop. On a plain TCP connection on Linux the session tells the link how
+many bytes it waits for (`expect`: the PUBACKs of what is in flight), and the link asks the
+kernel not to wake it before they are there (`SO_RCVLOWAT`; the end of the connection wakes
+it whatever the mark): one read a poll. The mark is never above what the broker owes (every
+QoS 1 PUBLISH it took gets its PUBACK), and it is one byte whenever the session needs an
+answer to go on: while messages wait for room in the window, which each PUBACK makes, and
+after a PINGREQ until the broker says anything, so the keep-alive hears the PINGRESP as
+before. A command that comes meanwhile is read with the PUBACKs.
 """
 
 from __future__ import annotations
 
 import asyncio
+import socket
 import ssl
+import sys
 from collections.abc import Callable
 
 import anyio
@@ -51,12 +64,16 @@ class PushedLink(asyncio.Protocol):
         self._arrived: asyncio.Future[None] | None = None
         self._ended: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         self._error: BaseException | None = None
+        self._socket: socket.socket | None = None  # where `expect` sets the mark, if it can
+        self._mark = 1
 
     # asyncio's callbacks
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport, self.writable = transport, True
+        if _MARKS and transport.get_extra_info("sslcontext") is None:
+            self._socket = transport.get_extra_info("socket")
 
     def data_received(self, data: bytes) -> None:
         receiver = self._receiver
@@ -95,6 +112,20 @@ class PushedLink(asyncio.Protocol):
         kept, self._kept = self._kept, []
         for data in kept:
             self.data_received(data)
+
+    def expect(self, size: int) -> None:
+        """Wake the receiver only once `size` bytes (at least 1) can be read, or the
+        connection ends: `size` must never be more than what will come (see the module
+        docstring). Where the mark cannot be set (TLS, not Linux), every chunk wakes it."""
+        size = max(1, size)
+        if size == self._mark or self._socket is None or self._error is not None:
+            return
+        try:
+            self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVLOWAT, size)
+        except OSError:  # a socket that takes no mark: read every chunk, as elsewhere
+            self._socket = None
+            return
+        self._mark = size
 
     def write(self, data: bytes) -> None:
         """Write `data` now (nothing once the link has ended)."""
@@ -148,6 +179,11 @@ class PushedLink(asyncio.Protocol):
     def _wake_receive(self) -> None:
         if self._arrived is not None and not self._arrived.done():
             self._arrived.set_result(None)
+
+
+_MARKS = sys.platform == "linux"
+"""Whether `expect` sets the socket's receive low-water mark: Linux's epoll honours it for TCP
+(and wakes on the connection's end whatever the mark)."""
 
 
 async def open_pushed(host: str, port: int, context: ssl.SSLContext | None) -> PushedLink:
