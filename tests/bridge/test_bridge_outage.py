@@ -5,6 +5,7 @@ profiles and points."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -206,3 +207,23 @@ def test_the_command_says_what_is_wrong_in_one_line(tmp_path: Path) -> None:
         assert done.returncode == code
         assert done.stderr.count("\n") == 1
         assert text in done.stderr
+
+
+def test_the_command_counts_its_devices_and_lines_in_words(tmp_path: Path) -> None:
+    # No broker listens: the bridge starts all the same, polls, and keeps the messages.
+    site = tmp_path / "site.toml"
+    url = f"mqtt://127.0.0.1:{free_port()}"
+    site.write_text(_LINE.format(url=url) + f'unit = 1\nprofile = "{HEAT_PUMP}"\n')
+    command = [sys.executable, "-m", "aiortu", "bridge", "--config", str(site)]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stderr is not None
+        lines = [process.stderr.readline()]  # first, that the broker cannot be reached
+        while lines[-1] and "Ctrl-C to stop" not in lines[-1]:
+            lines.append(process.stderr.readline())
+        started = lines[-1]
+    finally:
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=30)
+    assert started.startswith(f"aiortu bridge: 1 device on 1 line to {url} "), started + err
+    assert process.returncode == 0, err

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from aiortu.core.codes import (
+    MBAP_UNIT_IDS,
+    SERIAL_UNIT_IDS,
     USER_DEFINED_FUNCTION_CODES,
     DeviceIdObject,
     ExceptionCode,
@@ -72,3 +74,10 @@ def test_device_identification_objects_are_the_specs() -> None:
     }
     assert [int(member) for member in DeviceIdObject] == list(spec.values())
     assert dict(OBJECT_IDS) == spec  # the names a profile's [device.identify] may use
+
+
+def test_the_unit_ids_of_each_framing() -> None:
+    assert (SERIAL_UNIT_IDS.ids, SERIAL_UNIT_IDS.broadcast) == (range(248), 0)
+    assert SERIAL_UNIT_IDS.unicast == range(1, 248)
+    assert (MBAP_UNIT_IDS.ids, MBAP_UNIT_IDS.broadcast) == (range(256), None)
+    assert MBAP_UNIT_IDS.unicast == range(256)

@@ -12,7 +12,7 @@ import pytest
 
 import aiortu
 from aiortu.core.codes import ExceptionCode
-from aiortu.core.pdu import ReadHoldingRegistersResponse, Request
+from aiortu.core.pdu import ReadHoldingRegistersResponse, Request, WriteSingleRegisterRequest
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import UnitOffline
 from tests.virtual_clock import on_virtual_clock
@@ -268,6 +268,24 @@ async def test_fail_fast_on_an_offline_unit_except_for_probes() -> None:
         assert len(slave.seen) == sent + 1
         # Other units are not affected.
         assert master.is_online(8)
+
+
+@on_virtual_clock
+async def test_a_broadcast_on_a_serial_line_is_no_unit_of_the_health() -> None:
+    # Unit 0 on a serial line is the broadcast: sent, counted as unit 0's requests, never
+    # a failure (no reply is awaited), never refused, even with fail-fast after one failure.
+    options = {"timeout": 0.03, "retries": 0, "offline_after": 1, "fail_fast_offline": True}
+    async with line(**options) as (master, slave, _):
+        for value in range(3):
+            await master.broadcast.write_register(4, value)
+        await anyio.sleep(0.01)
+        sent = [(0, WriteSingleRegisterRequest(4, value)) for value in range(3)]
+        assert [(seen.unit, seen.request) for seen in slave.seen] == sent
+        stats = master.unit_stats(0)
+        assert (stats.requests, stats.failures, stats.timeouts) == (3, 0, 0)
+        assert stats.online
+        with pytest.raises(aiortu.InvalidRequest, match=r"use master\.broadcast"):
+            await master.read_holding_registers(0, 0, 1)
 
 
 @on_virtual_clock

@@ -8,16 +8,18 @@ from contextlib import asynccontextmanager
 
 import anyio
 import anyio.abc
+import anyio.streams.stapled
 import pytest
 
 import aiortu
-from aiortu.core.codes import DeviceIdReadCode
+from aiortu.core.codes import MBAP_UNIT_IDS, SERIAL_UNIT_IDS, DeviceIdReadCode, UnitIds
 from aiortu.core.mbap import Adu, AduDecoder, encode_adu
 from aiortu.core.pdu import ExceptionPDU, RawPDU
 from aiortu.errors import ExceptionResponse, PortNotFound, ResponseTimeout
 from aiortu.line import Link
 from aiortu.slave import RequestContext, Table
-from aiortu.transport import ModbusTcpCounters, ModbusTcpStream, PushConnectionStream
+from aiortu.testing import MockLine
+from aiortu.transport import AsciiStream, ModbusTcpCounters, ModbusTcpStream, PushConnectionStream
 from tests.slave.tcp_helpers import UNIT, device, tcp_server
 
 pytestmark = pytest.mark.timeout(30)
@@ -291,6 +293,58 @@ async def test_unit_ids_255_and_0_are_unicasts_over_modbus_tcp() -> None:
         await master.broadcast.write_register(3, 9)
 
 
+@asynccontextmanager
+async def silent_server(scheme: str) -> AsyncIterator[tuple[str, list[bytes]]]:
+    """A Modbus TCP or UDP server on loopback that reads every request and answers none:
+    its URL, and the chunks (TCP) or datagrams (UDP) it received."""
+    received: list[bytes] = []
+    async with anyio.create_task_group() as tasks:
+        if scheme == "tcp":
+            listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+            port = listener.extra(anyio.abc.SocketAttribute.local_port)
+
+            async def read(stream: anyio.abc.SocketStream) -> None:
+                async for chunk in stream:
+                    received.append(chunk)
+
+            tasks.start_soon(listener.serve, read)
+        else:
+            socket = await anyio.create_udp_socket(local_host="127.0.0.1")
+            port = socket.extra(anyio.abc.SocketAttribute.local_port)
+
+            async def read_datagrams() -> None:
+                async for datagram, _ in socket:
+                    received.append(datagram)
+
+            tasks.start_soon(read_datagrams)
+        yield f"{scheme}://127.0.0.1:{port}", received
+        tasks.cancel_scope.cancel()
+
+
+@pytest.mark.parametrize("scheme", ["tcp", "udp"])
+async def test_unit_0_over_mbap_goes_offline_and_fails_fast_like_any_unit(scheme: str) -> None:
+    # Over Modbus TCP and UDP unit 0 is an ordinary id (its reply awaited), so the unit
+    # health counts it, marks it offline and refuses it, as any other; a broadcast asked
+    # for awaits no reply and still goes.
+    options = {"timeout": 0.05, "retries": 0, "offline_after": 2, "late_reply_guard": 0.001}
+    async with (
+        silent_server(scheme) as (address, received),
+        aiortu.open_master(address, fail_fast_offline=True, **options) as master,
+    ):
+        for _ in range(2):
+            with pytest.raises(ResponseTimeout):
+                await master.read_holding_registers(0, 0, 1)
+        await until(lambda: len(b"".join(received)) == 2 * 12)
+        assert not master.is_online(0)
+        with pytest.raises(aiortu.UnitOffline):
+            await master.read_holding_registers(0, 0, 1)
+        assert master.unit_stats(0).requests == 2
+        assert master.is_online(1)
+        await master.broadcast.write_register(3, 9)
+        await until(lambda: len(b"".join(received)) == 3 * 12)
+        assert master.unit_stats(0).failures == 2
+
+
 async def test_a_serial_line_master_keeps_units_1_to_247() -> None:
     from aiortu.testing import PtyBus
 
@@ -302,6 +356,68 @@ async def test_a_serial_line_master_keeps_units_1_to_247() -> None:
         for unit in (0, 248, 255):
             with pytest.raises(aiortu.InvalidRequest):
                 await master.read_holding_registers(unit, 0, 1)
+
+
+class DeclaredStream(anyio.abc.ByteStream):
+    """A stream of frames that says which unit ids its framing carries, and carries nothing."""
+
+    def __init__(self, unit_ids: UnitIds) -> None:
+        self._unit_ids = unit_ids
+
+    @property
+    def whole_frames(self) -> bool:
+        return True
+
+    @property
+    def unit_ids(self) -> UnitIds:
+        return self._unit_ids
+
+    async def send(self, item: bytes) -> None:
+        pass
+
+    async def receive(self, max_bytes: int = 65536) -> bytes:
+        await anyio.sleep_forever()
+        raise AssertionError  # never reached
+
+    async def send_eof(self) -> None:
+        pass
+
+    async def aclose(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize(
+    ("stream", "unit_ids"),
+    [
+        (DeclaredStream(MBAP_UNIT_IDS), MBAP_UNIT_IDS),
+        (DeclaredStream(SERIAL_UNIT_IDS), SERIAL_UNIT_IDS),
+        (ModbusTcpStream(DeclaredStream(SERIAL_UNIT_IDS)), MBAP_UNIT_IDS),
+        (AsciiStream(DeclaredStream(MBAP_UNIT_IDS)), SERIAL_UNIT_IDS),
+    ],
+)
+def test_the_unit_ids_are_what_the_stream_declares(stream: object, unit_ids: UnitIds) -> None:
+    # The master takes them from the stream, whatever its class: an MBAP framing's 0..255,
+    # each awaited; a serial line's 0..247, 0 the broadcast.
+    master = aiortu.Master(stream)  # type: ignore[arg-type]
+    assert master.unit_ids == unit_ids
+    assert master.unit_range == unit_ids.unicast
+    assert master.unit_stats(unit_ids.ids[-1]).requests == 0
+    with pytest.raises(aiortu.InvalidRequest):
+        master.unit_stats(unit_ids.ids.stop)
+
+
+def test_a_stream_that_declares_nothing_carries_a_serial_line() -> None:
+    # RTU frames on any byte stream, or a seam in its place.
+    send, receive = anyio.create_memory_object_stream[bytes]()
+    for master in (
+        aiortu.Master(anyio.streams.stapled.StapledObjectStream(send, receive)),  # type: ignore[arg-type]
+        aiortu.Master(MockLine(lambda unit, request: None)),  # type: ignore[arg-type, return-value]
+    ):
+        assert master.unit_ids == SERIAL_UNIT_IDS
+        assert master.unit_range == range(1, 248)
+        assert master.unit_stats(0).requests == 0  # unit 0 counts the broadcasts
+    send.close()
+    receive.close()
 
 
 async def test_modbus_ascii_keeps_units_1_to_247_though_its_frames_come_whole() -> None:

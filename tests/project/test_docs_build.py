@@ -2,7 +2,8 @@
 
 `mkdocs build --strict` fails on any warning, and mkdocs-autorefs reports every
 cross-reference it cannot resolve as one, so a docstring that names something the
-reference does not show breaks the build. The pages of the API reference are then read
+reference does not show breaks the build (not with `--quiet`, which hides those warnings
+from the count as well as from the screen). The pages of the API reference are then read
 as a person sees them (the text of the HTML, tags removed): no Sphinx role left raw, no
 private `aiortu.x._y` name, and for each `::: module` of a page, the headings of the
 module's members are exactly the names its `__all__` exports, or those of its `members:` list (a
@@ -34,7 +35,7 @@ DIRECTIVE = re.compile(r"^::: (?P<module>\S+)\n(?P<options>(?:[ \t]+.*\n)*)", re
 def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     directory = tmp_path_factory.mktemp("site")
     result = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "--quiet", "--site-dir", directory],
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", directory],
         capture_output=True,
         text=True,
         timeout=300,

@@ -16,6 +16,7 @@ import sys
 import anyio
 
 from aiortu.cli import SUMMARIES, CommandFailed, Subparsers
+from aiortu.cli._arguments import plural
 from aiortu.cli._messages import library_warnings_on_stderr, port_failure
 from aiortu.errors import ConfigError, PortError
 
@@ -69,8 +70,8 @@ async def _serve(config: object) -> int:
     with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
         try:
             async with Bridge(config) as bridge:
-                devices = len(bridge.devices)
-                print(f"aiortu bridge: {devices} devices on {len(config.lines)} lines to "
+                devices = plural(len(bridge.devices), "device")
+                print(f"aiortu bridge: {devices} on {plural(len(config.lines), 'line')} to "
                       f"{config.broker.url} ({config.topics.layout}); Ctrl-C to stop",
                       file=sys.stderr)  # fmt: skip
                 async for _ in signals:

@@ -2,12 +2,14 @@
 
 Function codes, exception codes, the sub-functions of Diagnostics (08), and the codes of
 Read Device Identification (2B/0E). Each is an `enum.IntEnum`, so a member compares
-equal to the number on the wire and prints with its name.
+equal to the number on the wire and prints with its name. Beside them, the unit ids each
+framing carries ([`UnitIds`][aiortu.core.codes.UnitIds]).
 """
 
 from __future__ import annotations
 
 import enum
+from dataclasses import dataclass
 
 __all__ = (
     "BROADCAST_UNIT",
@@ -17,13 +19,42 @@ __all__ = (
     "EXCEPTION_BIT",
     "ExceptionCode",
     "FunctionCode",
+    "MBAP_UNIT_IDS",
     "MEI_READ_DEVICE_IDENTIFICATION",
+    "SERIAL_UNIT_IDS",
     "USER_DEFINED_FUNCTION_CODES",
+    "UnitIds",
     "is_user_defined",
 )
 
 BROADCAST_UNIT = 0
 """Unit address 0: every slave executes the request and none replies."""
+
+
+@dataclass(frozen=True, slots=True)
+class UnitIds:
+    """The unit ids a framing carries, and which of them, if any, is the broadcast."""
+
+    ids: range
+    """Every unit id a request may carry."""
+    broadcast: int | None
+    """The first of `ids` where it is the broadcast (every unit executes the request and none
+    answers), or None where there is no broadcast."""
+
+    @property
+    def unicast(self) -> range:
+        """The ids whose reply is awaited: `ids` less the broadcast."""
+        return self.ids if self.broadcast is None else self.ids[1:]
+
+
+SERIAL_UNIT_IDS = UnitIds(range(248), broadcast=BROADCAST_UNIT)
+"""A serial line (RTU or ASCII, on a port or over TCP): 1..247 are units, 0 is the broadcast
+(248..255 are reserved)."""
+
+MBAP_UNIT_IDS = UnitIds(range(256), broadcast=None)
+"""An MBAP header (Modbus TCP, UDP and TLS): any byte, each a unit whose reply is awaited;
+on TCP unit 0 addresses the server itself, and a gateway gives 0 its serial meaning only
+when it forwards to a line."""
 
 EXCEPTION_BIT = 0x80
 """Set in the function code of an exception response."""

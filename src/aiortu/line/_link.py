@@ -448,7 +448,7 @@ class Link:
 
     def call_at(self, when: float, callback: Callable[..., object], *args: object) -> Any:
         """Have the event loop call `callback(*args)` at `when` (the link's clock);
-        return a handle with `cancel()`. Only where [`loop`][aiortu.line.Link.loop] is set."""
+        return a handle with `cancel()`. Only where [`loop`][aiortu.line.Link] is set."""
         loop = self.loop
         assert loop is not None
         if self.backend_clock:
@@ -533,7 +533,7 @@ class Link:
         that arrive meanwhile move it): at the time itself where a
         [`WakeTimer`][aiortu.line.WakeTimer] can watch it. One callback at a time (a second
         replaces the first); [`cancel_quiet_call`][aiortu.line.Link.cancel_quiet_call] undoes
-        it. Only where [`loop`][aiortu.line.Link.loop] is set: a sender that is no task (the
+        it. Only where [`loop`][aiortu.line.Link] is set: a sender that is no task (the
         master's fast path) waits for the silence this way."""
         self._silence.call_when_quiet(
             self.loop, self._activity, self.clock, self.frame_gap, callback

@@ -13,14 +13,13 @@ import math
 from collections.abc import Collection, Iterable, Sequence
 from typing import Final
 
-from aiortu.core.codes import BROADCAST_UNIT
+from aiortu.core.codes import BROADCAST_UNIT, SERIAL_UNIT_IDS
 from aiortu.core.errors import InvalidRequest, InvalidValue
 from aiortu.core.machines import Failure
 from aiortu.core.pdu import REGISTER_RANGE
 
 __all__ = (
     "UNIT_RANGE",
-    "MBAP_UNIT_RANGE",
     "check_at_least",
     "check_bool",
     "check_coil",
@@ -38,13 +37,8 @@ __all__ = (
     "is_int",
 )
 
-UNIT_RANGE: Final = range(1, 248)
+UNIT_RANGE: Final = SERIAL_UNIT_IDS.unicast
 """The unit addresses a unicast request may go to on a serial line."""
-
-MBAP_UNIT_RANGE: Final = range(256)
-"""The unit ids a request may carry in an MBAP header (Modbus TCP, UDP and TLS): the byte as
-given (a device reached by its IP address is often 255 or 0, and 0 is then a unicast whose
-reply is awaited)."""
 
 _TEXT_TYPES: Final = (str, bytes, bytearray, memoryview)
 """Iterables that are never a sequence of values: text, and bytes (each byte an int)."""

@@ -37,7 +37,7 @@ from typing import Any, Self, TypeVar
 import anyio
 import anyio.abc
 
-from aiortu.core.codes import BROADCAST_UNIT
+from aiortu.core.codes import BROADCAST_UNIT, SERIAL_UNIT_IDS, UnitIds
 from aiortu.core.machines import RetryPolicy, Transaction
 from aiortu.core.pdu import (
     ExceptionPDU,
@@ -51,7 +51,6 @@ from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidRequest, InvalidValue, MalformedPDU
 from aiortu.line import Link
 from aiortu.master._arguments import (
-    MBAP_UNIT_RANGE,
     UNIT_RANGE,
     check_at_least,
     check_int,
@@ -66,6 +65,7 @@ from aiortu.master._engine import LineEngine, UnitOffline, UnitStats
 from aiortu.master._handles import BroadcastHandle, UnitHandle
 from aiortu.master._operations import Operations, answer
 from aiortu.master._seam import Seam
+from aiortu.transport import FramedStream
 
 __all__ = ("Master", "UnitOffline", "UnitStats", "open_master")
 
@@ -73,17 +73,11 @@ _ResponseT = TypeVar("_ResponseT", bound=Response)
 _SEND_ONCE = RetryPolicy(0)
 """The policy of a request without reply: nothing tells a failed attempt."""
 
-_STATS_UNITS = range(248)
-"""The units a master keeps statistics of: unit 0 counts the broadcasts."""
 
-
-def _unit_range(stream: object) -> range:
-    """The unit ids `stream`'s framing carries: any byte in an MBAP header, else (a serial
-    line, or a seam given in its place) 1..247."""
-    from aiortu.transport import ModbusTcpStream, PushConnectionStream, PushDatagramStream
-
-    mbap = isinstance(stream, ModbusTcpStream | PushConnectionStream | PushDatagramStream)
-    return MBAP_UNIT_RANGE if mbap else UNIT_RANGE
+def _unit_ids(stream: object) -> UnitIds:
+    """The unit ids `stream`'s framing carries, as it declares them; a serial line's where it
+    declares none (RTU frames on a byte stream, or a seam given in its place)."""
+    return stream.unit_ids if isinstance(stream, FramedStream) else SERIAL_UNIT_IDS
 
 
 def _known_form(pdu: object) -> Request:
@@ -202,7 +196,10 @@ class Master(Operations):
             engine = self.seam = self._engine = LineEngine(link, config, can_reconnect=reconnect)
             self._connection = LineConnection(engine, link, make_link, opener, config.reconnection)
         """Keeps the line up: reconnect counters, the current link."""
-        self.unit_range = _unit_range(stream)
+        self.unit_ids = _unit_ids(stream)
+        """The unit ids the stream's framing carries (see
+        [`FramedStream`][aiortu.transport.FramedStream])."""
+        self.unit_range = self.unit_ids.unicast
         """The unit ids a request may go to: 1..247 on a serial line (RTU or ASCII); over
         Modbus TCP, UDP or TLS, whose MBAP header carries any byte, 0..255 as given (0 then
         awaits a reply like any other id; [`broadcast`][aiortu.master.Master] is the
@@ -299,7 +296,7 @@ class Master(Operations):
     def unit_stats(self, unit: int) -> UnitStats:
         """The statistics and health of `unit` (0..247, and up to 255 over Modbus TCP; on a
         serial line unit 0 counts the broadcasts)."""
-        counted = range(max(self.unit_range.stop, _STATS_UNITS.stop))
+        counted = self.unit_ids.ids
         return self.seam.unit_stats(check_int("unit", unit, counted, InvalidRequest))
 
     def is_online(self, unit: int) -> bool:

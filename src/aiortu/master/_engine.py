@@ -44,7 +44,6 @@ from collections.abc import Awaitable
 
 import anyio
 
-from aiortu.core.codes import BROADCAST_UNIT
 from aiortu.core.machines import MasterState, OutcomeKind, Transaction
 from aiortu.errors import ConnectionLost, UnitOffline
 from aiortu.line import Link, LinkEvent
@@ -348,8 +347,8 @@ class LineEngine(LineState):
             raise ConnectionLost(f"the line is down and did not come back within {seconds} s")
 
     def _check_offline(self, unit: int) -> None:
-        if unit == BROADCAST_UNIT:
-            return
+        # Any unit whose reply is awaited: a broadcast awaits none and never comes here, and
+        # unit 0 that does (over Modbus TCP, UDP or TLS) is a unit like any other.
         stats = self.stats.get(unit)
         if stats is None or stats.online:
             return

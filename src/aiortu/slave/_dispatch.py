@@ -22,6 +22,7 @@ from aiortu.core.machines import SlaveMachine
 from aiortu.core.model import AsyncDataStore, DataStore, Table
 from aiortu.core.pdu import ExceptionPDU, Request, Response, decode_request, encode_exception
 from aiortu.errors import ExceptionResponse, InvalidValue, MalformedPDU
+from aiortu.slave._answer_at_once import AnswerAtOnce
 from aiortu.slave._handlers import (
     Answer,
     Handler,
@@ -53,15 +54,18 @@ RESTART_COMMUNICATIONS = bytes((0x08, 0x00, 0x01))
 class Dispatcher:
     """Units, their handlers, routes and hooks, and the general route of a request.
 
-    A base class: a server sets it up with `_init_dispatch`, builds the contexts
-    with `_build_contexts` once it is ready for `_configured`, and calls
-    `_answer` for each request the machine let through.
+    A base class: a server sets it up with `_init_dispatch`, makes its shortcut
+    (`_at_once`), builds the contexts with `_build_contexts`, and calls `_answer` for
+    each request the machine let through.
     """
 
     units: dict[int, DataStore | AsyncDataStore]
     """The data store of each unit served."""
     machine: SlaveMachine
     """The state machine that decides what to answer."""
+    _at_once: AnswerAtOnce
+    """The server's shortcut, which answers a request at once where the general route would
+    answer it the same (made by each server, on its carrier)."""
 
     def _init_dispatch(
         self,
@@ -86,7 +90,8 @@ class Dispatcher:
         handlers: Mapping[int, Handler],
         stores: Mapping[int, DataStore | AsyncDataStore],
     ) -> None:
-        """Called whenever the handlers or the stores change (a subclass may care)."""
+        """The handlers or the stores changed: the shortcut takes them."""
+        self._at_once.configure(handlers, stores)
 
     # -- handlers --------------------------------------------------------------------
 

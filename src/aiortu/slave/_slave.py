@@ -74,7 +74,6 @@ TraceCallback = Callable[[str, bytes], object]
 unit), `("sent", frame)` for every reply, `("discarded", data)` for bytes dropped."""
 
 _UNIT_RANGE = range(1, 248)
-_FUNCTION_CODE_RANGE = range(1, 128)
 
 
 class Slave(Dispatcher):
@@ -90,6 +89,8 @@ class Slave(Dispatcher):
     Raises [`InvalidValue`][aiortu.errors.InvalidValue] for a unit address outside 1..247 or a
     function code outside 1..127.
     """
+
+    _at_once: LineAnswerAtOnce
 
     def __init__(
         self,
@@ -147,13 +148,6 @@ class Slave(Dispatcher):
         self._waiter: Waiter | None = None
         """What the serve loop waits on while its queue is empty."""
         self._link_closed = False
-
-    def _configured(
-        self,
-        handlers: Mapping[int, Handler],
-        stores: Mapping[int, DataStore | AsyncDataStore],
-    ) -> None:
-        self._at_once.configure(handlers, stores)
 
     @property
     def trace(self) -> TraceCallback | None:

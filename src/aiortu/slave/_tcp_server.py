@@ -220,13 +220,6 @@ class ModbusTcpServer(Dispatcher):
         bytes to read (a datagram server's backlog is another matter)."""
         return ()
 
-    def _configured(
-        self,
-        handlers: Mapping[int, Handler],
-        stores: Mapping[int, DataStore | AsyncDataStore],
-    ) -> None:
-        self._at_once.configure(handlers, stores)
-
     @property
     def trace(self) -> Callable[[str, bytes], object] | None:
         """Sees every request and reply ADU, MBAP header included (see the class docstring);

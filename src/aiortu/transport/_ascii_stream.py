@@ -40,6 +40,7 @@ from aiortu.core.ascii import (
     AsciiReceiver,
     encode_ascii_frame,
 )
+from aiortu.core.codes import SERIAL_UNIT_IDS, UnitIds
 from aiortu.core.rtu import crc16
 from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
@@ -110,6 +111,11 @@ class AsciiStream(anyio.abc.ByteStream):
     def whole_frames(self) -> bool:
         """True: each `receive()` returns exactly one RTU frame."""
         return True
+
+    @property
+    def unit_ids(self) -> UnitIds:
+        """A serial line's: 1..247, and 0 the broadcast."""
+        return SERIAL_UNIT_IDS
 
     @property
     def extra_attributes(self) -> Any:

@@ -23,6 +23,7 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
+from aiortu.core.codes import MBAP_UNIT_IDS, UnitIds
 from aiortu.core.mbap import Adu
 from aiortu.transport._mbap_stream import (
     NONE_OUTSTANDING,
@@ -54,6 +55,11 @@ class PushedMbap(anyio.abc.ByteStream):
     def whole_frames(self) -> bool:
         """True: each frame handed over is one whole RTU frame."""
         return True
+
+    @property
+    def unit_ids(self) -> UnitIds:
+        """Any byte of the MBAP header, each a unit whose reply is awaited."""
+        return MBAP_UNIT_IDS
 
     # -- receiving -------------------------------------------------------------------
 

@@ -35,6 +35,7 @@ import anyio.abc
 import anyio.lowlevel
 
 from aiortu._log import get_logger
+from aiortu.core.codes import MBAP_UNIT_IDS, UnitIds
 from aiortu.core.mbap import Adu, AduDecoder, MalformedHeader, encode_adu
 from aiortu.core.rtu import crc16
 from aiortu.errors import InvalidValue
@@ -91,16 +92,23 @@ def reply_frame(counters: ModbusTcpCounters, outstanding: int, adu: Adu) -> byte
 
 @runtime_checkable
 class FramedStream(Protocol):
-    """A byte stream that knows where its frames end.
+    """A byte stream that knows where its frames end, and which unit ids they carry.
 
     Where `whole_frames` is true, every `receive()` returns exactly one whole frame, and
     `send()` carries a frame with no wire time to wait for. [`Link`][aiortu.line.Link] checks for
-    it once, when it is made.
+    it once, when it is made. A [`Master`][aiortu.master.Master] takes its unit ids from
+    `unit_ids`; any other stream carries RTU frames of a serial line
+    ([`SERIAL_UNIT_IDS`][aiortu.core.codes.SERIAL_UNIT_IDS]).
     """
 
     @property
     def whole_frames(self) -> bool:
         """Whether each `receive()` returns exactly one whole frame."""
+        ...
+
+    @property
+    def unit_ids(self) -> UnitIds:
+        """The unit ids the stream's framing carries."""
         ...
 
 
@@ -149,6 +157,11 @@ class ModbusTcpStream(anyio.abc.ByteStream):
     def whole_frames(self) -> bool:
         """True: each `receive()` returns exactly one RTU frame."""
         return True
+
+    @property
+    def unit_ids(self) -> UnitIds:
+        """Any byte of the MBAP header, each a unit whose reply is awaited."""
+        return MBAP_UNIT_IDS
 
     @property
     def extra_attributes(self) -> Any:

@@ -395,7 +395,7 @@ class MasterMachine:
         matched and its CRC checked.
 
         A poll loop reads the same block again and again and often gets the same bytes back. A frame
-        equal to [`KnownRequest.last_reply`][aiortu.core.machines.KnownRequest.last_reply]
+        equal to `known.last_reply` (the last usual reply to that request)
         holds the same response, so it is not decoded again (and a link need not check its CRC
         again: see [`aiortu.line.Link.expect`][aiortu.line.Link.expect]). Responses are immutable,
         so sharing one is safe.
