@@ -94,8 +94,8 @@ def free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-def wait_listening(port: int, process: subprocess.Popen[bytes]) -> None:
-    deadline = time.monotonic() + 20
+def wait_listening(port: int, process: subprocess.Popen[bytes], seconds: float = 20) -> None:
+    deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
         if process.poll() is not None:
             raise RuntimeError(f"{process.args!r} exited with {process.returncode}")
@@ -107,10 +107,11 @@ def wait_listening(port: int, process: subprocess.Popen[bytes]) -> None:
 
 def start_gateway(
     children: benchlib.Children, name: str, serial: str, args: argparse.Namespace,
-    rate: Rate = SLOW,
+    rate: Rate = SLOW, prefix: Sequence[str] = (), wait: float = 20,
 ) -> tuple[subprocess.Popen[bytes], int]:  # fmt: skip
-    """Start gateway *name* (`aiortu`, `GAP_1MS`, `mbusd`, or `BASE`...) on *serial*; return
-    it and its TCP port."""
+    """Start gateway *name* (`aiortu`, `GAP_1MS`, `mbusd`, or `BASE`...) on *serial*, its
+    command after *prefix* (a tool that runs it); return it and its TCP port once it listens
+    (within *wait* seconds)."""
     port = free_port()
     env = None
     if name == "mbusd":
@@ -126,8 +127,10 @@ def start_gateway(
             argv += ["--frame-gap", "0.001"]
         if name.startswith(BASE):
             env = {**os.environ, "PYTHONPATH": args.baseline}
-    process = children.start(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
-    wait_listening(port, process)
+    process = children.start(
+        [*prefix, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
+    )
+    wait_listening(port, process, wait)
     return process, port
 
 

@@ -9,19 +9,26 @@ Assertions are on the content and order of what the clients receive, and on virt
 
 from __future__ import annotations
 
+import gc
+import inspect
 import logging
 import re
 import tracemalloc
+import warnings
+from collections import deque
 from collections.abc import Callable
+from types import SimpleNamespace
 
 import anyio
 import anyio.abc
 import pytest
 
+from aiortu.core.mbap import encode_adu
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import InvalidValue
 from aiortu.gateway import Gateway, GatewayLine, gateway
 from aiortu.gateway._metrics import parse_metrics_url
+from aiortu.gateway._server import _drop_unstarted
 from aiortu.slave import MemoryStore, RequestContext
 from tests.gateway.helpers import (
     UNIT,
@@ -437,3 +444,44 @@ async def test_a_read_that_asks_again_keeps_its_place_in_its_connections_window(
             hold.release()
             replies = [await follower.receive() for _ in range(6)]
             assert sorted(reply.transaction_id for reply in replies if reply) == list(range(6))
+
+
+async def _stop_with_requests_queued_for_a_worker() -> None:
+    """A write and a read in one segment: the read queues behind the write for the same
+    worker. The write is held on the line when the gateway stops, so no worker ever takes
+    the read, nor the write after it."""
+    async with line(master_options=HELD, listen=()) as bench:
+        hold = Hold()
+        bench.slave.before_request(hold)
+        async with memory_stream(bench.gateway) as stream:
+            await stream.send(
+                encode_adu(1, UNIT, bytes.fromhex("06 0005 0042"))
+                + encode_adu(2, UNIT, bytes.fromhex("03 0000 0001"))
+                + encode_adu(3, OTHER, bytes.fromhex("06 0006 0043"))
+            )
+            await _until(lambda: bench.gateway.counters.requests == 3 and hold.held == 1)
+
+
+@on_virtual_clock
+async def test_requests_left_queued_for_a_worker_leave_no_coroutine_unawaited() -> None:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        await _stop_with_requests_queued_for_a_worker()
+        gc.collect()
+    unawaited = [str(w.message) for w in caught if "never awaited" in str(w.message)]
+    assert unawaited == []
+
+
+def test_a_reads_line_awaitable_no_worker_took_is_closed_with_its_connection() -> None:
+    # Where the line gives a read a coroutine (trio; an idle line where the fast path does
+    # not take it), a worker awaits it: when the connection ends before a worker took the
+    # read, the coroutine, not started and so nothing sent, is closed.
+    async def on_the_line() -> None:
+        raise AssertionError("never run")
+
+    submitted = on_the_line()
+    request = SimpleNamespace(submitted=submitted)
+    connection = SimpleNamespace(pending=deque([request, SimpleNamespace(submitted=None)]))
+    _drop_unstarted(connection)  # type: ignore[arg-type]
+    assert inspect.getcoroutinestate(submitted) == inspect.CORO_CLOSED
+    assert not connection.pending

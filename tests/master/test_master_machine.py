@@ -20,6 +20,7 @@ from aiortu.core.machines import (
 )
 from aiortu.core.machines._master_machine import TRANSITIONS, next_state
 from aiortu.core.pdu import (
+    RawRegisterRead,
     ReadHoldingRegistersRequest,
     ReadHoldingRegistersResponse,
     ReadInputRegistersRequest,
@@ -325,3 +326,31 @@ def test_the_usual_response_is_the_reply_decoded_even_when_remembered(
         last = (frame, response)
     assert machine.state is MasterState.IDLE
     assert machine.usual_exchange(1, request) is known  # remembered per unit and request
+
+
+@given(
+    code=st.sampled_from([0x03, 0x04]),
+    address=st.integers(0, 100),
+    count=st.integers(1, 4),
+    replies=st.lists(st.binary(min_size=2, max_size=8), max_size=4),
+)
+def test_a_read_kept_as_bytes_has_the_usual_exchange_of_the_decoded_read(
+    code: int, address: int, count: int, replies: list[bytes]
+) -> None:
+    """A RawRegisterRead has the frame and the usual reply's shape of the decoded read of the
+    same bytes, and its usual reply is handed over as those bytes, not decoded."""
+    raw = RawRegisterRead(code, bytes.fromhex(f"{address:04X}{count:04X}"))
+    decoded = (ReadHoldingRegistersRequest if code == 0x03 else ReadInputRegistersRequest)(
+        address, count
+    )
+    known = MasterMachine().usual_exchange(7, raw)
+    expected = MasterMachine().usual_exchange(7, decoded)
+    assert known is not None
+    assert expected is not None
+    assert (known.frame, known.reply_shape) == (expected.frame, expected.reply_shape)
+    for words in replies:
+        data = (words * count)[: 2 * count].ljust(2 * count, b"\x00")
+        frame = bytes((7, code, 2 * count)) + data + b"\x00\x00"  # the link checks the CRC
+        response = MasterMachine.usual_response(known, frame)
+        assert response.encode() == frame[1:-2]
+        assert response.encode() == MasterMachine.usual_response(expected, frame).encode()

@@ -6,8 +6,9 @@
 (RTU frames over TCP), `tls://` (Modbus/TCP Security) and `unix:PATH` URLs and serves every
 client through the one engine of its unit's line; [`Gateway`][aiortu.gateway.Gateway] is the
 server itself. Requests are forwarded at frame level: a function code aiortu knows is sent as
-its request class, so the engine checks the reply against the request; any other code
-(user-defined ones included) goes out byte for byte. See `docs/gateway.md`.
+its request class, so the engine checks the reply against the request (a register read as its
+bytes, [`RawRegisterRead`][aiortu.core.pdu.RawRegisterRead], with the same checks); any other
+code (user-defined ones included) goes out byte for byte. See `docs/gateway.md`.
 """
 
 from __future__ import annotations

@@ -117,15 +117,16 @@ async def forward(master: Master, unit: int, pdu: bytes, priority: int, order: i
     if pdu[0] == 0 or pdu[0] & 0x80:
         # Function code 0, or an exception's: not a request, nothing on the line answers it.
         return exception_reply(pdu, ExceptionCode.ILLEGAL_FUNCTION)
-    return await reply_from(start_forward(master, unit, pdu, priority, order), unit, pdu)
+    awaitable = start_forward(master, unit, request_of(pdu), priority, order)
+    return await reply_from(awaitable, unit, pdu)
 
 
 def start_forward(
-    master: Master, unit: int, pdu: bytes, priority: int, order: int
+    master: Master, unit: int, request: Request, priority: int, order: int
 ) -> Awaitable[Response | ExceptionPDU | None]:
-    """Hand request `pdu` (a request's function code) to `unit` on the line of `master`; return
-    the awaitable of its reply (see `on_the_line`), which `reply_pdu` turns into the reply PDU."""
-    request = request_of(pdu)
+    """Hand `request` (made by `request_of`, or kept as its bytes: `_as_bytes.py`) to `unit`
+    on the line of `master`; return the awaitable of its reply (see `on_the_line`), which
+    `reply_pdu` turns into the reply PDU."""
     policy = master.policy.for_function(request.function_code)
     return on_the_line(master, Transaction(unit, request, master.timeout, policy), priority, order)
 

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import inspect
 import logging
 import time
 from collections.abc import Awaitable, Callable, Sequence
@@ -64,6 +65,7 @@ from aiortu._log import get_logger
 from aiortu.core.codes import BROADCAST_UNIT, ExceptionCode
 from aiortu.core.mbap import Adu, MalformedHeader, decode_adu
 from aiortu.errors import FrameError, InvalidValue
+from aiortu.gateway._as_bytes import ReadsAsBytes
 from aiortu.gateway._cache import ReadCache
 from aiortu.gateway._connection import GONE, Connection, Turns
 from aiortu.gateway._forward import (
@@ -171,6 +173,8 @@ class _Line(Turns):
         self.shared: dict[tuple[int, bytes], _Shared] = {}
         self.cache = cache
         self.stats = stats
+        self.as_bytes = ReadsAsBytes(self.master)
+        """The line's byte shortcut for reads."""
         self.listen_only: set[int] = set()
         """Units the gateway put in listen-only mode (08/04), until an 08/01 to them."""
 
@@ -184,8 +188,12 @@ class _Request:
     line: _Line
     turn: int
     """Its connection's turn on the line, taken as it came."""
-    awaitable: Awaitable[bytes | None] | None = None
-    """What a worker awaits for its reply (None: it is answered from a callback)."""
+    work: Callable[[], Awaitable[bytes | None]] | None = None
+    """What the worker that takes it calls, and awaits, for its reply (None: it is answered
+    from a callback). A coroutine is made only by the worker that will await it."""
+    submitted: Awaitable[Any] | None = None
+    """The line's awaitable of a read handed to the line before a worker took it: closed
+    when none ever does (see `_drop_unstarted`)."""
     shared: _Shared | None = None
     """The shared read it leads (see `Gateway._start_read`)."""
     generation: tuple[int, int] | None = None
@@ -378,6 +386,7 @@ class Gateway:
                 tasks.cancel_scope.cancel()  # the watch and the writer
         finally:
             connection.leave()  # what is still on the line is dropped
+            _drop_unstarted(connection)
             if isinstance(stream, PushServerStream):
                 stream.tap = None
             await stream.aclose()
@@ -563,11 +572,11 @@ class Gateway:
             if line.cache is not None:
                 line.cache.invalidate(unit, pdu)
             self._count_transaction(line)
-        request.awaitable = self._line_request(request)
+        request.work = functools.partial(self._line_request, request)
         self._to_worker(request)
 
     def _to_worker(self, request: _Request) -> None:
-        """Have a worker of the connection await `request.awaitable` (started if none is parked)."""
+        """Have a worker of the connection run `request.work` (started if none is parked)."""
         connection = request.connection
         if not connection.put(request):
             assert connection.tasks is not None
@@ -584,9 +593,9 @@ class Gateway:
 
     async def _request(self, request: _Request) -> None:
         """Await `request`'s reply and end it (see `_end`)."""
-        assert request.awaitable is not None
+        assert request.work is not None
         try:
-            reply = await request.awaitable
+            reply = await request.work()
         except Exception:
             # A bug must cost one request, not every connection.
             _log.exception("gateway: forwarding a request failed; answered with exception 0B")
@@ -622,7 +631,9 @@ class Gateway:
             # read must not pass it on the line, so the worker that takes it takes this read
             # next (no task started: this may run in a callback).
             self._count_transaction(line)
-            request.awaitable = forward(line.master, unit, pdu, connection.priority, request.turn)
+            request.work = functools.partial(
+                forward, line.master, unit, pdu, connection.priority, request.turn
+            )
             connection.pending.append(request)
             return
         if self.coalesce:
@@ -639,7 +650,9 @@ class Gateway:
             request.generation = cache.generation(unit)
         self._count_transaction(line)
         try:
-            awaitable = start_forward(line.master, unit, pdu, connection.priority, request.turn)
+            awaitable = start_forward(
+                line.master, unit, line.as_bytes.request(pdu), connection.priority, request.turn
+            )
         except Exception:
             _log.exception("gateway: forwarding a request failed; answered with exception 0B")
             self._end(request, exception_reply(pdu, _NO_RESPONSE))
@@ -648,7 +661,8 @@ class Gateway:
             request.connection.on_line.add(awaitable)
             awaitable.add_done_callback(functools.partial(self._read_done, request))
         else:
-            request.awaitable = reply_from(awaitable, unit, pdu)
+            request.submitted = awaitable
+            request.work = functools.partial(reply_from, awaitable, unit, pdu)
             self._to_worker(request)
 
     def _read_done(self, request: _Request, future: asyncio.Future[Any]) -> None:
@@ -658,8 +672,10 @@ class Gateway:
         reply: bytes | None = None
         if not future.cancelled():
             pdu = request.adu.pdu
+            error = future.exception()
             try:
-                reply = reply_pdu(pdu, request.unit, *_outcome(future))
+                result = None if error is not None else future.result()
+                reply = reply_pdu(pdu, request.unit, result, error)
             except Exception:
                 _log.exception("gateway: forwarding a request failed; answered with exception 0B")
                 reply = exception_reply(pdu, _NO_RESPONSE)
@@ -789,10 +805,14 @@ def accepted_in_callback(connection: _Client, chunk: bytes) -> Adu | None:
         return None
 
 
-def _outcome(future: asyncio.Future[Any]) -> tuple[Any, BaseException | None]:
-    """The result and the error of done, not cancelled, `future`."""
-    error = future.exception()
-    return (None, error) if error is not None else (future.result(), None)
+def _drop_unstarted(connection: _Client) -> None:
+    """The connection is over: close the line's awaitables of the reads no worker took (a
+    coroutine not started yet, which sent nothing), so that none is left unawaited."""
+    for request in connection.pending:
+        submitted = request.submitted
+        if inspect.iscoroutine(submitted):
+            submitted.close()
+    connection.pending.clear()
 
 
 def _check_options(

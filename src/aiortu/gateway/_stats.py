@@ -89,7 +89,11 @@ class GatewayStatistics:
 
     def unit(self, line: str, unit: int) -> UnitStatistics:
         """The statistics of `unit` on line `line`, created empty."""
-        return self.units.setdefault((line, unit), UnitStatistics())
+        key = (line, unit)
+        stats = self.units.get(key)
+        if stats is None:
+            stats = self.units[key] = UnitStatistics()
+        return stats
 
     def client(self, host: str) -> ClientStatistics:
         """The statistics of client `host`, created empty (the least recent host's then added

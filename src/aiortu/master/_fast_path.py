@@ -94,8 +94,12 @@ class FastPath:
         """
         engine = self._engine
         if not (
+            # Nobody holds the line (nobody waits for it then), or the queue has just handed
+            # it to this caller: a queue of register reads runs each as one caller's. (First:
+            # a caller that finds the line busy is told at once.)
+            (handed or not engine.queue.busy)
             # The engine's switch: off, every transaction goes through the machine.
-            self.enabled
+            and self.enabled
             # The reply is handed over by the link's read callback: a stream that pushes its
             # bytes (a serial port) has one, and an event loop for the caller's future.
             and engine.link.loop is not None
@@ -103,9 +107,6 @@ class FastPath:
             and engine.open
             # The link writes without a yield: nobody else sends, the stream has not failed.
             and engine.link.sends_at_once
-            # Nobody holds the line (nobody waits for it then), or the queue has just handed
-            # it to this caller: a queue of register reads runs each as one caller's.
-            and (handed or not engine.queue.busy)
             # After a failed attempt the late-reply guard comes first: the machine's route
             # keeps it.
             and engine.attempts.guard_until == NO_GUARD

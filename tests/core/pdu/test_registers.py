@@ -20,6 +20,7 @@ from aiortu.core.pdu import (
     MaskWriteRegisterRequest,
     MaskWriteRegisterResponse,
     RawPDU,
+    RawRegisterRead,
     ReadFifoQueueRequest,
     ReadFifoQueueResponse,
     ReadHoldingRegistersRequest,
@@ -601,3 +602,57 @@ def test_mismatching_reply_is_malformed(
     with pytest.raises(MalformedPDU) as caught:
         request_.check_response(reply)
     assert caught.value.field == field
+
+
+@pytest.mark.parametrize(
+    ("code", "data", "field"),
+    [
+        (0x06, "0000 0001", "function_code"),
+        (0x03, "0000 00", "len(data)"),
+        (0x03, "0000 0000", "count"),
+        (0x04, "0000 007E", "count"),
+        (0x03, "FFFF 0002", "address + count"),
+    ],
+)
+def test_a_raw_register_read_checks_what_the_decoded_read_checks(
+    code: int, data: str, field: str
+) -> None:
+    with pytest.raises(InvalidRequest) as caught:
+        RawRegisterRead(code, bytes.fromhex(data))
+    assert caught.value.field == field
+
+
+@pytest.mark.parametrize(
+    "reply",
+    [
+        "03 06 0001 0002 0003",  # the usual reply
+        "03 04 0001 0002",  # two registers of three
+        "03 06 0001 0002",  # a byte count that lies about what follows
+        "03 06 0001 0002 0003 04",  # a byte too many
+        "03 07 0001 0002 0003 04",  # an odd byte count
+        "03",  # nothing after the function code
+        "04 06 0001 0002 0003",  # another function code
+    ],
+)
+def test_a_raw_register_read_takes_the_replies_the_decoded_read_takes(reply: str) -> None:
+    pdu = bytes.fromhex(reply)
+    raw = RawRegisterRead(0x03, bytes.fromhex("0010 0003"))
+    decoded = ReadHoldingRegistersRequest(0x10, 3)
+
+    def answers(request: Request, response: Response) -> bool:
+        try:
+            request.check_response(response)
+        except MalformedPDU:
+            return False
+        return True
+
+    try:
+        response = decode_response(pdu)
+    except MalformedPDU:
+        decoded_takes = False
+    else:
+        decoded_takes = answers(decoded, response)
+        # A late reply is checked against a raw read decoded, as the machine decodes it.
+        assert answers(raw, response) is decoded_takes
+    assert answers(raw, RawPDU.decode(pdu)) is decoded_takes
+    assert decoded_takes is (reply == "03 06 0001 0002 0003")

@@ -76,6 +76,7 @@ from aiortu.core.machines._master_transaction import (
 from aiortu.core.pdu import (
     ExceptionPDU,
     RawPDU,
+    RawRegisterRead,
     ReadHoldingRegistersRequest,
     ReadInputRegistersRequest,
     Request,
@@ -195,10 +196,22 @@ class KnownRequest:
 
 
 _REGISTER_READS: Final = frozenset((ReadHoldingRegistersRequest, ReadInputRegistersRequest))
+_USUAL_READS: Final = _REGISTER_READS | {RawRegisterRead}
+"""The requests with a usual reply: the register reads, decoded or kept as bytes."""
 
 
 _WORDS: Final = tuple(struct.Struct(f">{count}H") for count in range(126))
 """The layouts of 0..125 big-endian 16-bit words, made once."""
+
+
+def _raw_reply(frame: bytes) -> Response:
+    """The reply PDU in `frame`, the usual reply to a
+    [`RawRegisterRead`][aiortu.core.pdu.RawRegisterRead], as its bytes: built without
+    RawPDU's checks, which a matched shape passes."""
+    response = object.__new__(RawPDU)
+    object.__setattr__(response, "function_code", frame[1])
+    object.__setattr__(response, "data", frame[2:-2])
+    return response
 
 
 def _register_reply(request: ReadHoldingRegistersRequest, data: bytes, offset: int) -> Response:
@@ -350,8 +363,8 @@ class MasterMachine:
         known = self._frames.get(key)
         if known is None or known.request is not request:
             shape = None
-            if type(request) in _REGISTER_READS and unit != BROADCAST_UNIT:
-                assert isinstance(request, ReadHoldingRegistersRequest)
+            if type(request) in _USUAL_READS and unit != BROADCAST_UNIT:
+                assert isinstance(request, ReadHoldingRegistersRequest | RawRegisterRead)
                 size = 2 * request.count
                 shape = bytes((unit, request.function_code, size)), size + 5
             if len(self._frames) >= _FRAME_CACHE_SIZE:
@@ -379,7 +392,8 @@ class MasterMachine:
 
         This applies where the machine is IDLE, has no transition observer (which must
         see every transition), awaits no late reply from `unit` (the table recognises it:
-        see the module docstring), and the request has a usual reply (a register read's).
+        see the module docstring), and the request has a usual reply (a register read's, decoded
+        or a [`RawRegisterRead`][aiortu.core.pdu.RawRegisterRead]).
         """
         if self.state is not _S.IDLE or self._on_transition is not None or unit in self._late:
             return None
@@ -392,7 +406,8 @@ class MasterMachine:
     def usual_response(known: KnownRequest, frame: bytes) -> Response:
         """The response in `frame`, the usual reply to `known`'s request (see
         [`usual_exchange`][aiortu.core.machines.MasterMachine.usual_exchange]): its shape is
-        matched and its CRC checked.
+        matched and its CRC checked. For a [`RawRegisterRead`][aiortu.core.pdu.RawRegisterRead]
+        it is a [`RawPDU`][aiortu.core.pdu.RawPDU] of the reply's bytes, not decoded.
 
         A poll loop reads the same block again and again and often gets the same bytes back. A frame
         equal to `known.last_reply` (the last usual reply to that request)
@@ -405,8 +420,11 @@ class MasterMachine:
             assert response is not None
             return response
         request = known.request
-        assert isinstance(request, ReadHoldingRegistersRequest)
-        response = _register_reply(request, frame, 3)
+        if type(request) is RawRegisterRead:
+            response = _raw_reply(frame)
+        else:
+            assert isinstance(request, ReadHoldingRegistersRequest)
+            response = _register_reply(request, frame, 3)
         known.last_reply = frame
         known.last_response = response
         return response

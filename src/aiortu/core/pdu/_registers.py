@@ -7,6 +7,7 @@ Registers are 16-bit big-endian words on the wire and `int` 0..65535 here; typed
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from typing import ClassVar, Self
 
@@ -15,6 +16,7 @@ from aiortu.core.errors import MalformedPDU
 from aiortu.core.pdu._base import (
     ADDRESS_RANGE,
     REGISTER_RANGE,
+    RawPDU,
     Request,
     Response,
     pack_registers,
@@ -28,6 +30,7 @@ __all__ = (
     "MAX_WRITE_REGISTERS",
     "MaskWriteRegisterRequest",
     "MaskWriteRegisterResponse",
+    "RawRegisterRead",
     "ReadFifoQueueRequest",
     "ReadFifoQueueResponse",
     "ReadHoldingRegistersRequest",
@@ -59,6 +62,10 @@ _WRITE_REGISTERS_COUNT = range(1, MAX_WRITE_REGISTERS + 1)
 _READ_WRITE_WRITE_COUNT = range(1, MAX_READ_WRITE_WRITE_REGISTERS + 1)
 _FIFO_COUNT = range(MAX_FIFO_COUNT + 1)
 _END_RANGE = range(ADDRESS_RANGE.stop + 1)
+_REGISTER_READ_CODES = range(
+    FunctionCode.READ_HOLDING_REGISTERS, FunctionCode.READ_INPUT_REGISTERS + 1
+)
+_ADDRESS_COUNT = struct.Struct(">HH")
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,6 +130,59 @@ class ReadHoldingRegistersRequest(Request):
                 field="byte_count",
                 value=2 * len(response.values),
                 allowed=range(2 * self.count, 2 * self.count + 1),
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class RawRegisterRead(RawPDU):
+    """A read of holding (03) or input (04) registers kept as its PDU bytes, for a caller that
+    forwards PDUs as they come, such as the line server.
+
+    It encodes to the bytes it was made of, and the master hands its usual reply over as a
+    [`RawPDU`][aiortu.core.pdu.RawPDU] of the reply's bytes as they came, not decoded. Any
+    reply is checked as a register read's is (the function code, a byte count of twice the
+    count asked, and that many bytes), so a reply answers it exactly when it answers the
+    [`ReadHoldingRegistersRequest`][aiortu.core.pdu.ReadHoldingRegistersRequest] (or
+    [`ReadInputRegistersRequest`][aiortu.core.pdu.ReadInputRegistersRequest]) of the same
+    bytes. Building one checks what that request's constructor checks, raising
+    [`InvalidRequest`][aiortu.errors.InvalidRequest]:
+
+        >>> RawRegisterRead(0x03, bytes.fromhex("006b 0003")).count
+        3
+    """
+
+    def __post_init__(self) -> None:
+        RawPDU.__post_init__(self)
+        self._check("function_code", self.function_code, _REGISTER_READ_CODES)
+        self._check("len(data)", len(self.data), range(4, 5))
+        address, count = _ADDRESS_COUNT.unpack(self.data)
+        self._check("count", count, _READ_REGISTERS_COUNT)
+        self._check("address + count", address + count, _END_RANGE)
+
+    @property
+    def count(self) -> int:
+        """The number of registers asked for."""
+        return int(_ADDRESS_COUNT.unpack(self.data)[1])
+
+    def check_response(self, response: Response) -> None:
+        if response.function_code != self.function_code:
+            raise MalformedPDU("reply function code differs from the request's")
+        pdu = response.encode()
+        size = 2 * self.count
+        byte_count = pdu[1] if len(pdu) > 1 else None
+        if byte_count != size:
+            raise MalformedPDU(
+                "reply register count does not match the count asked",
+                field="byte_count",
+                value=byte_count,
+                allowed=range(size, size + 1),
+            )
+        if len(pdu) != 2 + size:
+            raise MalformedPDU(
+                "reply length does not match its byte count",
+                field="length",
+                value=len(pdu),
+                allowed=range(2 + size, 3 + size),
             )
 
 
