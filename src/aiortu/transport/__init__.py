@@ -49,7 +49,7 @@ from aiortu.transport._listen import (
     write_now,
 )
 from aiortu.transport._mbap_stream import FramedStream, ModbusTcpCounters, ModbusTcpStream
-from aiortu.transport._push import PushStream
+from aiortu.transport._push import PushStream, loop_pushes
 from aiortu.transport._push_server import (
     PushListener,
     PushServerStream,
@@ -164,6 +164,7 @@ __all__ = (
     "listening_address",
     "load_rules",
     "log_level",
+    "loop_pushes",
     "open_modbus_tcp",
     "open_modbus_tls",
     "open_modbus_udp",
