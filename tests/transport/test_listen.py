@@ -24,6 +24,7 @@ from aiortu.core.rtu import MAX_FRAME_LENGTH, crc16, encode_frame
 from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.testing import virtual_pair
 from aiortu.transport import (
+    WARNING_INTERVAL,
     ConnectionLimit,
     RtuFraming,
     UnixAddress,
@@ -184,7 +185,20 @@ async def test_an_accept_error_backs_off_is_logged_once_and_the_loop_goes_on() -
     )
     assert limit.accept_failures == 11
     failures = [message for message in messages if "cannot accept" in message]
-    assert len(failures) == 2  # once until a connection is accepted, then once again
+    # Once until a connection is accepted; the next burst, within a minute, at debug level.
+    assert len(failures) == 1
+
+
+@on_virtual_clock
+async def test_a_kind_of_trouble_is_a_warning_at_most_once_in_the_interval() -> None:
+    limit = ConnectionLimit("test server", 1)
+    assert limit.level("refusal") == logging.WARNING
+    assert limit.level("accept") == logging.WARNING  # another kind has its own interval
+    await anyio.sleep(WARNING_INTERVAL - 1)
+    assert limit.level("refusal") == logging.DEBUG
+    await anyio.sleep(1)
+    assert limit.level("refusal") == logging.WARNING
+    assert limit.level("refusal") == logging.DEBUG
 
 
 @contextlib.contextmanager

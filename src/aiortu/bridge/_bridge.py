@@ -17,7 +17,7 @@ refused or failed goes to the error topic, and the bridge goes on.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -37,6 +37,7 @@ from aiortu.bridge._sparkplug import SparkplugLayout
 from aiortu.bridge._state import Command, DeviceState, Layout
 from aiortu.core.model import Value
 from aiortu.errors import InvalidValue, ModbusError
+from aiortu.line import loop_clock
 from aiortu.master import Device, Master, ProfilePoller, Reading, UnitState, open_master
 from aiortu.slave import ProfileStore, Slave
 from aiortu.testing import VirtualBus
@@ -100,8 +101,12 @@ class Bridge:
         self._state_of: dict[Device, DeviceState] = {}
         self._send, self._receive = anyio.create_memory_object_stream[Command](64)
         self._stack: contextlib.AsyncExitStack | None = None
+        self._clock: Callable[[], float] = anyio.current_time
+        """The backend's clock (`Message.created`), as read where no task runs: a pushed
+        session hands commands over from the event loop's callback."""
 
     async def __aenter__(self) -> Self:
+        self._clock = loop_clock()
         async with contextlib.AsyncExitStack() as stack:
             try:
                 await self.session.connect()
@@ -150,7 +155,7 @@ class Bridge:
             await anyio.sleep(1.0)
 
     def _line_lost(self, line: LineConfig) -> None:
-        now = anyio.current_time()
+        now = self._clock()
         for state in self._states_of(line):
             if state.health is not UnitState.OFFLINE:
                 state.health = UnitState.OFFLINE
@@ -185,7 +190,7 @@ class Bridge:
         its unit's health, if that changed) goes to the outbox."""
         state = self._state_of[device]
         self.stats.readings += len(batch)
-        now = anyio.current_time()
+        now = self._clock()
         config, values, published = state.config, state.values, state.published
         if not state.complete:
             state.seen.update(name for name in batch if name in published)
@@ -211,10 +216,10 @@ class Bridge:
         self.stats.messages += len(messages)
 
     def _on_connect(self) -> list[Message]:
-        return self.layout.on_connect(self.devices, self.outbox.dropped, anyio.current_time())
+        return self.layout.on_connect(self.devices, self.outbox.dropped, self._clock())
 
     def _on_publish(self, publish: Publish) -> None:
-        now = anyio.current_time()
+        now = self._clock()
         commands, messages = self.layout.command(publish, self.devices, now)
         self._put(messages)
         for command in commands:
@@ -227,7 +232,7 @@ class Bridge:
         self.stats.write_errors += 1
         _log.warning("write of %s.%s refused: %s", command.device, command.point, reason)
         self._put([self.layout.error(command.device, command.point, command.payload, reason,
-                                     anyio.current_time())])  # fmt: skip
+                                     self._clock())])  # fmt: skip
 
     async def _writer(self) -> None:
         async for command in self._receive:
@@ -259,7 +264,7 @@ class Bridge:
         self.stats.writes += 1
         if reading.error is None:
             state.values[point.name] = reading.value
-            self._put(self.layout.values(state, {point.name: reading.value}, anyio.current_time()))
+            self._put(self.layout.values(state, {point.name: reading.value}, self._clock()))
         return None
 
 

@@ -9,8 +9,9 @@ a bounded memory, and a count that tells how much was lost.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Collection, Iterable, Sequence
 from dataclasses import dataclass, field
+from operator import attrgetter
 
 import anyio
 
@@ -41,9 +42,13 @@ class Message:
         return _size((self,))
 
 
-def _size(messages: Iterable[Message]) -> int:
-    """The bytes `messages` hold (their topics and payloads)."""
-    return sum([len(m.topic) + len(m.payload) for m in messages])
+_TOPIC, _PAYLOAD = attrgetter("topic"), attrgetter("payload")
+
+
+def _size(messages: Collection[Message]) -> int:
+    """The bytes `messages` hold (their topics and payloads), counted in C: a poll's messages
+    are put and taken by the batch."""
+    return sum(map(len, map(_TOPIC, messages))) + sum(map(len, map(_PAYLOAD, messages)))
 
 
 class Outbox:
@@ -60,6 +65,7 @@ class Outbox:
         self._queue: deque[Message] = deque()
         self._bytes = 0
         self._ready = anyio.Event()
+        self._listener: Callable[[], None] | None = None
         self.dropped = 0
         """Messages dropped, oldest first, to stay within the bound."""
         self.accepted = 0
@@ -86,7 +92,7 @@ class Outbox:
         self._bytes += _size(messages)
         self.accepted += len(messages)
         self._trim()
-        self._ready.set()
+        self._wake()
 
     def put_back(self, messages: Iterable[Message]) -> None:
         """Queue `messages` (sent but never acknowledged) first, in their order."""
@@ -95,7 +101,7 @@ class Outbox:
         self._bytes += _size(back)
         self._trim()
         if self._queue:
-            self._ready.set()
+            self._wake()
 
     def take(self, count: int) -> list[Message]:
         """Up to `count` messages from the front."""
@@ -108,6 +114,18 @@ class Outbox:
         taken = [queue.popleft() for _ in range(count)]
         self._bytes -= _size(taken)
         return taken
+
+    def notify(self, listener: Callable[[], None] | None) -> None:
+        """Call `listener` (a plain function, which may `take`) after each put, in place of
+        waking [`wait`][aiortu.bridge.Outbox.wait]; None wakes `wait` again. A session that
+        writes from the event loop's callbacks sends at once this way, with no task woken."""
+        self._listener = listener
+
+    def _wake(self) -> None:
+        if self._listener is not None:
+            self._listener()
+        else:
+            self._ready.set()
 
     async def wait(self) -> None:
         """Return once a message waits (at once if one does)."""

@@ -13,6 +13,7 @@ import struct
 from dataclasses import dataclass
 
 __all__ = (
+    "PUBACK_SIZE",
     "ConnectRefused",
     "Packet",
     "PacketReader",
@@ -98,6 +99,8 @@ class Publish:
 
 _PUBACK_FIRST = bytes((PacketType.PUBACK << 4,))
 _PUBACK_LENGTH = b"\x02"
+PUBACK_SIZE = 4
+"""The bytes of a PUBACK (MQTT 3.1.1, 3.4): what the broker sends for each QoS 1 PUBLISH."""
 
 _SHORT = struct.Struct(">H").pack
 """A two-byte big-endian integer (lengths and packet ids)."""
@@ -154,7 +157,9 @@ def publish_packet(
     dup: bool = False,
 ) -> bytes:  # fmt: skip
     """PUBLISH of `payload` on `topic` (`packet_id` for QoS 1)."""
-    return _publish(_topic_field(topic), payload, qos, retain, packet_id, dup=dup)
+    writer = PublishWriter(max_topics=0)
+    writer.add(topic, payload, qos, retain, packet_id, dup=dup)
+    return writer.joined()
 
 
 def _topic_field(topic: str) -> bytes:
@@ -164,35 +169,49 @@ def _topic_field(topic: str) -> bytes:
     return _SHORT(len(name)) + name
 
 
-def _publish(
-    topic: bytes, payload: bytes, qos: int, retain: bool, packet_id: int, *, dup: bool = False
-) -> bytes:
-    # One join, no intermediate body: a bridge makes one of these per value it publishes.
-    size = len(topic) + len(payload) + (2 if qos else 0)
-    first = 0x30 | (0x08 if dup else 0) | qos << 1 | (1 if retain else 0)
-    head = bytes((first, size)) if size < 0x80 else bytes((first,)) + _length(size)
-    if qos:
-        return b"".join((head, topic, _SHORT(packet_id), payload))
-    return b"".join((head, topic, payload))
+_HEADS = [[bytes((0x30 | flags, size)) for size in range(0x80)] for flags in range(4)]
+"""The fixed header of a PUBLISH at QoS 0 or 1 whose remaining length is under 128 (a
+bridge's values, as a rule), by its flags (QoS << 1 | retain), then by that length."""
 
 
 class PublishWriter:
     """PUBLISH packets as [`publish_packet`][aiortu.bridge._packets.publish_packet] makes
-    them, each topic encoded once: a publisher sends the same topics again and again. Up
-    to `max_topics` encodings are kept (a bridge's topics are set by its configuration)."""
+    them, added one by one and joined once a batch, each topic encoded once: a publisher
+    sends the same topics again and again. Up to `max_topics` encodings are kept (a bridge's
+    topics are set by its configuration)."""
 
     def __init__(self, max_topics: int = 100_000) -> None:
         self.max_topics = max_topics
         self._topics: dict[str, bytes] = {}
+        self._parts: list[bytes] = []
 
-    def packet(self, topic: str, payload: bytes, qos: int, retain: bool, packet_id: int) -> bytes:
-        """PUBLISH of `payload` on `topic` (`packet_id` for QoS 1)."""
+    def add(
+        self, topic: str, payload: bytes, qos: int, retain: bool, packet_id: int, *,
+        dup: bool = False,
+    ) -> None:  # fmt: skip
+        """Add the PUBLISH of `payload` on `topic` (`packet_id` for QoS 1) to the packets
+        that [`joined`][aiortu.bridge._packets.PublishWriter.joined] returns; raises
+        ValueError, adding nothing, for a topic or packet too long for MQTT."""
         field = self._topics.get(topic)
         if field is None:
             field = _topic_field(topic)
             if len(self._topics) < self.max_topics:
                 self._topics[topic] = field
-        return _publish(field, payload, qos, retain, packet_id)
+        size = len(field) + len(payload) + (2 if qos else 0)
+        flags = qos << 1 | retain
+        if size < 0x80 and flags < 4 and not dup:  # a header from the table, the rule
+            head = _HEADS[flags][size]
+        else:
+            head = bytes((0x30 | (0x08 if dup else 0) | flags,)) + _length(size)
+        if qos:
+            self._parts += (head, field, _SHORT(packet_id), payload)
+        else:
+            self._parts += (head, field, payload)
+
+    def joined(self) -> bytes:
+        """The packets added since the last call, in order, in one piece."""
+        parts, self._parts = self._parts, []
+        return b"".join(parts)
 
 
 def puback_packet(packet_id: int) -> bytes:
@@ -223,6 +242,11 @@ class PacketReader:
 
     def __init__(self) -> None:
         self._buffer = bytearray()
+
+    @property
+    def pending(self) -> int:
+        """The bytes held of a packet not yet whole."""
+        return len(self._buffer)
 
     def acknowledgements(self, data: bytes) -> tuple[int, ...] | None:
         """The packet ids of `data` if it is whole PUBACKs and nothing else, and no part of a

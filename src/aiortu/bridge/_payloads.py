@@ -27,12 +27,14 @@ class CommandError(ValueError):
 
 def format_value(point: ProfilePoint, value: Value) -> bytes:
     """The state payload of `value`, a value of `point`."""
+    if type(value) is int:  # the most common, and not a bool
+        return b"%d" % value
     if value is None:
         return b"null"
     if isinstance(value, bool):
         return b"true" if value else b"false"
-    if isinstance(value, int):
-        return str(value).encode()
+    if isinstance(value, int):  # an int subclass (an IntEnum)
+        return b"%d" % value
     if isinstance(value, float):
         if not math.isfinite(value):
             return b"null"

@@ -23,7 +23,7 @@ from aiortu.bridge._outbox import Message
 from aiortu.bridge._packets import Publish
 from aiortu.bridge._payloads import format_value
 from aiortu.bridge._state import Command, DeviceState
-from aiortu.core.model import Value
+from aiortu.core.model import ProfilePoint, Value
 from aiortu.master import UnitState
 
 __all__ = ("PlainLayout",)
@@ -39,7 +39,7 @@ class PlainLayout:
         self.prefix = topics.prefix
         self.status_topic = f"{self.prefix}/bridge/{topics.node}/status"
         self._command_prefixes: dict[str, DeviceState] = {}
-        self._state_topics: dict[str, dict[str, str]] = {}
+        self._states: dict[str, dict[str, tuple[str, ProfilePoint]]] = {}
 
     def will(self) -> Message | None:
         """The bridge's status `offline`, retained."""
@@ -52,9 +52,11 @@ class PlainLayout:
     def bind(self, devices: list[DeviceState]) -> None:
         """Learn the devices (before the first connection)."""
         self._command_prefixes = {d.name: d for d in devices if d.writable}
-        # Made once: the same strings each poll (their hashes kept for the session's cache).
-        self._state_topics = {
-            d.name: {p.name: f"{self.prefix}/{d.name}/{p.name}" for p in d.points} for d in devices
+        # Made once: each point's state topic (the same string each poll, its hash kept for
+        # the session's cache of encoded topics) and the point that formats its value.
+        self._states = {
+            d.name: {p.name: (f"{self.prefix}/{d.name}/{p.name}", p) for p in d.points}
+            for d in devices
         }
 
     def on_connect(self, devices: list[DeviceState], dropped: int, now: float) -> list[Message]:
@@ -86,13 +88,13 @@ class PlainLayout:
 
     def values(self, device: DeviceState, changed: dict[str, Value], now: float) -> list[Message]:
         """One message per value, on the point's topic."""
-        topics = self._state_topics[device.name]
+        states = self._states[device.name]
         qos, retain = self.topics.qos, self.topics.retain
-        points = device.config.profile.point
-        return [
-            Message(topics[name], format_value(points(name), value), qos, retain, now)
-            for name, value in changed.items()
-        ]
+        messages = []
+        for name, value in changed.items():
+            topic, point = states[name]
+            messages.append(Message(topic, format_value(point, value), qos, retain, now))
+        return messages
 
     def health(self, device: DeviceState, now: float) -> list[Message]:
         """The device's availability and its three-state health."""

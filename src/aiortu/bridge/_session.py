@@ -7,6 +7,12 @@ flight when the connection drops go back to the front of the outbox, so the orde
 nothing is lost but what the outbox's bound drops (a broker may then get a message twice:
 QoS 1 is at least once). After each connection the session first sends what
 `on_connect` returns (availability, discovery, Sparkplug births), then the backlog.
+
+On asyncio the connection is pushed (`_session_push.py`): the broker's packets are read in
+the event loop's read callback and the outbox is written from the call that fills it, so a
+poll's messages and their acknowledgements wake no task; on trio a task reads anyio's stream
+and another sends. Both paths make the same packets, in the same order, with the same
+functions.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from aiortu._log import get_logger
 from aiortu.bridge._broker import Broker, BrokerError
 from aiortu.bridge._outbox import Message, Outbox
 from aiortu.bridge._packets import (
+    PUBACK_SIZE,
     ConnectRefused,
     Packet,
     PacketReader,
@@ -35,6 +42,7 @@ from aiortu.bridge._packets import (
     puback_packet,
     subscribe_packet,
 )
+from aiortu.bridge._session_push import PushedLink, open_pushed, push_session
 
 __all__ = ("BrokerSession", "SessionHooks")
 
@@ -71,7 +79,9 @@ class SessionHooks:
     each: Sparkplug's bdSeq counts connections), the `subscriptions`, the messages to send
     first after connecting (`on_connect`), how to encode a message that carries `metrics`
     when it is sent (`prepare`: its Sparkplug sequence number; any other goes as made), and
-    where received messages go (`on_publish`, which must not block)."""
+    where received messages go (`on_publish`, which must not block, and on asyncio is called
+    from the event loop's read callback, where no task runs: anyio's functions that ask which
+    backend runs, such as `anyio.current_time`, fail there)."""
 
     will: Callable[[], Message | None]
     subscriptions: Callable[[], list[str]]
@@ -112,7 +122,10 @@ class BrokerSession:
         """Why the last connection failed or ended."""
         self._inflight: dict[int, Message] = {}
         self._next_id = 0
-        self._stream: anyio.abc.ByteStream | None = None
+        self._stream: anyio.abc.ByteStream | PushedLink | None = None
+        self._link: PushedLink | None = None  # while a pushed connection is served
+        self._holding = False  # while a pushed chunk is read: write after it
+        self._pinged = False  # a PINGREQ went, and the broker has said nothing since
         self._acked: anyio.Event | None = None
         self._heard = 0
         self._reader = PacketReader()
@@ -120,7 +133,7 @@ class BrokerSession:
         self._early: list[Packet] = []
         self._sending = anyio.Lock()
 
-    async def _write(self, stream: anyio.abc.ByteStream, data: bytes) -> None:
+    async def _write(self, stream: anyio.abc.ByteStream | PushedLink, data: bytes) -> None:
         # The sender, the pinger and the acknowledgements of commands share the stream. The
         # lock is taken without a checkpoint when free (the usual case): the send has one.
         sending = self._sending
@@ -172,28 +185,31 @@ class BrokerSession:
         if stream is None:
             return
         with anyio.move_on_after(1, shield=True):
-            with contextlib.suppress(OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
+            with contextlib.suppress(OSError, anyio.BrokenResourceError, anyio.ClosedResourceError,
+                                     anyio.EndOfStream):  # fmt: skip
                 await stream.send(disconnect_packet())
             await stream.aclose()
 
-    async def _open(self) -> anyio.abc.ByteStream:
+    async def _open(self) -> anyio.abc.ByteStream | PushedLink:
         broker = self.broker
         will = self.hooks.will()
         with anyio.fail_after(self.connect_timeout):
             context = broker.ssl_context()
-            stream: anyio.abc.ByteStream
-            if context is None:
-                stream = await anyio.connect_tcp(broker.host, broker.port)
-            else:
-                try:
+            stream: anyio.abc.ByteStream | PushedLink
+            try:
+                if push_session():
+                    stream = await open_pushed(broker.host, broker.port, context)
+                elif context is None:
+                    stream = await anyio.connect_tcp(broker.host, broker.port)
+                else:
                     stream = await anyio.connect_tcp(
                         broker.host, broker.port, ssl_context=context,
                         tls_standard_compatible=False,
                     )  # fmt: skip
-                except ssl.SSLError as error:
-                    # A certificate that does not check is the configuration's fault.
-                    reason = getattr(error, "verify_message", None) or error.reason or error
-                    raise BrokerError(f"broker {broker.url}: TLS failed: {reason}") from None
+            except ssl.SSLError as error:
+                # A certificate that does not check is the configuration's fault.
+                reason = getattr(error, "verify_message", None) or error.reason or error
+                raise BrokerError(f"broker {broker.url}: TLS failed: {reason}") from None
             try:
                 await stream.send(connect_packet(
                     broker.client_id, keepalive=broker.keepalive, username=broker.username,
@@ -203,14 +219,14 @@ class BrokerSession:
                 ))  # fmt: skip
                 await self._connack(stream)
             except BaseException:
-                await anyio.aclose_forcefully(stream)
+                await _abort(stream)
                 raise
         self.connections += 1
         self.connected = True
         _log.info("connected to broker %s", broker.url)
         return stream
 
-    async def _connack(self, stream: anyio.abc.ByteStream) -> None:
+    async def _connack(self, stream: anyio.abc.ByteStream | PushedLink) -> None:
         reader = PacketReader()
         while True:
             packets = reader.feed(await stream.receive())
@@ -228,76 +244,149 @@ class BrokerSession:
         self._reader = reader
         self._early = packets[1:]  # what came with the CONNACK, handled once serving
 
-    async def _serve(self, stream: anyio.abc.ByteStream) -> None:
+    async def _serve(self, stream: anyio.abc.ByteStream | PushedLink) -> None:
         topics = self.hooks.subscriptions()
         if topics:
             await self._write(stream, subscribe_packet(self._packet_id(), [(t, 1) for t in topics]))
-        await self._send(stream, self.hooks.on_connect())
+        first = self.hooks.on_connect()
+        if first:
+            await self._write(stream, self._encode(first))
         async with anyio.create_task_group() as tasks:
-            tasks.start_soon(self._receive, stream, tasks.cancel_scope)
             tasks.start_soon(self._ping, stream)
-            while True:
-                await self.outbox.wait()
-                while len(self._inflight) >= self.window:
-                    self._acked = anyio.Event()
-                    await self._acked.wait()
-                    self._acked = None
-                await self._send(stream, self.outbox.take(self.window - len(self._inflight)))
-
-    async def _send(self, stream: anyio.abc.ByteStream, messages: list[Message]) -> None:
-        if not messages:
-            return
-        packets = []
-        prepare, inflight, write = self.hooks.prepare, self._inflight, self._writer.packet
-        for message in messages:
-            number = 0
-            if message.qos:
-                number = self._next_id % 65535 + 1  # the next id, unless still in flight
-                if number in inflight:
-                    number = self._packet_id()
-                self._next_id = number
-                inflight[number] = message
+            if isinstance(stream, PushedLink):
+                await self._push(stream)
             else:
-                self.delivered += 1
-            payload = message.payload if message.metrics is None else prepare(message)
-            packets.append(write(message.topic, payload, message.qos, message.retain, number))
-        await self._write(stream, b"".join(packets))
+                tasks.start_soon(self._receive, stream)
+                await self._deliver(stream)
 
-    async def _receive(self, stream: anyio.abc.ByteStream, scope: anyio.CancelScope) -> None:
-        reader = self._reader
-        early, self._early = self._early, []
-        for packet in early:
-            await self._handle(stream, packet)
+    async def _deliver(self, stream: anyio.abc.ByteStream) -> None:
+        """Send the outbox in order, within the window, as it fills: a task's way."""
         while True:
-            data = await stream.receive()
-            self._heard += 1
-            acknowledged = reader.acknowledgements(data)
-            if acknowledged is not None:
-                self._acknowledged(acknowledged)
-                continue
-            for packet in reader.feed(data):
-                await self._handle(stream, packet)
+            await self.outbox.wait()
+            while len(self._inflight) >= self.window:
+                self._acked = anyio.Event()
+                await self._acked.wait()
+                self._acked = None
+            await self._write(stream, self._encode(self.outbox.take(self._room())))
+
+    def _room(self) -> int:
+        return self.window - len(self._inflight)
+
+    def _encode(self, messages: list[Message]) -> bytes:
+        """The PUBLISH packets of `messages`, each QoS 1 one in flight from now on."""
+        prepare, inflight, writer = self.hooks.prepare, self._inflight, self._writer
+        add = writer.add
+        try:
+            for message in messages:
+                number = 0
+                if message.qos:
+                    number = self._next_id % 65535 + 1  # the next id, unless still in flight
+                    if number in inflight:
+                        number = self._packet_id()
+                    self._next_id = number
+                    inflight[number] = message
+                else:
+                    self.delivered += 1
+                payload = message.payload if message.metrics is None else prepare(message)
+                add(message.topic, payload, message.qos, message.retain, number)
+        finally:
+            packets = writer.joined()  # and none left for the next batch if one failed
+        return packets
+
+    async def _receive(self, stream: anyio.abc.ByteStream) -> None:
+        answers = self._answers(self._early_packets())
+        while True:
+            if answers:
+                await self._write(stream, answers)
+            answers = self._read(await stream.receive())
+
+    async def _push(self, link: PushedLink) -> None:
+        """Serve a pushed connection: read in the loop's callback, write when the outbox is
+        filled, an acknowledgement makes room or the transport drains; until it ends."""
+        self._link = link
+        try:
+            link.write(self._answers(self._early_packets()))
+            link.on_writable = self._flush
+            self.outbox.notify(self._flush)
+            link.set_receiver(self._pushed)
+            self._flush()
+            await link.ended()
+        finally:
+            self.outbox.notify(None)
+            self._link = link.on_writable = None
+
+    def _pushed(self, data: bytes) -> None:
+        """The pushed connection's read callback: `_receive`'s work, with what a command puts
+        in the outbox written after its PUBACK, as the sending task would."""
+        self._holding = True
+        try:
+            answers = self._read(data)
+        finally:
+            self._holding = False
+        if answers and self._link is not None:
+            self._link.write(answers)
+        self._flush()
+
+    def _flush(self) -> None:
+        """Write what waits in the outbox, within the window, while the link takes it."""
+        link, outbox = self._link, self.outbox
+        if self._holding:
+            return
+        if link is None:
+            return
+        while link.writable and outbox and (room := self._room()) > 0:
+            link.write(self._encode(outbox.take(room)))
+        # Woken once for the PUBACKs of what is in flight, not once for each; by any byte
+        # while messages wait for room (each PUBACK makes some) and after a PINGREQ (the
+        # keep-alive hears the broker as it did).
+        wanted = PUBACK_SIZE * len(self._inflight) - self._reader.pending
+        link.expect(1 if self._pinged or outbox else wanted)
+
+    def _early_packets(self) -> list[Packet]:
+        """What came with the CONNACK (kept until the connection is served)."""
+        early, self._early = self._early, []
+        return early
+
+    def _read(self, data: bytes) -> bytes:
+        """Take `data` from the broker: the bulk, acknowledgements alone, without a packet
+        each; return the answers to write."""
+        self._heard += 1
+        self._pinged = False
+        acknowledged = self._reader.acknowledgements(data)
+        if acknowledged is not None:
+            self._acknowledged(acknowledged)
+            return b""
+        return self._answers(self._reader.feed(data))
+
+    def _answers(self, packets: list[Packet]) -> bytes:
+        """Take `packets` from the broker; return the answers to write (the PUBACKs of
+        commands), in order, in one piece."""
+        return b"".join([reply for packet in packets if (reply := self._handle(packet))])
 
     def _acknowledged(self, packet_ids: tuple[int, ...]) -> None:
-        pop = self._inflight.pop
-        done = [pop(packet_id, None) for packet_id in packet_ids]
-        self.delivered += len(done) - done.count(None)
+        inflight = self._inflight
+        before, pop = len(inflight), inflight.pop
+        for packet_id in packet_ids:
+            pop(packet_id, None)
+        self.delivered += before - len(inflight)  # not done.count(None): Message's __eq__ each
         if self._acked is not None:
             self._acked.set()
 
-    async def _handle(self, stream: anyio.abc.ByteStream, packet: Packet) -> None:
+    def _handle(self, packet: Packet) -> bytes | None:
+        """Take `packet` from the broker; return what to answer (a PUBLISH's PUBACK)."""
         if packet.type == PacketType.PUBACK:
             self._acknowledged((int.from_bytes(packet.body[:2], "big"),))
         elif packet.type == PacketType.PUBLISH:
             publish = Publish.parse(packet)
-            if publish.qos == 1 and publish.packet_id is not None:
-                await self._write(stream, puback_packet(publish.packet_id))
             self.hooks.on_publish(publish)
+            if publish.qos == 1 and publish.packet_id is not None:
+                return puback_packet(publish.packet_id)
         elif packet.type == PacketType.SUBACK and 0x80 in packet.body[2:]:
             _log.warning("broker %s refused a subscription: commands may not arrive",
                          self.broker.url)  # fmt: skip
+        return None
 
-    async def _ping(self, stream: anyio.abc.ByteStream) -> None:
+    async def _ping(self, stream: anyio.abc.ByteStream | PushedLink) -> None:
         """A PINGREQ every half keep-alive. The broker answers each at once, so a link that
         stays silent for two of them (a keep-alive) is dead: found within 1.5 keep-alives,
         and no timer is set for each receive."""
@@ -310,6 +399,8 @@ class BrokerSession:
                 silent += 1
                 if silent >= 2:
                     raise TimeoutError(f"the broker said nothing in {self.broker.keepalive} s")
+            self._pinged = True
+            self._flush()  # a pushed link: woken by the PINGRESP, whatever else it waits for
             await self._write(stream, pingreq_packet())
 
     def _packet_id(self) -> int:
@@ -321,11 +412,19 @@ class BrokerSession:
 
     async def _drop(self) -> None:
         """The connection ended: its unacknowledged messages go back first, in order."""
-        self.connected = False
+        self.connected = self._pinged = False
         stream, self._stream = self._stream, None
         if stream is not None:
-            await anyio.aclose_forcefully(stream)
+            await _abort(stream)
         self.outbox.put_back(self._inflight.values())  # a dict keeps the order they were sent
         self._inflight.clear()
         if self._acked is not None:
             self._acked.set()
+
+
+async def _abort(stream: anyio.abc.ByteStream | PushedLink) -> None:
+    """Close `stream` at once."""
+    if isinstance(stream, PushedLink):
+        stream.abort()
+    else:
+        await anyio.aclose_forcefully(stream)

@@ -39,7 +39,7 @@ each to the engine of its line at once, with a key that keeps the line fair. Wha
   nothing waiting that sends nothing for `idle_timeout` seconds is closed, and so is one whose
   reply could not be written for `idle_timeout` (it reads nothing), while one whose request
   waits for a slow line is not idle; a malformed MBAP header closes that connection only,
-  logged once.
+  the first logged as a warning and the rest at debug level (all counted).
 - **Clients that leave.** A client that resets its connection, or to which a reply cannot be
   written, has its queued requests dropped before they reach the line; one on the wire
   completes there. A client that half-closes (a request, then end of stream) gets the replies
@@ -95,6 +95,7 @@ from aiortu.transport import (
     RoleRules,
     RtuFraming,
     certificate_role,
+    log_level,
     peer_address,
     serve_listener,
 )
@@ -435,8 +436,11 @@ class Gateway:
             return framing.feed(data)
         except MalformedHeader as error:
             self.counters.connections_malformed += 1
-            _log.warning(
-                "gateway: %s sent %s; connection closed", peer_address(connection.stream), error
+            _log.log(
+                log_level(self.counters.connections_malformed),
+                "gateway: %s sent %s; connection closed (logged at debug level after the first)",
+                peer_address(connection.stream),
+                error,
             )
             connection.leave()
             return None

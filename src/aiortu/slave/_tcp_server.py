@@ -32,9 +32,12 @@ to us, and what this server does:
   one of them with `set_handler` is always served.
 - **Limits.** At most `max_connections` at once: a connection over the limit is closed at
   once (logged once until the count drops). A connection that sends nothing for
-  `idle_timeout` seconds is closed. A malformed MBAP header (protocol id not 0, a length
-  field outside 2..254) closes that connection only, logged once: nothing in the stream
-  marks where the next request would start.
+  `idle_timeout` seconds is closed, and so is one whose reply cannot be written for as long
+  (a client that sends requests and never reads the replies). A malformed MBAP header
+  (protocol id not 0, a length field outside 2..254) closes that connection only: nothing in
+  the stream marks where the next request would start. The first is logged as a warning,
+  the rest at debug level (all counted in `connections_malformed`), so that a flood of them
+  costs counts, not log lines.
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ from aiortu.transport import (
     MbapFraming,
     PushServerStream,
     listening_address,
+    log_level,
     peer_address,
     push_listener,
     pushed_listener,
@@ -111,11 +115,11 @@ class TcpServerCounters:
     [`ModbusTcpServer`][aiortu.slave.ModbusTcpServer]."""
 
     connections_accepted: int = 0
-    """Connections served."""
+    """Connections served (over TLS counted from the accept: the handshake takes a place)."""
     connections_refused: int = 0
     """Connections closed at once because *max_connections* were open."""
     connections_idle: int = 0
-    """Connections closed after *idle_timeout* of silence."""
+    """Connections closed after *idle_timeout* of silence, or of replies not read."""
     connections_malformed: int = 0
     """Connections closed for a malformed MBAP header."""
     requests: int = 0
@@ -273,16 +277,16 @@ class ModbusTcpServer(Dispatcher):
 
     async def serve_connection(self, stream: anyio.abc.ByteStream) -> None:
         """Serve one connection until the client closes it, it stays silent for
-        [`idle_timeout`][aiortu.slave.ModbusTcpServer.idle_timeout], or it sends a malformed header;
-        then close it."""
+        [`idle_timeout`][aiortu.slave.ModbusTcpServer.idle_timeout], a reply cannot be written
+        for as long (it reads nothing), or it sends a malformed header; then close it."""
         framing = self._new_framing()
         tap = None
         if isinstance(stream, PushServerStream) and isinstance(framing, MbapFraming):
             tap = stream.tap = ConnectionTap(self._at_once, self, stream, framing, self._permits())
         try:
             while (adus := await self._next_requests(stream, framing, tap)) is not None:
-                if adus:
-                    await self._answer_all(stream, adus)
+                if adus and not await self._answer_all(stream, adus):
+                    return
         except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
             return
         finally:
@@ -319,26 +323,45 @@ class ModbusTcpServer(Dispatcher):
             return framing.feed(data)
         except MalformedHeader as error:
             self.counters.connections_malformed += 1
-            _log.warning(
-                "%s: %s sent %s; connection closed", self._name, peer_address(stream), error
+            _log.log(
+                log_level(self.counters.connections_malformed),
+                "%s: %s sent %s; connection closed (logged at debug level after the first)",
+                self._name,
+                peer_address(stream),
+                error,
             )
             return None
 
-    async def _answer_all(self, stream: anyio.abc.ByteStream, adus: list[Adu]) -> None:
-        """Answer `adus` in order; replies that need no wait go out in one write."""
+    async def _answer_all(self, stream: anyio.abc.ByteStream, adus: list[Adu]) -> bool:
+        """Answer `adus` in order; replies that need no wait go out in one write. False when
+        a reply could not be written (see `_send`)."""
         out = bytearray()
         for adu in adus:
             outgoing = await self._respond(adu)
             if outgoing is None:
                 continue
             if outgoing.delay > 0:
-                if out:
-                    await stream.send(bytes(out))
-                    out.clear()
+                if out and not await self._send(stream, bytes(out)):
+                    return False
+                out.clear()
                 await anyio.sleep(outgoing.delay)
             out += outgoing.adu
-        if out:
-            await stream.send(bytes(out))
+        return not out or await self._send(stream, bytes(out))
+
+    async def _send(self, stream: anyio.abc.ByteStream, data: bytes) -> bool:
+        """Send `data`; False when it could not be written for `idle_timeout` seconds: the
+        client reads nothing, and the connection is to close (counted as idle)."""
+        with anyio.move_on_after(self.idle_timeout):
+            await stream.send(data)
+            return True
+        self.counters.connections_idle += 1
+        _log.info(
+            "%s: %s read no reply for %g s, closed",
+            self._name,
+            peer_address(stream),
+            self.idle_timeout,
+        )
+        return False
 
     # -- one request -----------------------------------------------------------------
 

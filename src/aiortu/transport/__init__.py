@@ -34,6 +34,7 @@ from aiortu.transport._datagram_server import DATAGRAM_BACKLOG, DatagramServer, 
 from aiortu.transport._echo import LocalEchoFilter
 from aiortu.transport._fd import FileDescriptorStream
 from aiortu.transport._listen import (
+    WARNING_INTERVAL,
     AcceptCounters,
     ConnectionCounters,
     ConnectionLimit,
@@ -48,7 +49,7 @@ from aiortu.transport._listen import (
     write_now,
 )
 from aiortu.transport._mbap_stream import FramedStream, ModbusTcpCounters, ModbusTcpStream
-from aiortu.transport._push import PushStream
+from aiortu.transport._push import PushStream, loop_pushes
 from aiortu.transport._push_server import (
     PushListener,
     PushServerStream,
@@ -82,7 +83,7 @@ from aiortu.transport._udp import (
     open_modbus_udp,
     serve_datagrams,
 )
-from aiortu.transport._udp_push import PushDatagramStream, push_datagrams
+from aiortu.transport._udp_push import PushDatagramStream, log_level, push_datagrams
 from aiortu.transport._url import (
     ASCII_TCP_SCHEME,
     MODBUS_TCP_SCHEME,
@@ -102,6 +103,7 @@ if TYPE_CHECKING:
     from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
 
 __all__ = (
+    "WARNING_INTERVAL",
     "ASCII_BYTESIZE",
     "ASCII_TCP_SCHEME",
     "DATAGRAM_BACKLOG",
@@ -161,6 +163,8 @@ __all__ = (
     "listen_unix",
     "listening_address",
     "load_rules",
+    "log_level",
+    "loop_pushes",
     "open_modbus_tcp",
     "open_modbus_tls",
     "open_modbus_udp",

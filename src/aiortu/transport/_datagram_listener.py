@@ -58,8 +58,11 @@ class _PeerStream(anyio.abc.ByteStream):
         }
 
     async def send(self, item: bytes) -> None:
-        await self._listener.socket.sendto(item, *self.peer)
-        self._listener.counters.replies += 1
+        listener = self._listener
+        # The peers share one socket, which takes one writer at a time.
+        async with listener.sending:
+            await listener.socket.sendto(item, *self.peer)
+        listener.counters.replies += 1
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
         try:
@@ -89,6 +92,8 @@ class DatagramListener(anyio.abc.Listener[anyio.abc.ByteStream]):
         """Datagrams received, refused (malformed, or over a peer's backlog) and answered."""
         self.peers: dict[_Address, _PeerStream] = {}
         """The stream of each source address being served."""
+        self.sending = anyio.Lock()
+        """Held by the peer stream that writes to the socket."""
         local = sock.extra(anyio.abc.SocketAttribute.local_address)
         self.local_address: _Address = (str(local[0]), int(local[1]))
         """The host and port the socket is bound to."""

@@ -5,7 +5,9 @@ server, the RTU-over-TCP server, the gateway and its metrics responder. What it 
 
 - **A limit.** At most `ConnectionLimit.max_connections` connections at once; one over the
   limit is closed at once and counted, and the refusals of one burst are logged once (until a
-  connection closes).
+  connection closes), as a warning at most once in `WARNING_INTERVAL` seconds and at debug
+  level in between: a client that opens and closes connections at the limit costs counts, not
+  log lines.
 - **Back-pressure from the first byte.** anyio's asyncio backend leaves an accepted TCP
   connection reading until its first `receive()` waits, so a client that streams requests
   before then fills the process without bound. The loop pauses reading on the transport right
@@ -13,9 +15,14 @@ server, the RTU-over-TCP server, the gateway and its metrics responder. What it 
   the server asks for them, and TCP holds the client back.
 - **Running out of file descriptors.** An `accept()` that fails (EMFILE, ENFILE, ENOBUFS,
   ENOMEM) backs off (10 ms, doubling to 1 s) and is logged once until a connection is
-  accepted again: the listener survives, the pending client waits in the backlog.
+  accepted again (a warning at most once in `WARNING_INTERVAL`): the listener survives, the
+  pending client waits in the backlog.
 - **A client gone before it was served** (reset in the backlog: no peer address) is closed
   and not counted.
+- **TLS.** A listener with a handshake ([`TlsListener`][aiortu.transport.TlsListener]) is
+  accepted from by the same loop, with the same limit and back-off, and each connection's
+  handshake runs in its task: a connection counts against the limit from its accept, so that
+  clients that never finish their handshake hold at most `max_connections` descriptors.
 """
 
 from __future__ import annotations
@@ -23,12 +30,14 @@ from __future__ import annotations
 import asyncio
 import errno
 import grp
+import logging
+import math
 import os
 import socket
 import stat
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import Final, Protocol
+from typing import Any, Final, Protocol, runtime_checkable
 
 import anyio
 import anyio.abc
@@ -59,11 +68,23 @@ UNIX_PREFIX: Final = "unix:"
 """What starts a Unix socket listen URL."""
 
 _ACCEPT_ERRORS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
+WARNING_INTERVAL: Final = 60.0
+"""The fewest seconds between two warnings of one kind from one accept loop (refusals over the
+limit, failed accepts); those in between are logged at debug level."""
 _FIRST_BACK_OFF = 0.01
 _LAST_BACK_OFF = 1.0
 _GONE = (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError)
 
 Handler = Callable[[anyio.abc.ByteStream], Awaitable[object]]
+
+
+@runtime_checkable
+class _Handshaking(Protocol):
+    """A listener whose connections need a handshake before they are served (TLS)."""
+
+    listener: anyio.abc.Listener[Any]
+
+    async def handshake(self, stream: anyio.abc.ByteStream) -> anyio.abc.ByteStream | None: ...
 
 
 class ConnectionCounters(Protocol):
@@ -103,6 +124,17 @@ class ConnectionLimit:
     """`accept()` calls that failed (out of file descriptors, or of memory)."""
     refusing: bool = False
     """Whether a refusal was logged since the last connection closed."""
+    warned: dict[str, float] = field(default_factory=dict)
+    """When a warning of each kind was last logged (the event loop's clock)."""
+
+    def level(self, kind: str) -> int:
+        """The level to log a `kind` of trouble at now: a warning at most once in
+        `WARNING_INTERVAL` seconds, else debug."""
+        now = anyio.current_time()
+        if now - self.warned.get(kind, -math.inf) < WARNING_INTERVAL:
+            return logging.DEBUG
+        self.warned[kind] = now
+        return logging.WARNING
 
 
 async def serve_listener(
@@ -115,13 +147,18 @@ async def serve_listener(
     after it returns, and an exception it raises is logged and ends that connection only.
 
     anyio's TCP listener (one socket per address family) gets an accept loop per socket; a
-    listener without `accept()` is served through its own `serve()`, with the limit."""
+    listener without `accept()` is served through its own `serve()`, with the limit; one with a
+    handshake is accepted from as the listener it wraps, each handshake in its connection's task.
+    """
+    accepting = listener
+    if isinstance(listener, _Handshaking):
+        accepting, handler = listener.listener, _after_handshake(listener, handler)
     async with listener, anyio.create_task_group() as tasks:
-        if isinstance(listener, MultiListener):
-            for each in listener.listeners:
+        if isinstance(accepting, MultiListener):
+            for each in accepting.listeners:
                 tasks.start_soon(_accept_loop, each, handler, limit, tasks)
-        elif isinstance(listener, anyio.abc.SocketListener):
-            await _accept_loop(listener, handler, limit, tasks)
+        elif isinstance(accepting, anyio.abc.SocketListener):
+            await _accept_loop(accepting, handler, limit, tasks)
         else:
 
             async def admitted(stream: anyio.abc.ByteStream) -> None:
@@ -130,7 +167,7 @@ async def serve_listener(
                 else:
                     await _close(stream)
 
-            await listener.serve(admitted)
+            await accepting.serve(admitted)
 
 
 async def _accept_loop(
@@ -152,6 +189,15 @@ async def _accept_loop(
             tasks.start_soon(_serve_one, handler, stream, limit)
         else:
             await _close(stream)
+
+
+def _after_handshake(listener: _Handshaking, handler: Handler) -> Handler:
+    async def secured(stream: anyio.abc.ByteStream) -> None:
+        secure = await listener.handshake(stream)
+        if secure is not None:
+            await handler(secure)
+
+    return secured
 
 
 def _admit(stream: anyio.abc.ByteStream, limit: ConnectionLimit) -> bool:
@@ -189,7 +235,8 @@ async def _accept_failed(limit: ConnectionLimit, error: BaseException, back_off:
         raise error
     limit.accept_failures += 1
     if not back_off:
-        _log.warning(
+        _log.log(
+            limit.level("accept"),
             "%s: cannot accept a connection: %s; retrying (logged once until one is accepted)",
             limit.name,
             cause.strerror or cause,
@@ -203,7 +250,8 @@ def _refuse(limit: ConnectionLimit, stream: anyio.abc.ByteStream) -> None:
     limit.counters.connections_refused += 1
     if not limit.refusing:
         limit.refusing = True
-        _log.warning(
+        _log.log(
+            limit.level("refusal"),
             "%s: %d connections open, the most allowed; closing %s (logged once until one closes)",
             limit.name,
             limit.open,

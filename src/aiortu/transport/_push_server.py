@@ -27,7 +27,6 @@ import asyncio
 import socket
 import ssl
 from collections.abc import Callable, Mapping
-from functools import wraps
 from typing import Any, cast, overload
 
 import anyio
@@ -264,22 +263,17 @@ class PushTlsListener(TlsListener):
     layer on asyncio's plain transport (which sends the alert of a refused one before it
     closes), its failures told and counted the same way."""
 
-    async def serve(  # type: ignore[override]
-        self,
-        handler: Callable[[PushServerStream], Any],
-        task_group: anyio.abc.TaskGroup | None = None,
-    ) -> None:
-        @wraps(handler)
-        async def handshake(stream: PushServerStream) -> None:
-            try:
-                with anyio.fail_after(self.handshake_timeout):
-                    await stream.connect(self.ssl_context)
-            except BaseException as error:
-                await self.handle_handshake_error(error, stream)
-            else:
-                await handler(stream)
-
-        await self.listener.serve(handshake, task_group)
+    async def handshake(self, stream: anyio.abc.ByteStream) -> anyio.abc.ByteStream | None:
+        """`stream` once its TLS handshake on asyncio's transport is done; None when it
+        failed (logged, counted, `stream` closed)."""
+        assert isinstance(stream, PushServerStream)
+        try:
+            with anyio.fail_after(self.handshake_timeout):
+                await stream.connect(self.ssl_context)
+        except BaseException as error:
+            await self.handle_handshake_error(error, stream)
+            return None
+        return stream
 
 
 def push_listener(listener: anyio.abc.Listener[Any]) -> bool:

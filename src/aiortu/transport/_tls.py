@@ -306,6 +306,36 @@ class TlsListener(TLSListener):
     handshake_failures: int = 0
     """Handshakes that failed (plaintext, no certificate, an expired or untrusted one, ...)."""
 
+    async def serve(  # type: ignore[override]
+        self,
+        handler: Callable[[anyio.abc.ByteStream], Any],
+        task_group: anyio.abc.TaskGroup | None = None,
+    ) -> None:
+        """Serve each connection of the wrapped listener whose handshake succeeds with
+        `handler` ([`serve_listener`][aiortu.transport.serve_listener] accepts with a limit and
+        calls [`handshake`][aiortu.transport.TlsListener.handshake] itself)."""
+
+        async def secured(stream: anyio.abc.ByteStream) -> None:
+            secure = await self.handshake(stream)
+            if secure is not None:
+                await handler(secure)
+
+        await self.listener.serve(secured, task_group)
+
+    async def handshake(self, stream: anyio.abc.ByteStream) -> anyio.abc.ByteStream | None:
+        """The TLS stream over the accepted `stream` once the handshake is done within
+        `handshake_timeout`; None when it failed (logged, counted, `stream` closed)."""
+        try:
+            with anyio.fail_after(self.handshake_timeout):
+                return await TLSStream.wrap(
+                    stream,
+                    ssl_context=self.ssl_context,
+                    standard_compatible=self.standard_compatible,
+                )
+        except BaseException as error:
+            await self.handle_handshake_error(error, stream)
+            return None
+
     async def handle_handshake_error(  # type: ignore[override]
         self, exc: BaseException, stream: anyio.abc.AnyByteStream
     ) -> None:

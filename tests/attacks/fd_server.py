@@ -1,0 +1,34 @@
+"""Run by `test_fd_exhaustion.py` in a process of its own: every stream listener of
+`tests/attacks/listeners.py`, with a connection limit (5,000 unless given) far above a file
+limit of 192 descriptors.
+
+Prints each listener's address as one JSON line on stdout, logs the library's warnings on
+stderr, and serves until its standard input closes."""
+
+from __future__ import annotations
+
+import json
+import logging
+import resource
+import sys
+from pathlib import Path
+
+import anyio
+
+from tests.attacks.listeners import STREAMS, listeners
+
+FILE_LIMIT = 192
+
+
+async def main(directory: str, limit: int) -> None:
+    async with listeners(Path(directory), STREAMS, max_connections=limit) as targets:
+        print(json.dumps({name: target.address for name, target in targets.items()}), flush=True)
+        await anyio.to_thread.run_sync(sys.stdin.read)
+
+
+if __name__ == "__main__":
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    resource.setrlimit(resource.RLIMIT_NOFILE, (FILE_LIMIT, hard))
+    logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+    limit = int(sys.argv[3]) if len(sys.argv) > 3 else 5000
+    anyio.run(main, sys.argv[1], limit, backend=sys.argv[2])
