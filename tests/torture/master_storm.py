@@ -195,11 +195,15 @@ class _Plug:
         self.spares = endpoints[1:]
         self.absent = absent
         self.back_at = -math.inf
+        self.plugged_in = anyio.Event()
+        """Set while the master's port is in: cleared by a pull, set by the master's reopen."""
+        self.plugged_in.set()
 
     async def open(self) -> anyio.abc.ByteStream:
         if anyio.current_time() < self.back_at or not self.spares:
             raise OSError("the port is unplugged")
         self.current = self.spares.pop(0)
+        self.plugged_in.set()
         # A port plugged in hears nothing of what went before (its buffer was not there).
         while self.current._take():
             pass
@@ -210,6 +214,8 @@ class _Plug:
         for moment in moments:
             await anyio.sleep_until(start + moment)
             self.back_at = anyio.current_time() + self.absent
+            if self.plugged_in.is_set():
+                self.plugged_in = anyio.Event()
             await self.current.aclose()
 
 
@@ -223,8 +229,12 @@ async def _storm(
         if plug is not None and scenario.unplugs:
             callers.start_soon(plug.pull_at, scenario.unplugs)
     # After the storm the line is free: a fresh read succeeds (on a noisy line, one of
-    # five: noise may garble or drop the request or the reply of a few).
-    with anyio.fail_after(5 + 4 * RECONNECT_DELAY[1]):
+    # five: noise may garble or drop the request or the reply of a few). A pull may end
+    # the storm: until the master has noticed it, it is still "connected", and a request
+    # made then fails with the lost line as documented, so wait for its reopen first.
+    with anyio.fail_after(5 + 4 * RECONNECT_DELAY[1] + scenario.absent):
+        if plug is not None:
+            await plug.plugged_in.wait()
         await master.connection.wait_connected()
     # A timeout far above any reply time: only a line that is not free misses it, not a
     # machine too loaded to run the slave in time.
