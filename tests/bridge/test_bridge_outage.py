@@ -20,6 +20,9 @@ from tests.bridge.mosquitto import Mosquitto, Subscriber, free_port
 from tests.bridge.test_bridge_broker import until
 
 pytestmark = pytest.mark.timeout(90)
+RECONNECT_DELAY = (0.1, 0.4)
+"""The back-off between connection attempts, capped low: the tests wait for the broker to come
+back, not for the back-off to reach its default cap of 5 s."""
 
 
 def _distinct(payloads: list[bytes]) -> list[bytes]:
@@ -44,6 +47,7 @@ async def test_the_backlog_arrives_in_order_after_a_broker_restart(mosquitto: Mo
     subscriber = Subscriber(mosquitto.port, ["aiortu/hp-1/power"], "keeper", persistent=True)
     try:
         async with Bridge(config(mosquitto.url, units=(1,))) as bridge:
+            bridge.session.reconnect_delay = RECONNECT_DELAY
             await until(lambda: subscriber.on("aiortu/hp-1/power") == [b"1800.0"])
             await _count_through_an_outage(mosquitto, bridge, 5)
             expected = [b"1800.0"] + [f"{n}.0".encode() for n in range(5)]
@@ -61,6 +65,7 @@ async def test_what_the_bound_drops_is_counted_and_published(mosquitto: Mosquitt
                      extra="[buffer]\nmax_messages = 20\n")  # fmt: skip
     try:
         async with Bridge(bounded) as bridge:
+            bridge.session.reconnect_delay = RECONNECT_DELAY
             await until(lambda: subscriber.on("aiortu/hp-1/power")[:1] == [b"1800.0"])
             mosquitto.stop()
             await until(lambda: bridge.outbox.dropped > 0, 15)

@@ -57,6 +57,8 @@ PLANS: dict[str, tuple[str, ...]] = {
     "late, then ok": ("late", "answer"),
 }
 WEIGHTS = {"ok": 8}  # the rest weigh 1
+LENGTH = len(PLANS) + 4
+"""Every plan once, and a few more drawn by weight: the silent plans cost a timeout each."""
 
 
 @dataclass(frozen=True)
@@ -202,7 +204,7 @@ async def test_reads_forwarded_as_bytes_agree_with_reads_decoded(
     offset: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     seed = SEED + offset
-    reads = scenario(seed, 30)
+    reads = scenario(seed, LENGTH)
     try:
         as_bytes = await _run(reads, True, monkeypatch)
         decoded = await _run(reads, False, monkeypatch)
