@@ -42,6 +42,16 @@ def test_trio_keeps_anyio_streams() -> None:
     assert anyio.run(scenario, backend="trio") is False
 
 
+async def test_a_send_on_a_connection_never_set_up_says_it_is_closed() -> None:
+    sock = socket.socket()
+    stream = PushServerStream(sock)  # accepted, but its transport never made
+    try:
+        with anyio.fail_after(5), pytest.raises(anyio.ClosedResourceError):
+            await stream.send(b"\x00")
+    finally:
+        sock.close()
+
+
 async def test_a_client_streaming_before_the_first_read_is_held_back() -> None:
     """As anyio's streams in test_listen.py: nothing is read before the first receive()."""
     limit = ConnectionLimit("test server", 4)

@@ -19,6 +19,9 @@ import asyncio
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
+import anyio
+import anyio.lowlevel
+
 __all__ = ("PushStream", "loop_pushes")
 
 
@@ -83,6 +86,14 @@ class PushStream(Protocol):
         ...
 
 
+def ended(error: BaseException | None, transport: object | None) -> BaseException | None:
+    """Why a pushed connection takes no more writes: the `error` it ended with, or closed
+    before it had a `transport`; None while it takes them."""
+    if error is None and transport is None:
+        return anyio.ClosedResourceError()
+    return error
+
+
 class WriteGate:
     """An asyncio transport's write flow control, for a pushed stream: whether its buffer is
     below the high-water mark (`open`), and a wait until it drains."""
@@ -104,6 +115,21 @@ class WriteGate:
         drained = self._drained
         if drained is not None and not drained.done():
             drained.set_result(None)
+
+    async def write(
+        self,
+        write_now: Callable[[bytes], bool],
+        item: bytes,
+        failure: Callable[[], BaseException | None],
+    ) -> None:
+        """`write_now(item)` once the buffer has room: a stream's `send`. `failure()` says why
+        the connection can take nothing more (None while it can); it is raised."""
+        await anyio.lowlevel.checkpoint()
+        while not write_now(item):
+            error = failure()
+            if error is not None:
+                raise error
+            await self.drained()
 
     async def drained(self) -> None:
         """Wait for the next `resume`."""

@@ -35,7 +35,7 @@ import anyio.lowlevel
 from anyio.streams.stapled import MultiListener
 from anyio.streams.tls import TLSAttribute
 
-from aiortu.transport._push import WriteGate, loop_pushes
+from aiortu.transport._push import WriteGate, ended, loop_pushes
 from aiortu.transport._tls import TlsListener
 from aiortu.transport._tls_bio import TlsBioTransport
 
@@ -208,11 +208,7 @@ class PushServerStream(anyio.abc.SocketStream):
 
     async def send(self, item: bytes) -> None:
         """Write `item` once the transport's buffer has room."""
-        await anyio.lowlevel.checkpoint()
-        while not self.write_now(item):
-            if self._error is not None or self.transport is None:
-                raise self._error or anyio.ClosedResourceError()
-            await self.gate.drained()
+        await self.gate.write(self.write_now, item, lambda: ended(self._error, self.transport))
 
     async def send_eof(self) -> None:
         if self.transport is not None and self.transport.can_write_eof():

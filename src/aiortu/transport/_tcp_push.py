@@ -37,7 +37,7 @@ from aiortu._log import get_logger
 from aiortu.core.mbap import AduDecoder, MalformedHeader
 from aiortu.transport._mbap_push import PushedMbap
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
-from aiortu.transport._push import WriteGate, loop_pushes
+from aiortu.transport._push import WriteGate, ended, loop_pushes
 from aiortu.transport._tcp import connect_protocol, open_tcp_connection
 from aiortu.transport._url import MODBUS_TCP_SCHEME, format_tcp_url
 
@@ -168,11 +168,7 @@ class PushConnectionStream(PushedMbap):
     async def send(self, item: bytes) -> None:
         """Send the RTU frame `item` as one ADU with the next transaction id, once the
         transport's buffer has room."""
-        await anyio.lowlevel.checkpoint()
-        while not self.send_nowait(item):
-            if self._error is not None or self.transport is None:
-                raise self._error or anyio.ClosedResourceError()
-            await self.gate.drained()
+        await self.gate.write(self.send_nowait, item, lambda: ended(self._error, self.transport))
 
     async def send_eof(self) -> None:
         if self.transport is not None and self.transport.can_write_eof():
