@@ -368,7 +368,9 @@ def _send_until_blocked(sock: socket.socket, chunk: bytes) -> int:
 async def test_a_pipelining_client_that_never_reads_is_held_back(name: str, tmp_path: Path) -> None:
     """Requests streamed without reading a reply: the server takes no more than the kernel's
     buffers and a window of its own, and the client's connection is closed within the idle
-    timeout once its replies cannot be written (listeners without one keep it, held back)."""
+    timeout once its replies cannot be written (listeners without one keep it, held back).
+    Each request reads 125 registers: its reply, 21 times its size, fills the server's
+    sending side after a few thousand requests, not hundreds of thousands."""
 
     bound = _kernel_buffers() + (1 << 20)
     async with listener(tmp_path, name) as target:
@@ -377,7 +379,7 @@ async def test_a_pipelining_client_that_never_reads_is_held_back(name: str, tmp_
             sock = await anyio.to_thread.run_sync(connect)
             with sock:
                 sent = await anyio.to_thread.run_sync(
-                    _send_until_blocked, sock, target.request() * 2048
+                    _send_until_blocked, sock, target.request(pdu=READ_ALL) * 2048
                 )
                 await _answers(target)
                 # Reset: the requests the kernel holds go with it, not through the server.
