@@ -300,7 +300,11 @@ class _ServerTlsStream(TLSStream):
     """anyio's TLS stream for a server, which sends the alert of a TLS error before the
     error goes on: anyio leaves it in the outgoing BIO, and a connection closed without it
     tells the client nothing of why its certificate was refused (asyncio's pushed
-    connections send it in `_tls_bio.py`)."""
+    connections send it in `_tls_bio.py`).
+
+    It overrides anyio's `_call_sslobject_method`, private but the one method every
+    handshake step, read and write goes through; were it renamed, the trio tests of the
+    master's reason would fail, not pass silently."""
 
     async def _call_sslobject_method(  # type: ignore[override]
         self, func: Callable[..., Any], *args: Any
