@@ -101,13 +101,13 @@ class PlainLayout:
     def health(self, device: DeviceState, now: float) -> list[Message]:
         """The device's availability and its three-state health."""
         available = b"offline" if device.health is UnitState.OFFLINE else b"online"
+        availability = device_topic(self.prefix, device.name, "availability")
+        health = device_topic(self.prefix, device.name, "health")
         qos = self.topics.qos
         return [
-            Message(device_topic(self.prefix, device.name, "availability"), available, qos,
-                    True, now),
-            Message(device_topic(self.prefix, device.name, "health"),
-                    device.health.value.encode(), qos, True, now),
-        ]  # fmt: skip
+            Message(availability, available, qos, True, now),
+            Message(health, device.health.value.encode(), qos, True, now),
+        ]
 
     def command(self, publish: Publish, devices: list[DeviceState], now: float,
                 ) -> tuple[list[Command], list[Message]]:  # fmt: skip
