@@ -74,7 +74,7 @@ class Target:
     max_connections: int = MAX_CONNECTIONS
 
     def request(self, transaction_id: int = 1, pdu: bytes = READ) -> bytes:
-        """A good request in this listener's framing (`pdu`: another read than `READ`)."""
+        """A good request in this listener's framing (`pdu` the good read by default)."""
         if self.framing == "rtu":
             return encode_frame(UNIT, pdu)
         if self.framing == "ascii":
@@ -256,7 +256,6 @@ async def _serve(
     options: dict[str, Any] = {}
     if scheme != "udp":
         options["max_connections"] = max_connections
-    if scheme in ("tcp", "tls"):
         options["idle_timeout"] = IDLE_TIMEOUT
     if scheme == "tls":
         options.update(files, rules=RULES)
