@@ -1,7 +1,7 @@
 """The line server under attack, on loopback: clients that leave with requests queued, that
 never read, that half-close, that reset before they are accepted, and many client hosts.
 These need sockets (resets, half-closes, the kernel's buffers), and run in real time; a slow
-line's client runs on a virtual clock over an in-memory stream.
+line's client, and one that takes no reply, run on a virtual clock over an in-memory stream.
 
 Each bound is one the gateway guarantees (requests on the wire, connections, counters), not a
 time a quiet machine happens to show."""
@@ -25,6 +25,9 @@ from tests.tcp_flood import kernel_buffers, send_until_blocked
 from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(60)
+
+READ = bytes.fromhex("03 0000 0001")
+"""A read of one register of unit 17."""
 
 
 class Gate:
@@ -121,8 +124,10 @@ reads without a window takes its bytes in bursts a slow line's replies apart."""
 
 
 async def test_a_client_that_never_reads_is_closed_as_idle() -> None:
-    """Replies it never reads fill its buffers; the one that waits `idle_timeout` to be
-    written closes the connection, and with it the requests it still has."""
+    """Cached replies it never reads fill its buffers, and the reader waits to write the next:
+    with nothing waiting for the line, the connection is silent, and closed as idle
+    `idle_timeout` after its last request (the watch's deadline, which comes before the
+    reply's own: see the next test for the write side)."""
     store = MemoryStore(holding_registers={0: list(range(125))})
     async with line({UNIT: store}, idle_timeout=0.5, cache_ms=60_000) as bench:
         sock = socket.socket()
@@ -138,6 +143,46 @@ async def test_a_client_that_never_reads_is_closed_as_idle() -> None:
         sock.close()
 
 
+def _take_reply(sock: socket.socket, size: int) -> bytes:
+    """The next `size` bytes on `sock` (fewer if the server closes)."""
+    data = b""
+    while len(data) < size and (chunk := sock.recv(size - len(data))):
+        data += chunk
+    return data
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_a_client_that_stops_reading_with_a_request_on_the_line_is_closed(backend: str) -> None:
+    """A request held on the line keeps the connection from being idle; cached replies it
+    never reads then fill its buffers, and the one the gateway waits `idle_timeout` to write
+    closes the connection (counted idle), while the request still waits."""
+
+    async def scenario() -> None:
+        gate = Gate()
+        store = MemoryStore(holding_registers={0: list(range(126))})
+        held = {"timeout": 10.0}  # no exception 0B before the test opens the gate
+        async with line(
+            {UNIT: store}, idle_timeout=0.3, cache_ms=60_000, master_options=held
+        ) as bench:
+            sock = socket.socket()
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            sock.connect(("127.0.0.1", bench.gateway.port))
+            read = encode_adu(1, UNIT, bytes.fromhex("03 0000 007D"))  # a 259-byte reply
+            sock.sendall(read)  # answered by the line, then from the cache
+            assert len(await anyio.to_thread.run_sync(_take_reply, sock, 259)) == 259
+            bench.slave.before_request(gate)
+            sock.sendall(encode_adu(2, UNIT, bytes.fromhex("03 0001 007D")))  # held
+            await _until(lambda: gate.held == 1)
+            flood = functools.partial(send_until_blocked, quiet=0.2)
+            assert await anyio.to_thread.run_sync(flood, sock, read * 64) > 0
+            await _until(lambda: bench.gateway.counters.connections_idle == 1)
+            await _until(lambda: bench.gateway.connections == 0)
+            gate.opened.set()
+            sock.close()
+
+    anyio.run(scenario, backend=backend)
+
+
 @on_virtual_clock
 async def test_a_request_that_waits_for_a_slow_line_is_not_idle() -> None:
     async def slow(request: object, context: RequestContext) -> None:
@@ -151,6 +196,45 @@ async def test_a_request_that_waits_for_a_slow_line_is_not_idle() -> None:
                 assert await tcp.request(f"03 {address:04X} 0001") == reply
                 assert anyio.current_time() - asked >= 0.8  # over twice the idle timeout
         assert bench.gateway.counters.connections_idle == 0
+
+
+class _Deaf(anyio.abc.ByteStream):
+    """The gateway's end of a client that sends `requests`, then nothing, and takes no reply
+    (as once the kernel's buffers are full): an in-memory stream, for a virtual clock."""
+
+    def __init__(self, requests: bytes) -> None:
+        self._requests = requests
+
+    async def receive(self, max_bytes: int = 65536) -> bytes:
+        if not self._requests:
+            await anyio.sleep_forever()
+        data, self._requests = self._requests[:max_bytes], self._requests[max_bytes:]
+        return data
+
+    async def send(self, item: bytes) -> None:
+        await anyio.sleep_forever()
+
+    async def send_eof(self) -> None:
+        pass
+
+    async def aclose(self) -> None:
+        pass
+
+
+@on_virtual_clock
+async def test_a_reply_not_written_for_idle_timeout_closes_the_connection() -> None:
+    """The line answers the client's read; its reply is never taken, and holds the request's
+    window place until written, so the connection is never idle: the write's own timeout
+    closes it, `idle_timeout` after the reply came."""
+    idle = 0.3
+    async with line(idle_timeout=idle, listen=()) as bench:
+        started = anyio.current_time()
+        with anyio.fail_after(10 * idle):
+            await bench.gateway.serve_connection(_Deaf(encode_adu(1, UNIT, READ)))
+        elapsed = anyio.current_time() - started
+        assert bench.messages == 1
+        assert bench.gateway.counters.connections_idle == 1
+        assert idle - 1e-9 <= elapsed <= idle + 0.05, elapsed  # the line answers in a few ms
 
 
 async def test_a_client_reset_before_accept_is_not_counted() -> None:
