@@ -199,6 +199,13 @@ class Link:
         """The event loop, where the link reads a stream that pushes its bytes (see `_push`); `None`
         otherwise. Its futures and [`call_at`][aiortu.line.Link.call_at] timers are the cheapest way
         to wait for the link there."""
+        self.direct = False
+        """Whether the link is direct (set when it opens; see `PushReader.on_frame`): its stream
+        pushes whole frames (a master's Modbus TCP, Modbus/TCP Security or Modbus UDP stream on
+        asyncio) and no frame gap is kept. Such a line has no timing to keep: a frame has left
+        once written, and each chunk is one frame. So [`send_now`][aiortu.line.Link.send_now]
+        asks no silence, and the reply [`expect`][aiortu.line.Link.expect] waits for is taken
+        without the receiver's chunk path."""
         self.waits: NativeWaits | None = None
         """The running backend's cheapest waits (set when the link opens): a
         [`Waiter`][aiortu.line.Waiter] is what a listener sets to wake a task."""
@@ -261,6 +268,7 @@ class Link:
         # Push only where the loop has call_at timers for the receiver's deadline (asyncio).
         if self._push_reader is not None and waits.call_at is not None:
             self.loop = waits.loop
+            self.direct = self.whole_frames and self.frame_gap == 0
             self._task_group.start_soon(self._push, name="aiortu link reader")
         else:
             self._task_group.start_soon(self._pump, name="aiortu link reader")
@@ -557,12 +565,17 @@ class Link:
             return None
         start = self.clock()
         activity = self._activity
-        if max(activity.last_received, activity.transmit_end) + self.frame_gap > start:
+        direct = self.direct  # no gap and no wire: quiet, and the frame gone once written
+        if not direct and max(activity.last_received, activity.transmit_end) + self.frame_gap > start:
             return None
         if not send_nowait(frame):
             return None
         self.last_write_start = start
         self.writes_begun += 1
+        if direct:
+            self.frames_sent += 1
+            activity.transmit_end = start
+            return start
         # The write took microseconds, far less than the wire time: no second clock read.
         return self._sent(frame, start, start)
 
