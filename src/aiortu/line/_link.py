@@ -29,6 +29,13 @@ On the push path a master can also tell the link the exact shape of the reply it
 frame with a good CRC goes straight to the master, with no event built or queued. Anything else, a
 split or garbled reply included, takes the usual way through the receiver.
 
+A link is direct ([`Link.direct`][aiortu.line.Link], one predicate, `_direct`) where its stream
+pushes whole frames and no frame gap is kept: a master's Modbus TCP, Modbus/TCP Security or Modbus
+UDP stream on asyncio. Such a line has no timing to keep, so `send_now` asks no silence and the
+push reader takes the expected reply with the receiver's check only (`PushReader.on_frame`);
+everything else goes the usual way. A differential test runs the same exchanges with the predicate
+forced off.
+
 The master and the slave are built on this; users rarely need it directly, except to
 watch a line (`role=Role.MONITOR`).
 
@@ -268,7 +275,7 @@ class Link:
         # Push only where the loop has call_at timers for the receiver's deadline (asyncio).
         if self._push_reader is not None and waits.call_at is not None:
             self.loop = waits.loop
-            self.direct = self.whole_frames and self.frame_gap == 0
+            self.direct = _direct(self)
             self._task_group.start_soon(self._push, name="aiortu link reader")
         else:
             self._task_group.start_soon(self._pump, name="aiortu link reader")
@@ -566,7 +573,8 @@ class Link:
         start = self.clock()
         activity = self._activity
         direct = self.direct  # no gap and no wire: quiet, and the frame gone once written
-        if not direct and max(activity.last_received, activity.transmit_end) + self.frame_gap > start:
+        quiet_at = max(activity.last_received, activity.transmit_end) + self.frame_gap
+        if not direct and quiet_at > start:
             return None
         if not send_nowait(frame):
             return None
@@ -597,6 +605,13 @@ class Link:
         a large share of t3.5 at high baud rates. Elsewhere it sleeps on the loop's timers.
         """
         await self._silence.wait(self._activity, self.clock, silence)
+
+
+def _direct(link: Link) -> bool:
+    """The direct route's one predicate, for a link whose stream pushes its bytes (see
+    [`Link.direct`][aiortu.line.Link]): each chunk is one whole frame, and no frame gap is
+    kept (nor is there a wire time: a stream of whole frames has none)."""
+    return link.whole_frames and link.frame_gap == 0
 
 
 def _wire_timed(stream: object, settings: LineSettings) -> bool:

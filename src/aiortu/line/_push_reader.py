@@ -7,7 +7,10 @@ chunk costs no task wake-up.
 
 Two taps take frames of a known layout before the receiver builds an event for them: the reply a
 master waits for ([`Link.expect`][aiortu.line.Link.expect], once) and the requests a slave answers
-at once ([`Link.expect_requests`][aiortu.line.Link.expect_requests], every time).
+at once ([`Link.expect_requests`][aiortu.line.Link.expect_requests], every time). On a direct link
+(whole frames, no frame gap: [`Link.direct`][aiortu.line.Link]) the stream calls `on_frame`
+instead, which takes the reply expected with the receiver's check alone and hands anything else
+to `on_chunk`.
 """
 
 from __future__ import annotations
@@ -156,9 +159,7 @@ class PushReader:
             link._activity.last_received = now
             self.reply_tap = None
             link.frames_received += 1
-            tap.on_frame(frame, now)
-            if self.timer is not None:
-                self.arm_timer()
+            tap.on_frame(frame, now)  # an idle receiver has no timer to move
         except BaseException as error:  # a bug: the reader task raises it
             self.fail(error)
 
