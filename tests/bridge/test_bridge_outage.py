@@ -214,6 +214,85 @@ def test_the_command_says_what_is_wrong_in_one_line(tmp_path: Path) -> None:
         assert text in done.stderr
 
 
+_LONG = 65_536 - len("aiortu/hp-1/")
+"""A point name that makes its plain topic, `aiortu/hp-1/NAME`, one byte too long."""
+
+
+def _profile_with_a_point(tmp_path: Path, name: str) -> Path:
+    """A profile of one writable register named `name`."""
+    path = tmp_path / "long.toml"
+    path.write_text(f'[device]\nmanufacturer = "M"\nmodel = "L"\n[[point]]\nname = "{name}"\n'
+                    'address = 0\ntype = "u16"\naccess = "rw"\n')  # fmt: skip
+    return path
+
+
+def _with_profile(profile: Path, topics: str = "") -> str:
+    return (topics + _LINE.format(url="mqtt://127.0.0.1:1")
+            + f'name = "hp-1"\nunit = 1\nprofile = "{profile}"\n')  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("layout", "name", "size"),
+    [
+        ("plain", "p" * (_LONG - 4), 65_536),  # its command topic, NAME/set
+        ("plain", "p" * (_LONG - 5), None),  # 65,535 bytes: fits
+        ("home-assistant", "p" * (_LONG - 4), 65_536),
+        ("home-assistant", "p" * (_LONG - 5), 65_559),  # its discovery topic, longer
+        ("sparkplug", "p" * _LONG, None),  # a metric is no topic
+    ],
+)
+def test_a_topic_over_mqtts_limit_is_refused_when_loaded(
+    tmp_path: Path, layout: str, name: str, size: int | None
+) -> None:
+    text = _with_profile(_profile_with_a_point(tmp_path, name), f'[topics]\nlayout = "{layout}"\n')
+    if size is None:
+        parse_config(text, "bridge.toml")
+        return
+    with pytest.raises(BrokerError) as caught:
+        parse_config(text, "bridge.toml")
+    message = str(caught.value)
+    assert message.startswith("bridge.toml: the topic of device 'hp-1', point 'pppp")
+    assert f" is {size:,} bytes, more than the 65,535 an MQTT topic holds" in message
+    assert len(message) < 300
+    assert "\n" not in message
+
+
+@pytest.mark.parametrize("key", ["client_id", "username", "password"])
+def test_a_broker_string_over_mqtts_limit_is_refused_when_loaded(key: str) -> None:
+    text = _LINE.format(url="mqtt://127.0.0.1:1") + f'unit = 1\nprofile = "{HEAT_PUMP}"\n'
+    text = text.replace("[[line]]", f'{key} = "{"x" * 65_536}"\n[[line]]')
+    with pytest.raises(BrokerError) as caught:
+        parse_config(text, "bridge.toml")
+    name = key.replace("_", " ")
+    assert str(caught.value) == (
+        f"bridge.toml: broker {name}: 65,536 bytes, more than the 65,535 MQTT allows"
+    )
+    parse_config(text.replace("x" * 65_536, "x" * 65_535), "bridge.toml")
+
+
+def test_the_bridges_own_topics_are_checked_in_bytes() -> None:
+    # 32,760 characters of two bytes each: the status topic (the last will's) is too long.
+    prefix = "é" * 32_760
+    line = _LINE.format(url="mqtt://127.0.0.1:1") + f'unit = 1\nprofile = "{HEAT_PUMP}"\n'
+    text = f'[topics]\nlayout = "plain"\nprefix = "{prefix}"\n' + line
+    with pytest.raises(BrokerError) as caught:
+        parse_config(text, "test")
+    assert str(caught.value).startswith("test: the topic of the bridge is 65,541 bytes, more")
+
+
+def test_the_command_refuses_a_topic_too_long_in_one_line(tmp_path: Path) -> None:
+    profile = _profile_with_a_point(tmp_path, "p" * _LONG)
+    path = tmp_path / "bridge.toml"
+    path.write_text(_with_profile(profile))
+    done = subprocess.run([sys.executable, "-m", "aiortu", "bridge", "--config", str(path)],
+                          capture_output=True, text=True, timeout=60, check=False)  # fmt: skip
+    assert done.returncode == 1
+    assert done.stderr.count("\n") == 1
+    assert "device 'hp-1', point 'pppp" in done.stderr
+    assert "is 65,540 bytes" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
 def test_the_command_counts_its_devices_and_lines_in_words(tmp_path: Path) -> None:
     # No broker listens: the bridge starts all the same, polls, and keeps the messages.
     site = tmp_path / "site.toml"
