@@ -43,6 +43,7 @@ from tests.attacks.listeners import (
     records,
 )
 from tests.slave.tcp_helpers import UNIT
+from tests.tcp_flood import kernel_buffers, send_until_blocked
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -338,43 +339,26 @@ async def test_thousands_of_source_addresses_of_datagrams_stay_bounded(
 # -- clients that never read, slowloris, half-sent headers --------------------------------
 
 
-def _kernel_buffers() -> int:
-    """The most a paused connection can hold in the kernel: the receiver's and the sender's
-    buffers at their largest (the tcp_rmem and tcp_wmem maximums)."""
-    total = 0
-    for name in ("tcp_rmem", "tcp_wmem"):
-        with open(f"/proc/sys/net/ipv4/{name}") as file:
-            total += int(file.read().split()[2])
-    return total
-
-
-def _send_until_blocked(sock: socket.socket, chunk: bytes) -> int:
-    """Send `chunk` over and over without reading; stop once the server has taken nothing
-    for 0.3 s, closed, or 64 MiB went. Return the bytes sent."""
-    sock.settimeout(0.3)
-    sent = 0
-    while sent < 64 << 20:
-        try:
-            sent += sock.send(chunk)
-        except (TimeoutError, ConnectionError, ssl.SSLError):
-            break
-    return sent
+_flood = functools.partial(send_until_blocked, quiet=0.3)
+"""Send until the server has taken nothing for 0.3 s, closed, or 64 MiB went."""
 
 
 @pytest.mark.parametrize("name", MODBUS_STREAMS)
 async def test_a_pipelining_client_that_never_reads_is_held_back(name: str, tmp_path: Path) -> None:
     """Requests streamed without reading a reply: the server takes no more than the kernel's
     buffers and a window of its own, and the client's connection is closed within the idle
-    timeout once its replies cannot be written."""
+    timeout once its replies cannot be written. Each request reads 125 registers: its reply,
+    21 times its size, fills the server's sending side after a few thousand requests, not
+    hundreds of thousands."""
 
-    bound = _kernel_buffers() + (1 << 20)
+    bound = kernel_buffers() + (1 << 20)
     async with listener(tmp_path, name) as target:
         with records() as log:
             connect = functools.partial(open_client, target, receive_buffer=4096)
             sock = await anyio.to_thread.run_sync(connect)
             with sock:
                 sent = await anyio.to_thread.run_sync(
-                    _send_until_blocked, sock, target.request() * 2048
+                    _flood, sock, target.request(pdu=READ_ALL) * 2048
                 )
                 await _answers(target)
                 # Reset: the requests the kernel holds go with it, not through the server.
@@ -398,7 +382,7 @@ def test_a_client_that_never_reads_its_replies_is_closed(
             with await anyio.to_thread.run_sync(connect) as sock:
                 read = target.request(pdu=READ_ALL) * 1024
                 for _ in range(24):  # 300,000 requests' worth of replies: 6 MiB
-                    await anyio.to_thread.run_sync(_send_until_blocked, sock, read)
+                    await anyio.to_thread.run_sync(_flood, sock, read)
                     if target.server.counters.connections_idle:
                         break
                 await _until(lambda: target.server.counters.connections_idle == 1)

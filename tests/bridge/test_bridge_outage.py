@@ -15,7 +15,7 @@ import pytest
 
 from aiortu.bridge import Bridge, BrokerError, parse_config
 from aiortu.errors import ConfigError
-from tests.bridge.helpers import HEAT_PUMP, config
+from tests.bridge.helpers import HEAT_PUMP, config, fast_heat_pump
 from tests.bridge.mosquitto import Mosquitto, Subscriber, free_port
 from tests.bridge.test_bridge_broker import until
 
@@ -46,7 +46,8 @@ async def test_the_backlog_arrives_in_order_after_a_broker_restart(mosquitto: Mo
     # The subscriber's session persists on the broker: it misses nothing after the restart.
     subscriber = Subscriber(mosquitto.port, ["aiortu/hp-1/power"], "keeper", persistent=True)
     try:
-        async with Bridge(config(mosquitto.url, units=(1,))) as bridge:
+        # Polled every 0.25 s: the values of the outage are a quarter of a second apart.
+        async with Bridge(config(mosquitto.url, units=(1,), profile=fast_heat_pump())) as bridge:
             bridge.session.reconnect_delay = RECONNECT_DELAY
             await until(lambda: subscriber.on("aiortu/hp-1/power") == [b"1800.0"])
             await _count_through_an_outage(mosquitto, bridge, 5)
@@ -60,9 +61,11 @@ async def test_the_backlog_arrives_in_order_after_a_broker_restart(mosquitto: Mo
 
 async def test_what_the_bound_drops_is_counted_and_published(mosquitto: Mosquitto) -> None:
     subscriber = Subscriber(mosquitto.port, ["aiortu/#"], "keeper", persistent=True)
-    # Every point every poll: about 6 messages a second for a bound of 20.
+    # Every point every poll, polled every 0.25 s: about 24 messages a second for a bound
+    # of 20.
     bounded = config(mosquitto.url, units=(1,), device='publish = "every"',
-                     extra="[buffer]\nmax_messages = 20\n")  # fmt: skip
+                     extra="[buffer]\nmax_messages = 20\n",
+                     profile=fast_heat_pump())  # fmt: skip
     try:
         async with Bridge(bounded) as bridge:
             bridge.session.reconnect_delay = RECONNECT_DELAY
