@@ -116,8 +116,7 @@ class BrokerSession:
         """Whether the session is connected now."""
         self.connections = 0
         """Connections made (the first one counts)."""
-        self.delivered = 0
-        """Messages the broker took: acknowledged (QoS 1) or written (QoS 0)."""
+        self._delivered = 0
         self.last_error: str | None = None
         """Why the last connection failed or ended."""
         self._inflight: dict[int, Message] = {}
@@ -132,6 +131,13 @@ class BrokerSession:
         self._writer = PublishWriter()
         self._early: list[Packet] = []
         self._sending = anyio.Lock()
+
+    @property
+    def delivered(self) -> int:
+        """Messages the broker took: acknowledged (QoS 1) or written (QoS 0). On a pushed
+        connection the acknowledgements waiting in the kernel are taken first."""
+        self._collect()
+        return self._delivered
 
     async def _write(self, stream: anyio.abc.ByteStream | PushedLink, data: bytes) -> None:
         # The sender, the pinger and the acknowledgements of commands share the stream. The
@@ -286,7 +292,7 @@ class BrokerSession:
                     self._next_id = number
                     inflight[number] = message
                 else:
-                    self.delivered += 1
+                    self._delivered += 1
                 payload = message.payload if message.metrics is None else prepare(message)
                 add(message.topic, payload, message.qos, message.retain, number)
         finally:
@@ -307,11 +313,12 @@ class BrokerSession:
         try:
             link.write(self._answers(self._early_packets()))
             link.on_writable = self._flush
-            self.outbox.notify(self._flush)
+            self.outbox.notify(self._filled)
             link.set_receiver(self._pushed)
             self._flush()
             await link.ended()
         finally:
+            self._collect()  # what the broker acknowledged is not sent again
             self.outbox.notify(None)
             self._link = link.on_writable = None
 
@@ -327,20 +334,34 @@ class BrokerSession:
             self._link.write(answers)
         self._flush()
 
+    def _filled(self) -> None:
+        """The outbox's listener: the acknowledgements waiting in the kernel first (read in
+        this turn of the loop, not in a wake of their own), then the writes. A command's
+        messages wait for its PUBACK: the read callback writes them after it."""
+        if not self._holding and not self._collect():
+            self._flush()
+
+    def _collect(self) -> bool:
+        """Take what the pushed link holds below its mark; whether there was any (then
+        `_pushed` has written what waits)."""
+        link = self._link
+        data = link.collect() if link is not None else b""
+        if data:
+            self._pushed(data)
+        return bool(data)
+
     def _flush(self) -> None:
         """Write what waits in the outbox, within the window, while the link takes it."""
         link, outbox = self._link, self.outbox
-        if self._holding:
-            return
         if link is None:
             return
         while link.writable and outbox and (room := self._room()) > 0:
             link.write(self._encode(outbox.take(room)))
-        # Woken once for the PUBACKs of what is in flight, not once for each; by any byte
-        # while messages wait for room (each PUBACK makes some) and after a PINGREQ (the
-        # keep-alive hears the broker as it did).
-        wanted = PUBACK_SIZE * len(self._inflight) - self._reader.pending
-        link.expect(1 if self._pinged or outbox else wanted)
+        # Never woken by the PUBACKs of what is in flight alone (the next write collects
+        # them), but by any byte more; by any byte while messages wait for room (each PUBACK
+        # makes some) and after a PINGREQ (the keep-alive hears the broker as it did).
+        owed = PUBACK_SIZE * len(self._inflight) - self._reader.pending
+        link.expect(1 if self._pinged or outbox else owed + 1)
 
     def _early_packets(self) -> list[Packet]:
         """What came with the CONNACK (kept until the connection is served)."""
@@ -368,7 +389,7 @@ class BrokerSession:
         before, pop = len(inflight), inflight.pop
         for packet_id in packet_ids:
             pop(packet_id, None)
-        self.delivered += before - len(inflight)  # not done.count(None): Message's __eq__ each
+        self._delivered += before - len(inflight)  # not done.count(None): Message's __eq__ each
         if self._acked is not None:
             self._acked.set()
 
