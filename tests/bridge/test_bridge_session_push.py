@@ -423,8 +423,9 @@ async def test_a_poll_s_acknowledgements_wake_nothing_and_the_next_write_reads_t
 
 
 async def test_collect_reads_below_the_mark_without_waiting_and_ends_the_link_on_a_reset() -> None:
-    """`PushedLink.collect` reads only what waits below a mark above one byte, never waits,
-    and a reset of the connection ends the link with it (not raised into the caller)."""
+    """`PushedLink.collect` reads only what waits below a mark above one byte, hands it on as
+    the loop's callback would, never waits, and a reset of the connection ends the link with
+    it (not raised into the caller)."""
     server = socket.create_server(("127.0.0.1", 0))
     with server:
         link = await open_pushed("127.0.0.1", server.getsockname()[1], None)
@@ -433,21 +434,56 @@ async def test_collect_reads_below_the_mark_without_waiting_and_ends_the_link_on
             peer.sendall(b"12345678")
             await anyio.sleep(0.05)  # the mark is one byte: the loop's callback reads them
             assert link._kept == [b"12345678"]
-            assert link.collect() == b""
+            link.collect()  # a mark of one byte: nothing read
+            assert link._kept == [b"12345678"]
             link.expect(9)
             peer.sendall(b"abcdefgh")
             await anyio.sleep(0.05)
             if not _marks():
-                assert link._kept[1:] == [b"abcdefgh"]
-                assert link.collect() == b""
+                assert link._kept == [b"12345678", b"abcdefgh"]
                 return
             assert link._kept == [b"12345678"]  # below the mark: no wake
-            assert link.collect() == b"abcdefgh"
-            assert link.collect() == b""  # nothing waits
+            link.collect()
+            assert link._kept == [b"12345678", b"abcdefgh"]  # handed on as the callback does
+            link.collect()  # nothing waits: no wait, nothing handed on
+            assert link._kept == [b"12345678", b"abcdefgh"]
             peer.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
-        assert link.collect() == b""  # the reset, read before the loop's callback
+        link.collect()  # the reset, read before the loop's callback
         with pytest.raises(ConnectionResetError):
             await link.ended()
+
+
+async def test_bytes_that_are_not_mqtt_below_the_mark_end_the_connection_not_the_poll() -> None:
+    """What the next fill of the outbox reads below the mark is taken as the read callback
+    takes it: bytes that are not MQTT end the connection (the session connects again), and
+    the caller that filled the outbox (a poll) goes on."""
+    count = 10
+
+    async def broker(stream: anyio.abc.ByteStream) -> None:
+        reader = PacketReader()
+        while not reader.feed(await stream.receive()):  # CONNECT
+            pass
+        await stream.send(CONNACK)
+        got: list[Packet] = []
+        while len(got) < count:
+            got += reader.feed(await stream.receive())
+        await stream.send(bytes((0x30, 0xFF, 0xFF, 0xFF, 0xFF, 0x7F)))  # below the mark of 41
+        await anyio.sleep_forever()
+
+    outbox = Outbox()
+    session, listener = await _connected(broker, outbox)
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(listener.serve, broker)
+        tasks.start_soon(session.run)
+        await _until(lambda: session.connected)
+        outbox.put_all([Message("t", b"%d" % n, qos=1) for n in range(count)])
+        await anyio.sleep(0.1)
+        if _marks():
+            assert session.connections == 1  # below the mark: not read yet
+        outbox.put(Message("t", b"next", qos=1))  # reads them, and does not raise
+        await _until(lambda: session.connections == 2)
+        tasks.cancel_scope.cancel()
+    assert session.last_error == "a malformed MQTT remaining length"
 
 
 def _marks() -> bool:

@@ -338,17 +338,14 @@ class BrokerSession:
         """The outbox's listener: the acknowledgements waiting in the kernel first (read in
         this turn of the loop, not in a wake of their own), then the writes. A command's
         messages wait for its PUBACK: the read callback writes them after it."""
-        if not self._holding and not self._collect():
+        if not self._holding:
+            self._collect()
             self._flush()
 
-    def _collect(self) -> bool:
-        """Take what the pushed link holds below its mark; whether there was any (then
-        `_pushed` has written what waits)."""
-        link = self._link
-        data = link.collect() if link is not None else b""
-        if data:
-            self._pushed(data)
-        return bool(data)
+    def _collect(self) -> None:
+        """Take what the pushed link holds below its mark (see `PushedLink.collect`)."""
+        if self._link is not None:
+            self._link.collect()
 
     def _flush(self) -> None:
         """Write what waits in the outbox, within the window, while the link takes it."""

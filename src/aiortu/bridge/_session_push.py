@@ -133,22 +133,23 @@ class PushedLink(asyncio.Protocol):
             return
         self._mark = size
 
-    def collect(self) -> bytes:
-        """What waits below the mark in the kernel, read without waiting (empty when nothing
-        does, or no mark above one byte is set: then every chunk is read as it comes). The end
-        of the connection is left for the loop's callback, which reads it as ever; an error
-        ends the link."""
+    def collect(self) -> None:
+        """Hand what waits below the mark in the kernel to the receiver, as the loop's
+        callback would (an error ends the link), without waiting. Nothing is read while the
+        mark is one byte: the loop's callback reads every chunk then. The end of the
+        connection is left for that callback, which reads it as ever."""
         if self._mark == 1 or self._socket is None:
-            return b""
+            return
         try:
-            return os.read(self._socket.fileno(), _COLLECT)
+            data = os.read(self._socket.fileno(), _COLLECT)
         except BlockingIOError:
-            return b""
+            return
         except OSError as error:
             self.end(error)
             if self.transport is not None:
                 self.transport.abort()
-            return b""
+            return
+        self.data_received(data)  # empty at the end, which the loop's callback then reads
 
     def write(self, data: bytes) -> None:
         """Write `data` now (nothing once the link has ended)."""
