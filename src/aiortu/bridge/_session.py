@@ -280,24 +280,30 @@ class BrokerSession:
 
     def _encode(self, messages: list[Message]) -> bytes:
         """The PUBLISH packets of `messages`, each QoS 1 one in flight from now on."""
-        prepare, inflight, writer = self.hooks.prepare, self._inflight, self._writer
-        add = writer.add
+        writer = self._writer
         try:
-            for message in messages:
-                number = 0
-                if message.qos:
-                    number = self._next_id % 65535 + 1  # the next id, unless still in flight
-                    if number in inflight:
-                        number = self._packet_id()
-                    self._next_id = number
-                    inflight[number] = message
-                else:
-                    self._delivered += 1
-                payload = message.payload if message.metrics is None else prepare(message)
-                add(message.topic, payload, message.qos, message.retain, number)
+            writer.add_all(messages, self._number(messages), self.hooks.prepare)
         finally:
             packets = writer.joined()  # and none left for the next batch if one failed
         return packets
+
+    def _number(self, messages: list[Message]) -> list[int]:
+        """The packet id of each of `messages` (0 at QoS 0): the next one not in flight."""
+        inflight, ids = self._inflight, []
+        number = self._next_id
+        for message in messages:
+            if message.qos:
+                number = number % 65535 + 1
+                if number in inflight:
+                    self._next_id = number
+                    number = self._packet_id()
+                inflight[number] = message
+                ids.append(number)
+            else:
+                ids.append(0)
+        self._next_id = number
+        self._delivered += ids.count(0)  # QoS 0: taken once written
+        return ids
 
     async def _receive(self, stream: anyio.abc.ByteStream) -> None:
         answers = self._answers(self._early_packets())
