@@ -73,15 +73,15 @@ class Target:
     client_context: ssl.SSLContext | None = None
     max_connections: int = MAX_CONNECTIONS
 
-    def request(self, transaction_id: int = 1) -> bytes:
-        """A good request in this listener's framing."""
+    def request(self, transaction_id: int = 1, pdu: bytes = READ) -> bytes:
+        """A good request in this listener's framing (`pdu` the good read by default)."""
         if self.framing == "rtu":
-            return encode_frame(UNIT, READ)
+            return encode_frame(UNIT, pdu)
         if self.framing == "ascii":
-            return encode_ascii_frame(UNIT, READ)
+            return encode_ascii_frame(UNIT, pdu)
         if self.framing == "http":
             return b"GET /metrics HTTP/1.0\r\n\r\n"
-        return encode_adu(transaction_id, UNIT, READ)
+        return encode_adu(transaction_id, UNIT, pdu)
 
     def reply(self, transaction_id: int = 1) -> bytes:
         """What the good request gets (for http: the start of the status line)."""
@@ -256,7 +256,6 @@ async def _serve(
     options: dict[str, Any] = {}
     if scheme != "udp":
         options["max_connections"] = max_connections
-    if scheme in ("tcp", "tls"):
         options["idle_timeout"] = IDLE_TIMEOUT
     if scheme == "tls":
         options.update(files, rules=RULES)

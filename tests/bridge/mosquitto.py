@@ -128,5 +128,7 @@ class Subscriber:
         self.client.publish(topic, payload, qos=qos).wait_for_publish(5)
 
     def close(self) -> None:
-        self.client.loop_stop()
+        # Disconnect first: it wakes the network thread, which then ends at once; stopped
+        # first, the thread is joined only when its select() times out, a second later.
         self.client.disconnect()
+        self.client.loop_stop()

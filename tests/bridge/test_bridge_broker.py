@@ -12,7 +12,7 @@ from pysparkplug import DataType as SpDataType
 from pysparkplug import Topic
 
 from aiortu.bridge import Bridge, DataType, Metric, SparkplugPayload, encode_payload
-from tests.bridge.helpers import config
+from tests.bridge.helpers import FAST_POLL, config, fast_heat_pump
 from tests.bridge.mosquitto import Mosquitto, Subscriber
 
 pytestmark = pytest.mark.timeout(60)
@@ -35,7 +35,7 @@ async def until(condition: object, within: float = 10) -> None:
 async def test_values_and_home_assistant_discovery(
     mosquitto: Mosquitto, subscriber: Subscriber
 ) -> None:
-    async with Bridge(config(mosquitto.url)) as bridge:
+    async with Bridge(config(mosquitto.url, profile=fast_heat_pump())) as bridge:
         await until(lambda: "aiortu/hp-2/setpoint" in subscriber.last())
         last = subscriber.last()
         assert last["aiortu/bridge/test/status"] == b"online"
@@ -62,8 +62,8 @@ async def test_values_and_home_assistant_discovery(
         mode = json.loads(last["homeassistant/select/test/hp_1_mode/config"])
         assert mode["options"] == ["off", "heat", "cool", "auto"]
         assert "homeassistant/switch/test/hp_1_pump/config" in last
-        # On change: a value published once, until it changes.
-        await anyio.sleep(1.2)
+        # On change: a value published once, until it changes (over four polls).
+        await anyio.sleep(4 * FAST_POLL)
         assert subscriber.on("aiortu/hp-1/power") == [b"1800.0"]
         bridge.simulated["hp-1"].set_value("power", 2500.0)
         await until(lambda: subscriber.on("aiortu/hp-1/power")[-1:] == [b"2500.0"], 5)
@@ -73,10 +73,11 @@ async def test_values_and_home_assistant_discovery(
 async def test_every_poll_points_are_published_every_poll(
     mosquitto: Mosquitto, subscriber: Subscriber
 ) -> None:
-    every = config(mosquitto.url, units=(1,), device='every_poll = ["power"]')
+    every = config(mosquitto.url, units=(1,), device='every_poll = ["power"]',
+                   profile=fast_heat_pump())  # fmt: skip
     async with Bridge(every):
-        await anyio.sleep(2.6)
-    assert len(subscriber.on("aiortu/hp-1/power")) >= 2
+        # Three polls published (the temperature goes before the power in each).
+        await until(lambda: len(subscriber.on("aiortu/hp-1/power")) >= 3)
     assert len(subscriber.on("aiortu/hp-1/flow_temperature")) == 1
 
 

@@ -13,7 +13,7 @@ import pytest
 from aiortu.bridge import Bridge, parse_config
 from aiortu.core.model import load_profile
 from aiortu.slave import ModbusTcpServer, ProfileStore
-from tests.bridge.helpers import HEAT_PUMP
+from tests.bridge.helpers import HEAT_PUMP, fast_heat_pump
 from tests.bridge.mosquitto import Mosquitto, Subscriber, free_port
 from tests.bridge.test_bridge_broker import _of, _sparkplug, until
 
@@ -22,7 +22,8 @@ pytestmark = pytest.mark.timeout(60)
 
 def _config(url: str, port: int, layout: str) -> str:
     devices = "".join(
-        f'[[line.device]]\nname = "hp-{u}"\nunit = {u}\nprofile = "{HEAT_PUMP}"\n' for u in (1, 3)
+        f'[[line.device]]\nname = "hp-{u}"\nunit = {u}\nprofile = "{fast_heat_pump()}"\n'
+        for u in (1, 3)
     )
     return (
         f'[broker]\nurl = "{url}"\nkeepalive = 5\n[topics]\nlayout = "{layout}"\nnode = "t"\n'

@@ -15,7 +15,7 @@ import pytest
 
 from aiortu.bridge import Bridge, BrokerError, parse_config
 from aiortu.errors import ConfigError
-from tests.bridge.helpers import HEAT_PUMP, config
+from tests.bridge.helpers import HEAT_PUMP, config, fast_heat_pump
 from tests.bridge.mosquitto import Mosquitto, Subscriber, free_port
 from tests.bridge.test_bridge_broker import until
 
@@ -46,7 +46,8 @@ async def test_the_backlog_arrives_in_order_after_a_broker_restart(mosquitto: Mo
     # The subscriber's session persists on the broker: it misses nothing after the restart.
     subscriber = Subscriber(mosquitto.port, ["aiortu/hp-1/power"], "keeper", persistent=True)
     try:
-        async with Bridge(config(mosquitto.url, units=(1,))) as bridge:
+        # Polled every 0.25 s: the values of the outage are a quarter of a second apart.
+        async with Bridge(config(mosquitto.url, units=(1,), profile=fast_heat_pump())) as bridge:
             bridge.session.reconnect_delay = RECONNECT_DELAY
             await until(lambda: subscriber.on("aiortu/hp-1/power") == [b"1800.0"])
             await _count_through_an_outage(mosquitto, bridge, 5)
@@ -60,9 +61,11 @@ async def test_the_backlog_arrives_in_order_after_a_broker_restart(mosquitto: Mo
 
 async def test_what_the_bound_drops_is_counted_and_published(mosquitto: Mosquitto) -> None:
     subscriber = Subscriber(mosquitto.port, ["aiortu/#"], "keeper", persistent=True)
-    # Every point every poll: about 6 messages a second for a bound of 20.
+    # Every point every poll, polled every 0.25 s: about 24 messages a second for a bound
+    # of 20.
     bounded = config(mosquitto.url, units=(1,), device='publish = "every"',
-                     extra="[buffer]\nmax_messages = 20\n")  # fmt: skip
+                     extra="[buffer]\nmax_messages = 20\n",
+                     profile=fast_heat_pump())  # fmt: skip
     try:
         async with Bridge(bounded) as bridge:
             bridge.session.reconnect_delay = RECONNECT_DELAY
@@ -212,6 +215,85 @@ def test_the_command_says_what_is_wrong_in_one_line(tmp_path: Path) -> None:
         assert done.returncode == code
         assert done.stderr.count("\n") == 1
         assert text in done.stderr
+
+
+_LONG = 65_536 - len("aiortu/hp-1/")
+"""A point name that makes its plain topic, `aiortu/hp-1/NAME`, one byte too long."""
+
+
+def _profile_with_a_point(tmp_path: Path, name: str) -> Path:
+    """A profile of one writable register named `name`."""
+    path = tmp_path / "long.toml"
+    path.write_text(f'[device]\nmanufacturer = "M"\nmodel = "L"\n[[point]]\nname = "{name}"\n'
+                    'address = 0\ntype = "u16"\naccess = "rw"\n')  # fmt: skip
+    return path
+
+
+def _with_profile(profile: Path, topics: str = "") -> str:
+    return (topics + _LINE.format(url="mqtt://127.0.0.1:1")
+            + f'name = "hp-1"\nunit = 1\nprofile = "{profile}"\n')  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("layout", "name", "size"),
+    [
+        ("plain", "p" * (_LONG - 4), 65_536),  # its command topic, NAME/set
+        ("plain", "p" * (_LONG - 5), None),  # 65,535 bytes: fits
+        ("home-assistant", "p" * (_LONG - 4), 65_536),
+        ("home-assistant", "p" * (_LONG - 5), 65_559),  # its discovery topic, longer
+        ("sparkplug", "p" * _LONG, None),  # a metric is no topic
+    ],
+)
+def test_a_topic_over_mqtts_limit_is_refused_when_loaded(
+    tmp_path: Path, layout: str, name: str, size: int | None
+) -> None:
+    text = _with_profile(_profile_with_a_point(tmp_path, name), f'[topics]\nlayout = "{layout}"\n')
+    if size is None:
+        parse_config(text, "bridge.toml")
+        return
+    with pytest.raises(BrokerError) as caught:
+        parse_config(text, "bridge.toml")
+    message = str(caught.value)
+    assert message.startswith("bridge.toml: the topic of device 'hp-1', point 'pppp")
+    assert f" is {size:,} bytes, more than the 65,535 an MQTT topic holds" in message
+    assert len(message) < 300
+    assert "\n" not in message
+
+
+@pytest.mark.parametrize("key", ["client_id", "username", "password"])
+def test_a_broker_string_over_mqtts_limit_is_refused_when_loaded(key: str) -> None:
+    text = _LINE.format(url="mqtt://127.0.0.1:1") + f'unit = 1\nprofile = "{HEAT_PUMP}"\n'
+    text = text.replace("[[line]]", f'{key} = "{"x" * 65_536}"\n[[line]]')
+    with pytest.raises(BrokerError) as caught:
+        parse_config(text, "bridge.toml")
+    name = key.replace("_", " ")
+    assert str(caught.value) == (
+        f"bridge.toml: broker {name}: 65,536 bytes, more than the 65,535 MQTT allows"
+    )
+    parse_config(text.replace("x" * 65_536, "x" * 65_535), "bridge.toml")
+
+
+def test_the_bridges_own_topics_are_checked_in_bytes() -> None:
+    # 32,760 characters of two bytes each: the status topic (the last will's) is too long.
+    prefix = "é" * 32_760
+    line = _LINE.format(url="mqtt://127.0.0.1:1") + f'unit = 1\nprofile = "{HEAT_PUMP}"\n'
+    text = f'[topics]\nlayout = "plain"\nprefix = "{prefix}"\n' + line
+    with pytest.raises(BrokerError) as caught:
+        parse_config(text, "test")
+    assert str(caught.value).startswith("test: the topic of the bridge is 65,541 bytes, more")
+
+
+def test_the_command_refuses_a_topic_too_long_in_one_line(tmp_path: Path) -> None:
+    profile = _profile_with_a_point(tmp_path, "p" * _LONG)
+    path = tmp_path / "bridge.toml"
+    path.write_text(_with_profile(profile))
+    done = subprocess.run([sys.executable, "-m", "aiortu", "bridge", "--config", str(path)],
+                          capture_output=True, text=True, timeout=60, check=False)  # fmt: skip
+    assert done.returncode == 1
+    assert done.stderr.count("\n") == 1
+    assert "device 'hp-1', point 'pppp" in done.stderr
+    assert "is 65,540 bytes" in done.stderr
+    assert "Traceback" not in done.stderr
 
 
 def test_the_command_counts_its_devices_and_lines_in_words(tmp_path: Path) -> None:

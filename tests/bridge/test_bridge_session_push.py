@@ -556,7 +556,7 @@ async def test_a_broker_that_holds_its_acknowledgements_is_still_heard_by_the_ke
         tasks.start_soon(session.run)
         await _until(lambda: session.connected)
         outbox.put_all([Message("t", b"%d" % n, qos=1) for n in range(5)])
-        await anyio.sleep(3.2)
+        await anyio.sleep(2.2)  # two keep-alives
         tasks.cancel_scope.cancel()
     assert session.connections == 1
     assert session.last_error is None

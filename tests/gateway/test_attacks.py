@@ -8,6 +8,7 @@ time a quiet machine happens to show."""
 
 from __future__ import annotations
 
+import functools
 import socket
 import struct
 from collections.abc import Callable
@@ -20,6 +21,7 @@ from aiortu.gateway import GatewayStatistics
 from aiortu.slave import MemoryStore, RequestContext, Table
 from aiortu.transport import listen_tcp
 from tests.gateway.helpers import UNIT, TcpClient, client, device, line, memory_client
+from tests.tcp_flood import kernel_buffers, send_until_blocked
 from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(60)
@@ -113,6 +115,11 @@ async def test_a_half_closed_client_still_gets_its_reply() -> None:
         await _until(lambda: bench.gateway.connections == 0)
 
 
+_flood = functools.partial(send_until_blocked, quiet=2.0, most=96 << 20)
+"""Send until the server has taken nothing for 2 s, closed, or 96 MiB went: a gateway that
+reads without a window takes its bytes in bursts a slow line's replies apart."""
+
+
 async def test_a_client_that_never_reads_is_closed_as_idle() -> None:
     """Replies it never reads fill its buffers; the one that waits `idle_timeout` to be
     written closes the connection, and with it the requests it still has."""
@@ -122,24 +129,13 @@ async def test_a_client_that_never_reads_is_closed_as_idle() -> None:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         sock.connect(("127.0.0.1", bench.gateway.port))
         read = encode_adu(1, UNIT, bytes.fromhex("03 0000 007D"))  # a 250-byte reply each
-        sent = await anyio.to_thread.run_sync(_send_until_blocked, sock, read * 64)
+        # Until the server takes nothing for 0.3 s: the idle close is waited for below.
+        flood = functools.partial(send_until_blocked, quiet=0.3)
+        sent = await anyio.to_thread.run_sync(flood, sock, read * 64)
         await _until(lambda: bench.gateway.counters.connections_idle == 1)
         await _until(lambda: bench.gateway.connections == 0)
         assert sent > 0
         sock.close()
-
-
-def _send_until_blocked(sock: socket.socket, chunk: bytes) -> int:
-    """Send `chunk` over and over without reading; stop once the server has taken nothing
-    for 2 s (or after 96 MiB). Return the bytes sent."""
-    sock.settimeout(2.0)
-    sent = 0
-    while sent < 96 << 20:
-        try:
-            sent += sock.send(chunk)
-        except (TimeoutError, ConnectionError):
-            break
-    return sent
 
 
 @on_virtual_clock
@@ -195,16 +191,6 @@ def test_the_statistics_bound_holds_for_any_number_of_hosts() -> None:
     assert len(list(statistics.summary())) <= 17 + 1
 
 
-def _kernel_buffers() -> int:
-    """The most a paused connection can hold in the kernel: the receiver's and the sender's
-    buffers at their largest (the tcp_rmem and tcp_wmem maximums)."""
-    total = 0
-    for name in ("tcp_rmem", "tcp_wmem"):
-        with open(f"/proc/sys/net/ipv4/{name}") as file:
-            total += int(file.read().split()[2])
-    return total
-
-
 @pytest.mark.parametrize("server", ["gateway", "serve tcp://"])
 async def test_a_pipelining_client_that_never_reads_is_held_back_by_tcp(server: str) -> None:
     """Requests streamed faster than a slow unit answers, replies never read: the client can
@@ -214,7 +200,7 @@ async def test_a_pipelining_client_that_never_reads_is_held_back_by_tcp(server: 
     async def slow(request: object, context: RequestContext) -> None:
         await anyio.sleep(0.05)
 
-    bound = _kernel_buffers() + (1 << 20)
+    bound = kernel_buffers() + (1 << 20)
     read = encode_adu(1, UNIT, bytes.fromhex("03 0000 0001")) * 4096
     async with line(master_options={"timeout": 5.0}) as bench:
         bench.slave.before_request(slow)
@@ -225,7 +211,7 @@ async def test_a_pipelining_client_that_never_reads_is_held_back_by_tcp(server: 
                 # Bytes waiting before the server's first read: where anyio's accept left
                 # the connection reading for good.
                 sock.sendall(read[:65536])
-                sent = await anyio.to_thread.run_sync(_send_until_blocked, sock, read)
+                sent = await anyio.to_thread.run_sync(_flood, sock, read)
     assert 0 < sent <= bound, f"{sent} bytes taken, more than the {bound} TCP can hold"
 
 

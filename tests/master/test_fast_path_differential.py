@@ -1,12 +1,13 @@
 """The master's fast path (the usual exchange) against the machine's route, differentially.
 
 Seeded random sequences of reads and writes, each with a device plan (a fault or not)
-and sometimes a cancellation, run four times: with ``fast_path`` on and
-off, on a serial port over a pty (the push path, where the fast path runs) and on a
-VirtualBus. Every run must give the same results, the same per-unit statistics and the
-same requests on the wire. The device plays each plan reacting to what it sees (the
-request, the caller gone, the master's retry), not to the clock, so that the outcome
-does not depend on the machine's load.
+and sometimes a cancellation, run four times: with ``fast_path`` on and off, on a serial
+port over a pty (the push path, where the fast path runs) and on a VirtualBus (on the
+virtual clock of tests/virtual_clock.py: its timeouts and guards are exact and take no real
+time). Every run must give the same results, the same per-unit statistics and the same
+requests on the wire. The device plays each plan reacting to what it sees (the request,
+the caller gone, the master's retry), not to the clock, so that the outcome does not depend
+on the machine's load.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from aiortu.testing import VirtualBus
 from aiortu.transport import open_serial
 from tests.master.fakes import standard_reply
 from tests.transport.ptys import LINE, Pty, open_pty, read_master
+from tests.virtual_clock import VirtualTimeLoop
 
 TIMEOUT = 0.25
 """The response timeout of the plans where an attempt must time out. Their retry must
@@ -300,6 +302,23 @@ def compare(runs: dict[tuple[str, bool], tuple[object, ...]]) -> None:
             assert ours == theirs, f"{name} differ: {key} against the machine on the pty"
 
 
+def both_lines(
+    usual_exchanges: bool, ops: list[Op], player: Player, gap: float
+) -> dict[tuple[str, bool], tuple[object, ...]]:
+    """The runs on a pty (in real time) and on a virtual bus (on the virtual clock)."""
+    return {
+        ("pty", usual_exchanges): anyio.run(on_a_pty, usual_exchanges, ops, player, gap),
+        ("virtual bus", usual_exchanges): anyio.run(
+            on_a_virtual_bus,
+            usual_exchanges,
+            ops,
+            player,
+            gap,
+            backend_options={"loop_factory": VirtualTimeLoop},
+        ),
+    }
+
+
 def print_failing(seed: int, ops: list[Op]) -> None:
     print(f"differential seed {seed} (AIORTU_DIFFERENTIAL_SEED={seed}); operations:")
     for op in ops:
@@ -312,17 +331,14 @@ GAPS = [0, 0.002]
 
 @pytest.mark.parametrize("gap", GAPS)
 @pytest.mark.parametrize("half", [0, 1])
-async def test_the_fast_path_and_the_machine_agree(half: int, gap: float) -> None:
+def test_the_fast_path_and_the_machine_agree(half: int, gap: float) -> None:
     # Each half of the faults is sure to come up once; the other operations are drawn.
     seed = SEED + half
     ops = scenario(seed, 8, FAULTS[half::2])
     runs = {}
     try:
         for usual_exchanges in (True, False):
-            runs["pty", usual_exchanges] = await on_a_pty(usual_exchanges, ops, gap=gap)
-            runs["virtual bus", usual_exchanges] = await on_a_virtual_bus(
-                usual_exchanges, ops, gap=gap
-            )
+            runs |= both_lines(usual_exchanges, ops, play, gap)
         compare(runs)
     except BaseException:
         print_failing(seed, ops)
@@ -341,7 +357,7 @@ BURST_PLANS = (
 
 
 @pytest.mark.parametrize("gap", GAPS)
-async def test_many_callers_at_once_agree(gap: float) -> None:
+def test_many_callers_at_once_agree(gap: float) -> None:
     # Twelve callers at once, mostly reads: eleven queue, and each is handed the line
     # by the one before (with a gap, its request waits for the silence on a timer);
     # faults on the way send some through the machine (the guard).
@@ -361,10 +377,7 @@ async def test_many_callers_at_once_agree(gap: float) -> None:
     runs = {}
     try:
         for usual_exchanges in (True, False):
-            runs["pty", usual_exchanges] = await on_a_pty(usual_exchanges, ops, play_burst, gap)
-            runs["virtual bus", usual_exchanges] = await on_a_virtual_bus(
-                usual_exchanges, ops, play_burst, gap
-            )
+            runs |= both_lines(usual_exchanges, ops, play_burst, gap)
         compare(runs)
     except BaseException:
         print_failing(seed, ops)

@@ -2,8 +2,10 @@
 
 The concurrency test runs 100 coroutines x 8 requests (800 transactions) to 10 units:
 at 19200 baud each read of one register takes about 12.6 ms on the wire with its two
-t3.5 silences, so the issue's 100 x 100 would take over two minutes; 800 keep the test
-near 10 s while still interleaving every caller with every other.
+t3.5 silences, about 10 s of line time, which still interleaves every caller with every
+other. Both tests run on the virtual clock (tests/virtual_clock.py): the line's pacing, the
+timeouts and the guard are exact and take no real time, and a collector pause of the
+machine cannot open a gap inside a frame.
 """
 
 from __future__ import annotations
@@ -12,12 +14,12 @@ import itertools
 import random
 
 import anyio
-import pytest
 
 import aiortu
 from aiortu.core.pdu import ReadHoldingRegistersRequest, Request
 from aiortu.core.serial import LineSettings
 from aiortu.testing import FaultPlan, VirtualBus
+from tests.virtual_clock import on_virtual_clock
 
 from .fakes import FakeSlave, answer, register_value, until_idle
 
@@ -31,8 +33,7 @@ async def answer_after_silence(slave: FakeSlave, unit: int, request: Request) ->
     await answer(slave, unit, request)
 
 
-@pytest.mark.timeout(60)
-@pytest.mark.usefixtures("without_collector_pauses")
+@on_virtual_clock
 async def test_many_callers_on_a_paced_line_keep_order_and_t3_5() -> None:
     callers, per_caller, units = 100, 8, 10
     bus = VirtualBus(2, settings=SETTINGS, trace_size=10 * callers * per_caller)
@@ -91,9 +92,7 @@ async def test_many_callers_on_a_paced_line_keep_order_and_t3_5() -> None:
     assert all(len(entry.data) == 8 for entry in trace if entry.sender == 0)
 
 
-@pytest.mark.timeout(60)
-@pytest.mark.parametrize(("bit_error_rate", "transactions"), [(1e-4, 400), (2e-3, 150)])
-async def test_a_noisy_line_gives_right_values_or_typed_errors(
+async def a_noisy_line_gives_right_values_or_typed_errors(
     bit_error_rate: float, transactions: int
 ) -> None:
     generator = random.Random(11)
@@ -127,3 +126,13 @@ async def test_a_noisy_line_gives_right_values_or_typed_errors(
     assert bus.injector is not None
     assert bus.injector.stats.bits_flipped > 0
     assert outcomes["ok"] >= transactions * 0.8, outcomes
+
+
+@on_virtual_clock
+async def test_a_line_with_rare_bit_errors_gives_right_values_or_typed_errors() -> None:
+    await a_noisy_line_gives_right_values_or_typed_errors(1e-4, 400)
+
+
+@on_virtual_clock
+async def test_a_noisy_line_gives_right_values_or_typed_errors() -> None:
+    await a_noisy_line_gives_right_values_or_typed_errors(2e-3, 150)

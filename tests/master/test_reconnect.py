@@ -176,6 +176,41 @@ async def test_requests_fail_while_the_port_is_gone_then_recover() -> None:
 
 
 @on_virtual_clock
+async def test_a_request_in_its_late_reply_guard_fails_at_once_when_the_port_goes() -> None:
+    # Its first attempt timed out; its retry waits for the guard of silence. Pulled then, it
+    # fails at once with the error of a request on the wire, not once the guard is over.
+    options = {"timeout": 0.1, "retries": 1, "late_reply_guard": 5.0, "reconnect_delay": DELAY}
+    async with plugged_master(**options) as (master, port):
+        failures: list[tuple[float, str]] = []
+
+        async def request(patience: float) -> None:
+            with pytest.raises(aiortu.ConnectionLost) as lost:
+                await master.read_holding_registers(1, 5, 2, timeout=patience)
+            failures.append((anyio.current_time(), str(lost.value)))
+
+        async def pulled_during(patience: float) -> float:
+            port.unplug()
+            await anyio.sleep(0.01)  # the master sees it gone
+            port.plug(slow=True)
+            await master.connection.wait_connected()
+            await anyio.sleep(0.05)  # the fake's receiver past its first silence
+            port.tasks.start_soon(request, patience)
+            await anyio.sleep(0.3)
+            assert port.fake is not None
+            assert len(port.fake.seen) == 1  # the first attempt only
+            pulled = anyio.current_time()
+            port.unplug()
+            await anyio.sleep(0.01)
+            return pulled
+
+        in_guard = await pulled_during(0.1)  # timed out at 0.1 s: in the guard until 5.1 s
+        on_the_wire = await pulled_during(5.0)  # waiting for its reply
+        assert [when for when, _ in failures] == [in_guard, on_the_wire]
+        assert failures[0][1] == failures[1][1]
+        assert master.unit_stats(1).retries == 1
+
+
+@on_virtual_clock
 async def test_fail_fast_while_reconnecting() -> None:
     options = {"timeout": 2.0, "reconnect_delay": DELAY, "reconnect_fail_fast": True}
     with warnings_of_aiortu() as warnings:

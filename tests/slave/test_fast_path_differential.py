@@ -5,8 +5,9 @@ unit whose store takes no fast path, malformed PDUs, garbage and bad CRCs, liste
 mode entered with 08/04 and left with 08/01, and bursts of two requests in one write
 whose first takes the general route) go to the same slave with the shortcut on and off,
 on a pty serial port (the push path, where whole requests are answered from the read
-callback) and on a virtual line. Every run must give the same bytes on the wire
-for each request, the same stores, diagnostic counters and comm event log.
+callback) and on a virtual line (on the virtual clock of tests/virtual_clock.py). Every
+run must give the same bytes on the wire for each request, the same stores, diagnostic
+counters and comm event log.
 
 A failure names its seed; ``AIORTU_DIFFERENTIAL_SEED=N`` runs that seed alone.
 """
@@ -31,6 +32,7 @@ from aiortu.core.serial import LineSettings
 from aiortu.slave import Block, MemoryStore, Slave, Table
 from aiortu.testing import virtual_pair
 from aiortu.transport import open_stream
+from tests.virtual_clock import VirtualTimeLoop
 
 FAST = 17
 """A unit whose MemoryStore the fast paths serve."""
@@ -304,17 +306,23 @@ def _differences(seed: int, items: list[tuple[bytes, ...]], runs: dict[str, _Run
     return found
 
 
+def _on_the_virtual_clock(fast: bool, items: list[tuple[bytes, ...]]) -> _Run:
+    """A run on the virtual line, on the virtual clock: its silences take no real time."""
+    options = {"loop_factory": VirtualTimeLoop}
+    return anyio.run(_run, _virtual_line, fast, items, backend_options=options)
+
+
 @pytest.mark.parametrize("seed", SEEDS)
-async def test_the_shortcut_on_and_off_on_a_pty_and_a_virtual_line(seed: int) -> None:
+def test_the_shortcut_on_and_off_on_a_pty_and_a_virtual_line(seed: int) -> None:
     rng = random.Random(seed)
     items = [_step(rng) for _ in range(STEPS)]
     runs = {
-        "pty, shortcut on": await _run(_pty_line, True, items),
-        "pty, shortcut off": await _run(_pty_line, False, items),
+        "pty, shortcut on": anyio.run(_run, _pty_line, True, items),
+        "pty, shortcut off": anyio.run(_run, _pty_line, False, items),
         # With a frame gap to keep, a reply computed at once waits in the serve loop.
-        "pty with a frame gap, shortcut on": await _run(_gapped_pty_line, True, items),
-        "virtual line, shortcut on": await _run(_virtual_line, True, items),
-        "virtual line, shortcut off": await _run(_virtual_line, False, items),
+        "pty with a frame gap, shortcut on": anyio.run(_run, _gapped_pty_line, True, items),
+        "virtual line, shortcut on": _on_the_virtual_clock(True, items),
+        "virtual line, shortcut off": _on_the_virtual_clock(False, items),
     }
     differences = _differences(seed, items, runs)
     assert not differences, "\n".join(differences)

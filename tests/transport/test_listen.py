@@ -33,6 +33,7 @@ from aiortu.transport import (
     parse_unix_url,
     serve_listener,
 )
+from tests.tcp_flood import kernel_buffers, send_until_blocked
 from tests.virtual_clock import on_virtual_clock
 
 pytestmark = pytest.mark.timeout(60)
@@ -86,16 +87,6 @@ async def test_refusals_of_a_burst_are_logged_once(caplog: pytest.LogCaptureFixt
     assert len(refusals) == 1
 
 
-def _kernel_buffers() -> int:
-    """The most a paused connection can hold in the kernel: the receiver's and the sender's
-    buffers at their largest (tcp_rmem and tcp_wmem maximums)."""
-    total = 0
-    for name in ("tcp_rmem", "tcp_wmem"):
-        with open(f"/proc/sys/net/ipv4/{name}") as file:
-            total += int(file.read().split()[2])
-    return total
-
-
 async def test_a_client_streaming_before_the_first_read_is_held_back() -> None:
     """The accept loop pauses reading right after accept: a client that streams requests
     that are never read can send no more than the kernel's buffers hold."""
@@ -110,7 +101,7 @@ async def test_a_client_streaming_before_the_first_read_is_held_back() -> None:
 
     listener = await listen_tcp("127.0.0.1", 0)
     port = listener.extra(anyio.abc.SocketAttribute.local_port)
-    bound = _kernel_buffers() + (1 << 20)
+    bound = kernel_buffers() + (1 << 20)
     async with anyio.create_task_group() as tasks:
         tasks.start_soon(serve_listener, listener, slow, limit)
         sent = await anyio.to_thread.run_sync(_stream_until_blocked, port, bound + (8 << 20))
@@ -123,15 +114,8 @@ def _stream_until_blocked(port: int, most: int) -> int:
     """Send up to `most` bytes of requests without reading; stop once the server has taken
     nothing for 1 s. Return the bytes sent."""
     chunk = bytes.fromhex("0001 0000 0006 11 03 0000 0001") * 4096
-    sent = 0
     with socket.create_connection(("127.0.0.1", port)) as sock:
-        sock.settimeout(1.0)
-        while sent < most:
-            try:
-                sent += sock.send(chunk)
-            except TimeoutError:
-                break
-    return sent
+        return send_until_blocked(sock, chunk, quiet=1.0, most=most)
 
 
 class _FailingListener(anyio.abc.SocketListener):

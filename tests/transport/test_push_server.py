@@ -19,7 +19,8 @@ from aiortu.transport import (
     pushed_listener,
     serve_listener,
 )
-from tests.transport.test_listen import _kernel_buffers, _stream_until_blocked
+from tests.tcp_flood import kernel_buffers
+from tests.transport.test_listen import _stream_until_blocked
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -66,7 +67,7 @@ async def test_a_client_streaming_before_the_first_read_is_held_back() -> None:
 
     listener = await listen_tcp("127.0.0.1", 0)
     port = listener.extra(anyio.abc.SocketAttribute.local_port)
-    bound = _kernel_buffers() + (1 << 20)
+    bound = kernel_buffers() + (1 << 20)
     async with anyio.create_task_group() as tasks:
         tasks.start_soon(serve_listener, pushed_listener(listener), slow, limit)
         sent = await anyio.to_thread.run_sync(_stream_until_blocked, port, bound + (8 << 20))

@@ -106,7 +106,7 @@ async def test_the_four_pairs_give_the_same_replies(
 
 
 @pytest.mark.parametrize("who", ["expired", "untrusted"])
-async def test_a_refused_certificate_is_told_alike_and_named_by_the_pushed_server(
+async def test_a_refused_certificate_is_told_alike_and_named_by_every_server(
     pki: dict[str, Any], monkeypatch: pytest.MonkeyPatch, who: str
 ) -> None:
     told = {}
@@ -117,8 +117,6 @@ async def test_a_refused_certificate_is_told_alike_and_named_by_the_pushed_serve
             assert server.handshake_failures == 1
         assert type(error) is aiortu.ConnectionLost, (pair, repr(error))
         told[pair] = re.sub(r"127\.0\.0\.1:\d+", "SERVER", str(error))
-    by_server = {pushed: {told[m, s] for m, s in PAIRS if s == pushed} for pushed in (True, False)}
-    assert all(len(messages) == 1 for messages in by_server.values()), told
-    ((named,), (closed,)) = by_server[True], by_server[False]
-    assert "the server refused this client's certificate: " in named
-    assert "the server closed the connection before its first reply" in closed
+    # The pushed server's own TLS layer and anyio's stream both send the alert first.
+    assert len(set(told.values())) == 1, told
+    assert "the server refused this client's certificate: " in told[PAIRS[0]], told

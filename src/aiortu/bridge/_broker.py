@@ -12,6 +12,8 @@ import ssl
 import urllib.parse
 from dataclasses import dataclass
 
+from aiortu.bridge._packets import MAX_STRING_BYTES
+
 __all__ = ("Broker", "BrokerError", "parse_broker_url")
 
 _PORTS = {"mqtt": 1883, "mqtts": 8883}
@@ -84,6 +86,13 @@ def parse_broker_url(url: str, **options: object) -> Broker:
         "password": urllib.parse.unquote(parts.password) if parts.password else None,
     }
     fields.update({k: v for k, v in options.items() if v is not None})
+    for key in ("client_id", "username", "password"):
+        value = fields.get(key)
+        if isinstance(value, str) and (size := len(value.encode())) > MAX_STRING_BYTES:
+            name = key.replace("_", " ")
+            raise BrokerError(
+                f"broker {name}: {size:,} bytes, more than the {MAX_STRING_BYTES:,} MQTT allows"
+            )
     keepalive = fields.get("keepalive", 30)
     if isinstance(keepalive, bool) or not isinstance(keepalive, int) or not 1 <= keepalive <= 65535:
         raise BrokerError(f"broker keepalive {keepalive!r}: must be whole seconds 1..65535")

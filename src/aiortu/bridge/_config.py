@@ -10,12 +10,21 @@ from __future__ import annotations
 
 import re
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from aiortu.bridge._broker import Broker, BrokerError, parse_broker_url
+from aiortu.bridge._packets import MAX_STRING_BYTES
+from aiortu.bridge._topics import (
+    COMMAND,
+    bridge_topic,
+    device_topic,
+    discovery_topic,
+    point_topic,
+    sparkplug_topic,
+)
 from aiortu.core.model import SCHEMA_PATH, Profile, load_profile
 from aiortu.errors import ConfigError
 
@@ -168,7 +177,22 @@ class _Reader:
             if device.name in seen:
                 raise self.fail(f"device[{n}].name", f"{device.name!r} names two devices")
             seen.add(device.name)
+        self.topic_lengths(config)
         return config
+
+    def topic_lengths(self, config: BridgeConfig) -> None:
+        """Every topic the layout fills in fits in an MQTT string; else the broker session
+        could never send it, and would fail again at each reconnect."""
+        for device, point, topic in _topics(config):
+            size = len(topic.encode())
+            if size > MAX_STRING_BYTES:
+                whose = f"device {_short(device)}" if device else "the bridge"
+                if point:
+                    whose += f", point {_short(point)}"
+                raise BrokerError(
+                    f"{self.source}: the topic of {whose} is {size:,} bytes, more than the "
+                    f"{MAX_STRING_BYTES:,} an MQTT topic holds: shorten the names it is made of"
+                )
 
     def integer(self, data: dict[str, Any], key: str, where: str, default: int) -> int:
         value = data.get(key, default)
@@ -276,6 +300,39 @@ class _Reader:
                 raise self.fail(key, f"unknown profile {name!r} (a file, or one of: {known})")
             self.profiles[name] = load_profile(path)
         return self.profiles[name]
+
+
+def _topics(config: BridgeConfig) -> Iterator[tuple[str, str, str]]:
+    """Each topic of `config`'s layout, with its device and point (empty when none)."""
+    layout = config.topics
+    prefix, node = layout.prefix, layout.node
+    if layout.layout == "sparkplug":
+        for kind in ("NBIRTH", "NDEATH", "NCMD"):
+            yield "", "", sparkplug_topic(layout.group, kind, node)
+    else:
+        for leaf in ("status", "dropped"):
+            yield "", "", bridge_topic(prefix, node, leaf)
+    for device in config.devices():
+        name = device.name
+        yield name, "", device_topic(prefix, name, "error")
+        if layout.layout == "sparkplug":
+            for kind in ("DBIRTH", "DDEATH", "DDATA", "DCMD"):
+                yield name, "", sparkplug_topic(layout.group, kind, node, name)
+            continue  # a point is a metric in the payload, not a topic
+        for leaf in ("availability", "health"):
+            yield name, "", device_topic(prefix, name, leaf)
+        for point in device.profile.points:
+            if device.points is not None and point.name not in device.points:
+                continue
+            topic = point_topic(prefix, name, point.name)
+            yield name, point.name, topic + COMMAND if point.writable else topic
+            if layout.layout == "home-assistant":
+                yield name, point.name, discovery_topic(layout.discovery_prefix, node, name, point)
+
+
+def _short(name: str) -> str:
+    """`name` quoted, cut to its first 40 characters."""
+    return repr(name) if len(name) <= 40 else repr(name[:40] + "...")
 
 
 def _slug(text: str) -> str:

@@ -13,23 +13,12 @@ last will says `offline`) and the device's (from its unit's health). The device 
 from __future__ import annotations
 
 import json
-import re
 
 from aiortu.bridge._state import DeviceState
+from aiortu.bridge._topics import discovery_object_id, discovery_topic, entity_component
 from aiortu.core.model import PointType, ProfilePoint
 
-__all__ = ("discovery_config", "entity_component")
-
-
-def entity_component(point: ProfilePoint) -> str:
-    """The Home Assistant entity platform of `point`."""
-    if point.type is PointType.BOOL:
-        return "switch" if point.writable else "binary_sensor"
-    if point.writable and point.type is PointType.ENUM:
-        return "select"
-    if point.writable and point.type.is_number:
-        return "number"
-    return "sensor"
+__all__ = ("discovery_config",)
 
 
 def discovery_config(
@@ -40,8 +29,7 @@ def discovery_config(
     `command`, `availability` and the bridge's `status` topic."""
     component = entity_component(point)
     info = device.config.profile.device
-    # Home Assistant's ids are letters, digits and underscores (SunSpec names have dots).
-    object_id = re.sub(r"[^A-Za-z0-9_]", "_", f"{device.name}_{point.name}")
+    object_id = discovery_object_id(device.name, point.name)
     config: dict[str, object] = {
         "name": point.description or point.name.replace("_", " "),
         "unique_id": f"aiortu_{object_id}",
@@ -78,5 +66,5 @@ def discovery_config(
         config["max"] = point.maximum if point.maximum is not None else 1e9
         config["step"] = point.scale if point.scale else (1 if point.type.is_integer else 0.001)
         config["mode"] = "box"
-    topic = f"{discovery_prefix}/{component}/{node}/{object_id}/config"
+    topic = discovery_topic(discovery_prefix, node, device.name, point)
     return topic, json.dumps(config, ensure_ascii=False).encode()

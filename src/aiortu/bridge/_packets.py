@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Protocol, TypeVar
 
 __all__ = (
+    "MAX_STRING_BYTES",
     "PUBACK_SIZE",
     "ConnectRefused",
     "Outgoing",
@@ -33,6 +34,9 @@ __all__ = (
 
 _MAX_REMAINING = 268_435_455
 """The largest remaining length four bytes can say (MQTT 3.1.1, 2.2.3)."""
+MAX_STRING_BYTES = 65_535
+"""The most bytes of an MQTT 3.1.1 string (1.5.3: a two-byte length, then UTF-8): a topic, a
+client id, a user name; a password's binary data has the same two-byte length (3.1.3.5)."""
 
 
 class PacketType(enum.IntEnum):
@@ -167,7 +171,7 @@ def publish_packet(
 
 def _topic_field(topic: str) -> bytes:
     name = topic.encode()
-    if len(name) > 0xFFFF:
+    if len(name) > MAX_STRING_BYTES:
         raise ValueError(f"an MQTT topic holds at most 65535 bytes, not {len(name)}")
     return _SHORT(len(name)) + name
 

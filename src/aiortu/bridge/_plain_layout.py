@@ -23,6 +23,7 @@ from aiortu.bridge._outbox import Message
 from aiortu.bridge._packets import Publish
 from aiortu.bridge._payloads import format_value
 from aiortu.bridge._state import Command, DeviceState
+from aiortu.bridge._topics import COMMAND, bridge_topic, device_topic, point_topic
 from aiortu.core.model import ProfilePoint, Value
 from aiortu.master import UnitState
 
@@ -37,7 +38,7 @@ class PlainLayout:
         self.topics = topics
         self.discovery = discovery
         self.prefix = topics.prefix
-        self.status_topic = f"{self.prefix}/bridge/{topics.node}/status"
+        self.status_topic = bridge_topic(self.prefix, topics.node, "status")
         self._command_prefixes: dict[str, DeviceState] = {}
         self._states: dict[str, dict[str, tuple[str, ProfilePoint]]] = {}
 
@@ -47,7 +48,7 @@ class PlainLayout:
 
     def subscriptions(self) -> list[str]:
         """The command topics of the devices with writable points."""
-        return [f"{self.prefix}/{name}/+/set" for name in self._command_prefixes]
+        return [point_topic(self.prefix, name, "+") + COMMAND for name in self._command_prefixes]
 
     def bind(self, devices: list[DeviceState]) -> None:
         """Learn the devices (before the first connection)."""
@@ -55,14 +56,14 @@ class PlainLayout:
         # Made once: each point's state topic (the same string each poll, its hash kept for
         # the session's cache of encoded topics) and the point that formats its value.
         self._states = {
-            d.name: {p.name: (f"{self.prefix}/{d.name}/{p.name}", p) for p in d.points}
+            d.name: {p.name: (point_topic(self.prefix, d.name, p.name), p) for p in d.points}
             for d in devices
         }
 
     def on_connect(self, devices: list[DeviceState], dropped: int, now: float) -> list[Message]:
         """Status, the dropped count, discovery, and each device's availability and values."""
         qos = self.topics.qos
-        dropped_topic = f"{self.prefix}/bridge/{self.topics.node}/dropped"
+        dropped_topic = bridge_topic(self.prefix, self.topics.node, "dropped")
         messages = [
             Message(self.status_topic, b"online", qos, True, now),
             Message(dropped_topic, str(dropped).encode(), qos, True, now),
@@ -75,13 +76,14 @@ class PlainLayout:
 
     def _discovery(self, device: DeviceState, now: float) -> list[Message]:
         messages = []
-        base = f"{self.prefix}/{device.name}"
+        availability = device_topic(self.prefix, device.name, "availability")
         for point in device.points:
+            state = point_topic(self.prefix, device.name, point.name)
             topic, payload = discovery_config(
                 device, point, node=self.topics.node, qos=self.topics.qos,
                 discovery_prefix=self.topics.discovery_prefix,
-                topics={"state": f"{base}/{point.name}", "command": f"{base}/{point.name}/set",
-                        "availability": f"{base}/availability", "status": self.status_topic},
+                topics={"state": state, "command": state + COMMAND,
+                        "availability": availability, "status": self.status_topic},
             )  # fmt: skip
             messages.append(Message(topic, payload, self.topics.qos, True, now))
         return messages
@@ -98,12 +100,13 @@ class PlainLayout:
 
     def health(self, device: DeviceState, now: float) -> list[Message]:
         """The device's availability and its three-state health."""
-        base = f"{self.prefix}/{device.name}/"
         available = b"offline" if device.health is UnitState.OFFLINE else b"online"
+        availability = device_topic(self.prefix, device.name, "availability")
+        health = device_topic(self.prefix, device.name, "health")
         qos = self.topics.qos
         return [
-            Message(base + "availability", available, qos, True, now),
-            Message(base + "health", device.health.value.encode(), qos, True, now),
+            Message(availability, available, qos, True, now),
+            Message(health, device.health.value.encode(), qos, True, now),
         ]
 
     def command(self, publish: Publish, devices: list[DeviceState], now: float,
@@ -117,7 +120,7 @@ class PlainLayout:
     def error(self, device: str, point: str, payload: bytes, reason: str, now: float) -> Message:
         """`PREFIX/DEVICE/error`, not retained."""
         body = {"point": point, "payload": payload.decode("utf-8", "replace"), "error": reason}
-        return Message(f"{self.prefix}/{device}/error", json.dumps(body).encode(),
+        return Message(device_topic(self.prefix, device, "error"), json.dumps(body).encode(),
                        self.topics.qos, False, now)  # fmt: skip
 
     def prepare(self, message: Message) -> bytes:

@@ -29,12 +29,12 @@ from aiortu.bridge._protobuf import (
     encode_payload,
 )
 from aiortu.bridge._state import Command, DeviceState
+from aiortu.bridge._topics import device_topic, sparkplug_topic
 from aiortu.core.model import PointType, ProfilePoint, Value
 from aiortu.master import UnitState
 
 __all__ = ("REBIRTH", "SparkplugLayout", "metric_datatype")
 
-NAMESPACE = "spBv1.0"
 REBIRTH = "Node Control/Rebirth"
 """The node metric whose `true` in an NCMD asks for the births again."""
 DROPPED = "Bridge/Dropped"
@@ -87,8 +87,7 @@ class SparkplugLayout:
         self._born: set[str] = set()
 
     def _topic(self, kind: str, device: str | None = None) -> str:
-        tail = f"/{device}" if device is not None else ""
-        return f"{NAMESPACE}/{self.group}/{kind}/{self.node}{tail}"
+        return sparkplug_topic(self.group, kind, self.node, device)
 
     def bind(self, devices: list[DeviceState]) -> None:
         """Learn the devices (before the first connection)."""
@@ -184,7 +183,7 @@ class SparkplugLayout:
         import json
 
         body = {"point": point, "payload": payload.decode("utf-8", "replace"), "error": reason}
-        topic = f"{self.topics.prefix}/{device}/error"
+        topic = device_topic(self.topics.prefix, device, "error")
         return Message(topic, json.dumps(body).encode(), self.topics.qos, False, now)
 
     def prepare(self, message: Message) -> bytes:

@@ -4,7 +4,8 @@ Reads the bridge's TOML file (lines, devices and their profiles, broker, topic l
 `docs/bridge.md`), connects to the broker, opens the lines and polls until SIGINT or SIGTERM
 (exit 0). A broker that cannot be reached is waited for while the bridge polls and buffers.
 A bad file is one line naming the file, the key and the problem (exit 2); a broker URL,
-certificate or login the broker refuses, or a line that cannot be opened, one line (exit 1).
+certificate or login the broker refuses, a topic, client id, user name or password longer than
+MQTT allows, or a line that cannot be opened, one line (exit 1).
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ examples:
       three simulated devices (a virtual line) to a broker on localhost:1883
 
 exit codes: 0 stopped by Ctrl-C (SIGINT) or SIGTERM; 1 the broker refused the URL, the
-certificates or the login, or a line cannot be opened; 2 a bad configuration file"""
+certificates or the login, a topic or login is longer than MQTT allows, or a line cannot be
+opened; 2 a bad configuration file"""
 
 
 def register(subparsers: Subparsers) -> None:

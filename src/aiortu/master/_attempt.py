@@ -155,14 +155,26 @@ class Attempts:
 
     async def keep_guard(self) -> None:
         """Wait until the line has been silent for the guard after the last failed attempt
-        (see `guard_ends`), then clear the guard."""
+        (see `guard_ends`), then clear the guard. Raises the link's ConnectionLost at once
+        if it closes meanwhile, as a wait for a reply does, and clears the guard then too:
+        no late reply comes on the line that replaces it."""
         link = self.link
         while True:
+            if link.closed:
+                self.guard_until = NO_GUARD
+                raise link.connection_lost_error()
             end = guard_ends(self.guard_until, link.last_activity, self.guard_seconds)
             delay = end - link.clock()
             if delay <= 0:
                 break
-            await anyio.sleep(delay)
+            # Not a bare sleep: `deliver` wakes it, a byte (the guard starts again) or the
+            # link's close (the request fails now, not once the guard is over).
+            arrival = self.arrival = anyio.Event()
+            try:
+                with anyio.move_on_after(delay):
+                    await arrival.wait()
+            finally:
+                self.arrival = None
         self.guard_until = NO_GUARD
 
     def send_at_once(self) -> bool:

@@ -7,13 +7,13 @@ device servers that connect in.
 [`AsciiFraming`][aiortu.transport.AsciiFraming]) and a serial device's rules: every connection
 reaches the same device (one state machine, its counters, its listen-only mode), a unit it
 does not serve is silent, unit 0 is a broadcast, and the serial-line codes (07, 08, 0B, 0C, 11)
-are served. There is no idle timeout: a line is quiet whenever no master polls.
+are served. The limits are the Modbus TCP server's: `max_connections`, and `idle_timeout` for
+a connection that sends nothing, or reads no reply, for that long.
 """
 
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Mapping
 
 from aiortu.core.ascii import DEFAULT_ASCII_TIMEOUT
@@ -23,7 +23,11 @@ from aiortu.core.serial import LineSettings
 from aiortu.errors import InvalidValue
 from aiortu.slave._dispatch import TraceCallback
 from aiortu.slave._handlers import Handler
-from aiortu.slave._tcp_server import DEFAULT_MAX_CONNECTIONS, ModbusTcpServer
+from aiortu.slave._tcp_server import (
+    DEFAULT_IDLE_TIMEOUT,
+    DEFAULT_MAX_CONNECTIONS,
+    ModbusTcpServer,
+)
 from aiortu.transport import AsciiFraming, RtuFraming
 
 __all__ = ("RtuOverTcpServer",)
@@ -40,7 +44,11 @@ class RtuOverTcpServer(ModbusTcpServer):
     gap inside a frame, 1 s by default). `settings` and `timing` are accepted for the serial
     line the frames came from, and do not change what is answered (a TCP connection has no
     character timing). `trace` sees `("received", frame)` and `("sent", frame)`, in the
-    connection's framing. At most `max_connections` at once; more are closed at once.
+    connection's framing. At most `max_connections` at once; more are closed at once. A
+    connection that sends nothing for `idle_timeout` seconds (120 by default) is closed, and so
+    is one whose reply cannot be written for as long (it reads nothing), as on Modbus TCP. A
+    serial device server that connects in and stays quiet while no master polls is closed too,
+    and must connect again; `idle_timeout=math.inf` keeps such connections open.
     """
 
     _name = "RTU over TCP"
@@ -54,6 +62,7 @@ class RtuOverTcpServer(ModbusTcpServer):
         handlers: Mapping[int, Handler] | None = None,
         trace: TraceCallback | None = None,
         max_connections: int = DEFAULT_MAX_CONNECTIONS,
+        idle_timeout: float = DEFAULT_IDLE_TIMEOUT,
         framing: str = "rtu",
         ascii_timeout: float | None = None,
     ) -> None:
@@ -75,7 +84,7 @@ class RtuOverTcpServer(ModbusTcpServer):
             answer_unknown_units=False,
             serial_line_codes=True,
             max_connections=max_connections,
-            idle_timeout=math.inf,
+            idle_timeout=idle_timeout,
             trace=trace,
         )
         self.settings = settings

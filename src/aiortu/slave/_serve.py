@@ -114,7 +114,8 @@ async def serve(
       `cafile` and `rules`, and the Modbus TCP server's).
     - `rtu+tcp://host:port` with `listen` true, or with a wildcard host (`0.0.0.0`, `[::]`) or port
       0 (addresses nobody can connect to): listens for RTU framing over TCP and yields the running
-      [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (options `max_connections`, and
+      [`RtuOverTcpServer`][aiortu.slave.RtuOverTcpServer] (options `max_connections`,
+      `idle_timeout`, and
       `framing="ascii"` for Modbus ASCII). `ascii+tcp://host:port` listens in the same cases,
       its lines in Modbus ASCII (option `ascii_timeout`).
 

@@ -13,7 +13,8 @@ UTF8String; the server grants rights by role (see
 - [`server_tls_context`][aiortu.transport.server_tls_context] and
   [`TlsListener`][aiortu.transport.TlsListener] make a server's side: a client certificate
   signed by `cafile` is required; a client that fails the handshake (plain TCP, no certificate,
-  an expired or untrusted one) is logged in one sentence and closed.
+  an expired or untrusted one) is sent TLS's alert saying why, logged in one sentence and
+  closed.
 - [`certificate_role`][aiortu.transport.certificate_role] reads the role out of a DER
   certificate with a small DER reader of its own, so no third-party package is needed.
 
@@ -25,6 +26,7 @@ request, in one sentence with the alert's reason (see `server_refusal`), not as 
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import ssl
 from collections.abc import AsyncIterator, Callable, Mapping
@@ -294,9 +296,33 @@ class _ClientTlsStream(TLSStream):
         return data
 
 
+class _ServerTlsStream(TLSStream):
+    """anyio's TLS stream for a server, which sends the alert of a TLS error before the
+    error goes on: anyio leaves it in the outgoing BIO, and a connection closed without it
+    tells the client nothing of why its certificate was refused (asyncio's pushed
+    connections send it in `_tls_bio.py`).
+
+    It overrides anyio's `_call_sslobject_method`, private but the one method every
+    handshake step, read and write goes through; were it renamed, the trio tests of the
+    master's reason would fail, not pass silently."""
+
+    async def _call_sslobject_method(  # type: ignore[override]
+        self, func: Callable[..., Any], *args: Any
+    ) -> Any:
+        try:
+            return await super()._call_sslobject_method(func, *args)
+        except ssl.SSLError:
+            outgoing = self._write_bio
+            if outgoing.pending:  # the alert; the connection may be gone already
+                with contextlib.suppress(anyio.BrokenResourceError, anyio.ClosedResourceError):
+                    await self.transport_stream.send(outgoing.read())
+            raise
+
+
 class TlsListener(TLSListener):
-    """anyio's TLS listener that logs a failed handshake in one sentence (who, and why), not
-    with a traceback, and passes on the listening address of the listener it wraps.
+    """anyio's TLS listener that sends a failed handshake's alert (so the client can say
+    why), logs the failure in one sentence (who, and why), not with a traceback, and passes on
+    the listening address of the listener it wraps.
 
     The first failed handshake is logged as a warning and the later ones at debug level, so
     that a flood of them costs counts, not log lines:
@@ -327,7 +353,7 @@ class TlsListener(TLSListener):
         `handshake_timeout`; None when it failed (logged, counted, `stream` closed)."""
         try:
             with anyio.fail_after(self.handshake_timeout):
-                return await TLSStream.wrap(
+                return await _ServerTlsStream.wrap(
                     stream,
                     ssl_context=self.ssl_context,
                     standard_compatible=self.standard_compatible,

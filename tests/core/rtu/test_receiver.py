@@ -130,6 +130,18 @@ def frames_for(role: Role) -> st.SearchStrategy[Sample]:
     return st.one_of(requests(), responses(), customs())
 
 
+def predictable_frames_for(role: Role) -> st.SearchStrategy[Sample]:
+    """The frames of :func:`frames_for` whose layout gives their length. Custom function
+    codes never do: leaving them out here keeps hypothesis from rejecting half its draws."""
+    if role is Role.MASTER:
+        frames = responses()
+    elif role is Role.SLAVE:
+        frames = requests(st.just(OWN_UNIT))
+    else:
+        frames = st.one_of(requests(), responses())
+    return frames.filter(lambda s: s.predictable)
+
+
 def guesses(data: bytes) -> set[int]:
     """Every length either predictor gives for a frame starting with *data*."""
     return {expected_request_length(data), expected_response_length(data)}
@@ -347,9 +359,7 @@ def test_every_frame_is_received_once_in_order(
 @given(data=st.data())
 def test_predictable_frames_complete_without_silence(role: Role, data: st.DataObject) -> None:
     """Length-aware: back-to-back frames of known length come out of feed() alone."""
-    samples = data.draw(
-        st.lists(frames_for(role).filter(lambda s: s.predictable), min_size=1, max_size=4)
-    )
+    samples = data.draw(st.lists(predictable_frames_for(role), min_size=1, max_size=4))
     assume(not any(accidental(sample) for sample in samples))
     receiver = make(role, LineSettings(19200), TimingMode.TOLERANT)
     stream = b"".join(sample.frame for sample in samples)
