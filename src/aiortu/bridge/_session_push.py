@@ -23,7 +23,8 @@ there (`SO_RCVLOWAT`; the end of the connection wakes it whatever the mark). The
 byte above the PUBACKs of what is in flight (every QoS 1 PUBLISH the broker took gets its
 PUBACK): the PUBACKs alone wake nobody. They wait in the kernel until the outbox is filled
 again, and the session reads them first (`collect`, a read that does not wait), in the turn
-of the loop the poll woke anyway: a poll at QoS 1 costs one wake, as at QoS 0. Any other byte
+of the loop the poll woke anyway: at QoS 1 a poll wakes the process no more than at QoS 0.
+Any other byte
 (a command, a PINGRESP) lifts what is there over the mark once the PUBACKs are in, so a command
 that comes meanwhile is read with them. The mark is one byte whenever the session needs an
 answer to go on: while messages wait for room in the window, which each PUBACK makes, and
