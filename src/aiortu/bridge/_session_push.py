@@ -24,12 +24,11 @@ byte above the PUBACKs of what is in flight (every QoS 1 PUBLISH the broker took
 PUBACK): the PUBACKs alone wake nobody. They wait in the kernel until the outbox is filled
 again, and the session reads them first (`collect`, a read that does not wait), in the turn
 of the loop the poll woke anyway: at QoS 1 a poll wakes the process no more than at QoS 0.
-Any other byte
-(a command, a PINGRESP) lifts what is there over the mark once the PUBACKs are in, so a command
-that comes meanwhile is read with them. The mark is one byte whenever the session needs an
-answer to go on: while messages wait for room in the window, which each PUBACK makes, and
-after a PINGREQ until the broker says anything, so the keep-alive hears the PINGRESP as before
-(and the PUBACKs are read at least once a half keep-alive).
+Any other byte (a command, a PINGRESP) lifts what is there over the mark once the PUBACKs are
+in, so a command that comes meanwhile is read with them. The mark is one byte whenever the
+session needs an answer to go on: while messages wait for room in the window, which each
+PUBACK makes, and after a PINGREQ until the broker says anything, so the keep-alive hears the
+PINGRESP as before (and the PUBACKs are read at least once a half keep-alive).
 """
 
 from __future__ import annotations
