@@ -570,7 +570,9 @@ class _QuietLink:
     def call_when_quiet(self, callback: Callable[[], object]) -> None:
         self.when_quiet.append(callback)
 
-    def send_now(self, frame: bytes) -> float:
+    def send_now(self, frame: bytes) -> float | None:
+        if self._quiet > self._now:
+            return None  # as Link.send_now: nothing goes before the silence
         self.sent.append(frame)
         return self._now + len(frame) * self.char_time
 
@@ -595,8 +597,10 @@ async def test_a_request_goes_out_at_once_from_the_instant_the_line_is_quiet(
         assert future is not None
         assert (link.sent, len(link.when_quiet)) == (([], 1) if waits else ([REQUEST], 0))
         assert engine.fast.waiting is waits
-        for callback in link.when_quiet:
+        link._now = quiet  # the silence has come
+        for callback in list(link.when_quiet):
             callback()
+        assert len(link.when_quiet) == (1 if waits else 0)  # no second wait
         assert (link.sent, engine.fast.waiting, engine.fast.on_wire) == ([REQUEST], False, True)
     finally:
         engine.attempts.stop_timer()

@@ -29,6 +29,13 @@ On the push path a master can also tell the link the exact shape of the reply it
 frame with a good CRC goes straight to the master, with no event built or queued. Anything else, a
 split or garbled reply included, takes the usual way through the receiver.
 
+A link is direct ([`Link.direct`][aiortu.line.Link], one predicate, `_direct`) where its stream
+pushes whole frames and no frame gap is kept: a master's Modbus TCP, Modbus/TCP Security or Modbus
+UDP stream on asyncio. Such a line has no timing to keep, so `send_now` asks no silence and the
+push reader takes the expected reply with the receiver's check only (`PushReader.on_frame`);
+everything else goes the usual way. A differential test runs the same exchanges with the predicate
+forced off.
+
 The master and the slave are built on this; users rarely need it directly, except to
 watch a line (`role=Role.MONITOR`).
 
@@ -199,6 +206,13 @@ class Link:
         """The event loop, where the link reads a stream that pushes its bytes (see `_push`); `None`
         otherwise. Its futures and [`call_at`][aiortu.line.Link.call_at] timers are the cheapest way
         to wait for the link there."""
+        self.direct = False
+        """Whether the link is direct (set when it opens; see `PushReader.on_frame`): its stream
+        pushes whole frames (a master's Modbus TCP, Modbus/TCP Security or Modbus UDP stream on
+        asyncio) and no frame gap is kept. Such a line has no timing to keep: a frame has left
+        once written, and each chunk is one frame. So [`send_now`][aiortu.line.Link.send_now]
+        asks no silence, and the reply [`expect`][aiortu.line.Link.expect] waits for is taken
+        without the receiver's chunk path."""
         self.waits: NativeWaits | None = None
         """The running backend's cheapest waits (set when the link opens): a
         [`Waiter`][aiortu.line.Waiter] is what a listener sets to wake a task."""
@@ -261,6 +275,7 @@ class Link:
         # Push only where the loop has call_at timers for the receiver's deadline (asyncio).
         if self._push_reader is not None and waits.call_at is not None:
             self.loop = waits.loop
+            self.direct = _direct(self)
             self._task_group.start_soon(self._push, name="aiortu link reader")
         else:
             self._task_group.start_soon(self._pump, name="aiortu link reader")
@@ -557,12 +572,18 @@ class Link:
             return None
         start = self.clock()
         activity = self._activity
-        if max(activity.last_received, activity.transmit_end) + self.frame_gap > start:
+        direct = self.direct  # no gap and no wire: quiet, and the frame gone once written
+        gap = self.frame_gap
+        if not direct and max(activity.last_received, activity.transmit_end) + gap > start:
             return None
         if not send_nowait(frame):
             return None
         self.last_write_start = start
         self.writes_begun += 1
+        if direct:
+            self.frames_sent += 1
+            activity.transmit_end = start
+            return start
         # The write took microseconds, far less than the wire time: no second clock read.
         return self._sent(frame, start, start)
 
@@ -584,6 +605,13 @@ class Link:
         a large share of t3.5 at high baud rates. Elsewhere it sleeps on the loop's timers.
         """
         await self._silence.wait(self._activity, self.clock, silence)
+
+
+def _direct(link: Link) -> bool:
+    """The direct route's one predicate, for a link whose stream pushes its bytes (see
+    [`Link.direct`][aiortu.line.Link]): each chunk is one whole frame, and no frame gap is
+    kept (nor is there a wire time: a stream of whole frames has none)."""
+    return link.whole_frames and link.frame_gap == 0
 
 
 def _wire_timed(stream: object, settings: LineSettings) -> bool:

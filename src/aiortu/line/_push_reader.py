@@ -7,7 +7,10 @@ chunk costs no task wake-up.
 
 Two taps take frames of a known layout before the receiver builds an event for them: the reply a
 master waits for ([`Link.expect`][aiortu.line.Link.expect], once) and the requests a slave answers
-at once ([`Link.expect_requests`][aiortu.line.Link.expect_requests], every time).
+at once ([`Link.expect_requests`][aiortu.line.Link.expect_requests], every time). On a direct link
+(whole frames, no frame gap: [`Link.direct`][aiortu.line.Link]) the stream calls `on_frame`
+instead, which takes the reply expected with the receiver's check alone and hands anything else
+to `on_chunk`.
 """
 
 from __future__ import annotations
@@ -63,6 +66,7 @@ class _Link(Protocol):
     receiver: Receiver
     backend: type[anyio.abc.AsyncBackend] | None
     frames_received: int
+    direct: bool
     _activity: LineActivity
 
     def _deliver(self, events: list[FrameReceived | FrameDiscarded]) -> None: ...
@@ -93,7 +97,7 @@ class PushReader:
         assert link.backend is not None
         lost = self.lost = link.backend.create_event()
         try:
-            set_receiver(self.on_chunk, lost.set)
+            set_receiver(self.on_frame if link.direct else self.on_chunk, lost.set)
             self.arm_timer()
             await lost.wait()
             if self.error is not None:
@@ -134,6 +138,28 @@ class PushReader:
                 if events:
                     link._deliver(events)
             self.arm_timer()
+        except BaseException as error:  # a bug: the reader task raises it
+            self.fail(error)
+
+    def on_frame(self, frame: bytes) -> None:
+        """A direct link's read callback (see [`Link.direct`][aiortu.line.Link]): each chunk is
+        one whole frame. The reply the master expects is taken as `on_chunk` takes it, without
+        the rest of its work; anything else goes to `on_chunk`."""
+        tap = self.reply_tap
+        if tap is None or len(frame) != tap.length or not frame.startswith(tap.prefix):
+            self.on_chunk(frame)
+            return
+        link = self.link
+        try:
+            now = link.clock()
+            if not link.receiver.take_expected_frame(frame, now, tap.checked):
+                self.on_chunk(frame)
+                return
+            # No wire: our own frame has left the line (`LineActivity.received`).
+            link._activity.last_received = now
+            self.reply_tap = None
+            link.frames_received += 1
+            tap.on_frame(frame, now)  # an idle receiver has no timer to move
         except BaseException as error:  # a bug: the reader task raises it
             self.fail(error)
 

@@ -135,11 +135,7 @@ class FastPath:
         self._transaction = transaction
         self._known = known
         future = self._future = link.loop.create_future() if job is None else job.future
-        if link.quiet_at() > link.clock():
-            self.waiting = True
-            link.call_when_quiet(self._send_when_quiet)
-        else:
-            self._send()
+        self._send()
         return future
 
     def _send_when_quiet(self) -> None:
@@ -153,9 +149,10 @@ class FastPath:
         self._send()
 
     def _send(self) -> None:
-        """Send the request and expect its reply (see the module docstring). A stream that
-        does not take the write at once (earlier bytes still queued in it) leaves the
-        transaction to the machine, on the line task."""
+        """Send the request and expect its reply (see the module docstring). A line that has
+        not been quiet for its frame gap yet has the request wait for it; a stream that does
+        not take the write at once (earlier bytes still queued in it) leaves the transaction
+        to the machine, on the line task."""
         engine = self._engine
         link = engine.link
         attempts = engine.attempts
@@ -165,7 +162,12 @@ class FastPath:
         frame = known.frame
         end = link.send_now(frame)
         if end is None:
-            self._hand_to_machine(on_the_wire=False)
+            # Asked only when the write did not go: a poll on a quiet line asks nothing more.
+            if link.quiet_at() > link.clock():
+                self.waiting = True
+                link.call_when_quiet(self._send_when_quiet)
+            else:
+                self._hand_to_machine(on_the_wire=False)
             return
         self.on_wire = True
         char_time = link.char_time
