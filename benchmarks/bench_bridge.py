@@ -343,6 +343,8 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
             *(
                 f"{medians[name][k]:.3f}"
                 if k == "transactions per point"
+                else f"{medians[name][k]:.1f}"
+                if k == "CPU us per point"
                 else f"{medians[name][k]:.0f}"
                 for k in keys
             ),
@@ -353,7 +355,7 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
     cpu = "CPU us per point"
     others = [
         f"{name} / modbus4mqtt: CPU per published point "
-        f"{medians[name][cpu] / medians['modbus4mqtt'][cpu]:.2f}x"
+        f"{medians[name][cpu] / medians['modbus4mqtt'][cpu]:.3f}x"
         for name in results
         if name not in ("aiortu bridge", "modbus4mqtt")
     ]
@@ -366,7 +368,7 @@ def versus_modbus4mqtt(args: argparse.Namespace) -> list[str]:
         "",
         f"aiortu / modbus4mqtt: line transactions per published point "
         f"{ratio['transactions per point']:.2f}x, CPU per published point "
-        f"{ratio['CPU us per point']:.2f}x",
+        f"{ratio['CPU us per point']:.3f}x",
         *others,
     ]
 

@@ -12,11 +12,14 @@ from hypothesis import strategies as st
 from pysparkplug import Topic
 
 from aiortu.bridge import (
+    Broker,
+    BrokerSession,
     CommandError,
     DataType,
     Message,
     Metric,
     Outbox,
+    SessionHooks,
     SparkplugPayload,
     decode_payload,
     encode_payload,
@@ -126,25 +129,67 @@ def _spec_publish(topic: str, payload: bytes, qos: int, retain: bool, packet_id:
 
 @given(
     st.lists(st.tuples(st.sampled_from(["a", "b/c", "t" * 120, "u" * 300]),
-                       st.sampled_from([0, 1, 120, 125, 126, 127, 128, 200, 16_400]),
-                       st.integers(0, 1), st.booleans(), st.integers(1, 65535), st.booleans()),
+                       st.sampled_from([0, 1, *range(120, 129), 200, 16_400]),
+                       st.integers(0, 2), st.booleans(), st.integers(1, 65535), st.booleans(),
+                       st.booleans()),
              max_size=12),
 )  # fmt: skip
 def test_a_writer_s_batch_is_each_packet_as_the_spec_lays_it_out(
-    packets: list[tuple[str, int, int, bool, int, bool]],
+    packets: list[tuple[str, int, int, bool, int, bool, bool]],
 ) -> None:
-    # The sizes around 128 take the fixed headers' table, or the general path past it.
+    # The remaining lengths around 128 (a topic field of 3 or 5 bytes, a packet id of 2) take
+    # the fixed headers' table, or the general path past it; a message with metrics gets the
+    # payload `prepare` makes.
     writer = PublishWriter()
+    made: dict[int, bytes] = {}  # the payloads prepare makes, by message
+
+    def prepare(message: Message) -> bytes:
+        assert message.metrics is not None
+        return made[id(message)]
+
+    general: list[str] = []  # the topics of packets laid out by `add`, not from the table
+    add = writer.add
+    writer.add = lambda topic, *rest, **options: (general.append(topic),  # type: ignore[method-assign]
+                                                 add(topic, *rest, **options))[1]  # fmt: skip
     for _ in range(2):  # each topic encoded afresh, then from the writer's cache
-        wanted = []
-        for topic, size, qos, retain, packet_id, dup in packets:
+        wanted, messages, ids = [], [], []
+        general.clear()
+        for topic, size, qos, retain, packet_id, dup, later in packets:
             payload = bytes(range(256)) * (size // 256) + bytes(size % 256)
-            writer.add(topic, payload, qos, retain, packet_id, dup=dup)
-            wanted.append(_spec_publish(topic, payload, qos, retain, packet_id, dup))
+            message = Message(topic, b"" if later else payload, qos, retain,
+                              metrics=object() if later else None)  # fmt: skip
+            made[id(message)] = payload
+            messages.append(message)
+            ids.append(packet_id if qos else 0)
+            wanted.append(_spec_publish(topic, payload, qos, retain, ids[-1], False))
             assert publish_packet(topic, payload, qos=qos, retain=retain, packet_id=packet_id,
-                                  dup=dup) == wanted[-1]  # fmt: skip
+                                  dup=dup) == _spec_publish(topic, payload, qos, retain,
+                                                            packet_id, dup)  # fmt: skip
+        writer.add_all(messages, ids, prepare)
         assert writer.joined() == b"".join(wanted)
+        assert general == [m.topic for m, w in zip(messages, wanted, strict=True)
+                           if m.qos == 2 or w[1] & 0x80]  # fmt: skip
         assert writer.joined() == b""
+
+
+def test_a_writer_keeps_at_most_max_topics_encodings() -> None:
+    writer = PublishWriter(max_topics=1)
+    for topic in ("a", "b", "a"):
+        writer.add(topic, b"1", 0, False, 0)
+    assert list(writer._topics) == ["a"]
+    assert writer.joined() == b"".join(publish_packet(t, b"1") for t in ("a", "b", "a"))
+
+
+def test_packet_ids_skip_those_still_in_flight_when_they_wrap() -> None:
+    hooks = SessionHooks(will=lambda: None, subscriptions=list, on_connect=list,
+                         on_publish=lambda publish: None)  # fmt: skip
+    session = BrokerSession(Broker("127.0.0.1", 1883), Outbox(), hooks)
+    waiting = Message("t", b"")
+    session._inflight = {1: waiting, 2: waiting, 65535: waiting}
+    session._next_id = 65533
+    sent = [Message("t", b"%d" % n, qos=n % 2) for n in range(1, 6)]
+    assert session._number(sent) == [65534, 0, 3, 0, 4]
+    assert list(session._inflight) == [1, 2, 65535, 65534, 3, 4]
 
 
 @given(st.lists(st.binary(max_size=40), max_size=60), st.integers(1, 20), st.integers(20, 400))

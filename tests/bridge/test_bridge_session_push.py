@@ -9,16 +9,20 @@ bytes are not MQTT, and a bug in a hook is raised, not taken for a lost connecti
 from __future__ import annotations
 
 import contextlib
+import os
 import random
+import socket
+import struct
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import anyio
 import anyio.abc
 import pytest
 
 import aiortu.bridge._session as session_module
-from aiortu.bridge import Broker, BrokerSession, Message, Outbox, SessionHooks
+from aiortu.bridge import Broker, BrokerSession, Message, Outbox, SessionHooks, _session_push
 from aiortu.bridge._packets import (
     Packet,
     PacketReader,
@@ -27,7 +31,7 @@ from aiortu.bridge._packets import (
     puback_packet,
     publish_packet,
 )
-from aiortu.bridge._session_push import push_session
+from aiortu.bridge._session_push import open_pushed, push_session
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -356,10 +360,104 @@ async def _until(check: Callable[[], bool], seconds: float = 10) -> None:
             await anyio.sleep(0.01)
 
 
-async def test_a_poll_s_acknowledgements_are_read_at_once_on_linux() -> None:
-    """The broker acknowledges 40 messages one by one; the pushed session is woken once for
-    them all (where the kernel takes a receive mark), not once each."""
+async def test_a_poll_s_acknowledgements_wake_nothing_and_the_next_write_reads_them(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The broker acknowledges 40 messages one by one; where the kernel takes a receive mark
+    the pushed session is not woken for them at all: the next write of the outbox reads them
+    first, in one piece, in the turn of the loop that fills it (elsewhere each chunk is read
+    as it comes). Nothing is read that way while nothing is in flight (QoS 0)."""
     count = 40
+    acknowledged = anyio.Event()
+
+    async def broker(stream: anyio.abc.ByteStream) -> None:
+        reader = PacketReader()
+        while not reader.feed(await stream.receive()):  # CONNECT
+            pass
+        await stream.send(CONNACK)
+        ids: list[int] = []
+        while len(ids) < count:
+            publishes = map(Publish.parse, reader.feed(await stream.receive()))
+            ids += [p.packet_id for p in publishes if p.packet_id is not None]
+        for packet_id in ids:
+            await stream.send(puback_packet(packet_id))
+            await anyio.sleep(0.002)
+        acknowledged.set()
+        await anyio.sleep_forever()
+
+    outbox = Outbox()
+    session, listener = await _connected(broker, outbox)
+    reads: list[bytes] = []
+    pushed = session._pushed
+    session._pushed = lambda data: (reads.append(data), pushed(data))[1]  # type: ignore[method-assign]
+    collected: list[bytes | None] = []
+
+    def read(fd: int, size: int) -> bytes:  # the link's own read, seen (None: it waited)
+        collected.append(None)
+        collected[-1] = data = os.read(fd, size)
+        return data
+
+    monkeypatch.setattr(_session_push, "os", SimpleNamespace(read=read))
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(listener.serve, broker)
+        tasks.start_soon(session.run)
+        await _until(lambda: session.connected)
+        outbox.put_all([Message("t", b"qos 0", qos=0) for _ in range(3)])
+        assert collected == []  # nothing in flight: nothing owed, nothing to read
+        outbox.put_all([Message("t", b"%d" % n, qos=1) for n in range(count)])
+        with anyio.fail_after(10):
+            await acknowledged.wait()
+        await anyio.sleep(0.05)
+        acks = b"".join(puback_packet(n) for n in range(1, count + 1))
+        if _marks():
+            assert reads == []  # no wake for them
+            assert len(session._inflight) == count
+            outbox.put(Message("t", b"next", qos=1))
+            assert reads == [acks]  # read first, at once
+            assert collected == [acks]
+            assert len(session._inflight) == 1
+        else:
+            assert b"".join(reads) == acks
+        await _until(lambda: session.delivered == count + 3)
+        tasks.cancel_scope.cancel()
+
+
+async def test_collect_reads_below_the_mark_without_waiting_and_ends_the_link_on_a_reset() -> None:
+    """`PushedLink.collect` reads only what waits below a mark above one byte, hands it on as
+    the loop's callback would, never waits, and a reset of the connection ends the link with
+    it (not raised into the caller)."""
+    server = socket.create_server(("127.0.0.1", 0))
+    with server:
+        link = await open_pushed("127.0.0.1", server.getsockname()[1], None)
+        peer, _ = server.accept()
+        with peer:
+            peer.sendall(b"12345678")
+            await anyio.sleep(0.05)  # the mark is one byte: the loop's callback reads them
+            assert link._kept == [b"12345678"]
+            link.collect()  # a mark of one byte: nothing read
+            assert link._kept == [b"12345678"]
+            link.expect(9)
+            peer.sendall(b"abcdefgh")
+            await anyio.sleep(0.05)
+            if not _marks():
+                assert link._kept == [b"12345678", b"abcdefgh"]
+                return
+            assert link._kept == [b"12345678"]  # below the mark: no wake
+            link.collect()
+            assert link._kept == [b"12345678", b"abcdefgh"]  # handed on as the callback does
+            link.collect()  # nothing waits: no wait, nothing handed on
+            assert link._kept == [b"12345678", b"abcdefgh"]
+            peer.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        link.collect()  # the reset, read before the loop's callback
+        with pytest.raises(ConnectionResetError):
+            await link.ended()
+
+
+async def test_bytes_that_are_not_mqtt_below_the_mark_end_the_connection_not_the_poll() -> None:
+    """What the next fill of the outbox reads below the mark is taken as the read callback
+    takes it: bytes that are not MQTT end the connection (the session connects again), and
+    the caller that filled the outbox (a poll) goes on."""
+    count = 10
 
     async def broker(stream: anyio.abc.ByteStream) -> None:
         reader = PacketReader()
@@ -369,31 +467,26 @@ async def test_a_poll_s_acknowledgements_are_read_at_once_on_linux() -> None:
         got: list[Packet] = []
         while len(got) < count:
             got += reader.feed(await stream.receive())
-        for packet in got:
-            await stream.send(puback_packet(Publish.parse(packet).packet_id or 0))
-            await anyio.sleep(0.002)
+        await stream.send(bytes((0x30, 0xFF, 0xFF, 0xFF, 0xFF, 0x7F)))  # below the mark of 41
         await anyio.sleep_forever()
 
     outbox = Outbox()
     session, listener = await _connected(broker, outbox)
-    reads = []
-    pushed = session._pushed
-    session._pushed = lambda data: (reads.append(data), pushed(data))[1]  # type: ignore[method-assign]
     async with anyio.create_task_group() as tasks:
         tasks.start_soon(listener.serve, broker)
         tasks.start_soon(session.run)
         await _until(lambda: session.connected)
         outbox.put_all([Message("t", b"%d" % n, qos=1) for n in range(count)])
-        await _until(lambda: session.delivered == count)
+        await anyio.sleep(0.1)
+        if _marks():
+            assert session.connections == 1  # below the mark: not read yet
+        outbox.put(Message("t", b"next", qos=1))  # reads them, and does not raise
+        await _until(lambda: session.connections == 2)
         tasks.cancel_scope.cancel()
-    assert b"".join(reads) == b"".join(puback_packet(n) for n in range(1, count + 1))
-    if _marks():
-        assert len(reads) == 1
+    assert session.last_error == "a malformed MQTT remaining length"
 
 
 def _marks() -> bool:
-    from aiortu.bridge import _session_push
-
     return _session_push._MARKS
 
 

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import enum
 import struct
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Protocol, TypeVar
 
 __all__ = (
     "MAX_STRING_BYTES",
     "PUBACK_SIZE",
     "ConnectRefused",
+    "Outgoing",
     "Packet",
     "PacketReader",
     "PacketType",
@@ -178,11 +181,31 @@ _HEADS = [[bytes((0x30 | flags, size)) for size in range(0x80)] for flags in ran
 bridge's values, as a rule), by its flags (QoS << 1 | retain), then by that length."""
 
 
+class Outgoing(Protocol):
+    """A message as [`PublishWriter.add_all`][aiortu.bridge._packets.PublishWriter.add_all]
+    reads it: a `payload` on a `topic` at `qos`, `retain`ed or not; one whose `metrics` is
+    set has its payload made when it is written."""
+
+    @property
+    def topic(self) -> str: ...
+    @property
+    def payload(self) -> bytes: ...
+    @property
+    def qos(self) -> int: ...
+    @property
+    def retain(self) -> bool: ...
+    @property
+    def metrics(self) -> object: ...
+
+
+_Message = TypeVar("_Message", bound=Outgoing)
+
+
 class PublishWriter:
     """PUBLISH packets as [`publish_packet`][aiortu.bridge._packets.publish_packet] makes
-    them, added one by one and joined once a batch, each topic encoded once: a publisher
-    sends the same topics again and again. Up to `max_topics` encodings are kept (a bridge's
-    topics are set by its configuration)."""
+    them, added by the batch and joined once, each topic encoded once: a publisher sends the
+    same topics again and again. Up to `max_topics` encodings are kept (a bridge's topics are
+    set by its configuration)."""
 
     def __init__(self, max_topics: int = 100_000) -> None:
         self.max_topics = max_topics
@@ -196,21 +219,44 @@ class PublishWriter:
         """Add the PUBLISH of `payload` on `topic` (`packet_id` for QoS 1) to the packets
         that [`joined`][aiortu.bridge._packets.PublishWriter.joined] returns; raises
         ValueError, adding nothing, for a topic or packet too long for MQTT."""
+        field = self._field(topic)
+        size = len(field) + len(payload) + (2 if qos else 0)
+        head = bytes((0x30 | (0x08 if dup else 0) | qos << 1 | retain,)) + _length(size)
+        if qos:
+            self._parts += (head, field, _SHORT(packet_id), payload)
+        else:
+            self._parts += (head, field, payload)
+
+    def add_all(
+        self, messages: Iterable[_Message], packet_ids: Iterable[int],
+        prepare: Callable[[_Message], bytes],
+    ) -> None:  # fmt: skip
+        """`add` each of `messages` with its id of `packet_ids` (0 at QoS 0), its payload
+        made by `prepare` if it carries `metrics`: a poll's values in one loop, each fixed
+        header under 128 bytes from a table. A message that `add` refuses raises its
+        ValueError, and the messages before it stay added."""
+        topics, extend = self._topics, self._parts.extend
+        for message, packet_id in zip(messages, packet_ids, strict=True):
+            topic = message.topic
+            field = topics.get(topic) or self._field(topic)
+            payload = message.payload if message.metrics is None else prepare(message)
+            qos = message.qos
+            size = len(field) + len(payload)
+            if qos == 1 and size < 0x7E:
+                extend((_HEADS[2 | message.retain][size + 2], field, _SHORT(packet_id), payload))
+            elif qos == 0 and size < 0x80:
+                extend((_HEADS[message.retain][size], field, payload))
+            else:  # a long packet, or QoS 2
+                self.add(topic, payload, qos, message.retain, packet_id)
+
+    def _field(self, topic: str) -> bytes:
+        """The topic's field, encoded once (and kept while under `max_topics`)."""
         field = self._topics.get(topic)
         if field is None:
             field = _topic_field(topic)
             if len(self._topics) < self.max_topics:
                 self._topics[topic] = field
-        size = len(field) + len(payload) + (2 if qos else 0)
-        flags = qos << 1 | retain
-        if size < 0x80 and flags < 4 and not dup:  # a header from the table, the rule
-            head = _HEADS[flags][size]
-        else:
-            head = bytes((0x30 | (0x08 if dup else 0) | flags,)) + _length(size)
-        if qos:
-            self._parts += (head, field, _SHORT(packet_id), payload)
-        else:
-            self._parts += (head, field, payload)
+        return field
 
     def joined(self) -> bytes:
         """The packets added since the last call, in order, in one piece."""

@@ -116,8 +116,7 @@ class BrokerSession:
         """Whether the session is connected now."""
         self.connections = 0
         """Connections made (the first one counts)."""
-        self.delivered = 0
-        """Messages the broker took: acknowledged (QoS 1) or written (QoS 0)."""
+        self._delivered = 0
         self.last_error: str | None = None
         """Why the last connection failed or ended."""
         self._inflight: dict[int, Message] = {}
@@ -132,6 +131,13 @@ class BrokerSession:
         self._writer = PublishWriter()
         self._early: list[Packet] = []
         self._sending = anyio.Lock()
+
+    @property
+    def delivered(self) -> int:
+        """Messages the broker took: acknowledged (QoS 1) or written (QoS 0). On a pushed
+        connection the acknowledgements waiting in the kernel are taken first."""
+        self._collect()
+        return self._delivered
 
     async def _write(self, stream: anyio.abc.ByteStream | PushedLink, data: bytes) -> None:
         # The sender, the pinger and the acknowledgements of commands share the stream. The
@@ -274,24 +280,30 @@ class BrokerSession:
 
     def _encode(self, messages: list[Message]) -> bytes:
         """The PUBLISH packets of `messages`, each QoS 1 one in flight from now on."""
-        prepare, inflight, writer = self.hooks.prepare, self._inflight, self._writer
-        add = writer.add
+        writer = self._writer
         try:
-            for message in messages:
-                number = 0
-                if message.qos:
-                    number = self._next_id % 65535 + 1  # the next id, unless still in flight
-                    if number in inflight:
-                        number = self._packet_id()
-                    self._next_id = number
-                    inflight[number] = message
-                else:
-                    self.delivered += 1
-                payload = message.payload if message.metrics is None else prepare(message)
-                add(message.topic, payload, message.qos, message.retain, number)
+            writer.add_all(messages, self._number(messages), self.hooks.prepare)
         finally:
             packets = writer.joined()  # and none left for the next batch if one failed
         return packets
+
+    def _number(self, messages: list[Message]) -> list[int]:
+        """The packet id of each of `messages` (0 at QoS 0): the next one not in flight."""
+        inflight, ids = self._inflight, []
+        number = self._next_id
+        for message in messages:
+            if message.qos:
+                number = number % 65535 + 1
+                if number in inflight:
+                    self._next_id = number
+                    number = self._packet_id()
+                inflight[number] = message
+                ids.append(number)
+            else:
+                ids.append(0)
+        self._next_id = number
+        self._delivered += ids.count(0)  # QoS 0: taken once written
+        return ids
 
     async def _receive(self, stream: anyio.abc.ByteStream) -> None:
         answers = self._answers(self._early_packets())
@@ -307,11 +319,12 @@ class BrokerSession:
         try:
             link.write(self._answers(self._early_packets()))
             link.on_writable = self._flush
-            self.outbox.notify(self._flush)
+            self.outbox.notify(self._filled)
             link.set_receiver(self._pushed)
             self._flush()
             await link.ended()
         finally:
+            self._collect()  # what the broker acknowledged is not sent again
             self.outbox.notify(None)
             self._link = link.on_writable = None
 
@@ -327,20 +340,31 @@ class BrokerSession:
             self._link.write(answers)
         self._flush()
 
+    def _filled(self) -> None:
+        """The outbox's listener: the acknowledgements waiting in the kernel first (read in
+        this turn of the loop, not in a wake of their own), then the writes. A command's
+        messages wait for its PUBACK: the read callback writes them after it."""
+        if not self._holding:
+            self._collect()
+            self._flush()
+
+    def _collect(self) -> None:
+        """Take what the pushed link holds below its mark (see `PushedLink.collect`)."""
+        if self._link is not None:
+            self._link.collect()
+
     def _flush(self) -> None:
         """Write what waits in the outbox, within the window, while the link takes it."""
         link, outbox = self._link, self.outbox
-        if self._holding:
-            return
         if link is None:
             return
         while link.writable and outbox and (room := self._room()) > 0:
             link.write(self._encode(outbox.take(room)))
-        # Woken once for the PUBACKs of what is in flight, not once for each; by any byte
-        # while messages wait for room (each PUBACK makes some) and after a PINGREQ (the
-        # keep-alive hears the broker as it did).
-        wanted = PUBACK_SIZE * len(self._inflight) - self._reader.pending
-        link.expect(1 if self._pinged or outbox else wanted)
+        # Never woken by the PUBACKs of what is in flight alone (the next write collects
+        # them), but by any byte more; by any byte while messages wait for room (each PUBACK
+        # makes some) and after a PINGREQ (the keep-alive hears the broker as it did).
+        owed = PUBACK_SIZE * len(self._inflight) - self._reader.pending
+        link.expect(1 if self._pinged or outbox else owed + 1)
 
     def _early_packets(self) -> list[Packet]:
         """What came with the CONNACK (kept until the connection is served)."""
@@ -368,7 +392,7 @@ class BrokerSession:
         before, pop = len(inflight), inflight.pop
         for packet_id in packet_ids:
             pop(packet_id, None)
-        self.delivered += before - len(inflight)  # not done.count(None): Message's __eq__ each
+        self._delivered += before - len(inflight)  # not done.count(None): Message's __eq__ each
         if self._acked is not None:
             self._acked.set()
 

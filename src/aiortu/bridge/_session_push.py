@@ -17,19 +17,24 @@ stops reading leaves the messages in the bounded outbox, not in the transport.
 
 A broker acknowledges a poll's messages one by one as it takes them, so the PUBACKs of one
 write come in as many reads as the broker was quick (up to one each, on an idle machine), each
-a turn of the event loop. On a plain TCP connection on Linux the session tells the link how
-many bytes it waits for (`expect`: the PUBACKs of what is in flight), and the link asks the
-kernel not to wake it before they are there (`SO_RCVLOWAT`; the end of the connection wakes
-it whatever the mark): one read a poll. The mark is never above what the broker owes (every
-QoS 1 PUBLISH it took gets its PUBACK), and it is one byte whenever the session needs an
-answer to go on: while messages wait for room in the window, which each PUBACK makes, and
-after a PINGREQ until the broker says anything, so the keep-alive hears the PINGRESP as
-before. A command that comes meanwhile is read with the PUBACKs.
+a turn of the event loop. On a plain TCP connection on Linux the session tells the link when
+to wake it (`expect`), and the link asks the kernel not to wake it before that many bytes are
+there (`SO_RCVLOWAT`; the end of the connection wakes it whatever the mark). The mark is one
+byte above the PUBACKs of what is in flight (every QoS 1 PUBLISH the broker took gets its
+PUBACK): the PUBACKs alone wake nobody. They wait in the kernel until the outbox is filled
+again, and the session reads them first (`collect`, a read that does not wait), in the turn
+of the loop the poll woke anyway: at QoS 1 a poll wakes the process no more than at QoS 0.
+Any other byte (a command, a PINGRESP) lifts what is there over the mark once the PUBACKs are
+in, so a command that comes meanwhile is read with them. The mark is one byte whenever the
+session needs an answer to go on: while messages wait for room in the window, which each
+PUBACK makes, and after a PINGREQ until the broker says anything, so the keep-alive hears the
+PINGRESP as before (and the PUBACKs are read at least once a half keep-alive).
 """
 
 from __future__ import annotations
 
 import asyncio
+import os
 import socket
 import ssl
 import sys
@@ -115,8 +120,9 @@ class PushedLink(asyncio.Protocol):
 
     def expect(self, size: int) -> None:
         """Wake the receiver only once `size` bytes (at least 1) can be read, or the
-        connection ends: `size` must never be more than what will come (see the module
-        docstring). Where the mark cannot be set (TLS, not Linux), every chunk wakes it."""
+        connection ends: at most one byte more than what will come, the rest read by
+        `collect` (see the module docstring). Where the mark cannot be set (TLS, not Linux),
+        every chunk wakes it."""
         size = max(1, size)
         if size == self._mark or self._socket is None or self._error is not None:
             return
@@ -126,6 +132,24 @@ class PushedLink(asyncio.Protocol):
             self._socket = None
             return
         self._mark = size
+
+    def collect(self) -> None:
+        """Hand what waits below the mark in the kernel to the receiver, as the loop's
+        callback would (an error ends the link), without waiting. Nothing is read while the
+        mark is one byte: the loop's callback reads every chunk then. The end of the
+        connection is left for that callback, which reads it as ever."""
+        if self._mark == 1 or self._socket is None:
+            return
+        try:
+            data = os.read(self._socket.fileno(), _COLLECT)
+        except BlockingIOError:
+            return
+        except OSError as error:
+            self.end(error)
+            if self.transport is not None:
+                self.transport.abort()
+            return
+        self.data_received(data)  # empty at the end, which the loop's callback then reads
 
     def write(self, data: bytes) -> None:
         """Write `data` now (nothing once the link has ended)."""
@@ -184,6 +208,9 @@ class PushedLink(asyncio.Protocol):
 _MARKS = sys.platform == "linux"
 """Whether `expect` sets the socket's receive low-water mark: Linux's epoll honours it for TCP
 (and wakes on the connection's end whatever the mark)."""
+
+_COLLECT = 256 * 1024
+"""The most `collect` reads at once (what asyncio's read callback takes at once)."""
 
 
 async def open_pushed(host: str, port: int, context: ssl.SSLContext | None) -> PushedLink:
