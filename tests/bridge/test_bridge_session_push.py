@@ -453,6 +453,18 @@ async def test_collect_reads_below_the_mark_without_waiting_and_ends_the_link_on
             await link.ended()
 
 
+async def _take_publishes(stream: anyio.abc.ByteStream, count: int) -> list[Packet]:
+    """The broker's side of a connection: its CONNECT answered, then `count` packets taken."""
+    reader = PacketReader()
+    while not reader.feed(await stream.receive()):  # CONNECT
+        pass
+    await stream.send(CONNACK)
+    got: list[Packet] = []
+    while len(got) < count:
+        got += reader.feed(await stream.receive())
+    return got
+
+
 async def test_bytes_that_are_not_mqtt_below_the_mark_end_the_connection_not_the_poll() -> None:
     """What the next fill of the outbox reads below the mark is taken as the read callback
     takes it: bytes that are not MQTT end the connection (the session connects again), and
@@ -460,13 +472,7 @@ async def test_bytes_that_are_not_mqtt_below_the_mark_end_the_connection_not_the
     count = 10
 
     async def broker(stream: anyio.abc.ByteStream) -> None:
-        reader = PacketReader()
-        while not reader.feed(await stream.receive()):  # CONNECT
-            pass
-        await stream.send(CONNACK)
-        got: list[Packet] = []
-        while len(got) < count:
-            got += reader.feed(await stream.receive())
+        await _take_publishes(stream, count)
         await stream.send(bytes((0x30, 0xFF, 0xFF, 0xFF, 0xFF, 0x7F)))  # below the mark of 41
         await anyio.sleep_forever()
 
@@ -499,13 +505,7 @@ async def test_acknowledgements_and_commands_cut_anywhere_never_wait_for_more(se
     commands = rng.randint(0, 3)
 
     async def broker(stream: anyio.abc.ByteStream) -> None:
-        reader = PacketReader()
-        while not reader.feed(await stream.receive()):  # CONNECT
-            pass
-        await stream.send(CONNACK)
-        got: list[Packet] = []
-        while len(got) < count:
-            got += reader.feed(await stream.receive())
+        got = await _take_publishes(stream, count)
         pieces = [puback_packet(Publish.parse(p).packet_id or 0) for p in got]
         pieces += [publish_packet("c", b"", qos=1, packet_id=100 + n) for n in range(commands)]
         rng.shuffle(pieces)
