@@ -52,6 +52,7 @@ __all__ = (
     "ConnectionCounters",
     "ConnectionLimit",
     "UnixAddress",
+    "after_handshake",
     "listen_tcp",
     "listen_unix",
     "listening_address",
@@ -152,7 +153,7 @@ async def serve_listener(
     """
     accepting = listener
     if isinstance(listener, _Handshaking):
-        accepting, handler = listener.listener, _after_handshake(listener, handler)
+        accepting, handler = listener.listener, after_handshake(listener, handler)
     async with listener, anyio.create_task_group() as tasks:
         if isinstance(accepting, MultiListener):
             for each in accepting.listeners:
@@ -191,7 +192,10 @@ async def _accept_loop(
             await _close(stream)
 
 
-def _after_handshake(listener: _Handshaking, handler: Handler) -> Handler:
+def after_handshake(listener: _Handshaking, handler: Handler) -> Handler:
+    """`handler`, called with the secured stream once `listener`'s handshake on an accepted
+    stream succeeds (a failed one is `listener`'s to tell and close)."""
+
     async def secured(stream: anyio.abc.ByteStream) -> None:
         secure = await listener.handshake(stream)
         if secure is not None:

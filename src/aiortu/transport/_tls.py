@@ -41,7 +41,7 @@ from anyio.streams.tls import TLSListener, TLSStream
 from aiortu._log import get_logger
 from aiortu.errors import InvalidValue, PortError
 from aiortu.transport import _tcp_push  # its predicate, looked up at each call
-from aiortu.transport._listen import peer_address
+from aiortu.transport._listen import after_handshake, peer_address
 from aiortu.transport._mbap_stream import ModbusTcpCounters, ModbusTcpStream
 from aiortu.transport._tcp import connect_protocol, open_tcp_connection
 from aiortu.transport._tcp_push import PushConnectionStream
@@ -340,13 +340,7 @@ class TlsListener(TLSListener):
         """Serve each connection of the wrapped listener whose handshake succeeds with
         `handler` ([`serve_listener`][aiortu.transport.serve_listener] accepts with a limit and
         calls [`handshake`][aiortu.transport.TlsListener.handshake] itself)."""
-
-        async def secured(stream: anyio.abc.ByteStream) -> None:
-            secure = await self.handshake(stream)
-            if secure is not None:
-                await handler(secure)
-
-        await self.listener.serve(secured, task_group)
+        await self.listener.serve(after_handshake(self, handler), task_group)
 
     async def handshake(self, stream: anyio.abc.ByteStream) -> anyio.abc.ByteStream | None:
         """The TLS stream over the accepted `stream` once the handshake is done within
