@@ -72,6 +72,7 @@ from aiortu.transport import (
     push_listener,
     pushed_listener,
     serve_listener,
+    write_now,
 )
 
 __all__ = (
@@ -350,7 +351,10 @@ class ModbusTcpServer(Dispatcher):
 
     async def _send(self, stream: anyio.abc.ByteStream, data: bytes) -> bool:
         """Send `data`; False when it could not be written for `idle_timeout` seconds: the
-        client reads nothing, and the connection is to close (counted as idle)."""
+        client reads nothing, and the connection is to close (counted as idle). Data the
+        transport takes at once needs no timer (nor the event-loop turn `send()` ends with)."""
+        if write_now(stream, data):
+            return True
         with anyio.move_on_after(self.idle_timeout):
             await stream.send(data)
             return True
