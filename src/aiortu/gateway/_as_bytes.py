@@ -34,7 +34,7 @@ import struct
 from typing import Final
 
 from aiortu.core.codes import FunctionCode
-from aiortu.core.pdu import MAX_READ_REGISTERS, RawRegisterRead, Request
+from aiortu.core.pdu import ADDRESS_RANGE, MAX_READ_REGISTERS, RawRegisterRead, Request
 from aiortu.errors import InvalidValue
 from aiortu.gateway._forward import request_of
 from aiortu.master import Master
@@ -43,7 +43,7 @@ __all__ = ("ReadsAsBytes",)
 
 _CODES: Final = frozenset((FunctionCode.READ_HOLDING_REGISTERS, FunctionCode.READ_INPUT_REGISTERS))
 _ADDRESS_COUNT: Final = struct.Struct(">HH")
-_ADDRESSES: Final = 0x10000
+_ADDRESSES: Final = ADDRESS_RANGE.stop
 _MAX_READS: Final = 1024
 """Distinct reads kept per line; past that the memo starts again (a bound, not a policy)."""
 
