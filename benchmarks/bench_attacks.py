@@ -17,10 +17,8 @@ the end; `VmHWM` is its peak. Run:
 
 from __future__ import annotations
 
-import json
 import random
 import socket
-import subprocess
 import sys
 import tempfile
 import threading
@@ -30,6 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tests.attacks import fd_server  # noqa: E402
 from tests.attacks.fd_server import FILE_LIMIT  # noqa: E402
 from tests.attacks.listeners import STREAMS, Target, ask, open_client  # noqa: E402
 from tests.attacks.test_fd_exhaustion import _target  # noqa: E402
@@ -88,13 +87,8 @@ def _recover(target: Target, began: float) -> float:
 
 def main(backend: str, limit: str) -> None:
     directory = Path(tempfile.mkdtemp())
-    command = [sys.executable, "-m", "tests.attacks.fd_server", str(directory), backend, limit]
-    process = subprocess.Popen(
-        command, cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
+    process, addresses = fd_server.start(directory, backend, limit)
     try:
-        assert process.stdout is not None
-        addresses = json.loads(process.stdout.readline())
         targets = [_target(name, addresses[name], directory) for name in STREAMS]
         start = _memory(process.pid)
         print(

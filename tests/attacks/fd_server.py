@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import resource
+import subprocess
 import sys
 from pathlib import Path
 
@@ -18,6 +19,18 @@ import anyio
 from tests.attacks.listeners import STREAMS, listeners
 
 FILE_LIMIT = 192
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def start(directory: Path, backend: str, *limit: str) -> tuple[subprocess.Popen[bytes], dict]:
+    """This module in a process of its own (the caller kills it); it and the listeners'
+    addresses, by name."""
+    command = [sys.executable, "-m", "tests.attacks.fd_server", str(directory), backend, *limit]
+    process = subprocess.Popen(
+        command, cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    assert process.stdout is not None
+    return process, json.loads(process.stdout.readline())
 
 
 async def main(directory: str, limit: int) -> None:

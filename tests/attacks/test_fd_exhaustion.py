@@ -4,20 +4,17 @@ trio; then each answers, with a line or two per listener and no traceback."""
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
+from tests.attacks import fd_server
 from tests.attacks.listeners import STREAMS, Target, ask, client_context
 from tests.attacks.test_listener_attacks import _close_all, _connect_many
 
 pytestmark = pytest.mark.timeout(120)
 
-ROOT = Path(__file__).resolve().parents[2]
 _KINDS = {"tls": "tls", "unix": "unix"}
 
 
@@ -34,13 +31,8 @@ def _target(name: str, address: list[object] | str, directory: Path) -> Target:
 def test_every_listener_survives_running_out_of_file_descriptors(
     backend: str, tmp_path: Path
 ) -> None:
-    command = [sys.executable, "-m", "tests.attacks.fd_server", str(tmp_path), backend]
-    process = subprocess.Popen(
-        command, cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
+    process, addresses = fd_server.start(tmp_path, backend)
     try:
-        assert process.stdout is not None
-        addresses = json.loads(process.stdout.readline())
         targets = [_target(name, addresses[name], tmp_path) for name in STREAMS]
         for target in targets:
             held = _connect_many(target, 400)

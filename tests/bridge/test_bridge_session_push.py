@@ -244,6 +244,16 @@ async def _connected(
     return session, listener
 
 
+async def _connect(stream: anyio.abc.ByteStream, then: bytes = b"") -> PacketReader:
+    """The scripted broker's side of a connection: the CONNECT read and answered (with
+    `then` after the CONNACK); the reader goes on with what follows."""
+    reader = PacketReader()
+    while not reader.feed(await stream.receive()):  # CONNECT
+        pass
+    await stream.send(CONNACK + then)
+    return reader
+
+
 async def test_a_broker_that_reads_nothing_leaves_the_messages_in_the_outbox() -> None:
     """The pushed path writes only while the transport's buffer is below its high-water
     mark: what the broker does not read waits in the outbox (bounded), not in memory the
@@ -253,10 +263,7 @@ async def test_a_broker_that_reads_nothing_leaves_the_messages_in_the_outbox() -
     count, size = 20_000, 1000
 
     async def broker(stream: anyio.abc.ByteStream) -> None:
-        reader = PacketReader()
-        while not reader.feed(await stream.receive()):  # CONNECT
-            pass
-        await stream.send(CONNACK)
+        reader = await _connect(stream)
         await reading.wait()
         while len(received) < count:
             packets = reader.feed(await stream.receive())
@@ -300,10 +307,7 @@ async def test_bytes_that_are_not_mqtt_end_the_connection(
     monkeypatch.setattr(session_module, "push_session", lambda: pushed)
 
     async def broker(stream: anyio.abc.ByteStream) -> None:
-        reader = PacketReader()
-        while not reader.feed(await stream.receive()):  # CONNECT
-            pass
-        await stream.send(CONNACK)
+        reader = await _connect(stream)
         while not reader.feed(await stream.receive()):  # the PUBLISH after connecting
             pass
         await stream.send(bytes((0x30, 0xFF, 0xFF, 0xFF, 0xFF, 0x7F)))  # a 5-byte length
@@ -335,10 +339,7 @@ async def test_a_bug_in_a_hook_is_raised_not_taken_for_a_lost_connection(
     monkeypatch.setattr(session_module, "push_session", lambda: pushed)
 
     async def broker(stream: anyio.abc.ByteStream) -> None:
-        reader = PacketReader()
-        while not reader.feed(await stream.receive()):  # CONNECT
-            pass
-        await stream.send(CONNACK + publish_packet("cmd", b"1", qos=1, packet_id=5))
+        await _connect(stream, then=publish_packet("cmd", b"1", qos=1, packet_id=5))
         await anyio.sleep_forever()
 
     def on_publish(publish: Publish) -> None:
@@ -371,10 +372,7 @@ async def test_a_poll_s_acknowledgements_wake_nothing_and_the_next_write_reads_t
     acknowledged = anyio.Event()
 
     async def broker(stream: anyio.abc.ByteStream) -> None:
-        reader = PacketReader()
-        while not reader.feed(await stream.receive()):  # CONNECT
-            pass
-        await stream.send(CONNACK)
+        reader = await _connect(stream)
         ids: list[int] = []
         while len(ids) < count:
             publishes = map(Publish.parse, reader.feed(await stream.receive()))
@@ -455,10 +453,7 @@ async def test_collect_reads_below_the_mark_without_waiting_and_ends_the_link_on
 
 async def _take_publishes(stream: anyio.abc.ByteStream, count: int) -> list[Packet]:
     """The broker's side of a connection: its CONNECT answered, then `count` packets taken."""
-    reader = PacketReader()
-    while not reader.feed(await stream.receive()):  # CONNECT
-        pass
-    await stream.send(CONNACK)
+    reader = await _connect(stream)
     got: list[Packet] = []
     while len(got) < count:
         got += reader.feed(await stream.receive())
@@ -534,10 +529,7 @@ async def test_a_broker_that_holds_its_acknowledgements_is_still_heard_by_the_ke
     PINGREQ the session is woken by any byte, so the PINGRESPs keep the connection."""
 
     async def broker(stream: anyio.abc.ByteStream) -> None:
-        reader = PacketReader()
-        while not reader.feed(await stream.receive()):  # CONNECT
-            pass
-        await stream.send(CONNACK)
+        reader = await _connect(stream)
         with contextlib.suppress(anyio.EndOfStream):
             while True:
                 for packet in reader.feed(await stream.receive()):
