@@ -21,7 +21,9 @@ from aiortu.bridge._topics import (
     COMMAND,
     bridge_topic,
     device_topic,
+    discovery_object_id,
     discovery_topic,
+    entity_component,
     point_topic,
     sparkplug_topic,
 )
@@ -305,7 +307,7 @@ class _Reader:
 def _topics(config: BridgeConfig) -> Iterator[tuple[str, str, str]]:
     """Each topic of `config`'s layout, with its device and point (empty when none)."""
     layout = config.topics
-    prefix, node = layout.prefix, layout.node
+    prefix, node, discovery = layout.prefix, layout.node, layout.discovery_prefix
     if layout.layout == "sparkplug":
         for kind in ("NBIRTH", "NDEATH", "NCMD"):
             yield "", "", sparkplug_topic(layout.group, kind, node)
@@ -327,7 +329,9 @@ def _topics(config: BridgeConfig) -> Iterator[tuple[str, str, str]]:
             topic = point_topic(prefix, name, point.name)
             yield name, point.name, topic + COMMAND if point.writable else topic
             if layout.layout == "home-assistant":
-                yield name, point.name, discovery_topic(layout.discovery_prefix, node, name, point)
+                object_id = discovery_object_id(name, point.name)
+                topic = discovery_topic(discovery, entity_component(point), node, object_id)
+                yield name, point.name, topic
 
 
 def _short(name: str) -> str:

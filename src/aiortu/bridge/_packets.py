@@ -172,7 +172,7 @@ def publish_packet(
 def _topic_field(topic: str) -> bytes:
     name = topic.encode()
     if len(name) > MAX_STRING_BYTES:
-        raise ValueError(f"an MQTT topic holds at most 65535 bytes, not {len(name)}")
+        raise ValueError(f"an MQTT topic holds at most {MAX_STRING_BYTES} bytes, not {len(name)}")
     return _SHORT(len(name)) + name
 
 

@@ -69,10 +69,9 @@ def discovery_object_id(device: str, point: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", f"{device}_{point}")
 
 
-def discovery_topic(discovery_prefix: str, node: str, device: str, point: ProfilePoint) -> str:
-    """The topic of `point`'s Home Assistant discovery config."""
-    component = entity_component(point)
-    object_id = discovery_object_id(device, point.name)
+def discovery_topic(discovery_prefix: str, component: str, node: str, object_id: str) -> str:
+    """The topic of a point's Home Assistant discovery config, by its `component`
+    (`entity_component`) and `object_id` (`discovery_object_id`)."""
     return f"{discovery_prefix}/{component}/{node}/{object_id}/config"
 
 

@@ -573,8 +573,10 @@ class Link:
         start = self.clock()
         activity = self._activity
         direct = self.direct  # no gap and no wire: quiet, and the frame gone once written
-        gap = self.frame_gap
-        if not direct and max(activity.last_received, activity.transmit_end) + gap > start:
+        if (
+            not direct
+            and max(activity.last_received, activity.transmit_end) + self.frame_gap > start
+        ):
             return None
         if not send_nowait(frame):
             return None

@@ -103,7 +103,6 @@ if TYPE_CHECKING:
     from aiortu.transport._serial import RS485Options, SerialAttribute, SerialStream, open_serial
 
 __all__ = (
-    "WARNING_INTERVAL",
     "ASCII_BYTESIZE",
     "ASCII_TCP_SCHEME",
     "DATAGRAM_BACKLOG",
@@ -114,6 +113,7 @@ __all__ = (
     "RTU_SILENCE",
     "TCP_SCHEME",
     "TLS_SCHEME",
+    "WARNING_INTERVAL",
     "WRITE_FUNCTION_CODES",
     "AcceptCounters",
     "AccessRule",
