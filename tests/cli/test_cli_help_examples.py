@@ -1,7 +1,8 @@
 """The examples the help texts and the getting-started page give, run as given: the
 virtual-bus help's serve, read and mbpoll lines; the gateway help's line shared with mbpoll;
 the getting-started walk-through with a monitor watching; and a second virtual bus over a
-running one, which must refuse."""
+running one, which must refuse; and every command's help examples, each one line that the
+command's parser takes."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from aiortu.cli import SUMMARIES, build_parser, main
 from tests.cli.cli_helpers import aiortu_command, run_aiortu, start_aiortu
 
 pytestmark = pytest.mark.timeout(90)
@@ -167,3 +169,33 @@ def test_a_second_virtual_bus_on_the_same_links_refuses(tmp_path: Path) -> None:
         assert sorted(p.name for p in (tmp_path / "rtu").iterdir()) == links
         assert (tmp_path / "rtu" / "port0").exists()
         assert ports == [str(tmp_path / "rtu" / "port0"), str(tmp_path / "rtu" / "port1")]
+
+
+def example_commands(help_text: str) -> list[str]:
+    """The command lines of the `examples:` section of a help text, each continued line (a `\\`
+    at its end) joined to the next, comments, pipes and redirections dropped."""
+    block = help_text.split("\nexamples:\n", 1)[1].split("\n\n", 1)[0]
+    lines = [
+        re.split(r" [#|>] ", line)[0].strip()
+        for line in re.sub(r"\\\n\s*", " ", block).splitlines()
+    ]
+    return [line for line in lines if line.startswith("aiortu ")]
+
+
+@pytest.mark.parametrize("command", sorted(SUMMARIES))
+def test_every_help_example_is_one_line_the_command_takes(
+    command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    examples = example_commands(capsys.readouterr().out)
+    assert examples
+    for line in examples:
+        # A `\` that ends a line in the source but not in the text joins the next line on, its
+        # indentation a gap in the middle of the command.
+        assert "   " not in line, line
+        argv = shlex.split(line)[1:]
+        try:
+            build_parser(argv[0]).parse_args(argv)
+        except SystemExit as exit:
+            pytest.fail(f"{line!r} exits {exit.code}")

@@ -56,11 +56,11 @@ examples:
       local clients (the SCADA) go before those of the other listener
   aiortu gateway /dev/ttyUSB0 --listen 'unix:/run/aiortu-ttyUSB0.sock?mode=0660&group=modbus'
       Modbus TCP framing on a Unix socket, for programs of group modbus on this machine
-  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:1502,rules=viewer.toml \
+  aiortu gateway /dev/ttyUSB0 --listen tcp://0.0.0.0:1502,rules=viewer.toml \\
                               --listen tcp://127.0.0.1:1503
       clients of port 1502 may do what viewer.toml allows (exception 01 otherwise);
       see "Exposing a line safely" in docs/gateway.md
-  aiortu gateway /dev/ttyUSB0 --listen tls://0.0.0.0:802,rules=roles.toml \
+  aiortu gateway /dev/ttyUSB0 --listen tls://0.0.0.0:802,rules=roles.toml \\
                  --certfile gw.crt --keyfile gw.key --cafile clients.pem
       Modbus/TCP Security: each client certificate's role gets its rule
   aiortu gateway --line /dev/ttyUSB0:1-20 --line /dev/ttyUSB1:21-40 \\

@@ -48,7 +48,7 @@ examples:
       behind a serial device server, no silence kept before replies
   aiortu serve tcp://0.0.0.0:1502 --config devices.toml
       Modbus TCP on every interface, many clients at once
-  aiortu serve tcp://0.0.0.0:1502 --config devices.toml --serial-line-codes \
+  aiortu serve tcp://0.0.0.0:1502 --config devices.toml --serial-line-codes \\
                                   --unit-alias 255=17 --unit-alias 0=17
       the same, answering the server id (11) and the other serial-line codes, and
       unit ids 255 and 0 as unit 17
