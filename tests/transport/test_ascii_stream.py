@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import random
+import socket
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
@@ -15,7 +16,7 @@ import pytest
 
 import aiortu
 from aiortu.core.ascii import AsciiDiscardReason, encode_ascii_frame
-from aiortu.errors import InvalidValue
+from aiortu.errors import InvalidValue, PortNotFound
 from aiortu.testing import PtyBus, virtual_pair
 from aiortu.transport import AsciiStream, TcpAddress, open_stream, parse_port_url
 
@@ -192,6 +193,19 @@ async def test_ascii_over_tcp_both_directions() -> None:
         connection = await listener.listeners[0].accept()
         async with aiortu.Master(AsciiStream(connection), timeout=1.0) as master:
             assert await master.read_holding_registers(17, 0, 3) == [1, 2, 3]
+
+
+async def test_a_refused_ascii_tcp_url_is_named_as_given() -> None:
+    with socket.socket() as probe:  # a loopback port nothing listens on once it is closed
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    url = f"ascii+tcp://127.0.0.1:{port}"
+    with pytest.raises(
+        PortNotFound, match=rf"^ascii\+tcp://127\.0\.0\.1:{port}: connection refused"
+    ):
+        await open_stream(url)
+    with pytest.raises(PortNotFound, match=r"^rtu\+tcp://"):
+        await open_stream(f"rtu+tcp://127.0.0.1:{port}", framing="ascii")
 
 
 async def test_bad_framing_options_are_one_sentence() -> None:

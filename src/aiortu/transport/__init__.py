@@ -64,7 +64,7 @@ from aiortu.transport._server_framing import (
     MbapFraming,
     RtuFraming,
 )
-from aiortu.transport._tcp import open_rtu_over_tcp
+from aiortu.transport._tcp import open_rtu_over_tcp, open_tcp_connection
 from aiortu.transport._tcp_push import PushConnectionStream, open_modbus_tcp
 from aiortu.transport._tls import (
     ROLE_OID,
@@ -272,7 +272,9 @@ async def _open(address: PortAddress, settings: LineSettings, options: Any) -> B
     if isinstance(address, ModbusTcpAddress):
         return await open_modbus_tcp(address.host, address.port, **options)
     if isinstance(address, TcpAddress):
-        return await open_rtu_over_tcp(address.host, address.port, **options)
+        # Its errors name the URL as given: ascii+tcp:// too.
+        scheme = f"{address.framing}+tcp"
+        return await open_tcp_connection(address.host, address.port, scheme=scheme, **options)
     from aiortu.transport._serial import open_serial
 
     return await open_serial(address.path, settings, **options)
