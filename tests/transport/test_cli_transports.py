@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 
+from aiortu.cli import main
 from aiortu.testing import PtyBus
 from tests.cli.cli_helpers import run_aiortu, start_aiortu, stop
 from tests.transport.certificates import Authority
@@ -125,6 +126,39 @@ def test_a_rule_file_with_an_unknown_key_is_one_line(files: dict[str, Any]) -> N
         f"aiortu serve: error: {rules}: roles.viewer.readonly: unknown key "
         "(expected addresses, broadcast, function_codes, read_only, units)"
     )
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["read", "tcp://127.0.0.1:1502", *READ, "--certfile", "operator.crt"],
+         "aiortu read: error: --certfile is for a tls:// port (Modbus/TCP Security), not "
+         "tcp://127.0.0.1:1502"),
+        (["write", "udp://127.0.0.1:1502", "--unit", "1", "--ref", "40001", "--values", "1",
+          "--cafile", "ca.pem"],
+         "aiortu write: error: --cafile is for a tls:// port (Modbus/TCP Security), not "
+         "udp://127.0.0.1:1502"),
+        (["read", "tls://127.0.0.1:1502", *READ, "--framing", "ascii"],
+         "aiortu read: error: --framing ascii is for a serial device path or rtu+tcp://, not "
+         "tls://127.0.0.1:1502, whose frames are Modbus TCP's"),
+        (["serve", "tcp://127.0.0.1:0", "--config", "device.toml", "--keyfile", "server.key"],
+         "aiortu serve: error: --keyfile is for a tls:// port (Modbus/TCP Security), not "
+         "tcp://127.0.0.1:0"),
+        (["serve", "/dev/ttyUSB0", "--config", "device.toml", "--rules", "rules.toml"],
+         "aiortu serve: error: --rules is for a tls:// port (Modbus/TCP Security), not "
+         "/dev/ttyUSB0"),
+        (["serve", "udp://127.0.0.1:0", "--config", "device.toml", "--framing", "ascii"],
+         "aiortu serve: error: --framing ascii is for a serial device path or rtu+tcp://, not "
+         "udp://127.0.0.1:0, whose frames are Modbus TCP's"),
+    ],
+)  # fmt: skip
+def test_an_option_of_another_transport_is_one_line(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Refused before any file is read or any port opened: none of these exist.
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert (captured.out, captured.err) == ("", message + "\n")
 
 
 def test_serve_and_read_in_ascii_on_a_pty_bus(files: dict[str, Any]) -> None:

@@ -32,7 +32,11 @@ from aiortu.cli._arguments import (
     unit_id,
 )
 from aiortu.cli._messages import invalid_value, port_failure
-from aiortu.cli._transport_options import add_transport_options, transport_options
+from aiortu.cli._transport_options import (
+    add_transport_options,
+    misplaced_option,
+    transport_options,
+)
 from aiortu.core.model import Reference, Table, parse_reference
 from aiortu.errors import (
     ConnectionLost,
@@ -252,6 +256,9 @@ async def open_from_args(
 
     if getattr(args, "unit", None) is not None and isinstance(args.unit, int):
         check_unit_for_port(args.port, args.unit)
+    misplaced = misplaced_option(args)
+    if misplaced is not None:
+        raise UsageError(misplaced)
     resolve_line_settings(args)
     options = {**rs485_options(args), **options}
     async with open_master(

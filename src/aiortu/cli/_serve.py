@@ -29,7 +29,11 @@ from aiortu.cli._arguments import (
     resolve_line_settings,
 )
 from aiortu.cli._messages import invalid_value, library_warnings_on_stderr, port_failure
-from aiortu.cli._transport_options import add_transport_options, transport_options
+from aiortu.cli._transport_options import (
+    add_transport_options,
+    misplaced_option,
+    transport_options,
+)
 from aiortu.core.codes import UNIT_ADDRESSES
 from aiortu.core.pdu import Request, decode_request
 from aiortu.core.rtu import describe_frame, encode_frame
@@ -141,6 +145,10 @@ def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT or SIGTERM; return the exit code."""
     if (args.config is None) == (args.profile is None):
         print("aiortu serve: error: give --config or --profile (one of them)", file=sys.stderr)
+        return 2
+    misplaced = misplaced_option(args)
+    if misplaced is not None:
+        print(f"aiortu serve: error: {misplaced}", file=sys.stderr)
         return 2
     if args.profile is not None:
         from aiortu.cli._profile import serve_profile

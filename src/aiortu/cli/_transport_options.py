@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-__all__ = ("add_transport_options", "transport_options")
+__all__ = ("add_transport_options", "misplaced_option", "transport_options")
 
 
 def add_transport_options(parser: argparse.ArgumentParser, *, server: bool = False) -> None:
@@ -27,6 +27,30 @@ def add_transport_options(parser: argparse.ArgumentParser, *, server: bool = Fal
         group.add_argument(
             "--rules", metavar="FILE.toml", help="tls://: what each client role may do"
         )
+
+
+_TLS_OPTIONS = ("certfile", "keyfile", "cafile", "rules")
+
+_ASCII_SCHEMES = ("", "rtu+tcp", "ascii+tcp")
+"""Where `--framing ascii` applies: a serial device path (no scheme) and the serial framings
+over TCP; Modbus TCP, UDP and TLS carry MBAP frames."""
+
+
+def misplaced_option(args: argparse.Namespace) -> str | None:
+    """Why an option of the group does not go with the port `args.port`, in one sentence;
+    None when they all do. (Given to the library, such an option would be a `TypeError`.)"""
+    scheme, separator, _ = args.port.partition("://")
+    scheme = scheme.lower() if separator else ""
+    if scheme != "tls":
+        given = [f"--{name}" for name in _TLS_OPTIONS if getattr(args, name, None) is not None]
+        if given:
+            return f"{given[0]} is for a tls:// port (Modbus/TCP Security), not {args.port}"
+    if args.framing == "ascii" and scheme not in _ASCII_SCHEMES:
+        return (
+            f"--framing ascii is for a serial device path or rtu+tcp://, not {args.port}, "
+            "whose frames are Modbus TCP's"
+        )
+    return None
 
 
 def transport_options(args: argparse.Namespace) -> dict[str, Any]:
