@@ -1,7 +1,7 @@
 """Messages reworded for people, each where it is produced: request limits in words, a
 number that is not one, a directory given as a device or a file, a Modbus TCP address
-without its scheme, a URL without its port number, and a pty that keeps no parity
-(from the library too)."""
+without its scheme, a URL without its port number, and a pty that keeps no parity and 8 data
+bits (from the library too)."""
 
 from __future__ import annotations
 
@@ -84,5 +84,34 @@ def test_the_command_adds_its_flags_to_the_librarys_pty_hint() -> None:
     assert result.stderr.endswith(
         "(8N2, the same character time as 8E1); on the command line: --parity N --stopbits 2, "
         "or leave both out\n"
+    )
+    assert result.stderr.count("\n") == 1
+
+
+async def test_the_library_says_a_pty_keeps_8_data_bits() -> None:
+    async with PtyBus() as bus:
+        path = bus.paths[0]
+        with pytest.raises(UnsupportedSettings) as refused:
+            async with aiortu.open_master(
+                path, framing="ascii", bytesize=7, parity="N", stopbits=2
+            ):
+                pass
+    assert str(refused.value) == (
+        f"{path}: the driver kept 8N2 instead of 7N2; a pseudo-terminal keeps 8 data bits and "
+        "no parity bit: open it with 8 data bits, parity N and 2 stop bits (8N2, the same "
+        "character time as 8E1; for Modbus ASCII too, as long as both ends use it)"
+    )
+
+
+def test_the_command_names_bytesize_when_a_pty_refuses_7_data_bits() -> None:
+    with PtyBus().running_in_thread() as bus:
+        result = run_aiortu(
+            "read", bus.paths[0], "--unit", "1", "--ref", "40001", "--framing", "ascii",
+            "--bytesize", "7",
+        )  # fmt: skip
+    assert result.returncode == 1
+    assert result.stderr.endswith(
+        "as long as both ends use it); on the command line: --bytesize 8 --parity N "
+        "--stopbits 2, or leave them out\n"
     )
     assert result.stderr.count("\n") == 1

@@ -662,18 +662,25 @@ def _open(port: str, instance: Any, settings: LineSettings, what: str) -> None:
         instance.close()
         raise _open_error(port, exc, what) from exc
     if applied is not None and applied != _expected_format(settings):
-        hint = _PTY_HINT if _is_pseudo_terminal(instance.fileno()) else ""
+        asked = _expected_format(settings)
+        hint = _pty_hint(applied, asked) if _is_pseudo_terminal(instance.fileno()) else ""
         instance.close()
-        raise UnsupportedSettings(
-            port, f"the driver kept {applied} instead of {_expected_format(settings)}{hint}"
+        raise UnsupportedSettings(port, f"the driver kept {applied} instead of {asked}{hint}")
+
+
+def _pty_hint(applied: str, asked: str) -> str:
+    """Why a pty kept `applied` where `asked` was asked, and what to open it with instead:
+    a pty keeps no parity bit, and 8 data bits whatever it is told (Modbus ASCII's 7 too)."""
+    if applied[0] != asked[0]:
+        return (
+            "; a pseudo-terminal keeps 8 data bits and no parity bit: open it with 8 data bits, "
+            "parity N and 2 stop bits (8N2, the same character time as 8E1; for Modbus ASCII "
+            "too, as long as both ends use it)"
         )
-
-
-_PTY_HINT = (
-    "; a pseudo-terminal keeps no parity bit: open it with parity N and 2 stop bits (8N2, "
-    "the same character time as 8E1)"
-)
-"""Why a pty refuses a parity, and what to open it with instead."""
+    return (
+        "; a pseudo-terminal keeps no parity bit: open it with parity N and 2 stop bits (8N2, "
+        "the same character time as 8E1)"
+    )
 
 
 def _running_loop() -> asyncio.AbstractEventLoop:
