@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import re
 import ssl
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -389,6 +390,29 @@ def test_a_bad_rule_file_is_one_line_naming_the_key(
     assert str(caught.value).startswith(f"{path}: ")
     assert message in str(caught.value)
     assert "\n" not in str(caught.value)
+
+
+def test_the_security_pages_rule_file_loads_and_its_error_is_the_loaders(
+    tmp_path: Path,
+) -> None:
+    page = (Path(__file__).parents[2] / "docs" / "security.md").read_text(encoding="utf-8")
+    example = re.search(r"```toml\n(# rules\.toml\n.*?)```", page, re.DOTALL)
+    assert example is not None
+    path = tmp_path / "rules.toml"
+    path.write_text(example.group(1), encoding="utf-8")
+    rules = load_rules(path)
+    assert rules.default_role == "viewer"
+    assert rules.roles["viewer"].read_only
+    # The page's table of keys names every key the loader takes.
+    path.write_text("[roles.viewer]\nfunction_codes = [3]\nreadonly = true\n", encoding="utf-8")
+    with pytest.raises(ConfigError) as caught:
+        load_rules(path)
+    message = str(caught.value).replace(str(path), "rules.toml")
+    assert f"`{message}`" in page
+    expected = re.search(r"\(expected ([a-z_, ]+)\)", message)
+    assert expected is not None
+    for key in expected.group(1).split(", "):
+        assert f"| `roles.NAME.{key}` |" in page, key
 
 
 def test_der_utf8_long_form() -> None:
