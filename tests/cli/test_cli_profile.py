@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from aiortu.cli import main
 from aiortu.core.model import parse_profile, schema_reference
 from tests.cli.cli_helpers import run_aiortu, start_aiortu, stop
 from tests.peers.venvs import PYSUNSPEC2, peer_python, sunspec_models
@@ -254,3 +255,25 @@ def test_scan_says_which_profile_each_unit_found_matches(tmp_path: Path) -> None
             stop(served)
         bus.terminate()
         bus.wait(timeout=10)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["serve", "/nonexistent/ttyX", "--profile", "eastron-sdm63"],
+        ["poll", "/nonexistent/ttyX", "--unit", "1", "--profile", "eastron-sdm63"],
+        ["profile", "read", "/nonexistent/ttyX", "--unit", "1", "--profile", "eastron-sdm63"],
+        ["scan", "/nonexistent/ttyX", "--units", "1", "--profile", "eastron-sdm63"],
+    ],
+)
+def test_an_unknown_profile_name_is_one_line_naming_the_shipped_ones(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Said before the port is opened (scan: before it scans): the port does not exist.
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert (captured.out, captured.err) == (
+        "",
+        f"aiortu {argv[0]}: error: eastron-sdm63: (file): no such file, nor a shipped profile "
+        "(one of: eastron-sdm630, sunspec-inverter)\n",
+    )

@@ -50,6 +50,7 @@ __all__ = (
     "SHIPPED",
     "report_matches",
     "open_profile",
+    "open_profiles",
     "register",
     "run_poll",
     "serve_profile",
@@ -86,11 +87,15 @@ def shipped_profiles() -> dict[str, Path]:
 
 
 def open_profile(name: str) -> Profile:
-    """The profile in file `name`, or the shipped profile called `name`."""
+    """The profile in file `name`, or the shipped profile called `name`; a
+    [`ConfigError`][aiortu.errors.ConfigError] naming the shipped ones when it is neither."""
     shipped = shipped_profiles()
-    if not Path(name).exists() and name in shipped:
+    if Path(name).exists():
+        return load_profile(name)
+    if name in shipped:
         return load_profile(shipped[name])
-    return load_profile(name)
+    known = ", ".join(shipped)
+    raise ConfigError(name, "(file)", f"no such file, nor a shipped profile (one of: {known})")
 
 
 def register(subparsers: Subparsers) -> None:
@@ -166,8 +171,8 @@ def _add_device_actions(actions: argparse._SubParsersAction[argparse.ArgumentPar
     write.set_defaults(run=_write)
 
 
-def _failed(error: ConfigError | InvalidValue) -> int:
-    print(f"aiortu profile: error: {error}", file=sys.stderr)
+def _failed(error: ConfigError | InvalidValue, command: str = "profile") -> int:
+    print(f"aiortu {command}: error: {error}", file=sys.stderr)
     return 2
 
 
@@ -296,7 +301,7 @@ def run_poll(args: argparse.Namespace) -> int:
     try:
         profile = open_profile(args.profile)
     except ConfigError as error:
-        return _failed(error)
+        return _failed(error, "poll")
 
     def show(reading: Reading) -> None:
         measure = reading.unit_of_measurement
@@ -503,21 +508,26 @@ def _match(args: argparse.Namespace) -> int:
     return run_master(args, body)
 
 
+def open_profiles(names: Sequence[str]) -> list[Profile]:
+    """The profiles `names` (files or shipped names; every shipped profile when empty), each
+    as `open_profile` opens it."""
+    return [open_profile(name) for name in names or shipped_profiles()]
+
+
 async def report_matches(
     port: str,
     found: Sequence[tuple[int, LineSettings]],
-    names: Sequence[str],
+    profiles: Sequence[Profile],
     *,
     response_timeout: float,
     out: TextIO,
 ) -> None:
-    """For `aiortu scan --profile`: which of the profiles `names` (files or shipped names;
-    every shipped profile when empty) each unit `found` (with the setting it answered at)
+    """For `aiortu scan --profile`: which of `profiles` (opened by `open_profiles` before the
+    scan, so that a bad one costs no scan) each unit `found` (with the setting it answered at)
     matches, one line each, reading the unit at that setting."""
     from aiortu.core.model import SunSpecModels
     from aiortu.master import match_profiles, open_master
 
-    profiles = [open_profile(name) for name in names or shipped_profiles()]
     try:
         models: SunSpecModels | None = SunSpecModels.locate()
     except ConfigError:

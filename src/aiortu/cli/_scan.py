@@ -27,7 +27,7 @@ import signal
 import sys
 from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import anyio
 import anyio.abc
@@ -45,6 +45,7 @@ from aiortu.core.pdu import (
 from aiortu.core.rtu import FrameReceived, Role, encode_frame
 from aiortu.core.serial import LineSettings, Parity
 from aiortu.errors import (
+    ConfigError,
     ConnectionLost,
     ModbusError,
     PortError,
@@ -53,6 +54,9 @@ from aiortu.errors import (
 )
 from aiortu.line import Link
 from aiortu.transport import open_stream
+
+if TYPE_CHECKING:
+    from aiortu.core.model import Profile
 
 __all__ = (
     "DEFAULT_BAUDRATES",
@@ -498,11 +502,21 @@ def report(results: Sequence[SettingResult], out: TextIO) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Scan the port described by `args`; return the exit code (0 found, 1 nothing)."""
-    return anyio.run(_scan, args)
+    """Scan the port described by `args`; return the exit code (0 found, 1 nothing, 2 a
+    profile to match that cannot be opened, said before the scan)."""
+    profiles: list[Profile] = []
+    if args.profiles or args.match:
+        from aiortu.cli._profile import open_profiles
+
+        try:
+            profiles = open_profiles(args.profiles or [])
+        except ConfigError as error:
+            print(f"aiortu scan: error: {error}", file=sys.stderr)
+            return 2
+    return anyio.run(_scan, args, profiles)
 
 
-async def _scan(args: argparse.Namespace) -> int:
+async def _scan(args: argparse.Namespace, profiles: list[Profile]) -> int:
     _check_port_exists(args.port)
     pty = is_pty(args.port)
     parities = args.parities
@@ -571,13 +585,11 @@ async def _scan(args: argparse.Namespace) -> int:
         raise CommandFailed(f"{args.port}: the port refused every line setting tried")
     if not report(results, sys.stdout):
         return 1
-    if args.profiles or args.match:
+    if profiles:
         from aiortu.cli._profile import report_matches
 
         found = [(a.unit, a.settings) for r in results for a in r.answers]
-        await report_matches(
-            args.port, found, args.profiles or [], response_timeout=1.0, out=sys.stdout
-        )
+        await report_matches(args.port, found, profiles, response_timeout=1.0, out=sys.stdout)
     return 0
 
 
