@@ -29,14 +29,14 @@ Runner: TypeAlias = "Callable[[argparse.Namespace], int]"
 SUMMARIES: dict[str, str] = {
     "bridge": "publish the devices of lines to an MQTT broker (Home Assistant, Sparkplug B)",
     "demo": "watch three simulated devices being polled on a virtual bus (no hardware)",
-    "gateway": "share one serial line with many Modbus TCP clients (the line server)",
+    "gateway": "share serial lines with many Modbus TCP, UDP and TLS clients (the line server)",
     "identify": "read what a device says it is: identification objects and server id",
     "monitor": "watch a bus: print every frame with its meaning, never send",
     "poll": "poll points on one or more units and show them as a live table",
     "profile": "check device profiles; read and write a device's points by name",
     "read": "read coils, discrete inputs or registers from a device once",
     "scan": "find the units that answer on a port, and their line settings",
-    "serve": "simulate Modbus RTU devices described in a TOML file",
+    "serve": "simulate Modbus devices described in a TOML file or a profile",
     "virtual-bus": "a virtual RS-485 bus of pseudo-terminals that any program can open",
     "write": "write coils or holding registers of a device once",
 }
@@ -69,7 +69,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     parser = Parser(
         prog="aiortu",
-        description="Modbus RTU tools: a master, a slave simulator and virtual serial lines.",
+        description=(
+            "Modbus tools (RTU and ASCII on serial lines; Modbus TCP, UDP and TLS): a master, a "
+            "slave simulator, a line server, an MQTT bridge and virtual serial lines."
+        ),
         epilog="Run 'aiortu COMMAND --help' for the options and examples of a command.",
     )
     parser.add_argument("--version", action="version", version=f"aiortu {__version__}")

@@ -103,9 +103,10 @@ def register(subparsers: Subparsers) -> None:
         "gateway",
         help=SUMMARIES["gateway"],
         description=(
-            "Share one serial line with many Modbus TCP clients: every request goes through "
-            "the line's one master, at frame level (every function code), fairly between "
-            "connections, until interrupted (SIGINT or SIGTERM). See docs/gateway.md."
+            "Share a serial line (or several, routed by unit) with many Modbus TCP, UDP and "
+            "TLS clients: every request goes through the line's one master, at frame level "
+            "(every function code), fairly between connections, until interrupted (SIGINT or "
+            "SIGTERM). See docs/gateway.md."
         ),
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,

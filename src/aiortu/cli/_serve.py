@@ -83,9 +83,10 @@ def register(subparsers: Subparsers) -> None:
         help=SUMMARIES["serve"],
         description=(
             "Serve the units a TOML device description defines (tables, read-only ranges, "
-            "FIFOs, files, device identification, server id) on a serial port or an "
-            "rtu+tcp:// URL, or listening for Modbus TCP on a tcp:// URL, until interrupted "
-            "(SIGINT or SIGTERM). See docs/slave.md."
+            "FIFOs, files, device identification, server id), or a device profile, on a "
+            "serial port or an rtu+tcp:// or ascii+tcp:// URL, or listening on a tcp:// "
+            "(Modbus TCP), udp:// (Modbus UDP) or tls:// (Modbus/TCP Security) URL, until "
+            "interrupted (SIGINT or SIGTERM). See docs/slave.md."
         ),
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
