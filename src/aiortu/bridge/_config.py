@@ -54,6 +54,9 @@ _LINE_OPTIONS: dict[str, type | tuple[type, ...]] = {
     "baudrate": int, "parity": str, "stopbits": (int, float), "bytesize": int,
     "timeout": (int, float), "retries": int, "offline_after": int, "probe_interval": (int, float),
 }  # fmt: skip
+_LINE_FILES = {"cert_file": "certfile", "key_file": "keyfile", "ca_file": "cafile"}
+"""A `tls://` line's certificate files, named as the broker's are, and the options of
+[`open_master`][aiortu.open_master] they become."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,9 +76,10 @@ class DeviceConfig:
 
 @dataclass(frozen=True, slots=True)
 class LineConfig:
-    """One line: its `port` (a serial device, `tcp://`, `rtu+tcp://`, a gateway's listen URL,
-    or [`VIRTUAL_PORT`][aiortu.bridge.VIRTUAL_PORT]), the master's `options` (`baudrate`,
-    `timeout`, `offline_after`, ...), and its `devices`."""
+    """One line: its `port` (a serial device, a `tcp://`, `udp://`, `tls://`, `rtu+tcp://` or
+    `ascii+tcp://` URL, a gateway's listen URL, or [`VIRTUAL_PORT`][aiortu.bridge.VIRTUAL_PORT]),
+    the master's `options` (`baudrate`, `timeout`, `offline_after`, `framing`, a `tls://` port's
+    `certfile`, `keyfile` and `cafile`, ...), and its `devices`."""
 
     port: str
     devices: tuple[DeviceConfig, ...]
@@ -238,13 +242,15 @@ class _Reader:
             raise BrokerError(f"{self.source}: {error}") from None
 
     def line(self, data: object, key: str) -> LineConfig:
-        table = self.table(data, key, {"port", "device", *_LINE_OPTIONS})
+        table = self.table(data, key, {"port", "device", "framing", *_LINE_OPTIONS, *_LINE_FILES})
         port = table.get("port")
         if not isinstance(port, str) or not port:
             raise self.fail(
-                f"{key}.port", "is required: a serial device, tcp://, rtu+tcp:// or virtual"
+                f"{key}.port",
+                "is required: a serial device, tcp://, udp://, tls://, rtu+tcp://, ascii+tcp:// "
+                "or virtual",
             )
-        options: dict[str, Any] = {}
+        options = self.line_transport(table, key, port)
         for name, kinds in _LINE_OPTIONS.items():
             if name in table:
                 value = table[name]
@@ -258,6 +264,32 @@ class _Reader:
             port, tuple(self.device(d, f"{key}.device[{n}]") for n, d in enumerate(devices)),
             options,
         )  # fmt: skip
+
+    def line_transport(self, table: dict[str, Any], key: str, port: str) -> dict[str, Any]:
+        """The options of a line's transport: `framing = "ascii"` on a serial port or
+        `rtu+tcp://`, and the certificate files a `tls://` port needs (relative to the file)."""
+        scheme = port.partition("://")[0].lower() if "://" in port else ""
+        options: dict[str, Any] = {}
+        framing = table.get("framing", "rtu")
+        if framing not in ("rtu", "ascii"):
+            raise self.fail(f"{key}.framing", f'must be "rtu" or "ascii", not {framing!r}')
+        if framing == "ascii":
+            if scheme not in ("", "rtu+tcp", "ascii+tcp") or port == VIRTUAL_PORT:
+                raise self.fail(f"{key}.framing", '"ascii" is for a serial port or rtu+tcp://')
+            options["framing"] = framing
+        for name, option in _LINE_FILES.items():
+            value = table.get(name)
+            if value is None and scheme == "tls":
+                raise self.fail(
+                    f"{key}.{name}", "is required for a tls:// port (Modbus/TCP Security)"
+                )
+            if value is not None and scheme != "tls":
+                raise self.fail(f"{key}.{name}", "is for a tls:// port only")
+            if value is not None:
+                if not isinstance(value, str) or not value:
+                    raise self.fail(f"{key}.{name}", f"must be a file name, not {value!r}")
+                options[option] = str(self.base / value)
+        return options
 
     def device(self, data: object, key: str) -> DeviceConfig:
         table = self.table(
