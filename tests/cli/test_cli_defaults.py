@@ -58,7 +58,7 @@ def test_a_parity_on_a_pty_is_refused_with_the_flags_to_use(bus: list[str]) -> N
     assert result.stderr == (
         f"aiortu read: {bus[0]}: the driver kept 8N1 instead of 8E1; a pseudo-terminal keeps "
         "no parity bit: open it with parity N and 2 stop bits (8N2, the same character time "
-        "as 8E1); on the command line: --parity N --stopbits 2, or leave both out\n"
+        "as 8E1); on the command line: --bytesize 8 --parity N --stopbits 2, or leave them out\n"
     )
 
 

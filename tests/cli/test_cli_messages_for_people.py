@@ -82,8 +82,8 @@ def test_the_command_adds_its_flags_to_the_librarys_pty_hint() -> None:
         result = run_aiortu("read", bus.paths[0], "--unit", "1", "--ref", "40001", "--parity", "E")
     assert result.returncode == 1
     assert result.stderr.endswith(
-        "(8N2, the same character time as 8E1); on the command line: --parity N --stopbits 2, "
-        "or leave both out\n"
+        "(8N2, the same character time as 8E1); on the command line: --bytesize 8 --parity N "
+        "--stopbits 2, or leave them out\n"
     )
     assert result.stderr.count("\n") == 1
 

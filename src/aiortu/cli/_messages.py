@@ -59,10 +59,8 @@ def port_failure(error: PortError) -> str:
     to use; for a missing device named like `host:port`, the Modbus TCP URL meant most likely."""
     message = str(error)
     if isinstance(error, UnsupportedSettings) and is_pty(error.port):
-        if "keeps 8 data bits" in message:  # 7 asked for: every flag's default fits a pty
-            message += f"; on the command line: --bytesize 8 {PTY_LINE}, or leave them out"
-        else:
-            message += f"; on the command line: {PTY_LINE}, or leave both out"
+        # The library said what the pty kept; on a pty every flag's default fits it.
+        message += f"; on the command line: --bytesize 8 {PTY_LINE}, or leave them out"
     elif isinstance(error, PortNotFound) and _HOST_PORT.fullmatch(error.port):
         message += f"; for Modbus TCP write tcp://{error.port} (RTU over TCP: rtu+tcp://)"
     return message
