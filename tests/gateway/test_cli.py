@@ -40,6 +40,18 @@ def test_a_bad_listen_url_is_one_line_and_exit_2(
     assert "Traceback" not in err
 
 
+@pytest.mark.parametrize("option", ["--certfile", "--keyfile", "--cafile"])
+def test_a_certificate_without_a_tls_listener_is_one_line_and_exit_2(
+    option: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["gateway", "/dev/null", "--listen", "tcp://127.0.0.1:0", option, "gw.pem"]
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (
+        f"aiortu gateway: error: {option} is for a --listen tls:// (Modbus/TCP Security), and "
+        "no --listen is one\n"
+    )
+
+
 def test_a_port_that_cannot_be_opened_is_one_line_and_exit_1(
     capsys: pytest.CaptureFixture[str],
 ) -> None:

@@ -381,8 +381,15 @@ async def _serve(
 
 
 def _tls_context(args: argparse.Namespace, listens: list[Listen]) -> ssl.SSLContext | None:
-    """The server context of the tls:// listeners (None when there is none)."""
+    """The server context of the tls:// listeners (None when there is none); a certificate
+    option without such a listener is an `InvalidValue` rather than quietly ignored."""
     if not any(item.url.lower().startswith("tls://") for item in listens):
+        for name in ("certfile", "keyfile", "cafile"):
+            if getattr(args, name) is not None:
+                raise InvalidValue(
+                    f"--{name}", getattr(args, name), "", message=f"--{name} is for a "
+                    "--listen tls:// (Modbus/TCP Security), and no --listen is one",
+                )  # fmt: skip
         return None
     return server_tls_context(args.certfile, args.keyfile, args.cafile)
 
