@@ -87,11 +87,26 @@ def register(subparsers: Subparsers) -> None:
         help="hold received bytes this long (seconds)",
     )
     faults = parser.add_argument_group("faults")
-    faults.add_argument("--bit-error-rate", type=probability, default=0.0, metavar="R")
-    faults.add_argument("--drop-rate", type=probability, default=0.0, metavar="R")
-    faults.add_argument("--garbage-rate", type=probability, default=0.0, metavar="R")
-    faults.add_argument("--gap-rate", type=probability, default=0.0, metavar="R")
-    faults.add_argument("--gap", type=seconds_or_zero, default=0.0, metavar="S", help="gap length")
+    faults.add_argument(
+        "--bit-error-rate", type=probability, default=0.0, metavar="R",
+        help="probability that a data bit is flipped (0)",
+    )  # fmt: skip
+    faults.add_argument(
+        "--drop-rate", type=probability, default=0.0, metavar="R",
+        help="probability that a byte is lost, after taking its time on the wire (0)",
+    )  # fmt: skip
+    faults.add_argument(
+        "--garbage-rate", type=probability, default=0.0, metavar="R",
+        help="probability that random bytes are inserted into a write (0)",
+    )  # fmt: skip
+    faults.add_argument(
+        "--gap-rate", type=probability, default=0.0, metavar="R",
+        help="probability of a pause of --gap seconds after a byte (0)",
+    )  # fmt: skip
+    faults.add_argument(
+        "--gap", type=seconds_or_zero, default=0.0, metavar="S",
+        help="the length of those pauses in seconds (0; needed with --gap-rate)",
+    )  # fmt: skip
     faults.add_argument("--seed", type=int, default=0, help="seed of the fault generator (0)")
     parser.add_argument(
         "--link-dir",
