@@ -230,7 +230,8 @@ class Bridge:
 
     def _refuse(self, command: Command, reason: str) -> None:
         self.stats.write_errors += 1
-        _log.warning("write of %s.%s refused: %s", command.device, command.point, reason)
+        # `reason` says whether it was refused or failed.
+        _log.warning("write of %s.%s not done: %s", command.device, command.point, reason)
         self._put([self.layout.error(command.device, command.point, command.payload, reason,
                                      self._clock())])  # fmt: skip
 
