@@ -82,7 +82,7 @@ async def test_every_poll_points_are_published_every_poll(
 
 
 async def test_writes_round_trip_and_refusals_go_to_the_error_topic(
-    mosquitto: Mosquitto, subscriber: Subscriber, caplog: pytest.LogCaptureFixture
+    mosquitto: Mosquitto, subscriber: Subscriber
 ) -> None:
     async with Bridge(config(mosquitto.url)) as bridge:
         await until(lambda: "aiortu/hp-1/setpoint" in subscriber.last())
@@ -114,14 +114,23 @@ async def test_writes_round_trip_and_refusals_go_to_the_error_topic(
         assert "turbo" in json.loads(subscriber.on("aiortu/hp-2/error")[0])["error"]
         assert bridge.simulated["hp-1"].value("setpoint") == 50.5
         assert bridge.stats.write_errors == 6
-        logged = [r.getMessage() for r in caplog.records if r.name == "aiortu.bridge._bridge"]
-        assert (
-            "write of hp-1.setpoint not done: refused: point setpoint: value 99 is outside the "
-            "limits 20..55"
-        ) in logged
         # The bridge goes on.
         bridge.simulated["hp-1"].set_value("power", 10.0)
         await until(lambda: subscriber.on("aiortu/hp-1/power")[-1:] == [b"10.0"])
+
+
+async def test_a_refused_write_is_logged_once_as_not_done(
+    mosquitto: Mosquitto, subscriber: Subscriber, caplog: pytest.LogCaptureFixture
+) -> None:
+    async with Bridge(config(mosquitto.url, units=(1,))):
+        await until(lambda: "aiortu/hp-1/setpoint" in subscriber.last())
+        subscriber.publish("aiortu/hp-1/setpoint/set", b"99")
+        await until(lambda: len(subscriber.on("aiortu/hp-1/error")) == 1)
+    logged = [r.getMessage() for r in caplog.records if r.name == "aiortu.bridge._bridge"]
+    assert (
+        "write of hp-1.setpoint not done: refused: point setpoint: value 99 is outside the "
+        "limits 20..55"
+    ) in logged
 
 
 def _sparkplug(subscriber: Subscriber) -> list[tuple[str, object]]:
