@@ -27,7 +27,7 @@ from aiortu.bridge._topics import (
     point_topic,
     sparkplug_topic,
 )
-from aiortu.core.model import SCHEMA_PATH, Profile, load_profile
+from aiortu.core.model import SCHEMA_PATH, Profile, TomlReader, load_profile
 from aiortu.errors import ConfigError
 
 __all__ = (
@@ -126,12 +126,7 @@ def shipped_profiles() -> dict[str, Path]:
 
 def load_config(path: str | Path) -> BridgeConfig:
     """The configuration in the TOML file at `path` (see the module docstring)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(str(path), "(file)", f"cannot be read: {error}") from None
-    return parse_config(text, str(path), path.parent)
+    return parse_config(TomlReader.read(path), str(path), Path(path).parent)
 
 
 def parse_config(text: str, source: str = "<string>", base: Path | None = None) -> BridgeConfig:

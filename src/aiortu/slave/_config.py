@@ -140,12 +140,7 @@ _kind = TomlReader.kind
 def load_config(path: str | Path) -> DeviceConfig:
     """Read the device description at `path`; raise [`ConfigError`][aiortu.errors.ConfigError] if it
     is wrong."""
-    source = str(path)
-    try:
-        text = Path(path).read_bytes().decode()
-    except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(source, "(file)", f"cannot read it: {error}") from None
-    return parse_config(text, source)
+    return parse_config(TomlReader.read(path), str(path))
 
 
 def parse_config(text: str, source: str = "<string>") -> DeviceConfig:

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+from aiortu.core.model import TomlReader
 from aiortu.errors import ConfigError
 
 __all__ = ("WRITE_FUNCTION_CODES", "AccessRule", "RoleRules", "load_rules")
@@ -150,11 +151,9 @@ def load_rules(path: str | Path) -> RoleRules:
     """Read [`RoleRules`][aiortu.transport.RoleRules] from the TOML file `path` (see the module
     docstring). Raises [`ConfigError`][aiortu.errors.ConfigError] naming the file and the key."""
     source = str(path)
+    text = TomlReader.read(path)
     try:
-        with open(path, "rb") as file:
-            data = tomllib.load(file)
-    except OSError as error:
-        raise ConfigError(source, "(file)", f"cannot read it ({error.strerror})") from None
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(source, "(file)", f"not valid TOML ({error})") from None
     return parse_rules(data, source)

@@ -3,10 +3,16 @@ names the file, the line, the point and the key."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+
 import pytest
 
+import aiortu.bridge
+import aiortu.slave
 from aiortu.core.model import Access, Layout, PointType, Table, load_profile, parse_profile
 from aiortu.errors import ConfigError
+from aiortu.transport import load_rules
 
 HEAD = """
 [device]
@@ -168,9 +174,22 @@ def test_a_missing_device_and_a_syntax_error_are_named() -> None:
     assert "meter.toml: (syntax):" in error_of("[device\n")
 
 
-def test_a_missing_file_is_named(tmp_path: object) -> None:
-    with pytest.raises(ConfigError, match=r"nowhere\.toml: \(file\): cannot be read"):
-        load_profile("nowhere.toml")
+@pytest.mark.parametrize(
+    "load", [load_profile, aiortu.slave.load_config, aiortu.bridge.load_config, load_rules]
+)
+def test_a_file_that_cannot_be_read_is_named_with_why(
+    load: Callable[[Path], object], tmp_path: Path
+) -> None:
+    # Every description file says it the same way: once, in words, without errno's repr.
+    with pytest.raises(ConfigError) as missing:
+        load(tmp_path / "nowhere.toml")
+    assert str(missing.value) == (
+        f"{tmp_path / 'nowhere.toml'}: (file): cannot be read (No such file or directory)"
+    )
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(b"\xff\xfe")
+    with pytest.raises(ConfigError, match=r"binary\.toml: \(file\): cannot be read \('utf-8'"):
+        load(binary)
 
 
 def test_one_based_addresses_are_shifted_and_bounded() -> None:

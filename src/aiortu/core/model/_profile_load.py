@@ -99,12 +99,7 @@ def load_profile(path: str | Path) -> Profile:
     Raises [`ConfigError`][aiortu.errors.ConfigError] (`FILE:LINE: KEY: PROBLEM`) for
     anything wrong in it, or a file that cannot be read.
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(str(path), "(file)", f"cannot be read: {error}") from None
-    return parse_profile(text, str(path))
+    return parse_profile(TomlReader.read(path), str(path))
 
 
 def parse_profile(text: str, source: str = "<string>") -> Profile:

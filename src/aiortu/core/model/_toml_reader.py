@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from aiortu.core.errors import ConfigError
@@ -26,6 +27,17 @@ class TomlReader:
         names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
         names |= {list: "an array", dict: "a table"}
         return names.get(type(value), type(value).__name__)
+
+    @staticmethod
+    def read(path: str | Path) -> str:
+        """The text of the UTF-8 file at `path`; a [`ConfigError`][aiortu.errors.ConfigError]
+        saying why when it cannot be read (`FILE: (file): cannot be read (No such file or
+        directory)`)."""
+        try:
+            return Path(path).read_bytes().decode()
+        except (OSError, UnicodeDecodeError) as error:
+            why = error.strerror if isinstance(error, OSError) and error.strerror else error
+            raise ConfigError(str(path), "(file)", f"cannot be read ({why})") from None
 
     def fail(self, key: str, problem: str) -> ConfigError:
         """The error for `problem` at `key` (to raise)."""
