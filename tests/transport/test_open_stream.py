@@ -85,6 +85,16 @@ def test_parse_invalid(text: str, reason: str) -> None:
     assert info.value.value == text
 
 
+def test_an_unknown_scheme_is_one_sentence_listing_the_forms_once() -> None:
+    with pytest.raises(InvalidValue) as info:
+        parse_port_url("socket://10.0.0.7:502")
+    assert str(info.value) == (
+        "port must be a serial device path, rtu+tcp://host:port, ascii+tcp://host:port, "
+        "tcp://host:port, udp://host:port or tls://host:port, not 'socket://10.0.0.7:502': "
+        "unknown scheme 'socket'"
+    )
+
+
 @pytest.mark.parametrize(
     ("text", "expected"),
     [

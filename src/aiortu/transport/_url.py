@@ -207,11 +207,8 @@ def parse_port_url(text: str) -> PortAddress:
     if scheme == ASCII_TCP_SCHEME:
         return TcpAddress(*_parse_host_port(text, rest, scheme), "ascii")
     if scheme != TCP_SCHEME:
-        raise _bad(
-            text,
-            f"unknown scheme {scheme!r}: only rtu+tcp://, ascii+tcp://, tcp://, udp:// and "
-            "tls:// are supported",
-        )
+        # The sentence already lists the forms a port may take.
+        raise _bad(text, f"unknown scheme {scheme!r}")
     return TcpAddress(*_parse_host_port(text, rest, scheme))
 
 
