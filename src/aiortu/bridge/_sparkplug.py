@@ -107,7 +107,8 @@ class SparkplugLayout:
 
     def every_topic(self, devices: list[DeviceState]) -> list[LayoutTopic]:
         """The node's NBIRTH, NDEATH (its last will) and NCMD; each device's error topic,
-        DBIRTH, DDEATH, DDATA and DCMD (a point is a metric in the payload, not a topic)."""
+        DBIRTH, DDEATH, DDATA, and its DCMD if it has writable points (a DCMD to the others
+        can only be refused); a point is a metric in the payload, not a topic."""
         listed = [LayoutTopic(self._topic("NBIRTH")), LayoutTopic(self._topic("NDEATH")),
                   LayoutTopic(self._topic("NCMD"), command=True)]  # fmt: skip
         for device in devices:
@@ -115,7 +116,8 @@ class SparkplugLayout:
             listed.append(LayoutTopic(self._error_topic(name), name))
             listed += [LayoutTopic(self._topic(kind, name), name)
                        for kind in ("DBIRTH", "DDEATH", "DDATA")]  # fmt: skip
-            listed.append(LayoutTopic(self._topic("DCMD", name), name, command=True))
+            if device.writable:
+                listed.append(LayoutTopic(self._topic("DCMD", name), name, command=True))
         return listed
 
     def on_connect(self, devices: list[DeviceState], dropped: int, now: float) -> list[Message]:

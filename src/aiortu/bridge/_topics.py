@@ -42,8 +42,9 @@ COMMAND: Final = "/set"
 
 @dataclass(frozen=True, slots=True)
 class LayoutTopic:
-    """A topic a layout uses: it publishes on it, or (`command`) takes commands from it; the
-    `device` and `point` it belongs to (empty: the bridge's own, or the device's own)."""
+    """A topic a layout uses: it publishes on it, or (`command`) takes commands from it (a
+    write of a writable point, a Sparkplug rebirth); the `device` and `point` it belongs to
+    (empty: the bridge's own, or the device's own)."""
 
     topic: str
     device: str = ""
