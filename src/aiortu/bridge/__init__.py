@@ -20,10 +20,8 @@ from aiortu.bridge._config import (
     DeviceConfig,
     LineConfig,
     TopicLayout,
-    load_config,
-    parse_config,
-    shipped_profiles,
 )
+from aiortu.bridge._config_file import load_config, parse_config, shipped_profiles
 from aiortu.bridge._outbox import Message, Outbox
 from aiortu.bridge._payloads import CommandError, format_value, parse_command
 from aiortu.bridge._protobuf import (
@@ -35,6 +33,7 @@ from aiortu.bridge._protobuf import (
 )
 from aiortu.bridge._session import BrokerSession, SessionHooks
 from aiortu.bridge._state import Command, DeviceState, Layout
+from aiortu.bridge._topics import LayoutTopic
 
 __all__ = (
     "LAYOUTS",
@@ -51,6 +50,7 @@ __all__ = (
     "DeviceConfig",
     "DeviceState",
     "Layout",
+    "LayoutTopic",
     "LineConfig",
     "Message",
     "Metric",

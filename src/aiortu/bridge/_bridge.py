@@ -27,14 +27,14 @@ import anyio
 import anyio.abc
 
 from aiortu._log import get_logger
-from aiortu.bridge._config import VIRTUAL_PORT, BridgeConfig, LineConfig, load_config
+from aiortu.bridge._config import VIRTUAL_PORT, BridgeConfig, LineConfig
+from aiortu.bridge._config_file import load_config
+from aiortu.bridge._layouts import make_layout
 from aiortu.bridge._outbox import Message, Outbox
 from aiortu.bridge._packets import Publish
 from aiortu.bridge._payloads import CommandError, parse_command
-from aiortu.bridge._plain_layout import PlainLayout
 from aiortu.bridge._session import BrokerSession, SessionHooks
-from aiortu.bridge._sparkplug import SparkplugLayout
-from aiortu.bridge._state import Command, DeviceState, Layout
+from aiortu.bridge._state import Command, DeviceState, Layout, device_states
 from aiortu.core.model import Value
 from aiortu.errors import InvalidValue, ModbusError
 from aiortu.line import loop_clock
@@ -74,16 +74,8 @@ class Bridge:
         self.config = config
         self.outbox = Outbox(config.max_messages, config.max_bytes)
         """The messages waiting for the broker."""
-        topics = config.topics
-        self.layout: Layout = (
-            SparkplugLayout(topics) if topics.layout == "sparkplug"
-            else PlainLayout(topics, discovery=topics.layout == "home-assistant")
-        )  # fmt: skip
-        self.devices = [
-            DeviceState(d, tuple(p for p in d.profile.points
-                                 if d.points is None or p.name in d.points))
-            for d in config.devices()
-        ]  # fmt: skip
+        self.layout: Layout = make_layout(config.topics)
+        self.devices = device_states(config)
         """Each device's state, in the configuration's order."""
         self._by_name = {device.name: device for device in self.devices}
         self.layout.bind(self.devices)

@@ -1,34 +1,15 @@
 """The bridge's configuration: its lines, the devices on each, the broker, the topic layout
-and the buffer, read from TOML and checked before anything is opened.
-
-Every mistake is a [`ConfigError`][aiortu.errors.ConfigError] naming the file, the key and
-the problem in one line (`bridge.toml: line[0].device[2].profile: unknown profile 'sdm603'
-(a file, or one of: eastron-sdm630, sunspec-inverter)`). See `docs/bridge.md`.
+and the buffer, as records (`_config_file` reads them from TOML and checks them).
 """
 
 from __future__ import annotations
 
-import re
-import tomllib
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-from aiortu.bridge._broker import Broker, BrokerError, parse_broker_url
-from aiortu.bridge._packets import MAX_STRING_BYTES
-from aiortu.bridge._topics import (
-    COMMAND,
-    bridge_topic,
-    device_topic,
-    discovery_object_id,
-    discovery_topic,
-    entity_component,
-    point_topic,
-    sparkplug_topic,
-)
-from aiortu.core.model import SCHEMA_PATH, Profile, load_profile
-from aiortu.errors import ConfigError
+from aiortu.bridge._broker import Broker
+from aiortu.core.model import Profile
 
 __all__ = (
     "LAYOUTS",
@@ -37,9 +18,6 @@ __all__ = (
     "DeviceConfig",
     "LineConfig",
     "TopicLayout",
-    "load_config",
-    "parse_config",
-    "shipped_profiles",
 )
 
 LAYOUTS = ("home-assistant", "plain", "sparkplug")
@@ -48,12 +26,6 @@ LAYOUTS = ("home-assistant", "plain", "sparkplug")
 VIRTUAL_PORT = "virtual"
 """The port of a simulated line: the devices answer from their profiles, in the bridge's
 process, on a virtual line of `aiortu.testing` (demos, tests, a fleet on one machine)."""
-
-_NAME = re.compile(r"[A-Za-z0-9_-]+")
-_LINE_OPTIONS: dict[str, type | tuple[type, ...]] = {
-    "baudrate": int, "parity": str, "stopbits": (int, float), "bytesize": int,
-    "timeout": (int, float), "retries": int, "offline_after": int, "probe_interval": (int, float),
-}  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,231 +85,3 @@ class BridgeConfig:
     def devices(self) -> list[DeviceConfig]:
         """Every device of every line."""
         return [device for line in self.lines for device in line.devices]
-
-
-def shipped_profiles() -> dict[str, Path]:
-    """The profiles aiortu ships, by name."""
-    return {path.stem: path for path in sorted((SCHEMA_PATH.parent / "profiles").glob("*.toml"))}
-
-
-def load_config(path: str | Path) -> BridgeConfig:
-    """The configuration in the TOML file at `path` (see the module docstring)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(str(path), "(file)", f"cannot be read: {error}") from None
-    return parse_config(text, str(path), path.parent)
-
-
-def parse_config(text: str, source: str = "<string>", base: Path | None = None) -> BridgeConfig:
-    """The configuration in TOML `text`; `source` names it in errors, and profile files are
-    found relative to `base` (the current directory when None)."""
-    try:
-        document = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(source, "(syntax)", str(error)) from None
-    reader = _Reader(source, base or Path())
-    return reader.config(document)
-
-
-class _Reader:
-    def __init__(self, source: str, base: Path) -> None:
-        self.source = source
-        self.base = base
-        self.profiles: dict[str, Profile] = {}
-
-    def fail(self, key: str, problem: str) -> ConfigError:
-        return ConfigError(self.source, key, problem)
-
-    def table(self, data: object, key: str, known: set[str]) -> dict[str, Any]:
-        if not isinstance(data, dict):
-            raise self.fail(key, "must be a table")
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise self.fail(
-                f"{key}.{unknown[0]}", f"unknown key (known: {', '.join(sorted(known))})"
-            )
-        return data
-
-    def config(self, document: dict[str, Any]) -> BridgeConfig:
-        self.table(document, "(top)", {"broker", "topics", "buffer", "line"})
-        topics = self.topics(document.get("topics", {}))
-        broker = self.broker(document.get("broker"), topics.node)
-        buffer = self.table(document.get("buffer", {}), "buffer", {"max_messages", "max_bytes"})
-        lines = document.get("line")
-        if not isinstance(lines, list) or not lines:
-            raise self.fail("line", "at least one [[line]] with its devices is needed")
-        config = BridgeConfig(
-            broker, tuple(self.line(entry, f"line[{n}]") for n, entry in enumerate(lines)),
-            topics,
-            self.integer(buffer, "max_messages", "buffer", 100_000),
-            self.integer(buffer, "max_bytes", "buffer", 64 * 1024 * 1024),
-        )  # fmt: skip
-        seen: set[str] = set()
-        for n, device in enumerate(config.devices()):
-            if device.name in seen:
-                raise self.fail(f"device[{n}].name", f"{device.name!r} names two devices")
-            seen.add(device.name)
-        self.topic_lengths(config)
-        return config
-
-    def topic_lengths(self, config: BridgeConfig) -> None:
-        """Every topic the layout fills in fits in an MQTT string; else the broker session
-        could never send it, and would fail again at each reconnect."""
-        for device, point, topic in _topics(config):
-            size = len(topic.encode())
-            if size > MAX_STRING_BYTES:
-                whose = f"device {_short(device)}" if device else "the bridge"
-                if point:
-                    whose += f", point {_short(point)}"
-                raise BrokerError(
-                    f"{self.source}: the topic of {whose} is {size:,} bytes, more than the "
-                    f"{MAX_STRING_BYTES:,} an MQTT topic holds: shorten the names it is made of"
-                )
-
-    def integer(self, data: dict[str, Any], key: str, where: str, default: int) -> int:
-        value = data.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise self.fail(f"{where}.{key}", f"must be an integer >= 1, not {value!r}")
-        return value
-
-    def topics(self, data: object) -> TopicLayout:
-        keys = {"layout", "prefix", "discovery_prefix", "retain", "qos", "node", "group"}
-        table = self.table(data, "topics", keys)
-        layout = TopicLayout(**table)
-        if layout.layout not in LAYOUTS:
-            raise self.fail("topics.layout", f"must be one of {', '.join(LAYOUTS)}")
-        if not isinstance(layout.retain, bool):
-            raise self.fail("topics.retain", f"must be true or false, not {layout.retain!r}")
-        if layout.qos not in (0, 1) or isinstance(layout.qos, bool):
-            raise self.fail("topics.qos", f"must be 0 or 1, not {layout.qos!r}")
-        for key in ("prefix", "discovery_prefix", "node", "group"):
-            value = getattr(layout, key)
-            if not isinstance(value, str) or not value or any(c in value for c in "#+"):
-                raise self.fail(f"topics.{key}", "must be a topic name without + or #")
-        if not _NAME.fullmatch(layout.node):
-            raise self.fail("topics.node", "must be letters, digits, _ and - only")
-        return layout
-
-    def broker(self, data: object, node: str) -> Broker:
-        keys = {"url", "username", "password", "client_id", "keepalive", "ca_file", "cert_file",
-                "key_file", "insecure"}  # fmt: skip
-        table = self.table(data if data is not None else {}, "broker", keys)
-        if "url" not in table:
-            raise self.fail("broker.url", "is required (mqtt://host:port or mqtts://host:port)")
-        options = {k: v for k, v in table.items() if k != "url"}
-        for key in ("ca_file", "cert_file", "key_file"):
-            if key in options:
-                options[key] = str(self.base / options[key])
-        options.setdefault("client_id", f"aiortu-{node}")
-        try:
-            return parse_broker_url(table["url"], **options)
-        except BrokerError as error:
-            # A broker the bridge cannot use is its own kind of failure (exit 1, not 2).
-            raise BrokerError(f"{self.source}: {error}") from None
-
-    def line(self, data: object, key: str) -> LineConfig:
-        table = self.table(data, key, {"port", "device", *_LINE_OPTIONS})
-        port = table.get("port")
-        if not isinstance(port, str) or not port:
-            raise self.fail(
-                f"{key}.port", "is required: a serial device, tcp://, rtu+tcp:// or virtual"
-            )
-        options: dict[str, Any] = {}
-        for name, kinds in _LINE_OPTIONS.items():
-            if name in table:
-                value = table[name]
-                if isinstance(value, bool) or not isinstance(value, kinds):
-                    raise self.fail(f"{key}.{name}", f"has the wrong type: {value!r}")
-                options[name] = value
-        devices = table.get("device")
-        if not isinstance(devices, list) or not devices:
-            raise self.fail(f"{key}.device", "at least one [[line.device]] is needed")
-        return LineConfig(
-            port, tuple(self.device(d, f"{key}.device[{n}]") for n, d in enumerate(devices)),
-            options,
-        )  # fmt: skip
-
-    def device(self, data: object, key: str) -> DeviceConfig:
-        table = self.table(
-            data, key, {"name", "unit", "profile", "publish", "every_poll", "points"}
-        )
-        unit = table.get("unit")
-        if isinstance(unit, bool) or not isinstance(unit, int) or not 1 <= unit <= 247:
-            raise self.fail(f"{key}.unit", f"must be a unit address 1..247, not {unit!r}")
-        profile = self.profile(table.get("profile"), f"{key}.profile")
-        name = table.get("name", f"{_slug(profile.device.model)}-{unit}")
-        if not isinstance(name, str) or not _NAME.fullmatch(name):
-            raise self.fail(f"{key}.name", f"{name!r} must be letters, digits, _ and - only")
-        publish = table.get("publish", "change")
-        if publish not in ("change", "every"):
-            raise self.fail(f"{key}.publish", f'must be "change" or "every", not {publish!r}')
-        points = table.get("points")
-        every = table.get("every_poll", [])
-        for option, names in (("points", points or []), ("every_poll", every)):
-            if not isinstance(names, list) or (option == "points" and points == []):
-                raise self.fail(f"{key}.{option}", "must be a list of point names (none: omit it)")
-            for n, point in enumerate(names):
-                if not any(p.name == point for p in profile.points):
-                    raise self.fail(
-                        f"{key}.{option}[{n}]",
-                        f"profile {profile.device.model!r} has no point named {point!r}",
-                    )
-        return DeviceConfig(
-            name, unit, profile, publish, frozenset(every),
-            None if points is None else tuple(points),
-        )  # fmt: skip
-
-    def profile(self, name: object, key: str) -> Profile:
-        if not isinstance(name, str) or not name:
-            raise self.fail(key, "is required: a profile file or a shipped profile's name")
-        if name not in self.profiles:
-            path = self.base / name
-            shipped = shipped_profiles()
-            if not path.exists() and name in shipped:
-                path = shipped[name]
-            elif not path.exists():
-                known = ", ".join(shipped)
-                raise self.fail(key, f"unknown profile {name!r} (a file, or one of: {known})")
-            self.profiles[name] = load_profile(path)
-        return self.profiles[name]
-
-
-def _topics(config: BridgeConfig) -> Iterator[tuple[str, str, str]]:
-    """Each topic of `config`'s layout, with its device and point (empty when none)."""
-    layout = config.topics
-    prefix, node, discovery = layout.prefix, layout.node, layout.discovery_prefix
-    if layout.layout == "sparkplug":
-        for kind in ("NBIRTH", "NDEATH", "NCMD"):
-            yield "", "", sparkplug_topic(layout.group, kind, node)
-    else:
-        for leaf in ("status", "dropped"):
-            yield "", "", bridge_topic(prefix, node, leaf)
-    for device in config.devices():
-        name = device.name
-        yield name, "", device_topic(prefix, name, "error")
-        if layout.layout == "sparkplug":
-            for kind in ("DBIRTH", "DDEATH", "DDATA", "DCMD"):
-                yield name, "", sparkplug_topic(layout.group, kind, node, name)
-            continue  # a point is a metric in the payload, not a topic
-        for leaf in ("availability", "health"):
-            yield name, "", device_topic(prefix, name, leaf)
-        for point in device.profile.points:
-            if device.points is not None and point.name not in device.points:
-                continue
-            topic = point_topic(prefix, name, point.name)
-            yield name, point.name, topic + COMMAND if point.writable else topic
-            if layout.layout == "home-assistant":
-                object_id = discovery_object_id(name, point.name)
-                topic = discovery_topic(discovery, entity_component(point), node, object_id)
-                yield name, point.name, topic
-
-
-def _short(name: str) -> str:
-    """`name` quoted, cut to its first 40 characters."""
-    return repr(name) if len(name) <= 40 else repr(name[:40] + "...")
-
-
-def _slug(text: str) -> str:
-    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "device"

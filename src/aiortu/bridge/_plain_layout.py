@@ -23,7 +23,14 @@ from aiortu.bridge._outbox import Message
 from aiortu.bridge._packets import Publish
 from aiortu.bridge._payloads import format_value
 from aiortu.bridge._state import Command, DeviceState
-from aiortu.bridge._topics import COMMAND, bridge_topic, device_topic, point_topic
+from aiortu.bridge._topics import (
+    COMMAND,
+    LayoutTopic,
+    bridge_topic,
+    device_topic,
+    discovery_topic,
+    point_topic,
+)
 from aiortu.core.model import ProfilePoint, Value
 from aiortu.master import UnitState
 
@@ -39,6 +46,7 @@ class PlainLayout:
         self.discovery = discovery
         self.prefix = topics.prefix
         self.status_topic = bridge_topic(self.prefix, topics.node, "status")
+        self.dropped_topic = bridge_topic(self.prefix, topics.node, "dropped")
         self._command_prefixes: dict[str, DeviceState] = {}
         self._states: dict[str, dict[str, tuple[str, ProfilePoint]]] = {}
 
@@ -49,6 +57,27 @@ class PlainLayout:
     def subscriptions(self) -> list[str]:
         """The command topics of the devices with writable points."""
         return [point_topic(self.prefix, name, "+") + COMMAND for name in self._command_prefixes]
+
+    def every_topic(self, devices: list[DeviceState]) -> list[LayoutTopic]:
+        """The bridge's status and dropped count; each device's error topic if it has writable
+        points (the others take no commands), its availability and health; each point's
+        command topic if writable (first: the longer, which the length check names), its
+        topic, and its discovery topic."""
+        listed = [LayoutTopic(self.status_topic), LayoutTopic(self.dropped_topic)]
+        for device in devices:
+            name = device.name
+            leaves = (["error"] if device.writable else []) + ["availability", "health"]
+            listed += [LayoutTopic(device_topic(self.prefix, name, leaf), name) for leaf in leaves]
+            for point in device.points:
+                state = point_topic(self.prefix, name, point.name)
+                if point.writable:
+                    listed.append(LayoutTopic(state + COMMAND, name, point.name, command=True))
+                listed.append(LayoutTopic(state, name, point.name))
+                if self.discovery:
+                    topic = discovery_topic(self.topics.discovery_prefix, self.topics.node, name,
+                                            point)  # fmt: skip
+                    listed.append(LayoutTopic(topic, name, point.name))
+        return listed
 
     def bind(self, devices: list[DeviceState]) -> None:
         """Learn the devices (before the first connection)."""
@@ -63,10 +92,9 @@ class PlainLayout:
     def on_connect(self, devices: list[DeviceState], dropped: int, now: float) -> list[Message]:
         """Status, the dropped count, discovery, and each device's availability and values."""
         qos = self.topics.qos
-        dropped_topic = bridge_topic(self.prefix, self.topics.node, "dropped")
         messages = [
             Message(self.status_topic, b"online", qos, True, now),
-            Message(dropped_topic, str(dropped).encode(), qos, True, now),
+            Message(self.dropped_topic, str(dropped).encode(), qos, True, now),
         ]
         for device in devices:
             if self.discovery:

@@ -29,7 +29,7 @@ from aiortu.bridge._protobuf import (
     encode_payload,
 )
 from aiortu.bridge._state import Command, DeviceState
-from aiortu.bridge._topics import device_topic, sparkplug_topic
+from aiortu.bridge._topics import LayoutTopic, device_topic, sparkplug_topic
 from aiortu.core.model import PointType, ProfilePoint, Value
 from aiortu.master import UnitState
 
@@ -104,6 +104,21 @@ class SparkplugLayout:
     def subscriptions(self) -> list[str]:
         """NCMD of the node, DCMD of its devices."""
         return [self._topic("NCMD"), self._topic("DCMD", "+")]
+
+    def every_topic(self, devices: list[DeviceState]) -> list[LayoutTopic]:
+        """The node's NBIRTH, NDEATH (its last will) and NCMD; each device's error topic,
+        DBIRTH, DDEATH, DDATA, and its DCMD if it has writable points (a DCMD to the others
+        can only be refused); a point is a metric in the payload, not a topic."""
+        listed = [LayoutTopic(self._topic("NBIRTH")), LayoutTopic(self._topic("NDEATH")),
+                  LayoutTopic(self._topic("NCMD"), command=True)]  # fmt: skip
+        for device in devices:
+            name = device.name
+            listed.append(LayoutTopic(self._error_topic(name), name))
+            listed += [LayoutTopic(self._topic(kind, name), name)
+                       for kind in ("DBIRTH", "DDEATH", "DDATA")]  # fmt: skip
+            if device.writable:
+                listed.append(LayoutTopic(self._topic("DCMD", name), name, command=True))
+        return listed
 
     def on_connect(self, devices: list[DeviceState], dropped: int, now: float) -> list[Message]:
         """NBIRTH, then a DBIRTH per device that answers."""
@@ -183,8 +198,11 @@ class SparkplugLayout:
         import json
 
         body = {"point": point, "payload": payload.decode("utf-8", "replace"), "error": reason}
-        topic = device_topic(self.topics.prefix, device, "error")
-        return Message(topic, json.dumps(body).encode(), self.topics.qos, False, now)
+        return Message(self._error_topic(device), json.dumps(body).encode(), self.topics.qos,
+                       False, now)  # fmt: skip
+
+    def _error_topic(self, device: str) -> str:
+        return device_topic(self.topics.prefix, device, "error")
 
     def prepare(self, message: Message) -> bytes:
         """The payload with this session's next sequence number (NBIRTH: 0), DDATA queued

@@ -11,13 +11,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from aiortu.bridge._config import DeviceConfig
+from aiortu.bridge._config import BridgeConfig, DeviceConfig
 from aiortu.bridge._outbox import Message
 from aiortu.bridge._packets import Publish
+from aiortu.bridge._topics import LayoutTopic
 from aiortu.core.model import ProfilePoint, Value
 from aiortu.master import UnitState
 
-__all__ = ("Command", "DeviceState", "Layout")
+__all__ = ("Command", "DeviceState", "Layout", "device_states")
 
 
 @dataclass(slots=True)
@@ -54,6 +55,16 @@ class DeviceState:
         return tuple(p for p in self.points if p.writable)
 
 
+def device_states(config: BridgeConfig) -> list[DeviceState]:
+    """Each device of `config` before its first read, with the points it publishes: its
+    profile's, or those its `points` names."""
+    return [
+        DeviceState(d, tuple(p for p in d.profile.points
+                             if d.points is None or p.name in d.points))
+        for d in config.devices()
+    ]  # fmt: skip
+
+
 @dataclass(frozen=True, slots=True)
 class Command:
     """A write asked over MQTT: `point` of `device` from `payload` (text), or from a
@@ -78,6 +89,11 @@ class Layout(Protocol):
 
     def subscriptions(self) -> list[str]:
         """The topic filters of the commands."""
+
+    def every_topic(self, devices: list[DeviceState]) -> list[LayoutTopic]:
+        """Every topic this layout publishes on (its last will's too) or takes commands from,
+        as [`LayoutTopic`][aiortu.bridge.LayoutTopic]s, for `devices`: the one list of them (the
+        configuration checks their lengths)."""
 
     def on_connect(self, devices: list[DeviceState], dropped: int, now: float) -> list[Message]:
         """What to publish first on a new connection: the bridge's and the devices'

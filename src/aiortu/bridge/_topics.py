@@ -1,5 +1,6 @@
 """The bridge's topic names, each made by one function from the configuration's names: the
-layouts publish and subscribe on them, and the configuration is checked with them against
+layouts publish and subscribe on them, and each lists those it uses as
+[`LayoutTopic`][aiortu.bridge.LayoutTopic]s, which the configuration is checked with against
 MQTT's limit on a topic's length before anything is opened.
 
 | function | topic |
@@ -14,6 +15,7 @@ MQTT's limit on a topic's length before anything is opened.
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from typing import Final
 
 from aiortu.core.model import PointType, ProfilePoint
@@ -21,6 +23,7 @@ from aiortu.core.model import PointType, ProfilePoint
 __all__ = (
     "COMMAND",
     "SPARKPLUG_NAMESPACE",
+    "LayoutTopic",
     "bridge_topic",
     "device_topic",
     "discovery_object_id",
@@ -35,6 +38,18 @@ SPARKPLUG_NAMESPACE: Final = "spBv1.0"
 
 COMMAND: Final = "/set"
 """What follows a point's topic in its command topic."""
+
+
+@dataclass(frozen=True, slots=True)
+class LayoutTopic:
+    """A topic a layout uses: it publishes on it, or (`command`) takes commands from it (a
+    write of a writable point, a Sparkplug rebirth); the `device` and `point` it belongs to
+    (empty: the bridge's own, or the device's own)."""
+
+    topic: str
+    device: str = ""
+    point: str = ""
+    command: bool = False
 
 
 def bridge_topic(prefix: str, node: str, leaf: str) -> str:
@@ -69,10 +84,11 @@ def discovery_object_id(device: str, point: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", f"{device}_{point}")
 
 
-def discovery_topic(discovery_prefix: str, component: str, node: str, object_id: str) -> str:
-    """The topic of a point's Home Assistant discovery config, by its `component`
-    (`entity_component`) and `object_id` (`discovery_object_id`)."""
-    return f"{discovery_prefix}/{component}/{node}/{object_id}/config"
+def discovery_topic(discovery_prefix: str, node: str, device: str, point: ProfilePoint) -> str:
+    """The topic of the Home Assistant discovery config of `point` of `device`: under its
+    component (`entity_component`), by its object id (`discovery_object_id`)."""
+    object_id = discovery_object_id(device, point.name)
+    return f"{discovery_prefix}/{entity_component(point)}/{node}/{object_id}/config"
 
 
 def sparkplug_topic(group: str, kind: str, node: str, device: str | None = None) -> str:
