@@ -311,3 +311,33 @@ async def _until_closed(client: Client) -> None:
     """Wait until the server is done with `client` (at most ten idle_timeouts)."""
     with anyio.fail_after(10 * IDLE):
         await client.ended.wait()
+
+
+@pytest.mark.parametrize("framing", list(FRAMINGS))
+def test_a_reply_from_the_connections_task_is_written_at_once_on_a_pushed_stream(
+    framing: str,
+) -> None:
+    # A write is answered by the connection's task, not the read callback. While the client
+    # reads, its reply goes straight to the transport: no `send()` (and no timer around it).
+    write = bytes.fromhex("06 0000 0001")
+    speaks = FRAMINGS[framing]
+
+    async def main() -> None:
+        server = speaks.server()
+        client = _PushedClient()
+
+        async def no_send(item: bytes) -> None:
+            raise AssertionError("the reply waited in send()")
+
+        client.stream.send = no_send  # type: ignore[method-assign]
+        try:
+            async with anyio.create_task_group() as group:
+                group.start_soon(server.serve_connection, client.stream)
+                client.request(speaks.frame(7, write))
+                await anyio.sleep(IDLE / 2)  # virtual time: the task has long answered
+                assert bytes(client.replies) == speaks.frame(7, write)
+                group.cancel_scope.cancel()
+        finally:
+            client._socket.close()
+
+    anyio.run(main, backend="asyncio", backend_options={"loop_factory": VirtualTimeLoop})
