@@ -5,6 +5,7 @@ general paths are compared on random exchanges in test_ascii_push_differential.p
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from typing import Any
 
 import anyio
@@ -12,6 +13,7 @@ import pytest
 
 import aiortu
 from aiortu.core.ascii import AsciiDiscardReason, encode_ascii_frame
+from aiortu.core.pdu import RawPDU
 from aiortu.core.serial import LineSettings
 from aiortu.master import _fast_path
 from aiortu.testing import PtyBus, VirtualBus, virtual_pair
@@ -23,6 +25,8 @@ from aiortu.transport import (
     open_stream,
     pushes_ascii,
 )
+from aiortu.transport import _ascii_push as push_module
+from tests.virtual_clock import VirtualTimeLoop
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -213,3 +217,39 @@ async def test_frames_after_the_receiver_stops_are_kept_for_receive() -> None:
     assert [frame[0] for frame in taken] == [1]
     assert second[0] == 2
     assert stream.frames_received == 2
+
+
+@pytest.mark.parametrize("push", [True, False])
+def test_two_frames_in_one_read_are_two_frames(push: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One read of the port holds another unit's reply and then the unit's own, of a function
+    code whose length the first bytes do not tell: the link takes each as a frame of its own
+    (a stream of whole frames has no character time to join them by), skips the first and
+    answers with the second, on a virtual clock."""
+    if not push:
+        monkeypatch.setattr(push_module, "pushes_ascii", lambda stream: False)
+    other = encode_ascii_frame(5, bytes.fromhex("41 0102"))
+    own = encode_ascii_frame(1, bytes.fromhex("41 0304"))
+
+    async def scenario() -> None:
+        port, device = virtual_pair()
+        stream = ascii_stream(port)
+        assert isinstance(stream, PushAsciiStream) is push
+
+        async def answer() -> None:
+            with contextlib.suppress(anyio.EndOfStream):
+                while await device.receive():
+                    await device.send(other + own)
+
+        async with anyio.create_task_group() as group:
+            group.start_soon(answer)
+            async with aiortu.Master(stream, LineSettings(19200), timeout=0.5) as master:
+                for _ in range(3):
+                    assert await master.execute(1, RawPDU(0x41, b"\x09")) == RawPDU(
+                        0x41, b"\x03\x04"
+                    )
+                stats = master.unit_stats(1)
+                assert (stats.successes, stats.skipped_frames, stats.failures) == (3, 3, 0)
+                assert not master.link.discarded
+            group.cancel_scope.cancel()
+
+    anyio.run(scenario, backend="asyncio", backend_options={"loop_factory": VirtualTimeLoop})

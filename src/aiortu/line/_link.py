@@ -177,6 +177,10 @@ class Link:
         self.receiver = Receiver(
             self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence
         )
+        if whole_frames:
+            # No wire time in the receiver either: two frames handed over in one read (the
+            # same clock reading) are two, the first ended when the second begins.
+            self.receiver.char_time = 0.0
         self._init_events(queue_size)
         self._init_runtime()
         self._init_sender(stream)

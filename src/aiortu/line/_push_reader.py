@@ -144,7 +144,10 @@ class PushReader:
     def on_frame(self, frame: bytes) -> None:
         """A direct link's read callback (see [`Link.direct`][aiortu.line.Link]): each chunk is
         one whole frame. The reply the master expects is taken as `on_chunk` takes it, without
-        the rest of its work; anything else goes to `on_chunk`."""
+        the rest of its work; anything else goes to `on_chunk`. The receiver's timer is not
+        touched: the receiver takes the reply only while IDLE, when it has no deadline, and
+        so no timer (`arm_timer` keeps one exactly while it has one). A reply right behind a
+        frame that armed the timer finds the receiver mid-frame and goes to `on_chunk`."""
         tap = self.reply_tap
         if tap is None or len(frame) != tap.length or not frame.startswith(tap.prefix):
             self.on_chunk(frame)

@@ -279,7 +279,11 @@ def write_now(stream: anyio.abc.ByteStream, data: bytes) -> bool:
     anyio's `send()` ends with an event-loop turn even when the kernel took every byte; a
     server that answers a request per turn pays for it on every reply. What the kernel does
     not take stays in the transport's buffer, and the next `write_now` then declines: the
-    caller's `send()` waits for it to drain, so back-pressure holds as with `send()`."""
+    caller's `send()` waits for it to drain, so back-pressure holds as with `send()`. A
+    stream with a `write_now` of its own (a pushed server connection) is asked by it."""
+    own = getattr(stream, "write_now", None)
+    if own is not None:
+        return bool(own(data))
     transport = getattr(stream, "_transport", None)
     if (
         isinstance(transport, asyncio.WriteTransport)

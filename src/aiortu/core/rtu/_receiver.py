@@ -254,6 +254,8 @@ class Receiver:
         self.units = frozenset(units)
         self.timing = TimingMode(timing)
         self.char_time = self.settings.char_time
+        """Seconds per character: when a chunk's first byte came, and the silence between
+        chunks. A stream of whole frames has none (its [`Link`][aiortu.line.Link] sets 0)."""
         self.t1_5 = self.settings.t1_5
         if frame_silence is None:
             frame_silence = self.settings.t3_5
