@@ -21,7 +21,7 @@ from aiortu.bridge._config import (
     LineConfig,
     TopicLayout,
 )
-from aiortu.bridge._config_file import load_config, parse_config, shipped_profiles
+from aiortu.bridge._config_file import load_config, parse_config
 from aiortu.bridge._outbox import Message, Outbox
 from aiortu.bridge._payloads import CommandError, format_value, parse_command
 from aiortu.bridge._protobuf import (
@@ -34,6 +34,7 @@ from aiortu.bridge._protobuf import (
 from aiortu.bridge._session import BrokerSession, SessionHooks
 from aiortu.bridge._state import Command, DeviceState, Layout
 from aiortu.bridge._topics import LayoutTopic
+from aiortu.core.model import shipped_profiles
 
 __all__ = (
     "LAYOUTS",

@@ -27,10 +27,10 @@ from aiortu.bridge._config import (
 from aiortu.bridge._layouts import make_layout
 from aiortu.bridge._packets import MAX_STRING_BYTES
 from aiortu.bridge._state import device_states
-from aiortu.core.model import SCHEMA_PATH, Profile, TomlReader, load_profile
+from aiortu.core.model import Profile, TomlReader, load_profile, shipped_profiles
 from aiortu.errors import ConfigError
 
-__all__ = ("load_config", "parse_config", "shipped_profiles")
+__all__ = ("load_config", "parse_config")
 
 _NAME = re.compile(r"[A-Za-z0-9_-]+")
 _LINE_OPTIONS: dict[str, type | tuple[type, ...]] = {
@@ -40,11 +40,6 @@ _LINE_OPTIONS: dict[str, type | tuple[type, ...]] = {
 _LINE_FILES = {"cert_file": "certfile", "key_file": "keyfile", "ca_file": "cafile"}
 """A `tls://` line's certificate files, named as the broker's are, and the options of
 [`open_master`][aiortu.open_master] they become."""
-
-
-def shipped_profiles() -> dict[str, Path]:
-    """The profiles aiortu ships, by name."""
-    return {path.stem: path for path in sorted((SCHEMA_PATH.parent / "profiles").glob("*.toml"))}
 
 
 def load_config(path: str | Path) -> BridgeConfig:

@@ -71,7 +71,8 @@ def register(subparsers: Subparsers) -> None:
         "monitor",
         help=SUMMARIES["monitor"],
         description=(
-            "Listen to a Modbus RTU bus without ever transmitting, and print each frame "
+            "Listen to a Modbus RTU bus (or ASCII, with --framing ascii) without ever "
+            "transmitting, and print each frame "
             "on one line: when it arrived, whether it is a request, a reply, an exception "
             "reply or a broadcast, its CRC status, and what it means (function, addresses, "
             "values; a reply is paired with its request so that it names its addresses). "

@@ -39,6 +39,7 @@ from aiortu.core.model import (
     check_write,
     load_profile,
     schema_reference,
+    shipped_profiles,
 )
 from aiortu.errors import ConfigError, InvalidValue
 
@@ -47,18 +48,13 @@ if TYPE_CHECKING:
     from aiortu.slave import MemoryStore, ProfileStore
 
 __all__ = (
-    "SHIPPED",
     "report_matches",
     "open_profile",
     "open_profiles",
     "register",
     "run_poll",
     "serve_profile",
-    "shipped_profiles",
 )
-
-SHIPPED = Path(__file__).parents[1] / "core" / "model" / "profiles"
-"""Where the profiles aiortu ships live."""
 
 _EXAMPLES = f"""\
 examples:
@@ -79,11 +75,6 @@ examples:
   aiortu serve tcp://127.0.0.1:5020 --profile meter.toml --unit 1 --move 1
 
 {EXIT_CODES_HELP}"""
-
-
-def shipped_profiles() -> dict[str, Path]:
-    """The shipped profiles by name (the file name without `.toml`)."""
-    return {path.stem: path for path in sorted(SHIPPED.glob("*.toml"))}
 
 
 def open_profile(name: str) -> Profile:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import asynccontextmanager
 from typing import Any
@@ -62,6 +63,38 @@ def _listen_address(port_or_url: str, listen: bool | None) -> ListenAddress | No
     return None
 
 
+_SERVERS: dict[str, type[ModbusTcpServer | ModbusUdpServer]] = {
+    MODBUS_TCP_SCHEME: ModbusTcpServer,
+    MODBUS_UDP_SCHEME: ModbusUdpServer,
+    TLS_SCHEME: ModbusTlsServer,
+}
+"""The server of each listener's scheme but RTU and ASCII over TCP (`RtuOverTcpServer`)."""
+
+_GIVEN_BY_SERVE = frozenset({"units", "settings", "timing", "handlers", "trace"})
+
+
+def _options(server: type) -> set[str]:
+    """The options `server` takes: its keywords, and Modbus TCP's where it passes the rest on
+    (`**options`)."""
+    parameters = inspect.signature(server).parameters.values()
+    names = {p.name for p in parameters if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
+    if any(p.kind is p.VAR_KEYWORD for p in parameters):
+        names |= _options(ModbusTcpServer)
+    return names - _GIVEN_BY_SERVE
+
+
+def _refuse_unknown(port_or_url: str, server: type, options: Mapping[str, Any]) -> None:
+    """A `TypeError` in one sentence for an option the listener's server does not take (a TLS
+    certificate given for `tcp://`), before anything is opened."""
+    taken = _options(server)
+    unknown = sorted(set(options) - taken)
+    if unknown:
+        raise TypeError(
+            f"{port_or_url}: {server.__name__} takes no option {', '.join(unknown)} "
+            f"(it takes {', '.join(sorted(taken))})"
+        )
+
+
 @asynccontextmanager
 async def _running(
     server: ModbusTcpServer | RtuOverTcpServer, address: ListenAddress, url: str
@@ -119,12 +152,15 @@ async def serve(
       `framing="ascii"` for Modbus ASCII). `ascii+tcp://host:port` listens in the same cases,
       its lines in Modbus ASCII (option `ascii_timeout`).
 
-    Port 0 asks the system for a free port (see the server's `port`). Raises the
-    transport's [`PortError`][aiortu.errors.PortError] subclasses when the port cannot be
-    opened or listened on.
+    Port 0 asks the system for a free port (see the server's `port`). Raises `TypeError`, in
+    one sentence, for an option the listener's server does not take (a certificate for
+    `tcp://`), and the transport's [`PortError`][aiortu.errors.PortError] subclasses when the
+    port cannot be opened or listened on.
     """
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     address = _listen_address(port_or_url, listen)
+    if address is not None:
+        _refuse_unknown(port_or_url, _SERVERS.get(address.scheme, RtuOverTcpServer), options)
     if address is not None and address.scheme == MODBUS_UDP_SCHEME:
         udp = ModbusUdpServer(units, handlers=handlers, trace=trace, **options)
         async with udp.running(address, port_or_url):

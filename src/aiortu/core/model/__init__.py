@@ -71,7 +71,7 @@ from aiortu.core.model._profile import (
     Value,
 )
 from aiortu.core.model._profile_dump import dump_profile
-from aiortu.core.model._profile_load import load_profile, parse_profile
+from aiortu.core.model._profile_load import load_profile, parse_profile, shipped_profiles
 from aiortu.core.model._read_plan import BlockRead, Raw, ReadPlan, describe, plan_blocks
 from aiortu.core.model._schema_doc import SCHEMA_PATH, schema_reference
 from aiortu.core.model._sunspec import (
@@ -182,6 +182,7 @@ __all__ = (
     "model_length",
     "model_points",
     "parse_profile",
+    "shipped_profiles",
     "parse_reference",
     "plan_blocks",
     "plan_reads",

@@ -35,7 +35,7 @@ from aiortu.core.model._profile import (
 from aiortu.core.model._toml_reader import TomlReader
 from aiortu.core.model._values import Layout
 
-__all__ = ("load_profile", "parse_profile")
+__all__ = ("load_profile", "parse_profile", "shipped_profiles")
 
 _TOP = frozenset({"device", "defaults", "poll", "hole", "point"})
 _DEVICE = frozenset({"manufacturer", "model", "description", "url", "identify"})
@@ -91,6 +91,12 @@ _ALIASES = {
 }
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.-]*")
 _ADDRESSES = 0x10000
+_SHIPPED = Path(__file__).parent / "profiles"
+
+
+def shipped_profiles() -> dict[str, Path]:
+    """The profiles aiortu ships, by name (the file name without `.toml`), in name order."""
+    return {path.stem: path for path in sorted(_SHIPPED.glob("*.toml"))}
 
 
 def load_profile(path: str | Path) -> Profile:
