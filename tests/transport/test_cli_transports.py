@@ -110,7 +110,7 @@ def test_serve_tls_without_a_key_or_rules_is_one_line(
     at = args.index(leave_out)
     del args[at : at + 2]
     done = run_aiortu("serve", *args)
-    assert done.returncode == 1
+    assert done.returncode == 2
     assert done.stderr.strip() == message
 
 
@@ -121,7 +121,7 @@ def test_a_rule_file_with_an_unknown_key_is_one_line(files: dict[str, Any]) -> N
         "serve", "tls://127.0.0.1:0", "--config", files["config"], "--rules", str(rules),
         *files["server"], *files["ca"],
     )  # fmt: skip
-    assert done.returncode == 1
+    assert done.returncode == 2
     assert done.stderr.strip() == (
         f"aiortu serve: error: {rules}: roles.viewer.readonly: unknown key "
         "(expected addresses, broadcast, function_codes, read_only, units)"

@@ -49,8 +49,12 @@ class CommandFailed(Exception):
     """A command could not do its job; the message is shown on one line. Caused by the environment.
 
     Raised by command modules (a device that cannot be opened, ...); `main` turns
-    it into exit code 1.
+    it into its `exit_code`: 1, or 2 for a bad argument or file found only once running.
     """
+
+    def __init__(self, message: str, exit_code: int = 1) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
@@ -135,4 +139,4 @@ def _main(argv: list[str]) -> int:
         return 2
     except CommandFailed as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
-        return 1
+        return exc.exit_code

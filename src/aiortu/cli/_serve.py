@@ -251,7 +251,7 @@ async def _serve_until_stopped(args: argparse.Namespace, units: Mapping[int, Mem
             error = await _serve_once(args, units, tracer)
         except (InvalidValue, ConfigError) as failure:  # a TLS file or rule file, say
             shown = invalid_value(failure) if isinstance(failure, InvalidValue) else failure
-            raise CommandFailed(f"error: {shown}") from failure
+            raise CommandFailed(f"error: {shown}", exit_code=2) from failure
         except PortError as failure:
             # The port must open the first time; once served, it may be gone a while.
             if not opened:
