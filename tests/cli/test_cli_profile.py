@@ -277,3 +277,22 @@ def test_an_unknown_profile_name_is_one_line_naming_the_shipped_ones(
         f"aiortu {argv[0]}: error: eastron-sdm63: (file): no such file, nor a shipped profile "
         "(one of: eastron-sdm630, sunspec-inverter)\n",
     )
+
+
+@pytest.mark.parametrize(
+    ("port", "code", "message"),
+    [
+        ("/nonexistent/ttyX", 1, "/nonexistent/ttyX: no such serial device"),
+        ("tls://127.0.0.1:0", 2, "error: cafile must be given"),
+    ],
+)
+def test_serve_profile_failing_to_open_is_one_line(
+    port: str, code: int, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The profile's device is served in a task group (for --move); a failure leaves it as the
+    # command's one line and exit code, not as an exception group's traceback.
+    assert main(["serve", port, "--profile", "eastron-sdm630", "--move", "5"]) == code
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    assert lines[0].startswith(f"aiortu serve: {message}"), captured.err

@@ -337,11 +337,19 @@ def serve_profile(
     resolve_line_settings(args)
 
     async def moving() -> int:
+        failure: CommandFailed | None = None
+        code = 0
         async with anyio.create_task_group() as tasks:
             if args.move:
                 tasks.start_soon(_move, store, args.move)
-            code = await serve(args, {args.unit: store})
+            try:
+                code = await serve(args, {args.unit: store})
+            except CommandFailed as error:
+                failure = error
             tasks.cancel_scope.cancel()
+        # Raised out here, not wrapped in the task group's ExceptionGroup.
+        if failure is not None:
+            raise failure
         return code
 
     with library_warnings_on_stderr("serve"):
