@@ -161,6 +161,26 @@ def test_an_option_of_another_transport_is_one_line(
     assert (captured.out, captured.err) == ("", message + "\n")
 
 
+@pytest.mark.parametrize(
+    ("argv", "code", "message"),
+    [
+        (["read", "TLS://127.0.0.1:1", *READ, "--certfile", "nope.crt", "--keyfile", "nope.key",
+          "--cafile", "nope.pem"],
+         2, "aiortu read: error: certfile and keyfile must be readable PEM, not nope.crt"),
+        (["read", "ascii+tcp://127.0.0.1:1", *READ, "--framing", "ascii"],
+         1, "aiortu read: ascii+tcp://127.0.0.1:1: connection refused"),
+    ],
+)  # fmt: skip
+def test_an_option_of_the_ports_own_transport_is_taken(
+    argv: list[str], code: int, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A scheme in capitals is the same scheme, and ascii+tcp:// takes --framing ascii (it says
+    # what the URL does): the command goes on to the file or the port, which fail as they do.
+    assert main(argv) == code
+    captured = capsys.readouterr()
+    assert captured.err.startswith(message), captured.err
+
+
 def test_serve_and_read_in_ascii_on_a_pty_bus(files: dict[str, Any]) -> None:
     with PtyBus(ports=2).running_in_thread() as bus:
         first, second = bus.paths
