@@ -89,6 +89,13 @@ def test_bad_arguments_exit_2_with_one_line(argv, capsys):
     assert "error" in captured.err
 
 
+def test_a_gap_rate_without_a_gap_names_both_flags(capsys):
+    assert main(["virtual-bus", "--gap-rate", "0.1"]) == 2
+    assert capsys.readouterr().err == (
+        "aiortu virtual-bus: error: --gap-rate needs --gap SECONDS, the length of each pause\n"
+    )
+
+
 def test_bad_arguments_in_a_subprocess():
     result = run_aiortu("virtual-bus", "--ports", "-3", timeout=20)
     assert result.returncode == 2

@@ -119,6 +119,11 @@ def register(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the bus described by `args` until SIGINT or SIGTERM; return the exit code."""
+    if args.gap_rate > 0 and args.gap == 0:
+        # Said here in the flags' names; the fault plan would name its fields.
+        print("aiortu virtual-bus: error: --gap-rate needs --gap SECONDS, the length of each "
+              "pause", file=sys.stderr)  # fmt: skip
+        return 2
     settings = (
         None
         if args.no_pacing
