@@ -65,6 +65,8 @@ def test_an_ascii_line_asks_the_master_for_ascii() -> None:
          "line[0].ca_file: is required for a tls:// port (Modbus/TCP Security)"),
         ("tcp://10.0.0.5:502", 'cert_file = "c.pem"',
          "line[0].cert_file: is for a tls:// port only"),
+        ("tls://10.0.0.5:802", 'cert_file = "c.pem"\nkey_file = "k.pem"\nca_file = "ca.pem"',
+         "line[0].cert_file: no such file: c.pem"),
         ("tls://10.0.0.5:802", 'cert_file = 1\nkey_file = "k.pem"\nca_file = "ca.pem"',
          "line[0].cert_file: must be a file name, not 1"),
         ("tcp://10.0.0.5:502", 'framing = "ascii"',

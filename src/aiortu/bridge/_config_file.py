@@ -190,6 +190,12 @@ class _Reader:
             if scheme not in ("", "rtu+tcp", "ascii+tcp") or port == VIRTUAL_PORT:
                 raise self.fail(f"{key}.framing", '"ascii" is for a serial port or rtu+tcp://')
             options["framing"] = framing
+        return options | self.line_files(table, key, scheme)
+
+    def line_files(self, table: dict[str, Any], key: str, scheme: str) -> dict[str, str]:
+        """A `tls://` line's certificate files as the master's options, each required there,
+        refused elsewhere, and found relative to the configuration."""
+        files: dict[str, str] = {}
         for name, option in _LINE_FILES.items():
             value = table.get(name)
             if value is None and scheme == "tls":
@@ -201,8 +207,12 @@ class _Reader:
             if value is not None:
                 if not isinstance(value, str) or not value:
                     raise self.fail(f"{key}.{name}", f"must be a file name, not {value!r}")
-                options[option] = str(self.base / value)
-        return options
+                files[option] = str(self.base / value)
+        for name, option in _LINE_FILES.items():
+            # Said here under its key; the master would name it by its option, once running.
+            if option in files and not Path(files[option]).is_file():
+                raise self.fail(f"{key}.{name}", f"no such file: {files[option]}")
+        return files
 
     def device(self, data: object, key: str) -> DeviceConfig:
         table = self.table(
