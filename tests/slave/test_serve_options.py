@@ -71,3 +71,14 @@ def test_an_option_the_listener_takes_still_goes_through() -> None:
             assert server.idle_timeout == 7.5
 
     anyio.run(main)
+
+
+def test_an_ascii_url_with_another_framing_is_refused() -> None:
+    # The URL says ASCII: a framing that contradicts it is refused, as open_stream refuses it,
+    # not served in RTU.
+    async def main() -> None:
+        async with aiortu.serve("ascii+tcp://0.0.0.0:0", {1: aiortu.MemoryStore()}, framing="rtu"):
+            pytest.fail("served RTU on an ascii+tcp:// URL")
+
+    with pytest.raises(aiortu.errors.InvalidValue, match="'ascii' for an ascii\\+tcp:// URL"):
+        anyio.run(main)

@@ -174,13 +174,12 @@ class Link:
         A stream whose own settings are faster than the link's is not: the link would date
         its frames later than they left the wire. The master may set it
         (`Master(wire_timed=...)`)."""
+        # No wire time in the receiver of whole frames either: two frames handed over in one
+        # read (the same clock reading) are two, the first ended when the second begins.
         self.receiver = Receiver(
-            self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence
-        )
-        if whole_frames:
-            # No wire time in the receiver either: two frames handed over in one read (the
-            # same clock reading) are two, the first ended when the second begins.
-            self.receiver.char_time = 0.0
+            self.settings, role=role, units=units, timing=timing, frame_silence=frame_silence,
+            whole_frames=whole_frames,
+        )  # fmt: skip
         self._init_events(queue_size)
         self._init_runtime()
         self._init_sender(stream)

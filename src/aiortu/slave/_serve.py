@@ -174,7 +174,11 @@ async def serve(
             server = ModbusTcpServer(units, handlers=handlers, trace=trace, **options)
         else:
             if address.scheme == ASCII_TCP_SCHEME:
-                options = {"framing": "ascii", **options}
+                if options.get("framing", "ascii") != "ascii":  # as open_stream refuses it
+                    raise InvalidValue(
+                        "framing", options["framing"], "'ascii' for an ascii+tcp:// URL"
+                    )
+                options = {**options, "framing": "ascii"}
             server = RtuOverTcpServer(
                 units, settings, timing=timing, handlers=handlers, trace=trace, **options
             )

@@ -236,7 +236,9 @@ class Receiver:
     [`TOLERANT_FRAME_SILENCE`][aiortu.core.rtu.TOLERANT_FRAME_SILENCE] in tolerant mode).
 
     `now` is when it starts listening: given, it starts in INIT (a frame under way when
-    the port opened is not taken for a whole one); left out, in IDLE.
+    the port opened is not taken for a whole one); left out, in IDLE. `whole_frames`: each
+    chunk is whole frames, handed over at once (a Modbus TCP stream's), so there is no
+    character time: two frames in one chunk's clock reading are two.
     """
 
     def __init__(
@@ -248,14 +250,15 @@ class Receiver:
         timing: TimingMode | str = TimingMode.TOLERANT,
         frame_silence: float | None = None,
         now: float | None = None,
+        whole_frames: bool = False,
     ) -> None:
         self.settings = settings if settings is not None else LineSettings()
         self.role = role
         self.units = frozenset(units)
         self.timing = TimingMode(timing)
-        self.char_time = self.settings.char_time
+        self.char_time = 0.0 if whole_frames else self.settings.char_time
         """Seconds per character: when a chunk's first byte came, and the silence between
-        chunks. A stream of whole frames has none (its [`Link`][aiortu.line.Link] sets 0)."""
+        chunks; none for a stream of whole frames."""
         self.t1_5 = self.settings.t1_5
         if frame_silence is None:
             frame_silence = self.settings.t3_5
