@@ -9,71 +9,16 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 
 import anyio
-import anyio.abc
 import anyio.lowlevel
 import pytest
 
-from aiortu.core.codes import MBAP_UNIT_IDS, UnitIds
 from aiortu.core.rtu import DiscardReason, FrameDiscarded, FrameReceived, encode_frame
 from aiortu.line import Link, LinkEvent, ReplyTap
+from tests.line.fakes import PushedFrames, silence_timer
 from tests.virtual_clock import VirtualTimeLoop
 
 REQUEST = encode_frame(1, bytes.fromhex("03 0000 0002"))
 REPLY = encode_frame(1, bytes.fromhex("03 04 0007 0008"))
-
-
-class _Frames(anyio.abc.ByteStream):
-    """A push stream of whole frames, as a master's pushed Modbus TCP stream is."""
-
-    def __init__(self, whole: bool = True) -> None:
-        self.whole = whole
-        self.sent: list[bytes] = []
-        self.receiver: Callable[[bytes], None] | None = None
-        self.on_lost: Callable[[], None] | None = None
-        self._closed = anyio.Event()
-
-    @property
-    def whole_frames(self) -> bool:
-        return self.whole
-
-    @property
-    def unit_ids(self) -> UnitIds:
-        return MBAP_UNIT_IDS
-
-    def set_receiver(
-        self,
-        receiver: Callable[[bytes], None] | None,
-        on_lost: Callable[[], None] | None = None,
-    ) -> None:
-        self.receiver = receiver
-        self.on_lost = on_lost
-
-    def end(self) -> None:
-        """The connection ends (as a pushed stream tells it, from its callback)."""
-        self._closed.set()
-        if self.on_lost is not None:
-            self.on_lost()
-
-    def send_nowait(self, item: bytes) -> bool:
-        self.sent.append(item)
-        return True
-
-    def push(self, frame: bytes) -> None:
-        assert self.receiver is not None
-        self.receiver(frame)
-
-    async def receive(self, max_bytes: int = 65536) -> bytes:
-        await self._closed.wait()
-        raise anyio.ClosedResourceError
-
-    async def send(self, item: bytes) -> None:
-        self.sent.append(item)
-
-    async def send_eof(self) -> None:
-        pass
-
-    async def aclose(self) -> None:
-        self._closed.set()
 
 
 async def _opened(link: Link) -> None:
@@ -89,13 +34,13 @@ async def _opened(link: Link) -> None:
 async def test_only_a_pushed_stream_of_whole_frames_with_no_gap_is_direct(
     whole: bool, frame_gap: float | None, direct: bool
 ) -> None:
-    async with Link(_Frames(whole), frame_gap=frame_gap) as link:
+    async with Link(PushedFrames(whole=whole), frame_gap=frame_gap) as link:
         assert link.direct is direct
 
 
 async def test_a_direct_link_sends_at_once_and_counts_the_frame() -> None:
     now = [5.0]
-    stream = _Frames()
+    stream = PushedFrames()
     async with Link(stream, clock=lambda: now[0]) as link:
         await _opened(link)
         now[0] = 6.0
@@ -108,7 +53,7 @@ async def test_a_direct_link_sends_at_once_and_counts_the_frame() -> None:
 
 async def test_a_direct_link_hands_the_expected_reply_over_and_nothing_else() -> None:
     now = [5.0]
-    stream = _Frames()
+    stream = PushedFrames()
     taken: list[tuple[bytes, float]] = []
     events: list[LinkEvent | None] = []
     tap = ReplyTap(REPLY[:3], len(REPLY), lambda frame, end: taken.append((frame, end)), None)
@@ -159,7 +104,7 @@ HEAD = REPLY[:5]
 class _Watched:
     """A direct link's expected replies taken by the tap, and what its listener got."""
 
-    def __init__(self, link: Link, stream: _Frames) -> None:
+    def __init__(self, link: Link, stream: PushedFrames) -> None:
         self.link = link
         self.stream = stream
         self.taken: list[tuple[bytes, float]] = []
@@ -173,11 +118,7 @@ class _Watched:
     @property
     def timer(self) -> object:
         """The receiver's silence timer, where one is armed."""
-        reader = self.link._push_reader
-        assert reader is not None
-        # The tap relies on this: a receiver with a deadline has its timer, one without none.
-        assert (reader.timer is None) == (self.link.receiver.next_deadline() is None)
-        return reader.timer
+        return silence_timer(self.link)
 
     def one_read(self, *frames: bytes) -> None:
         """`frames` handed over in one callback, as one read of a socket holds several ADUs;
@@ -193,7 +134,7 @@ def _on_a_virtual_clock(
     pushed link of a serial line (its frame silence 20 ms), not `whole`."""
 
     async def run() -> None:
-        stream = _Frames(whole)
+        stream = PushedFrames(whole=whole)
         async with Link(stream) as link:
             await _opened(link)
             assert link.direct is whole
