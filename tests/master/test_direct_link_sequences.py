@@ -23,19 +23,17 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import random
-from collections.abc import Callable
 from typing import Any
 
 import anyio
-import anyio.abc
 import pytest
 
-from aiortu.core.codes import MBAP_UNIT_IDS, UnitIds
 from aiortu.core.rtu import encode_frame
 from aiortu.errors import ConnectionLost, ModbusError
 from aiortu.line import Link
 from aiortu.line import _link as link_module
 from aiortu.master import Master
+from tests.line.fakes import PushedFrames, silence_timer
 from tests.virtual_clock import VirtualTimeLoop
 
 SEEDS = range(8)
@@ -120,43 +118,14 @@ class _Script:
         return [_reply(unit, list(range(count + 1)))]
 
 
-class _Device(anyio.abc.ByteStream):
+class _Device(PushedFrames):
     """A master's stream of whole frames, pushed (as its Modbus TCP stream is on asyncio),
     with the device at its other end: each request is answered by a plan from the script."""
 
     def __init__(self, script: _Script) -> None:
+        super().__init__(self._answer, turn_at_end=False)
         self.script = script
-        self.receiver: Callable[[bytes], None] | None = None
-        self.on_lost: Callable[[], None] | None = None
         self.link: Link | None = None
-        self._ended = asyncio.Event()
-
-    @property
-    def whole_frames(self) -> bool:
-        return True
-
-    @property
-    def unit_ids(self) -> UnitIds:
-        return MBAP_UNIT_IDS
-
-    def set_receiver(
-        self,
-        receiver: Callable[[bytes], None] | None,
-        on_lost: Callable[[], None] | None = None,
-    ) -> None:
-        self.receiver = receiver
-        self.on_lost = on_lost if receiver is not None else None
-
-    def send_nowait(self, item: bytes) -> bool:
-        if self._ended.is_set():
-            return False
-        self._answer(item)
-        return True
-
-    async def send(self, item: bytes) -> None:
-        if self._ended.is_set():
-            raise anyio.BrokenResourceError
-        self._answer(item)
 
     def _answer(self, request: bytes) -> None:
         script = self.script
@@ -174,10 +143,11 @@ class _Device(anyio.abc.ByteStream):
     def _push(self, request: bytes, read: tuple[str, ...]) -> None:
         """One read of the stream's socket: its frames handed over in one callback."""
         for name in read:
-            if self._ended.is_set():
+            if self.ended.is_set():
                 return
             if name == "end":
-                self._end()
+                self.script.ends += 1
+                self.end()
                 continue
             for frame in self.script.frames(request, name):
                 self._hand_over(frame)
@@ -193,28 +163,10 @@ class _Device(anyio.abc.ByteStream):
         expected = tap is not None and len(frame) == tap.length and frame.startswith(tap.prefix)
         if expected and reader.timer is not None:
             self.script.armed += 1
-        self.receiver(frame)
+        self.push(frame)
         if expected and reader.reply_tap is None:
             self.script.taken += 1
-        # What the reply tap relies on: a receiver with a deadline has its timer, and one
-        # without has none (an IDLE receiver, the only one an expected frame is taken by).
-        assert (reader.timer is None) == (link.receiver.next_deadline() is None)
-
-    def _end(self) -> None:
-        self.script.ends += 1
-        self._ended.set()
-        if self.on_lost is not None:
-            self.on_lost()
-
-    async def receive(self, max_bytes: int = 65536) -> bytes:
-        await self._ended.wait()
-        raise anyio.EndOfStream
-
-    async def send_eof(self) -> None:
-        pass
-
-    async def aclose(self) -> None:
-        self._ended.set()
+        silence_timer(link)
 
 
 async def _run(seed: int) -> tuple[Any, ...]:
