@@ -66,5 +66,5 @@ def discovery_config(
         config["max"] = point.maximum if point.maximum is not None else 1e9
         config["step"] = point.scale if point.scale else (1 if point.type.is_integer else 0.001)
         config["mode"] = "box"
-    topic = discovery_topic(discovery_prefix, node, device.name, point)
+    topic = discovery_topic(discovery_prefix, component, node, object_id)
     return topic, json.dumps(config, ensure_ascii=False).encode()

@@ -28,7 +28,9 @@ from aiortu.bridge._topics import (
     LayoutTopic,
     bridge_topic,
     device_topic,
+    discovery_object_id,
     discovery_topic,
+    entity_component,
     point_topic,
 )
 from aiortu.core.model import ProfilePoint, Value
@@ -74,8 +76,10 @@ class PlainLayout:
                     listed.append(LayoutTopic(state + COMMAND, name, point.name, command=True))
                 listed.append(LayoutTopic(state, name, point.name))
                 if self.discovery:
-                    topic = discovery_topic(self.topics.discovery_prefix, self.topics.node, name,
-                                            point)  # fmt: skip
+                    topic = discovery_topic(
+                        self.topics.discovery_prefix, entity_component(point), self.topics.node,
+                        discovery_object_id(name, point.name),
+                    )  # fmt: skip
                     listed.append(LayoutTopic(topic, name, point.name))
         return listed
 

@@ -84,11 +84,10 @@ def discovery_object_id(device: str, point: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", f"{device}_{point}")
 
 
-def discovery_topic(discovery_prefix: str, node: str, device: str, point: ProfilePoint) -> str:
-    """The topic of the Home Assistant discovery config of `point` of `device`: under its
-    component (`entity_component`), by its object id (`discovery_object_id`)."""
-    object_id = discovery_object_id(device, point.name)
-    return f"{discovery_prefix}/{entity_component(point)}/{node}/{object_id}/config"
+def discovery_topic(discovery_prefix: str, component: str, node: str, object_id: str) -> str:
+    """The topic of a point's Home Assistant discovery config, by its `component`
+    (`entity_component`) and `object_id` (`discovery_object_id`), which its config uses too."""
+    return f"{discovery_prefix}/{component}/{node}/{object_id}/config"
 
 
 def sparkplug_topic(group: str, kind: str, node: str, device: str | None = None) -> str:

@@ -160,19 +160,15 @@ async def serve(
     settings = LineSettings(baudrate, bytesize, parity, stopbits)
     address = _listen_address(port_or_url, listen)
     if address is not None:
-        _refuse_unknown(port_or_url, _SERVERS.get(address.scheme, RtuOverTcpServer), options)
-    if address is not None and address.scheme == MODBUS_UDP_SCHEME:
-        udp = ModbusUdpServer(units, handlers=handlers, trace=trace, **options)
-        async with udp.running(address, port_or_url):
-            yield udp
-        return
-    if address is not None:
+        kind = _SERVERS.get(address.scheme, RtuOverTcpServer)
+        _refuse_unknown(port_or_url, kind, options)
+        if kind is ModbusUdpServer:
+            udp = ModbusUdpServer(units, handlers=handlers, trace=trace, **options)
+            async with udp.running(address, port_or_url):
+                yield udp
+            return
         server: ModbusTcpServer | RtuOverTcpServer
-        if address.scheme == TLS_SCHEME:
-            server = ModbusTlsServer(units, handlers=handlers, trace=trace, **options)
-        elif address.scheme == MODBUS_TCP_SCHEME:
-            server = ModbusTcpServer(units, handlers=handlers, trace=trace, **options)
-        else:
+        if kind is RtuOverTcpServer:
             if address.scheme == ASCII_TCP_SCHEME:
                 if options.get("framing", "ascii") != "ascii":  # as open_stream refuses it
                     raise InvalidValue(
@@ -182,6 +178,8 @@ async def serve(
             server = RtuOverTcpServer(
                 units, settings, timing=timing, handlers=handlers, trace=trace, **options
             )
+        else:  # Modbus TCP, or Modbus/TCP Security
+            server = kind(units, handlers=handlers, trace=trace, **options)
         async with _running(server, address, port_or_url):
             yield server
         return

@@ -273,8 +273,9 @@ async def _open(address: PortAddress, settings: LineSettings, options: Any) -> B
         return await open_modbus_tcp(address.host, address.port, **options)
     if isinstance(address, TcpAddress):
         # Its errors name the URL as given: ascii+tcp:// too.
-        scheme = f"{address.framing}+tcp"
-        return await open_tcp_connection(address.host, address.port, scheme=scheme, **options)
+        return await open_tcp_connection(
+            address.host, address.port, scheme=address.scheme, **options
+        )
     from aiortu.transport._serial import open_serial
 
     return await open_serial(address.path, settings, **options)

@@ -93,9 +93,13 @@ class TcpAddress:
     framing: str = "rtu"
     """`rtu` or `ascii`."""
 
+    @property
+    def scheme(self) -> str:
+        """`rtu+tcp` or `ascii+tcp`, by the framing."""
+        return ASCII_TCP_SCHEME if self.framing == "ascii" else TCP_SCHEME
+
     def __str__(self) -> str:
-        scheme = ASCII_TCP_SCHEME if self.framing == "ascii" else TCP_SCHEME
-        return format_tcp_url(self.host, self.port, scheme)
+        return format_tcp_url(self.host, self.port, self.scheme)
 
 
 @dataclass(frozen=True, slots=True)
