@@ -49,6 +49,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 Read = Callable[[int], Awaitable[object]]
 
+_KEEP: list[object] = []
+"""What must outlive `_open`: aiortu's master's context manager (its generator would close
+the master once collected)."""
+
 CONTENDERS = {
     "aiortu": "aiortu's master",
     "pymodbus": "pymodbus's client",
@@ -97,7 +101,7 @@ async def _open(kind: str, port: int, files: _Files) -> Read:
             certfile=files.certfile, keyfile=files.keyfile, cafile=files.cafile,
         )  # fmt: skip
         master = await opener.__aenter__()
-        _KEEP.append(opener)  # its generator would close the master once collected
+        _KEEP.append(opener)
         return lambda tid: master.read_holding_registers(1, 0, 10)
     if kind == "pymodbus":
         import pymodbus.client as pm
@@ -153,9 +157,6 @@ def _socket_and_bios(
 
     loop.add_reader(sock.fileno(), on_readable)
     return _bare(loop, write, app)
-
-
-_KEEP: list[object] = []
 
 
 class _Files:

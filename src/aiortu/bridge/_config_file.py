@@ -27,7 +27,7 @@ from aiortu.bridge._config import (
 from aiortu.bridge._layouts import make_layout
 from aiortu.bridge._packets import MAX_STRING_BYTES
 from aiortu.bridge._state import device_states
-from aiortu.core.model import Profile, TomlReader, load_profile, shipped_profiles
+from aiortu.core.model import Profile, TomlReader, find_profile, load_profile, shipped_profiles
 from aiortu.errors import ConfigError
 
 __all__ = ("load_config", "parse_config")
@@ -248,12 +248,9 @@ class _Reader:
         if not isinstance(name, str) or not name:
             raise self.fail(key, "is required: a profile file or a shipped profile's name")
         if name not in self.profiles:
-            path = self.base / name
-            shipped = shipped_profiles()
-            if not path.exists() and name in shipped:
-                path = shipped[name]
-            elif not path.exists():
-                known = ", ".join(shipped)
+            path = find_profile(name, self.base)
+            if path is None:
+                known = ", ".join(shipped_profiles())
                 raise self.fail(key, f"unknown profile {name!r} (a file, or one of: {known})")
             self.profiles[name] = load_profile(path)
         return self.profiles[name]

@@ -37,6 +37,7 @@ from aiortu.core.model import (
     ReadPlan,
     Value,
     check_write,
+    find_profile,
     load_profile,
     schema_reference,
     shipped_profiles,
@@ -80,13 +81,11 @@ examples:
 def open_profile(name: str) -> Profile:
     """The profile in file `name`, or the shipped profile called `name`; a
     [`ConfigError`][aiortu.errors.ConfigError] naming the shipped ones when it is neither."""
-    shipped = shipped_profiles()
-    if Path(name).exists():
-        return load_profile(name)
-    if name in shipped:
-        return load_profile(shipped[name])
-    known = ", ".join(shipped)
-    raise ConfigError(name, "(file)", f"no such file, nor a shipped profile (one of: {known})")
+    path = find_profile(name)
+    if path is None:
+        known = ", ".join(shipped_profiles())
+        raise ConfigError(name, "(file)", f"no such file, nor a shipped profile (one of: {known})")
+    return load_profile(path)
 
 
 def register(subparsers: Subparsers) -> None:

@@ -58,7 +58,7 @@ def transport_options(args: argparse.Namespace) -> dict[str, Any]:
     options: dict[str, Any] = {}
     if args.framing == "ascii":
         options["framing"] = "ascii"
-    for name in ("certfile", "keyfile", "cafile", "rules"):
+    for name in _TLS_OPTIONS:
         value = getattr(args, name, None)
         if value is not None:
             options[name] = value

@@ -246,3 +246,17 @@ def test_a_text_its_encoding_cannot_hold_is_refused_not_mangled() -> None:
     assert "point s.value: text '€1' has characters ascii cannot encode" in error_of(text)
     latin = text.replace('value = "€1"', 'encoding = "latin-1"\nvalue = "é1"')
     assert parse_profile(latin).points[0].initial == "é1"
+
+
+def test_find_profile_takes_a_file_before_a_shipped_name(tmp_path: Path) -> None:
+    from aiortu.core.model import find_profile, shipped_profiles
+
+    shipped = shipped_profiles()
+    assert list(shipped) == sorted(shipped)
+    assert "eastron-sdm630" in shipped
+    assert find_profile("eastron-sdm630", tmp_path) == shipped["eastron-sdm630"]
+    (tmp_path / "eastron-sdm630").write_text("", encoding="utf-8")
+    assert find_profile("eastron-sdm630", tmp_path) == tmp_path / "eastron-sdm630"
+    assert find_profile("nosuch", tmp_path) is None
+    # Without a base the file is given back as named, for the messages that name it.
+    assert find_profile(str(tmp_path / "eastron-sdm630")) == str(tmp_path / "eastron-sdm630")

@@ -71,7 +71,12 @@ from aiortu.core.model._profile import (
     Value,
 )
 from aiortu.core.model._profile_dump import dump_profile
-from aiortu.core.model._profile_load import load_profile, parse_profile, shipped_profiles
+from aiortu.core.model._profile_load import (
+    find_profile,
+    load_profile,
+    parse_profile,
+    shipped_profiles,
+)
 from aiortu.core.model._read_plan import BlockRead, Raw, ReadPlan, describe, plan_blocks
 from aiortu.core.model._schema_doc import SCHEMA_PATH, schema_reference
 from aiortu.core.model._sunspec import (
@@ -172,6 +177,7 @@ __all__ = (
     "dump_profile",
     "encode_point",
     "encode_value",
+    "find_profile",
     "float32_to_registers",
     "float64_to_registers",
     "format_reference",

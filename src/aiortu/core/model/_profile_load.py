@@ -35,7 +35,7 @@ from aiortu.core.model._profile import (
 from aiortu.core.model._toml_reader import TomlReader
 from aiortu.core.model._values import Layout
 
-__all__ = ("load_profile", "parse_profile", "shipped_profiles")
+__all__ = ("find_profile", "load_profile", "parse_profile", "shipped_profiles")
 
 _TOP = frozenset({"device", "defaults", "poll", "hole", "point"})
 _DEVICE = frozenset({"manufacturer", "model", "description", "url", "identify"})
@@ -97,6 +97,16 @@ _SHIPPED = Path(__file__).parent / "profiles"
 def shipped_profiles() -> dict[str, Path]:
     """The profiles aiortu ships, by name (the file name without `.toml`), in name order."""
     return {path.stem: path for path in sorted(_SHIPPED.glob("*.toml"))}
+
+
+def find_profile(name: str, base: Path | None = None) -> str | Path | None:
+    """The file of profile `name`: the file `name` (relative to `base`) where there is one,
+    as named, else the shipped profile of that name (see `shipped_profiles`); None when
+    neither."""
+    path = Path(name) if base is None else base / name
+    if path.exists():
+        return name if base is None else path
+    return shipped_profiles().get(name)
 
 
 def load_profile(path: str | Path) -> Profile:
